@@ -1,0 +1,124 @@
+"""The sections of ``configs/fleet.yaml`` as frozen dataclasses, and the whole file as FleetConfig."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fleet.config import configs_dir, from_mapping, read_yaml
+from planners.dwa import DWAParams
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """A disc robot with differential drive."""
+
+    radius: float = 0.17
+    wheel_base: float = 0.3
+    cleaning_width: float = 0.30
+    max_vel_x: float = 0.5
+    max_vel_theta: float = 1.0
+    acc_lim_x: float = 0.5
+    acc_lim_theta: float = 1.0
+    mass: float = 3.5
+
+    def validate(self) -> None:
+        for name in ("radius", "wheel_base", "cleaning_width", "max_vel_x", "max_vel_theta"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0")
+        if self.cleaning_width > 2 * self.radius + 1e-9:
+            raise ValueError("cleaning_width must not exceed the robot diameter")
+
+
+@dataclass(frozen=True)
+class LidarParams:
+    beams: int = 360
+    fov: float = 2 * math.pi
+    range_min: float = 0.1
+    range_max: float = 6.0
+    noise_sigma: float = 0.01
+    rate_hz: float = 10.0
+
+    def validate(self) -> None:
+        if self.beams < 1:
+            raise ValueError("beams must be >= 1")
+        if not 0 < self.range_min < self.range_max:
+            raise ValueError("need 0 < range_min < range_max")
+        if self.noise_sigma < 0 or self.rate_hz <= 0:
+            raise ValueError("noise_sigma must be >= 0 and rate_hz > 0")
+
+
+@dataclass(frozen=True)
+class OdometryParams:
+    """Wheel odometry noise: per step, the standard deviations grow with distance and rotation.
+
+    Follows the odometry motion model of Thrun, Burgard, Fox, Probabilistic Robotics, §5.4:
+    translation noise σ_t = alpha_trans·|Δs| + alpha_rot_trans·|Δθ|, rotation noise
+    σ_r = alpha_rot·|Δθ| + alpha_trans_rot·|Δs|, plus a constant heading bias per metre
+    (a wheel-radius mismatch) that makes drift systematic as on a real robot.
+    """
+
+    rate_hz: float = 50.0
+    alpha_trans: float = 0.02
+    alpha_rot: float = 0.02
+    alpha_rot_trans: float = 0.005
+    alpha_trans_rot: float = 0.01
+    heading_bias_per_m: float = 0.004
+
+    def validate(self) -> None:
+        if not 1.0 <= self.rate_hz <= 200.0:
+            raise ValueError("rate_hz must be within 1..200")
+
+
+@dataclass(frozen=True)
+class SimParams:
+    physics_hz: float = 100.0
+    clock_hz: float = 20.0
+    coverage_hz: float = 2.0
+    cell_size: float = 0.05
+    max_lag_s: float = 0.1
+    agent_timeout_s: float = 3.0
+
+    def validate(self) -> None:
+        if self.physics_hz < 20:
+            raise ValueError("physics_hz must be >= 20")
+        if self.cell_size <= 0 or self.max_lag_s <= 0:
+            raise ValueError("cell_size and max_lag_s must be > 0")
+
+
+@dataclass(frozen=True)
+class AgentParams:
+    control_hz: float = 10.0
+    stale_after_s: float = 0.5
+    waypoint_tolerance: float = 0.15
+    goal_tolerance: float = 0.1
+    intent_horizon_s: float = 2.0
+    status_hz: float = 2.0
+
+
+@dataclass(frozen=True)
+class CoordinatorParams:
+    lane_overlap: float = 0.1
+    done_coverage: float = 0.98
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    robot: RobotParams = field(default_factory=RobotParams)
+    lidar: LidarParams = field(default_factory=LidarParams)
+    odometry: OdometryParams = field(default_factory=OdometryParams)
+    sim: SimParams = field(default_factory=SimParams)
+    agent: AgentParams = field(default_factory=AgentParams)
+    coordinator: CoordinatorParams = field(default_factory=CoordinatorParams)
+    dwa: DWAParams = field(default_factory=DWAParams)
+
+
+def default_config_path() -> Path:
+    return configs_dir() / "fleet.yaml"
+
+
+def load_fleet_config(path: str | Path | None = None) -> FleetConfig:
+    """Load and validate ``configs/fleet.yaml`` (or ``path``); errors name file and field."""
+    p = Path(path) if path is not None else default_config_path()
+    return from_mapping(FleetConfig, read_yaml(p), str(p))
