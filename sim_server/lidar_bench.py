@@ -1,0 +1,130 @@
+"""Scenes and timing for the lidar benchmark (``fleet bench lidar``).
+
+A scene is a furnished rectangular floor: the outer walls plus randomly placed, rotated boxes
+(four edges each) at the density of the built-in home world (about one box per 1.3 m²), and
+robots at random free positions. Timings report rays per second of :func:`cast_scans` and of the
+brute-force :func:`cast_scans_reference` on the same scene.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim_server.lidar import SegmentIndex, cast_scans, cast_scans_reference, occupancy_to_segments
+
+ROBOT_RADIUS = 0.17
+_FLOOR_PER_BOX = 1.3
+
+
+@dataclass(frozen=True)
+class Scene:
+    segments: np.ndarray
+    origins: np.ndarray
+    headings: np.ndarray
+    discs: np.ndarray
+    self_index: np.ndarray
+
+
+def furnished_scene(n_segments: int, n_robots: int, seed: int = 0) -> Scene:
+    """A square floor with 4 walls and (n_segments − 4) / 4 boxes, and n_robots robot discs."""
+    rng = np.random.default_rng(seed)
+    n_boxes = max(0, (n_segments - 4) // 4)
+    side = max(4.0, math.sqrt(n_boxes * _FLOOR_PER_BOX))
+    walls = np.array(
+        [[0, 0, side, 0], [side, 0, side, side], [side, side, 0, side], [0, side, 0, 0]]
+    )
+    centre = rng.uniform(0.5, side - 0.5, size=(n_boxes, 2))
+    half = rng.uniform(0.15, 0.6, size=(n_boxes, 2))
+    angle = rng.uniform(0, math.pi, size=n_boxes)
+    corner_signs = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+    local = corner_signs[None] * half[:, None]
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    corners = centre[:, None] + np.stack(
+        [c * local[..., 0] - s * local[..., 1], s * local[..., 0] + c * local[..., 1]], axis=-1
+    )
+    edges = np.concatenate([corners, np.roll(corners, -1, axis=1)], axis=-1).reshape(-1, 4)
+    segments = np.concatenate([walls, edges])[: max(n_segments, 4)]
+    clearance = np.hypot(half[:, 0], half[:, 1]) + ROBOT_RADIUS
+    origins = []
+    while len(origins) < n_robots:
+        p = rng.uniform(ROBOT_RADIUS, side - ROBOT_RADIUS, size=2)
+        if np.all(np.hypot(*(centre - p).T) > clearance):
+            origins.append(p)
+    origins = np.array(origins).reshape(-1, 2)
+    discs = np.column_stack([origins, np.full(n_robots, ROBOT_RADIUS)])
+    return Scene(
+        segments=segments.astype(np.float64),
+        origins=origins,
+        headings=rng.uniform(-math.pi, math.pi, size=n_robots),
+        discs=discs,
+        self_index=np.arange(n_robots),
+    )
+
+
+def ros_map_occupied(yaml_path: Path) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """A ROS map_server map → (occupied, resolution, origin) in OccupancyGrid orientation.
+
+    Trinary interpretation: p = (255 − v) / 255 (or v / 255 when ``negate``), occupied where
+    p > occupied_thresh. Image row 0 is the top, so rows are flipped to make row 0 the lowest y.
+    """
+    import yaml
+    from PIL import Image
+
+    meta = yaml.safe_load(Path(yaml_path).read_text())
+    image = np.asarray(Image.open(Path(yaml_path).parent / meta["image"]).convert("L"), float)
+    p = image / 255.0 if meta.get("negate", 0) else (255.0 - image) / 255.0
+    occupied = np.flipud(p > float(meta.get("occupied_thresh", 0.65)))
+    return occupied, float(meta["resolution"]), (float(meta["origin"][0]), float(meta["origin"][1]))
+
+
+def map_scene(yaml_path: Path, n_robots: int, seed: int = 0) -> Scene:
+    """The boundary segments of a ROS map, with robots at random cells far from any wall."""
+    from scipy.ndimage import distance_transform_edt
+
+    occupied, res, origin = ros_map_occupied(yaml_path)
+    segments = occupancy_to_segments(occupied, res, origin)
+    rng = np.random.default_rng(seed)
+    clear = distance_transform_edt(~occupied) * res > 2 * ROBOT_RADIUS
+    # Unknown space outside the walls is also "not occupied"; keep cells inside the map's hull.
+    rows, cols = np.nonzero(occupied)
+    inside = np.zeros_like(clear)
+    inside[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1] = True
+    free_r, free_c = np.nonzero(clear & inside)
+    pick = rng.choice(free_r.size, size=n_robots, replace=False)
+    origins = np.column_stack(
+        [origin[0] + (free_c[pick] + 0.5) * res, origin[1] + (free_r[pick] + 0.5) * res]
+    )
+    return Scene(
+        segments=segments,
+        origins=origins,
+        headings=rng.uniform(-math.pi, math.pi, size=n_robots),
+        discs=np.column_stack([origins, np.full(n_robots, ROBOT_RADIUS)]),
+        self_index=np.arange(n_robots),
+    )
+
+
+def rays_per_second(
+    scene: Scene,
+    beams: int,
+    range_max: float,
+    *,
+    reference: bool = False,
+    indexed: bool = False,
+    min_seconds: float = 0.5,
+) -> float:
+    """Rays per second of one full scan of every robot in the scene, timed over ≥ min_seconds."""
+    angles = np.linspace(0.0, 2 * math.pi, beams, endpoint=False)
+    segments = SegmentIndex(scene.segments, reach=range_max) if indexed else scene.segments
+    cast = cast_scans_reference if reference else cast_scans
+    args = (scene.origins, scene.headings, angles, segments, scene.discs, range_max)
+    cast(*args, scene.self_index)
+    calls, start = 0, time.perf_counter()
+    while (elapsed := time.perf_counter() - start) < min_seconds:
+        cast(*args, scene.self_index)
+        calls += 1
+    return calls * scene.origins.shape[0] * beams / elapsed
