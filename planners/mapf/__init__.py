@@ -1,0 +1,161 @@
+"""Multi-agent path finding on 4-connected grids: PP, SIPP-PP, CBS (ICBS) and ECBS.
+
+Entry point for the rest of the system::
+
+    from planners.mapf import MapfInstance, solve
+
+    instance = MapfInstance(free=free_bool_array, starts=((r0, c0), ...), goals=((r1, c1), ...))
+    result = solve(instance, "ecbs", w=1.2, time_limit_s=2.0)
+    if result.status == "success":
+        paths = result.solution.paths        # paths[i][t] = (row, col); agents stay at the end
+    # result.status: "success" | "timeout" | "infeasible" (rejected before search, reason in
+    # result.message) | "failed" (PP with max_restarts exhausted)
+
+Solvers (``SOLVERS``):
+
+- ``"pp"``: prioritized planning with space-time A*, randomized restarts (fast, incomplete).
+- ``"sipp-pp"``: the same with SIPP as single-agent planner.
+- ``"cbs"``: ICBS, optimal sum of costs (cardinal conflicts via MDDs, bypass, CG heuristic).
+- ``"cbs-plain"``: CBS without those improvements, the baseline of ``fleet bench mapf``.
+- ``"ecbs"``: ECBS(w), SOC ≤ w · optimum.
+
+Model, formats and checks: ``model`` (costs, feasibility check), ``movingai`` (.map/.scen),
+``yaml_format`` (libMultiRobotPlanning YAML), ``validate`` (independent solution checker),
+``generate`` (seeded benchmark maps and scenarios). All solvers are deterministic for a given input
+(and seed), and honour ``time_limit_s`` by returning status ``"timeout"``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from planners.mapf.cbs import PLAIN_CBS, CbsOptions, ConflictBasedSearch
+from planners.mapf.deadline import Deadline
+from planners.mapf.ecbs import ecbs
+from planners.mapf.grid_graph import GridGraph
+from planners.mapf.low_level import SearchStats
+from planners.mapf.model import (
+    InfeasibleInstanceError,
+    MapfInstance,
+    MapfResult,
+    MapfSolution,
+    SearchTimeout,
+    check_instance,
+)
+from planners.mapf.prioritized import prioritized
+from planners.mapf.validate import ValidationReport, validate
+
+SOLVERS = ("pp", "sipp-pp", "cbs", "cbs-plain", "ecbs")
+
+__all__ = [
+    "SOLVERS",
+    "CbsOptions",
+    "InfeasibleInstanceError",
+    "MapfInstance",
+    "MapfResult",
+    "MapfSolution",
+    "ValidationReport",
+    "check_instance",
+    "solve",
+    "validate",
+]
+
+
+def solve(
+    instance: MapfInstance,
+    solver: str,
+    w: float = 1.2,
+    time_limit_s: float = 10.0,
+    *,
+    order: Sequence[int] | None = None,
+    seed: int = 0,
+    max_restarts: int | None = None,
+    cbs_options: CbsOptions | None = None,
+    graph: GridGraph | None = None,
+) -> MapfResult:
+    """Solve ``instance`` with ``solver`` (one of ``SOLVERS``) within ``time_limit_s`` seconds.
+
+    ``w`` is the ECBS suboptimality bound; ``order``, ``seed`` and ``max_restarts`` configure
+    prioritized planning (priority order, restart shuffles, None = restart until the deadline);
+    ``graph`` lets repeated calls on one map share its cached distance tables.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    deadline = Deadline(time_limit_s)
+    try:
+        check_instance(instance)
+    except InfeasibleInstanceError as err:
+        return MapfResult("infeasible", solver, None, deadline.elapsed(), message=str(err))
+    same_map = graph is not None and np.array_equal(graph.free, instance.free)
+    if graph is None or not same_map:
+        graph = GridGraph(instance.free)
+    starts = [graph.cell(s) for s in instance.starts]
+    goals = [graph.cell(g) for g in instance.goals]
+    stats = SearchStats()
+    lower_bound: int | None = None
+    details: dict[str, object] = {}
+    try:
+        if solver in ("pp", "sipp-pp"):
+            paths, used, attempts = prioritized(
+                graph,
+                starts,
+                goals,
+                order,
+                "sipp" if solver == "sipp-pp" else "astar",
+                seed,
+                max_restarts,
+                deadline,
+                stats,
+            )
+            details = {"order": list(used), "attempts": attempts}
+            if paths is None:
+                return MapfResult(
+                    "failed",
+                    solver,
+                    None,
+                    deadline.elapsed(),
+                    stats.high,
+                    stats.low,
+                    message=f"no order found in {attempts} attempts",
+                    details=details,
+                )
+        elif solver == "ecbs":
+            paths, lower_bound = ecbs(graph, starts, goals, w, deadline, stats)
+            details = {"w": w}
+        else:
+            options = PLAIN_CBS if solver == "cbs-plain" else (cbs_options or CbsOptions())
+            search = ConflictBasedSearch(graph, starts, goals, options, deadline, stats)
+            paths, _ = search.run()
+    except SearchTimeout:
+        return MapfResult(
+            "timeout",
+            solver,
+            None,
+            deadline.elapsed(),
+            stats.high,
+            stats.low,
+            message=f"no solution within {time_limit_s:g} s",
+            details=details,
+        )
+    solution = MapfSolution(tuple(tuple(graph.rc(c) for c in _trim(p)) for p in paths))
+    if solver.startswith("cbs"):
+        lower_bound = solution.soc
+    return MapfResult(
+        "success",
+        solver,
+        solution,
+        deadline.elapsed(),
+        stats.high,
+        stats.low,
+        lower_bound,
+        details=details,
+    )
+
+
+def _trim(path: list[int]) -> list[int]:
+    end = len(path)
+    while end > 1 and path[end - 2] == path[-1]:
+        end -= 1
+    return path[:end]

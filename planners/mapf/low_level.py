@@ -1,0 +1,237 @@
+"""Single-agent space-time search under constraints: A* and focal A* (the CBS / ECBS low levels).
+
+States are ``(cell, t)`` with unit-cost moves and waits and the cached BFS distance as heuristic,
+raised to ``earliest_finish - t`` when the goal is constrained later on (both consistent). Beyond
+the last time any constraint or avoidance entry mentions, ``(cell, t)`` and ``(cell, t + 1)`` have
+the same future, so states are merged there ("time collapse"): the state space is finite and a
+search with no solution ends instead of waiting forever.
+
+- ``space_time_astar``: A* ordered by ``(f, conflicts, -g)``, i.e. among optimal paths the one
+  with the fewest collisions with other agents' paths (the CAT tie-break of ICBS).
+- ``focal_astar``: focal search (Pearl and Kim 1982; ECBS low level, Barer et al. 2014): expands
+  the node with the fewest collisions among those with ``f ≤ w · f_min``; returns the path and
+  ``f_min``, a lower bound on the optimal cost under these constraints.
+"""
+
+from __future__ import annotations
+
+from heapq import heappop, heappush
+
+from planners.mapf.deadline import Deadline
+from planners.mapf.grid_graph import UNREACHABLE, GridGraph
+from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
+
+_CHECK_EVERY = 512
+
+
+class SearchStats:
+    """Counters shared by the high level and its low-level calls."""
+
+    __slots__ = ("high", "low")
+
+    def __init__(self) -> None:
+        self.high = 0
+        self.low = 0
+
+
+def _path(cells: list[int], parents: list[int], node: int) -> list[int]:
+    out = []
+    while node >= 0:
+        out.append(cells[node])
+        node = parents[node]
+    out.reverse()
+    return out
+
+
+def space_time_astar(
+    graph: GridGraph,
+    start: int,
+    goal: int,
+    table: ConstraintTable,
+    cat: ConflictAvoidanceTable | None,
+    deadline: Deadline,
+    stats: SearchStats,
+) -> list[int] | None:
+    """The cheapest path from ``start`` to ``goal`` (parked there) under ``table``, or None."""
+    earliest = table.earliest_finish(goal)
+    if earliest is None:
+        return None
+    n = graph.num_cells
+    dist = graph.distances(goal)
+    if dist[start] >= UNREACHABLE:
+        return None
+    succ = graph.successors
+    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    horizon = max(table.horizon, earliest) + 1
+    if cat is not None:
+        horizon = max(horizon, cat.horizon + 1)
+        cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
+    span = horizon + 1
+    cells = [start]
+    times = [0]
+    confs = [0]
+    parents = [-1]
+    h0 = max(dist[start], earliest)
+    heap = [(h0, 0, 0, 0)]
+    closed: set[int] = set()
+    best_conf: dict[int, int] = {}
+    expanded = 0
+    try:
+        while heap:
+            _f, conf, _, node = heappop(heap)
+            cell = cells[node]
+            t = times[node]
+            key = cell * span + (t if t < horizon else horizon)
+            if key in closed:
+                continue
+            closed.add(key)
+            expanded += 1
+            if expanded % _CHECK_EVERY == 0:
+                deadline.check()
+            if cell == goal and t >= earliest:
+                return _path(cells, parents, node)
+            nt = t + 1
+            tn = nt * n
+            for nc in succ[cell]:
+                if tn + nc in vertex:
+                    continue
+                bf = blocked.get(nc)
+                if bf is not None and nt >= bf:
+                    continue
+                if nc != cell and (tn + cell) * n + nc in edge:
+                    continue
+                h = dist[nc]
+                if earliest - nt > h:
+                    h = earliest - nt
+                nkey = nc * span + (nt if nt < horizon else horizon)
+                if nkey in closed:
+                    continue
+                c = conf
+                if cat is not None:
+                    c += cat_v.get(tn + nc, 0)
+                    if nc != cell:
+                        c += cat_e.get((tn + cell) * n + nc, 0)
+                    pa = cat_p.get(nc)
+                    if pa is not None and nt >= pa:
+                        c += 1
+                if nt < horizon:
+                    old = best_conf.get(nkey)
+                    if old is not None and old <= c:
+                        continue
+                    best_conf[nkey] = c
+                idx = len(cells)
+                cells.append(nc)
+                times.append(nt)
+                confs.append(c)
+                parents.append(node)
+                heappush(heap, (nt + h, c, -nt, idx))
+        return None
+    finally:
+        stats.low += expanded
+
+
+def focal_astar(
+    graph: GridGraph,
+    start: int,
+    goal: int,
+    table: ConstraintTable,
+    cat: ConflictAvoidanceTable,
+    w: float,
+    deadline: Deadline,
+    stats: SearchStats,
+) -> tuple[list[int], int] | None:
+    """A path of cost ≤ w · optimum with few CAT collisions, and the lower bound ``f_min``."""
+    earliest = table.earliest_finish(goal)
+    if earliest is None:
+        return None
+    n = graph.num_cells
+    dist = graph.distances(goal)
+    if dist[start] >= UNREACHABLE:
+        return None
+    succ = graph.successors
+    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
+    horizon = max(table.horizon, earliest, cat.horizon) + 1
+    span = horizon + 1
+    cells = [start]
+    times = [0]
+    fs = [max(dist[start], earliest)]
+    confs = [0]
+    parents = [-1]
+    keys = [start * span]
+    current: dict[int, int] = {keys[0]: 0}
+    done: set[int] = set()
+    open_heap = [(fs[0], 0)]
+    focal = [(0, fs[0], 0, 0)]
+    waiting: list[tuple[int, int]] = []
+    threshold = int(w * fs[0] + 1e-9)
+    expanded = 0
+
+    def live(i: int) -> bool:
+        return i not in done and current.get(keys[i]) == i
+
+    try:
+        while True:
+            while open_heap and not live(open_heap[0][1]):
+                heappop(open_heap)
+            if not open_heap:
+                return None
+            f_min = open_heap[0][0]
+            new_threshold = int(w * f_min + 1e-9)
+            if new_threshold > threshold:
+                threshold = new_threshold
+                while waiting and waiting[0][0] <= threshold:
+                    f, i = heappop(waiting)
+                    if live(i):
+                        heappush(focal, (confs[i], f, -times[i], i))
+            # never empty here: threshold ≥ f_min, so the node at the top of OPEN is in FOCAL
+            while not live(focal[0][3]):
+                heappop(focal)
+            conf, _f, _, node = heappop(focal)
+            done.add(node)
+            expanded += 1
+            if expanded % _CHECK_EVERY == 0:
+                deadline.check()
+            cell = cells[node]
+            t = times[node]
+            if cell == goal and t >= earliest:
+                return _path(cells, parents, node), f_min
+            nt = t + 1
+            tn = nt * n
+            for nc in succ[cell]:
+                if tn + nc in vertex:
+                    continue
+                bf = blocked.get(nc)
+                if bf is not None and nt >= bf:
+                    continue
+                if nc != cell and (tn + cell) * n + nc in edge:
+                    continue
+                h = dist[nc]
+                if earliest - nt > h:
+                    h = earliest - nt
+                c = conf + cat_v.get(tn + nc, 0)
+                if nc != cell:
+                    c += cat_e.get((tn + cell) * n + nc, 0)
+                pa = cat_p.get(nc)
+                if pa is not None and nt >= pa:
+                    c += 1
+                nkey = nc * span + (nt if nt < horizon else horizon)
+                old = current.get(nkey)
+                if old is not None and times[old] <= nt and confs[old] <= c:
+                    continue
+                idx = len(cells)
+                cells.append(nc)
+                times.append(nt)
+                f = nt + h
+                fs.append(f)
+                confs.append(c)
+                parents.append(node)
+                keys.append(nkey)
+                current[nkey] = idx
+                heappush(open_heap, (f, idx))
+                if f <= threshold:
+                    heappush(focal, (c, f, -nt, idx))
+                else:
+                    heappush(waiting, (f, idx))
+    finally:
+        stats.low += expanded

@@ -1,0 +1,52 @@
+"""Multi-valued decision diagrams (Sharon et al. 2013), reduced to what ICBS needs.
+
+The MDD of an agent with cost C under its constraints holds every ``(cell, t)`` on some path of
+cost exactly C. A conflict is cardinal for an agent when the MDD has width one at the conflict
+(every optimal path goes through it), so the constraint that forbids it raises the agent's cost
+(Boyarski et al., "ICBS", IJCAI 2015). We keep only ``singletons[t]``: the cell when the level has
+width one, else -1.
+"""
+
+from __future__ import annotations
+
+from planners.mapf.grid_graph import GridGraph
+from planners.mapf.tables import ConstraintTable
+
+
+def mdd_singletons(
+    graph: GridGraph, start: int, goal: int, cost: int, table: ConstraintTable
+) -> tuple[int, ...]:
+    """For t in 0..cost, the only cell of MDD level t, or -1 where the level is wider."""
+    n = graph.num_cells
+    dist = graph.distances(goal)
+    succ = graph.successors
+    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    levels: list[dict[int, list[int]]] = [{start: []}]
+    for t in range(1, cost + 1):
+        budget = cost - t
+        tn = t * n
+        layer: dict[int, list[int]] = {}
+        for cell in levels[-1]:
+            for nc in succ[cell]:
+                if dist[nc] > budget or tn + nc in vertex:
+                    continue
+                bf = blocked.get(nc)
+                if bf is not None and t >= bf:
+                    continue
+                if nc != cell and (tn + cell) * n + nc in edge:
+                    continue
+                parents = layer.get(nc)
+                if parents is None:
+                    layer[nc] = [cell]
+                else:
+                    parents.append(cell)
+        levels.append(layer)
+    singles = [-1] * (cost + 1)
+    alive = {goal} if goal in levels[cost] else set()
+    for t in range(cost, -1, -1):
+        if len(alive) == 1:
+            singles[t] = next(iter(alive))
+        if t:
+            layer = levels[t]
+            alive = {p for c in alive for p in layer[c]}
+    return tuple(singles)
