@@ -88,8 +88,8 @@ class SegmentIndex:
         step = max(1, 2_000_000 // n)
         for k in range(0, centres_x.size, step):
             d = _point_segment_distance(
-                centres_x[k : k + step, None] - self.ax,
-                centres_y[k : k + step, None] - self.ay,
+                self.ax - centres_x[k : k + step, None],
+                self.ay - centres_y[k : k + step, None],
                 self.ux,
                 self.uy,
                 self.length,
@@ -378,7 +378,7 @@ def cast_scans_reference(
     if self_index is None:
         self_index = np.full(origins.shape[0], -1)
     out = np.full((origins.shape[0], beam_angles.size), np.inf)
-    for i, ((px, py), heading) in enumerate(zip(origins, headings)):
+    for i, ((px, py), heading) in enumerate(zip(origins, headings, strict=True)):
         angles = heading + beam_angles
         dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
         wx, wy = ax - px, ay - py
