@@ -51,12 +51,16 @@ class LidarParams:
 
 @dataclass(frozen=True)
 class OdometryParams:
-    """Wheel odometry noise: per step, the standard deviations grow with distance and rotation.
+    """Wheel odometry drift, as simulated by ``sim_server.odometry``.
 
-    Follows the odometry motion model of Thrun, Burgard, Fox, Probabilistic Robotics, §5.4:
-    translation noise σ_t = alpha_trans·|Δs| + alpha_rot_trans·|Δθ|, rotation noise
-    σ_r = alpha_rot·|Δθ| + alpha_trans_rot·|Δs|, plus a constant heading bias per metre
-    (a wheel-radius mismatch) that makes drift systematic as on a real robot.
+    The odometry motion model of Thrun, Burgard, Fox, Probabilistic Robotics, §5.4 (rot1, trans,
+    rot2), with noise *variances* growing linearly with distance and rotation, so the drift does
+    not depend on the odometry rate and each alpha is an error std after one metre or radian:
+    ``alpha_trans`` (m/√m) translation error per distance driven, ``alpha_rot`` (rad/√rad)
+    heading error per angle turned, ``alpha_rot_trans`` (m/√rad) translation error per angle
+    turned, ``alpha_trans_rot`` (rad/√m) heading error per distance driven; e.g. the heading
+    error std after D metres straight is ``alpha_trans_rot·√D``. ``heading_bias_per_m`` is a
+    systematic heading drift (rad per metre of signed travel, a wheel-size mismatch).
     """
 
     rate_hz: float = 50.0
@@ -69,6 +73,9 @@ class OdometryParams:
     def validate(self) -> None:
         if not 1.0 <= self.rate_hz <= 200.0:
             raise ValueError("rate_hz must be within 1..200")
+        for name in ("alpha_trans", "alpha_rot", "alpha_rot_trans", "alpha_trans_rot"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0")
 
 
 @dataclass(frozen=True)
