@@ -22,6 +22,7 @@ occupied cells, so map_server worlds are cast against the same way.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -164,6 +165,11 @@ class _Beams:
         return counts, self.order3[pos] + np.repeat(sensor * b, counts)
 
 
+@functools.lru_cache(maxsize=16)
+def _beams_cached(angles: bytes) -> _Beams:
+    return _Beams(np.frombuffer(angles, dtype=np.float64))
+
+
 def _cast_segments(out, dirs, ox, oy, headings, beams, geom, sensor, seg, range_max) -> None:
     ax, ay, ux, uy, length = geom
     wx = ax[seg] - ox[sensor]
@@ -208,7 +214,7 @@ def _cast_discs(out, dirs, ox, oy, headings, beams, discs, self_index, range_max
     r_count, d_count = ox.size, discs.shape[0]
     mx = (discs[None, :, 0] - ox[:, None]).ravel()
     my = (discs[None, :, 1] - oy[:, None]).ravel()
-    rad = np.broadcast_to(discs[None, :, 2], (r_count, d_count)).ravel()
+    rad = np.tile(discs[:, 2], r_count)
     sensor = np.repeat(np.arange(r_count), d_count)
     disc = np.tile(np.arange(d_count), r_count)
     dist = np.hypot(mx, my)
@@ -267,13 +273,13 @@ def cast_scans(
     self_index = np.asarray(self_index, dtype=np.int64).reshape(-1)
     if self_index.size != r_count:
         raise ValueError(f"cast_scans: {r_count} origins but {self_index.size} self indices")
-    beams = _Beams(beam_angles)
+    beam_angles = np.ascontiguousarray(beam_angles, dtype=np.float64).reshape(-1)
+    beams = _beams_cached(beam_angles.tobytes())
     b_count = beams.count
     out = np.full(r_count * b_count, np.inf)
     if r_count == 0 or b_count == 0:
         return out.reshape(r_count, b_count)
     ox, oy = origins[:, 0], origins[:, 1]
-    beam_angles = np.asarray(beam_angles, dtype=np.float64)
     bc, bs = np.cos(beam_angles), np.sin(beam_angles)
     hc, hs = np.cos(headings)[:, None], np.sin(headings)[:, None]
     dirs = np.stack([(hc * bc - hs * bs).ravel(), (hs * bc + hc * bs).ravel()])

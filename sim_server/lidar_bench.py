@@ -33,7 +33,7 @@ class Scene:
 def furnished_scene(n_segments: int, n_robots: int, seed: int = 0) -> Scene:
     """A square floor with 4 walls and (n_segments − 4) / 4 boxes, and n_robots robot discs."""
     rng = np.random.default_rng(seed)
-    n_boxes = max(0, (n_segments - 4) // 4)
+    n_boxes = max(0, math.ceil((n_segments - 4) / 4))
     side = max(4.0, math.sqrt(n_boxes * _FLOOR_PER_BOX))
     walls = np.array(
         [[0, 0, side, 0], [side, 0, side, side], [side, side, 0, side], [0, side, 0, 0]]
