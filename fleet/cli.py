@@ -28,6 +28,7 @@ app.add_typer(slam_app, name="slam")
 def _register_all() -> None:
     """Each command module adds its commands; one line per module."""
     from fleet import cli_lidar; cli_lidar.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
+    from fleet import cli_mapf; cli_mapf.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
 
 
 _register_all()
