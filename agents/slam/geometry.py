@@ -1,0 +1,63 @@
+"""SE(2) poses as (x, y, theta) arrays: composition, inversion, relative poses, scan points.
+
+Poses broadcast over leading axes, so a whole trajectory is transformed at once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def wrap_angle(a: np.ndarray | float) -> np.ndarray | float:
+    """Angles mapped to [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a ⊕ b: the pose b, given in the frame of a, expressed in a's parent frame."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+
+
+def inverse(a: np.ndarray) -> np.ndarray:
+    """a⁻¹, so that a ⊕ a⁻¹ is the identity."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a⁻¹ ⊕ b: the pose b seen from a."""
+    return compose(inverse(a), b)
+
+
+def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 2) points in the frame ``pose`` → the parent frame."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    rot = np.array([[c, -s], [s, c]])
+    return points @ rot.T + np.asarray(pose[:2])
+
+
+def scan_to_points(
+    ranges: np.ndarray,
+    angle_min: float,
+    angle_increment: float,
+    range_min: float,
+    range_max: float,
+) -> np.ndarray:
+    """Beam endpoints (N, 2) in the sensor frame for ranges within [range_min, range_max).
+
+    Beams outside that interval (and NaN/inf) are "no return" and are dropped: they carry no
+    reliable evidence about free space (glass, black surfaces, open doors beyond range).
+    """
+    r = np.asarray(ranges, dtype=float)
+    angles = angle_min + angle_increment * np.arange(r.size)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(r) & (r >= range_min) & (r < range_max)
+    return np.stack([r[ok] * np.cos(angles[ok]), r[ok] * np.sin(angles[ok])], axis=-1)

@@ -1,0 +1,264 @@
+"""Correlative scan matching (Olson, "Real-time correlative scan matching", ICRA 2009).
+
+The map is turned into a likelihood field F = exp(−d²/2σ²), d the distance to the nearest
+occupied cell. A scan's score at a pose is the mean of F over its transformed points. The search
+is exhaustive over a window (dx, dy, dθ) around a prior, done in two resolutions as in Olson §III-C:
+a low-resolution field whose cell holds the maximum of F over the f×f high-resolution cells it
+covers gives an upper bound for all f×f fine translations at once, so fine cells are only scored
+under coarse cells whose bound beats the best fine score found so far (branch and bound).
+Rotations are searched exhaustively at both levels; all candidates of a level are scored in one
+vectorized gather. The covariance follows Olson §IV: the candidates' scores, turned into
+probabilities, give the second moment around their mean. A few Gauss–Newton steps on the
+bilinearly interpolated field then refine the discrete optimum to sub-cell accuracy (as the Ceres
+step in Hess et al. 2016).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from agents.slam.occupancy import LogOddsGrid
+from agents.slam.params import SlamParams
+
+
+def _window_max(a: np.ndarray, f: int) -> np.ndarray:
+    """out[i, j] = max(a[i:i+f, j:j+f]), zero beyond the edge."""
+    out = a.copy()
+    for k in range(1, f):
+        np.maximum(out[:-k], a[k:], out=out[:-k])
+    rows = out.copy()
+    for k in range(1, f):
+        np.maximum(out[:, :-k], rows[:, k:], out=out[:, :-k])
+    return out
+
+
+class LikelihoodField:
+    """F = exp(−d²/2σ²) over a grid's occupied cells, with cached max-pooled levels.
+
+    The outermost ring of cells is forced to zero, so lookups clipped into the array score
+    points that fall outside the map as zero.
+    """
+
+    def __init__(self, grid: LogOddsGrid, sigma: float) -> None:
+        self.resolution = grid.resolution
+        self.origin = grid.origin
+        rows, cols = grid.shape
+        values = np.zeros((rows, cols), dtype=np.float32)
+        if grid.touched is not None:
+            pad = math.ceil(3.0 * sigma / grid.resolution) + 1
+            r0, r1, c0, c1 = grid.touched
+            r0, c0 = max(r0 - pad, 0), max(c0 - pad, 0)
+            r1, c1 = min(r1 + pad, rows), min(c1 + pad, cols)
+            occupied = grid.log_odds[r0:r1, c0:c1] > 0
+            if occupied.any():
+                d = distance_transform_edt(~occupied) * grid.resolution
+                values[r0:r1, c0:c1] = np.exp(-0.5 * (d / sigma) ** 2)
+        values[0, :] = values[-1, :] = 0.0
+        values[:, 0] = values[:, -1] = 0.0
+        self.values = values
+        self._pooled: dict[int, np.ndarray] = {1: values}
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.values.shape  # type: ignore[return-value]
+
+    def pooled(self, factor: int) -> np.ndarray:
+        if factor not in self._pooled:
+            self._pooled[factor] = _window_max(self.values, factor)
+        return self._pooled[factor]
+
+    def bilinear(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """F and its gradient (dF/dx, dF/dy) at local points, interpolated between cell centres."""
+        rows, cols = self.shape
+        u = (x - self.origin[0]) / self.resolution - 0.5
+        v = (y - self.origin[1]) / self.resolution - 0.5
+        u = np.clip(u, 0.0, cols - 1.001)
+        v = np.clip(v, 0.0, rows - 1.001)
+        j = np.floor(u).astype(np.int64)
+        i = np.floor(v).astype(np.int64)
+        fu, fv = u - j, v - i
+        f = self.values
+        f00, f01, f10, f11 = f[i, j], f[i, j + 1], f[i + 1, j], f[i + 1, j + 1]
+        value = (1 - fv) * ((1 - fu) * f00 + fu * f01) + fv * ((1 - fu) * f10 + fu * f11)
+        d_du = (1 - fv) * (f01 - f00) + fv * (f11 - f10)
+        d_dv = (1 - fu) * (f10 - f00) + fu * (f11 - f01)
+        return value, d_du / self.resolution, d_dv / self.resolution
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """The best pose in the field's frame, its mean likelihood in [0, 1], and its covariance."""
+
+    pose: np.ndarray
+    score: float
+    covariance: np.ndarray
+
+
+class CorrelativeMatcher:
+    """Olson's multi-resolution correlative matcher with a Gaussian prior penalty and a
+    Gauss–Newton refinement; tunables come from ``SlamParams``."""
+
+    def __init__(self, params: SlamParams) -> None:
+        self.params = params
+
+    def match(
+        self,
+        field: LikelihoodField,
+        points: np.ndarray,
+        prior: np.ndarray,
+        window_xy: float,
+        window_theta: float,
+        coarse_factor: int,
+        penalize: bool = True,
+    ) -> MatchResult:
+        """Match ``points`` (N, 2, sensor frame) against ``field`` around ``prior`` (field frame).
+
+        With ``penalize`` the score is reduced with the squared distance from the prior (an
+        odometry prior); loop-closure searches turn it off, their prior carries drift.
+        """
+        p = self.params
+        t_pen = p.translation_penalty if penalize else 0.0
+        r_pen = p.rotation_penalty if penalize else 0.0
+        res = field.resolution
+        rows, cols = field.shape
+        prior = np.asarray(prior, dtype=float)
+        n_points = points.shape[0]
+        n_xy = math.ceil(window_xy / res - 1e-9)
+        n_th = math.ceil(window_theta / p.angular_step - 1e-9)
+        d_theta = np.arange(-n_th, n_th + 1) * p.angular_step
+        c, s = np.cos(prior[2] + d_theta), np.sin(prior[2] + d_theta)
+        px = c[:, None] * points[:, 0] - s[:, None] * points[:, 1] + prior[0]
+        py = s[:, None] * points[:, 0] + c[:, None] * points[:, 1] + prior[1]
+        col0 = np.floor((px - field.origin[0]) / res).astype(np.int64)
+        row0 = np.floor((py - field.origin[1]) / res).astype(np.int64)
+        rot_penalty = r_pen * d_theta**2
+        pen_xy = t_pen * res * res
+
+        f = max(1, min(coarse_factor, 2 * n_xy + 1))
+        starts = np.arange(-n_xy, n_xy + 1, f)
+        ends = np.minimum(starts + f - 1, n_xy)
+        nearest = np.where((starts <= 0) & (ends >= 0), 0, np.minimum(abs(starts), abs(ends)))
+        coarse = self._scores(field.pooled(f), row0, col0, starts, starts)
+        coarse -= rot_penalty[:, None, None]
+        coarse -= pen_xy * (nearest[None, :, None] ** 2 + nearest[None, None, :] ** 2)
+
+        order = np.argsort(coarse, axis=None)[::-1]
+        coarse_sorted = coarse.reshape(-1)[order]
+        offs = np.arange(f)
+        samples: list[np.ndarray] = []
+        best = -np.inf
+        batch = 4
+        for k in range(0, order.size, batch):
+            if coarse_sorted[k] < best - p.covariance_margin:
+                break
+            ti, jy, jx = np.unravel_index(order[k : k + batch], coarse.shape)
+            ky = starts[jy][:, None] + offs  # (B, f)
+            kx = starts[jx][:, None] + offs
+            r = np.clip(row0[ti][:, None, :] + ky[:, :, None], 0, rows - 1)  # (B, f, N)
+            cc = np.clip(col0[ti][:, None, :] + kx[:, :, None], 0, cols - 1)
+            flat = r[:, :, None, :] * cols + cc[:, None, :, :]  # (B, f, f, N)
+            score = field.values.reshape(-1)[flat].mean(axis=-1)
+            score -= rot_penalty[ti][:, None, None]
+            score -= pen_xy * (ky[:, :, None] ** 2 + kx[:, None, :] ** 2)
+            valid = (ky[:, :, None] <= n_xy) & (kx[:, None, :] <= n_xy)
+            score = np.where(valid, score, -np.inf)
+            best = max(best, float(score.max()))
+            grid_t = np.broadcast_to(d_theta[ti][:, None, None], score.shape)
+            grid_y = np.broadcast_to(ky[:, :, None] * res, score.shape)
+            grid_x = np.broadcast_to(kx[:, None, :] * res, score.shape)
+            samples.append(np.stack([grid_x, grid_y, grid_t, score], axis=-1).reshape(-1, 4))
+        cand = np.concatenate(samples)
+        cand = cand[np.isfinite(cand[:, 3])]
+        top = cand[np.argmax(cand[:, 3])]
+        covariance = self._covariance(cand, n_points, res)
+        start = prior + top[:3]
+        pose = self._refine(field, points, start, prior, t_pen, r_pen)
+        score = float(field.bilinear(*self._transform(pose, points))[0].mean())
+        return MatchResult(pose=pose, score=score, covariance=covariance)
+
+    @staticmethod
+    def _transform(pose: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        return (
+            c * points[:, 0] - s * points[:, 1] + pose[0],
+            s * points[:, 0] + c * points[:, 1] + pose[1],
+        )
+
+    @staticmethod
+    def _scores(
+        table: np.ndarray, row0: np.ndarray, col0: np.ndarray, dy: np.ndarray, dx: np.ndarray
+    ) -> np.ndarray:
+        """Mean of ``table`` over points shifted by every (dy, dx) for every rotation: (T, Y, X)."""
+        rows, cols = table.shape
+        r = np.clip(row0[:, None, :] + dy[None, :, None], 0, rows - 1)
+        c = np.clip(col0[:, None, :] + dx[None, :, None], 0, cols - 1)
+        flat = r[:, :, None, :] * cols + c[:, None, :, :]
+        return table.reshape(-1)[flat].mean(axis=-1)
+
+    def _covariance(self, cand: np.ndarray, n_points: int, res: float) -> np.ndarray:
+        """Olson 2009 §IV: Σ = Σᵢ wᵢ xᵢxᵢᵀ / Σ w − μμᵀ with wᵢ from the candidate scores."""
+        w = np.exp(self.params.score_information_gain * n_points * (cand[:, 3] - cand[:, 3].max()))
+        x = cand[:, :3]
+        mu = (w[:, None] * x).sum(axis=0) / w.sum()
+        d = x - mu
+        cov = (w[:, None, None] * d[:, :, None] * d[:, None, :]).sum(axis=0) / w.sum()
+        floor = np.array([res * res, res * res, self.params.angular_step**2]) / 12.0
+        return cov + np.diag(floor)
+
+    def _refine(
+        self,
+        field: LikelihoodField,
+        points: np.ndarray,
+        start: np.ndarray,
+        prior: np.ndarray,
+        t_pen: float,
+        r_pen: float,
+    ) -> np.ndarray:
+        """Gauss–Newton on Σ(1 − F)²/N + penalties, kept within one search cell of ``start``."""
+        p = self.params
+        n = points.shape[0]
+        wt, wr = math.sqrt(t_pen), math.sqrt(r_pen)
+        lo = start - np.array([field.resolution, field.resolution, p.angular_step])
+        hi = start + np.array([field.resolution, field.resolution, p.angular_step])
+
+        def residuals(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            x, y = self._transform(pose, points)
+            value, gx, gy = field.bilinear(x, y)
+            c, s = math.cos(pose[2]), math.sin(pose[2])
+            dx_dt = -s * points[:, 0] - c * points[:, 1]
+            dy_dt = c * points[:, 0] - s * points[:, 1]
+            scale = 1.0 / math.sqrt(n)
+            r = np.concatenate(
+                [
+                    (1.0 - value) * scale,
+                    [
+                        wt * (pose[0] - prior[0]),
+                        wt * (pose[1] - prior[1]),
+                        wr * (pose[2] - prior[2]),
+                    ],
+                ]
+            )
+            jac = np.empty((n + 3, 3))
+            jac[:n, 0] = -gx * scale
+            jac[:n, 1] = -gy * scale
+            jac[:n, 2] = -(gx * dx_dt + gy * dy_dt) * scale
+            jac[n:] = np.diag([wt, wt, wr])
+            return r, jac
+
+        pose = start.copy()
+        r, jac = residuals(pose)
+        cost = float(r @ r)
+        for _ in range(p.refine_iterations):
+            h = jac.T @ jac + 1e-9 * np.eye(3)
+            step = np.linalg.solve(h, -jac.T @ r)
+            trial = np.clip(pose + step, lo, hi)
+            r_new, jac_new = residuals(trial)
+            cost_new = float(r_new @ r_new)
+            if cost_new >= cost:
+                break
+            pose, r, jac, cost = trial, r_new, jac_new, cost_new
+        return pose

@@ -1,0 +1,111 @@
+"""SLAM tunables: the ``slam:`` section of ``configs/fleet.yaml``."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SlamParams:
+    """Parameters of the grid, the correlative matcher, submaps and the pose graph.
+
+    Units are metres, radians and seconds. Probabilities are per-observation occupancy
+    probabilities turned into log-odds increments (Thrun et al., Probabilistic Robotics §9.2).
+    """
+
+    # Occupancy grid
+    resolution: float = 0.05
+    max_range: float = 8.0  # beams longer than this (or than the sensor's range_max) are skipped
+    p_hit: float = 0.7
+    p_miss: float = 0.4
+    p_min: float = 0.12  # clamp, so a cell can change its mind after a few scans
+    p_max: float = 0.97
+    occupied_threshold: float = 0.65  # GridMap view: p ≥ this is occupied
+    free_threshold: float = 0.35  # p ≤ this is free, in between is unknown
+    map_tile: int = 32  # cells; the map's bounds snap to tiles and patches are whole tiles
+    patch_tolerance: int = 5  # percent; smaller changes of a cell do not re-send its tile
+
+    # Nodes (scans kept in the pose graph) and submaps (Hess et al. 2016)
+    node_min_distance: float = 0.05  # a scan becomes a node after this much motion ...
+    node_min_rotation: float = 0.05  # ... or this much rotation ...
+    node_max_interval: float = 2.0  # ... or this much time
+    submap_nodes: int = 40  # nodes per submap; a new one starts every submap_nodes/2
+    submap_travel: float = 3.0  # or when the robot is this far from the newest submap's origin
+    field_refresh_nodes: int = 4  # recompute the matching submap's likelihood field this often
+
+    # Correlative scan matcher (Olson 2009), tracking
+    match_sigma: float = 0.05  # Gaussian width of the likelihood field around occupied cells
+    search_window_xy: float = 0.2
+    search_window_theta: float = 0.2
+    angular_step: float = 0.008  # ≈ resolution / typical range: a far point moves ≤ one cell
+    coarse_factor: int = 4  # low-resolution level = max-pool over coarse_factor² cells
+    translation_penalty: float = 0.3  # score penalty per m² away from the odometry prior
+    rotation_penalty: float = 0.1  # score penalty per rad² away from the odometry prior
+    min_match_score: float = 0.35  # below this mean likelihood, trust odometry instead
+    refine_iterations: int = 6  # Gauss–Newton steps on the interpolated field after the search
+    score_information_gain: float = 0.1  # Olson §IV weights exp(gain·N·(score − best))
+    covariance_margin: float = 0.02  # also refine coarse cells this close to the best
+
+    # Loop closure: scan-to-submap matching against older submaps
+    loop_every_nodes: int = 5
+    loop_search_radius: float = 3.0
+    loop_window_xy: float = 0.8
+    loop_window_theta: float = 0.35
+    loop_coarse_factor: int = 8
+    loop_min_score: float = 0.6
+    loop_min_submap_gap: int = 2  # never close against the newest few submaps
+    loop_max_candidates: int = 2
+
+    # Pose graph (sparse least squares)
+    constraint_sigma_xy: float = 0.02
+    constraint_sigma_theta: float = 0.01
+    odom_sigma_xy: float = 0.05
+    odom_sigma_theta: float = 0.03
+    loop_sigma_xy: float = 0.05
+    loop_sigma_theta: float = 0.02
+    huber_scale: float = 3.0  # in standard deviations: a wrong loop closure is down-weighted
+    optimize_every_nodes: int = 20  # optimize at most this often, and only after new closures
+
+    def validate(self) -> None:
+        positive = (
+            "resolution",
+            "max_range",
+            "node_max_interval",
+            "submap_travel",
+            "match_sigma",
+            "search_window_xy",
+            "search_window_theta",
+            "angular_step",
+            "loop_search_radius",
+            "loop_window_xy",
+            "loop_window_theta",
+            "constraint_sigma_xy",
+            "constraint_sigma_theta",
+            "odom_sigma_xy",
+            "odom_sigma_theta",
+            "loop_sigma_xy",
+            "loop_sigma_theta",
+            "huber_scale",
+        )
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0")
+        if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < self.p_max < 1:
+            raise ValueError("need 0 < p_min < p_miss < 0.5 < p_hit < p_max < 1")
+        if not self.p_min < self.free_threshold < self.occupied_threshold < self.p_max:
+            raise ValueError("need p_min < free_threshold < occupied_threshold < p_max")
+        if not 0 <= self.patch_tolerance <= 100:
+            raise ValueError("patch_tolerance must be within 0..100")
+        if self.submap_nodes < 2:
+            raise ValueError("submap_nodes must be >= 2")
+        for name in ("coarse_factor", "loop_coarse_factor"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1")
+        for name in ("map_tile", "field_refresh_nodes", "loop_every_nodes", "optimize_every_nodes"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1")
+        if self.search_window_theta > math.pi or self.loop_window_theta > math.pi:
+            raise ValueError("angular search windows must be <= pi")
+        if not 0 < self.min_match_score < 1 or not 0 < self.loop_min_score < 1:
+            raise ValueError("min_match_score and loop_min_score must be within (0, 1)")

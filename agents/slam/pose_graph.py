@@ -1,0 +1,129 @@
+"""A 2D pose graph optimized by sparse nonlinear least squares (scipy ``least_squares``).
+
+Every constraint says "pose b seen from pose a is z": residual r = (a⁻¹ ⊕ b) ⊖ z, whitened by
+its standard deviations (the SPA formulation of Konolige et al. 2010, as used for submaps and
+scan nodes in Hess et al. 2016). A Huber loss bounds the pull of a wrong loop closure. The
+Jacobian is analytic and sparse: each constraint touches six variables.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import least_squares
+
+from agents.slam.geometry import wrap_angle
+
+
+@dataclass(frozen=True)
+class OptimizationReport:
+    """Function evaluations used and ½Σr² of the whitened residuals before and after."""
+
+    iterations: int
+    initial_cost: float
+    final_cost: float
+
+
+class PoseGraph:
+    """Poses (x, y, θ) and relative-pose constraints; pose 0 is held fixed (the gauge)."""
+
+    def __init__(self) -> None:
+        self._poses = np.zeros((0, 3))
+        self._a: list[int] = []
+        self._b: list[int] = []
+        self._z: list[np.ndarray] = []
+        self._w: list[np.ndarray] = []
+
+    @property
+    def poses(self) -> np.ndarray:
+        return self._poses
+
+    @property
+    def num_constraints(self) -> int:
+        return len(self._a)
+
+    def add_pose(self, pose: np.ndarray) -> int:
+        self._poses = np.vstack([self._poses, np.asarray(pose, dtype=float)[None, :]])
+        return self._poses.shape[0] - 1
+
+    def set_pose(self, index: int, pose: np.ndarray) -> None:
+        self._poses[index] = pose
+
+    def add_constraint(
+        self, a: int, b: int, z: np.ndarray, sigma_xy: float, sigma_theta: float
+    ) -> None:
+        self._a.append(a)
+        self._b.append(b)
+        self._z.append(np.asarray(z, dtype=float))
+        self._w.append(np.array([1.0 / sigma_xy, 1.0 / sigma_xy, 1.0 / sigma_theta]))
+
+    def optimize(self, huber_scale: float, max_iterations: int = 20) -> OptimizationReport:
+        """Minimize the whitened residuals with a Huber loss (scale in standard deviations)."""
+        if not self._a:
+            return OptimizationReport(0, 0.0, 0.0)
+        a = np.asarray(self._a)
+        b = np.asarray(self._b)
+        z = np.asarray(self._z)
+        w = np.asarray(self._w)
+        n = self._poses.shape[0]
+        m = a.size
+        anchor = self._poses[0].copy()
+        anchor_w = 1e4
+
+        def residuals(flat: np.ndarray) -> np.ndarray:
+            x = flat.reshape(n, 3)
+            pa, pb = x[a], x[b]
+            c, s = np.cos(pa[:, 2]), np.sin(pa[:, 2])
+            dx, dy = pb[:, 0] - pa[:, 0], pb[:, 1] - pa[:, 1]
+            r = np.empty((m, 3))
+            r[:, 0] = c * dx + s * dy - z[:, 0]
+            r[:, 1] = -s * dx + c * dy - z[:, 1]
+            r[:, 2] = wrap_angle(pb[:, 2] - pa[:, 2] - z[:, 2])
+            r *= w
+            return np.concatenate([r.reshape(-1), anchor_w * (x[0] - anchor)])
+
+        rows3 = 3 * np.arange(m)
+        row_idx = np.concatenate(
+            [
+                np.repeat(rows3, 5),
+                np.repeat(rows3 + 1, 5),
+                np.repeat(rows3 + 2, 2),
+                3 * m + np.arange(3),
+            ]
+        )
+        cols_xy = np.stack([3 * a, 3 * a + 1, 3 * a + 2, 3 * b, 3 * b + 1], axis=1).reshape(-1)
+        cols_t = np.stack([3 * a + 2, 3 * b + 2], axis=1).reshape(-1)
+        col_idx = np.concatenate([cols_xy, cols_xy, cols_t, np.arange(3)])
+
+        def jacobian(flat: np.ndarray) -> sp.csr_matrix:
+            x = flat.reshape(n, 3)
+            pa, pb = x[a], x[b]
+            c, s = np.cos(pa[:, 2]), np.sin(pa[:, 2])
+            dx, dy = pb[:, 0] - pa[:, 0], pb[:, 1] - pa[:, 1]
+            jx = np.stack([-c, -s, -s * dx + c * dy, c, s], axis=1) * w[:, :1]
+            jy = np.stack([s, -c, -c * dx - s * dy, -s, c], axis=1) * w[:, 1:2]
+            jt = np.stack([-np.ones(m), np.ones(m)], axis=1) * w[:, 2:3]
+            data = np.concatenate(
+                [jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), np.full(3, anchor_w)]
+            )
+            return sp.csr_matrix((data, (row_idx, col_idx)), shape=(3 * m + 3, 3 * n))
+
+        result = least_squares(
+            residuals,
+            self._poses.reshape(-1),
+            jac=jacobian,
+            method="trf",
+            tr_solver="lsmr",
+            loss="huber",
+            f_scale=huber_scale,
+            max_nfev=max_iterations,
+            x_scale="jac",
+        )
+        initial = float(0.5 * np.sum(residuals(self._poses.reshape(-1)) ** 2))
+        final = float(0.5 * np.sum(residuals(result.x) ** 2))
+        x = result.x.reshape(n, 3)
+        x[:, 2] = wrap_angle(x[:, 2])
+        self._poses = x
+        return OptimizationReport(int(result.nfev), initial, final)

@@ -1,0 +1,375 @@
+"""2D laser SLAM: scan-to-submap tracking and submap pose-graph loop closure (Hess et al. 2016).
+
+Per scan, the odometry delta since the previous scan predicts the pose, and the correlative
+matcher (Olson 2009) aligns the scan with the older of the two active submaps around that
+prediction. Scans that moved enough become *nodes*: they are inserted into both active submaps
+(each submap receives ``submap_nodes`` nodes; a new one starts every ``submap_nodes/2``), so
+the matching submap is always well filled. Nodes and submaps are poses of a pose graph with
+constraints node-in-submap (from tracking), node-to-node (odometry) and loop closures (a node
+matched against an older finished submap near its estimate). After new loop closures the graph
+is optimized with sparse least squares and the current pose follows the last node's correction.
+
+The map frame is the frame of ``initial_pose``: an agent that knows its dock pose in the world
+passes it, and the SLAM map is then in world coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agents.slam.geometry import compose, relative, scan_to_points, transform_points
+from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
+from agents.slam.occupancy import LogOddsGrid, log_odds
+from agents.slam.params import SlamParams
+from agents.slam.pose_graph import PoseGraph
+from agents.slam.slam_map import SlamMap
+
+Pose = tuple[float, float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class SlamEstimate:
+    """The pose after a scan (map frame), its 3×3 covariance (x, y, θ) and the scan time.
+
+    ``matched`` is False when the scan could not be aligned (too few returns or a score below
+    ``min_match_score``) and the pose is odometry-propagated only.
+    """
+
+    pose: Pose
+    covariance: np.ndarray
+    t: float
+    matched: bool
+    score: float
+
+
+@dataclass(frozen=True)
+class SlamStats:
+    scans: int
+    nodes: int
+    submaps: int
+    loop_closures: int
+    optimizations: int
+
+
+@dataclass(eq=False)
+class _Submap:
+    index: int
+    graph_id: int
+    grid: LogOddsGrid
+    nodes: int = 0
+    finished: bool = False
+    field: LikelihoodField | None = None
+    field_nodes: int = -1
+
+
+@dataclass(eq=False)
+class _MapCache:
+    origin: tuple[float, float]
+    log_odds: np.ndarray
+    submaps: set[int] = field(default_factory=set)
+
+
+class Slam:
+    """Online SLAM for one robot. Feed every scan to ``process``; read ``occupancy()`` for the map.
+
+    ``range_min``/``range_max`` are the sensor's limits; returns outside [range_min, range_max)
+    (and beyond ``params.max_range``) are treated as "no return" and skipped entirely: no free
+    space is carved along them.
+    """
+
+    def __init__(
+        self,
+        params: SlamParams,
+        initial_pose: Pose = (0.0, 0.0, 0.0),
+        range_min: float = 0.0,
+        range_max: float = math.inf,
+    ) -> None:
+        self.params = params
+        self.range_min = range_min
+        self.range_max = min(range_max, params.max_range)
+        self._matcher = CorrelativeMatcher(params)
+        self._graph = PoseGraph()
+        self._submaps: list[_Submap] = []
+        self._active: list[_Submap] = []
+        self._pose = np.asarray(initial_pose, dtype=float)
+        self._last_odom: np.ndarray | None = None
+        self._last_node_id: int | None = None
+        self._last_node_odom: np.ndarray | None = None
+        self._last_node_t = -math.inf
+        self._covariance = np.zeros((3, 3))
+        self._scans = 0
+        self._nodes = 0
+        self._loop_closures = 0
+        self._pending_loops = 0
+        self._nodes_since_optimization = 0
+        self._optimizations = 0
+        self._cache: _MapCache | None = None
+        self._half_size = self.range_max + params.submap_travel
+
+    @property
+    def pose(self) -> Pose:
+        return (float(self._pose[0]), float(self._pose[1]), float(self._pose[2]))
+
+    def stats(self) -> SlamStats:
+        return SlamStats(
+            self._scans, self._nodes, len(self._submaps), self._loop_closures, self._optimizations
+        )
+
+    def process(
+        self,
+        scan_ranges: np.ndarray,
+        angle_min: float,
+        angle_increment: float,
+        odom_pose: Pose,
+        t: float,
+    ) -> SlamEstimate:
+        """One scan with the odometry pose (odometry frame, absolute) at the scan's time."""
+        p = self.params
+        points = scan_to_points(
+            scan_ranges, angle_min, angle_increment, self.range_min, self.range_max
+        )
+        odom = np.asarray(odom_pose, dtype=float)
+        self._scans += 1
+        if self._last_odom is None:
+            self._last_odom = odom
+            self._add_node(points, odom, t)
+            return SlamEstimate(self.pose, self._covariance.copy(), t, True, 1.0)
+        prior = compose(self._pose, relative(self._last_odom, odom))
+        self._last_odom = odom
+        submap = self._active[0]
+        matched, score = False, 0.0
+        if points.shape[0] >= 3 and submap.grid.touched is not None:
+            fld = self._field(submap)
+            sm_pose = self._graph.poses[submap.graph_id]
+            result = self._matcher.match(
+                fld,
+                points,
+                relative(sm_pose, prior),
+                p.search_window_xy,
+                p.search_window_theta,
+                p.coarse_factor,
+            )
+            score = result.score
+            matched = score >= p.min_match_score
+            if matched:
+                prior = compose(sm_pose, result.pose)
+                self._covariance = _rotate_covariance(result.covariance, sm_pose[2])
+        if not matched:
+            self._covariance = np.diag(
+                [p.search_window_xy**2, p.search_window_xy**2, p.search_window_theta**2]
+            )
+        self._pose = prior
+        if self._is_new_node(odom, t):
+            self._add_node(points, odom, t)
+        return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
+
+    def finish(self) -> None:
+        """Optimize once more if loop closures came in since the last optimization."""
+        if self._pending_loops:
+            self._optimize()
+
+    def occupancy(self) -> SlamMap:
+        """The map in the map frame: finished submaps (cached) plus the active ones."""
+        p = self.params
+        boxes = [self._submap_box(s) for s in self._submaps if s.grid.touched is not None]
+        tile = p.map_tile * p.resolution
+        if not boxes:
+            return SlamMap(
+                np.zeros((p.map_tile, p.map_tile), dtype=np.float32),
+                p.resolution,
+                (float(self._pose[0]), float(self._pose[1])),
+            )
+        lo = np.floor(np.min([b[0] for b in boxes], axis=0) / tile) * tile
+        hi = np.ceil(np.max([b[1] for b in boxes], axis=0) / tile) * tile
+        origin = (float(lo[0]), float(lo[1]))
+        shape = (
+            round((hi[1] - lo[1]) / p.resolution),
+            round((hi[0] - lo[0]) / p.resolution),
+        )
+        cache = self._cache
+        if cache is None or cache.origin != origin or cache.log_odds.shape != shape:
+            cache = self._cache = _MapCache(origin, np.zeros(shape, dtype=np.float32))
+        for s in self._submaps:
+            if s.finished and s.index not in cache.submaps:
+                self._render(s, cache.log_odds, origin)
+                cache.submaps.add(s.index)
+        out = cache.log_odds.copy()
+        for s in self._active:
+            self._render(s, out, origin)
+        np.clip(out, log_odds(p.p_min), log_odds(p.p_max), out=out)
+        return SlamMap(out, p.resolution, origin)
+
+    def _field(self, submap: _Submap) -> LikelihoodField:
+        p = self.params
+        if submap.field is None or (
+            not submap.finished and submap.nodes - submap.field_nodes >= p.field_refresh_nodes
+        ):
+            submap.field = LikelihoodField(submap.grid, p.match_sigma)
+            submap.field_nodes = submap.nodes
+        return submap.field
+
+    def _is_new_node(self, odom: np.ndarray, t: float) -> bool:
+        p = self.params
+        moved = relative(self._last_node_odom, odom)
+        return (
+            math.hypot(moved[0], moved[1]) >= p.node_min_distance
+            or abs(moved[2]) >= p.node_min_rotation
+            or t - self._last_node_t >= p.node_max_interval
+        )
+
+    def _new_submap(self, pose: np.ndarray) -> None:
+        """Start a submap at ``pose``'s position, its grid axis-aligned with the map frame and
+        snapped to the map's cell lattice: all submaps then quantize a wall into the same cells,
+        so the half-cell discretization bias does not differ (and accumulate) between submaps."""
+        p = self.params
+        snapped = np.array(
+            [
+                round(pose[0] / p.resolution) * p.resolution,
+                round(pose[1] / p.resolution) * p.resolution,
+                0.0,
+            ]
+        )
+        n = math.ceil(2 * self._half_size / p.resolution)
+        grid = LogOddsGrid(
+            (n, n),
+            (-self._half_size, -self._half_size),
+            p.resolution,
+            p.p_hit,
+            p.p_miss,
+            p.p_min,
+            p.p_max,
+        )
+        submap = _Submap(len(self._submaps), self._graph.add_pose(snapped), grid)
+        self._submaps.append(submap)
+        self._active.append(submap)
+        if len(self._active) > 2:
+            old = self._active.pop(0)
+            old.finished = True
+            old.field = LikelihoodField(old.grid, p.match_sigma)
+            old.field_nodes = old.nodes
+
+    def _add_node(self, points: np.ndarray, odom: np.ndarray, t: float) -> None:
+        p = self.params
+        pose = self._pose
+        if not self._submaps:
+            self._new_submap(pose)
+        node_id = self._graph.add_pose(pose)
+        if self._last_node_id is not None:
+            self._graph.add_constraint(
+                self._last_node_id,
+                node_id,
+                relative(self._last_node_odom, odom),
+                p.odom_sigma_xy,
+                p.odom_sigma_theta,
+            )
+        for s in self._active:
+            local = relative(self._graph.poses[s.graph_id], pose)
+            s.grid.insert(local[:2], transform_points(local, points))
+            s.nodes += 1
+            self._graph.add_constraint(
+                s.graph_id, node_id, local, p.constraint_sigma_xy, p.constraint_sigma_theta
+            )
+        self._last_node_id = node_id
+        self._last_node_odom = odom
+        self._last_node_t = t
+        self._nodes += 1
+        self._nodes_since_optimization += 1
+        newest = self._active[-1]
+        newest_pose = self._graph.poses[newest.graph_id]
+        far = math.hypot(*(pose[:2] - newest_pose[:2])) > 0.5 * p.submap_travel
+        if newest.nodes >= max(1, p.submap_nodes // 2) or far:
+            self._new_submap(pose)
+        if self._nodes % p.loop_every_nodes == 0 and points.shape[0] >= 3:
+            self._close_loops(node_id, points)
+        if self._pending_loops and self._nodes_since_optimization >= p.optimize_every_nodes:
+            self._optimize()
+
+    def _close_loops(self, node_id: int, points: np.ndarray) -> None:
+        p = self.params
+        pose = self._graph.poses[node_id]
+        newest_allowed = self._active[0].index - p.loop_min_submap_gap
+        candidates = []
+        for s in self._submaps:
+            if not s.finished or s.index > newest_allowed or s.grid.touched is None:
+                continue
+            lo, hi = self._submap_box(s)
+            gap = np.maximum(np.maximum(lo - pose[:2], pose[:2] - hi), 0.0)
+            distance = float(np.hypot(*gap))
+            if distance <= p.loop_search_radius:
+                candidates.append((distance, s))
+        candidates.sort(key=lambda c: c[0])
+        for _, s in candidates[: p.loop_max_candidates]:
+            sm_pose = self._graph.poses[s.graph_id]
+            result = self._matcher.match(
+                s.field,
+                points,
+                relative(sm_pose, pose),
+                p.loop_window_xy,
+                p.loop_window_theta,
+                p.loop_coarse_factor,
+                penalize=False,
+            )
+            if result.score >= p.loop_min_score:
+                self._graph.add_constraint(
+                    s.graph_id, node_id, result.pose, p.loop_sigma_xy, p.loop_sigma_theta
+                )
+                self._loop_closures += 1
+                self._pending_loops += 1
+
+    def _optimize(self) -> None:
+        before = self._graph.poses[self._last_node_id].copy()
+        self._graph.optimize(self.params.huber_scale)
+        after = self._graph.poses[self._last_node_id]
+        self._pose = compose(after, relative(before, self._pose))
+        self._pending_loops = 0
+        self._nodes_since_optimization = 0
+        self._optimizations += 1
+        self._cache = None
+
+    def _submap_box(self, s: _Submap) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned map-frame bounds (lo, hi) of the submap's observed cells."""
+        r0, r1, c0, c1 = s.grid.touched
+        res = s.grid.resolution
+        ox, oy = s.grid.origin
+        corners = np.array(
+            [[ox + c * res, oy + r * res] for r in (r0, r1) for c in (c0, c1)], dtype=float
+        )
+        world = transform_points(self._graph.poses[s.graph_id], corners)
+        return world.min(axis=0), world.max(axis=0)
+
+    def _render(self, s: _Submap, target: np.ndarray, origin: tuple[float, float]) -> None:
+        """Add half the submap's log-odds into ``target`` (every node lives in two submaps),
+        sampling the submap at the centre of each target cell it covers."""
+        if s.grid.touched is None:
+            return
+        res = self.params.resolution
+        lo, hi = self._submap_box(s)
+        rows, cols = target.shape
+        c0 = max(math.floor((lo[0] - origin[0]) / res), 0)
+        c1 = min(math.ceil((hi[0] - origin[0]) / res), cols)
+        r0 = max(math.floor((lo[1] - origin[1]) / res), 0)
+        r1 = min(math.ceil((hi[1] - origin[1]) / res), rows)
+        if r0 >= r1 or c0 >= c1:
+            return
+        ys = origin[1] + (np.arange(r0, r1) + 0.5) * res
+        xs = origin[0] + (np.arange(c0, c1) + 0.5) * res
+        gx, gy = np.meshgrid(xs, ys)
+        pose = self._graph.poses[s.graph_id]
+        c, sn = math.cos(pose[2]), math.sin(pose[2])
+        dx, dy = gx - pose[0], gy - pose[1]
+        lx, ly = c * dx + sn * dy, -sn * dx + c * dy
+        gc = np.floor((lx - s.grid.origin[0]) / res).astype(np.int64)
+        gr = np.floor((ly - s.grid.origin[1]) / res).astype(np.int64)
+        tr0, tr1, tc0, tc1 = s.grid.touched
+        ok = (gr >= tr0) & (gr < tr1) & (gc >= tc0) & (gc < tc1)
+        block = target[r0:r1, c0:c1]
+        block[ok] += 0.5 * s.grid.log_odds[gr[ok], gc[ok]]
+
+
+def _rotate_covariance(cov: np.ndarray, theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return rot @ cov @ rot.T

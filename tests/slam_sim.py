@@ -1,0 +1,145 @@
+"""A tiny 2D world for SLAM tests: rooms made of line segments, a vectorized lidar ray caster,
+the rooms' occupancy raster, and a loop route with drifting odometry."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+
+from agents.slam.geometry import compose, relative, wrap_angle
+
+
+def box(x0: float, y0: float, x1: float, y1: float) -> list[tuple[float, float, float, float]]:
+    return [(x0, y0, x1, y0), (x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
+
+
+def room_segments() -> np.ndarray:
+    """A 6 m × 4 m room with an alcove and three pieces of furniture (no symmetry to fool a
+    matcher)."""
+    walls = [
+        (0.0, 0.0, 6.0, 0.0),
+        (6.0, 0.0, 6.0, 2.5),
+        (6.0, 2.5, 5.0, 2.5),
+        (5.0, 2.5, 5.0, 4.0),
+        (5.0, 4.0, 0.0, 4.0),
+        (0.0, 4.0, 0.0, 0.0),
+    ]
+    return np.array(
+        walls + box(1.0, 1.0, 1.6, 1.4) + box(3.5, 2.8, 4.2, 3.3) + box(4.5, 0.6, 4.8, 1.2)
+    )
+
+
+def home_segments() -> np.ndarray:
+    """Two rooms joined by a corridor (a 10 m × 6 m flat), for a loop with drift."""
+    walls = [
+        (0.0, 0.0, 10.0, 0.0),
+        (10.0, 0.0, 10.0, 6.0),
+        (10.0, 6.0, 0.0, 6.0),
+        (0.0, 6.0, 0.0, 0.0),
+        # inner block: the loop goes around it
+        (3.0, 2.0, 7.0, 2.0),
+        (7.0, 2.0, 7.0, 4.0),
+        (7.0, 4.0, 3.0, 4.0),
+        (3.0, 4.0, 3.0, 2.0),
+        # partition walls with doorways to break the symmetry
+        (5.0, 0.0, 5.0, 0.7),
+        (8.5, 6.0, 8.5, 5.0),
+    ]
+    return np.array(
+        walls + box(0.4, 0.4, 0.9, 1.0) + box(8.8, 0.3, 9.6, 0.8) + box(1.0, 5.2, 2.2, 5.6)
+    )
+
+
+def raycast(
+    segments: np.ndarray, pose: np.ndarray, angles: np.ndarray, max_range: float
+) -> np.ndarray:
+    """Range along each beam to the nearest segment; ``inf`` where nothing is within max_range."""
+    ox, oy, th = pose
+    dx = np.cos(th + angles)[:, None]
+    dy = np.sin(th + angles)[:, None]
+    ax, ay, bx, by = (segments[:, i][None, :] for i in range(4))
+    ex, ey = bx - ax, by - ay
+    denom = dx * ey - dy * ex
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((ax - ox) * ey - (ay - oy) * ex) / denom
+        u = ((ax - ox) * dy - (ay - oy) * dx) / denom
+    hit = (np.abs(denom) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+    t = np.where(hit, t, np.inf).min(axis=1)
+    return np.where(t < max_range, t, np.inf)
+
+
+def scan(
+    segments: np.ndarray,
+    pose: np.ndarray,
+    beams: int = 360,
+    max_range: float = 6.0,
+    noise: float = 0.01,
+    rng: np.random.Generator | None = None,
+) -> tuple[np.ndarray, float, float]:
+    """A 360° scan (ranges, angle_min, angle_increment) with Gaussian range noise."""
+    inc = 2 * math.pi / beams
+    angles = -math.pi + inc * np.arange(beams)
+    r = raycast(segments, np.asarray(pose, dtype=float), angles, max_range)
+    if rng is not None and noise > 0:
+        r = r + rng.normal(0.0, noise, size=r.shape)
+    return r, -math.pi, inc
+
+
+def occupancy_raster(
+    segments: np.ndarray, resolution: float, origin: tuple[float, float], shape: tuple[int, int]
+) -> np.ndarray:
+    """Cells (row 0 = lowest y) that a wall segment passes through."""
+    out = np.zeros(shape, dtype=bool)
+    for ax, ay, bx, by in segments:
+        n = math.ceil(math.hypot(bx - ax, by - ay) / (resolution / 4)) + 1
+        s = np.linspace(0.0, 1.0, n)
+        col = np.floor((ax + s * (bx - ax) - origin[0]) / resolution).astype(int)
+        row = np.floor((ay + s * (by - ay) - origin[1]) / resolution).astype(int)
+        ok = (row >= 0) & (row < shape[0]) & (col >= 0) & (col < shape[1])
+        out[row[ok], col[ok]] = True
+    return out
+
+
+def loop_route(waypoints: list[tuple[float, float]], speed: float, rate_hz: float) -> np.ndarray:
+    """Poses (T, 3) along a closed polyline at ``speed``, turning in place at the corners at
+    0.8 rad/s, sampled at ``rate_hz``."""
+    pts = [*waypoints, waypoints[0]]
+    poses = []
+    heading = math.atan2(pts[1][1] - pts[0][1], pts[1][0] - pts[0][0])
+    for (x0, y0), (x1, y1) in itertools.pairwise(pts):
+        target = math.atan2(y1 - y0, x1 - x0)
+        turn = float(wrap_angle(target - heading))
+        for k in range(int(abs(turn) / (0.8 / rate_hz))):
+            poses.append(
+                (x0, y0, float(wrap_angle(heading + math.copysign(k * 0.8 / rate_hz, turn))))
+            )
+        heading = target
+        n = max(int(math.hypot(x1 - x0, y1 - y0) / (speed / rate_hz)), 1)
+        for k in range(n):
+            f = k / n
+            poses.append((x0 + f * (x1 - x0), y0 + f * (y1 - y0), heading))
+    poses.append((*pts[-1], heading))
+    return np.array(poses)
+
+
+def drifting_odometry(
+    truth: np.ndarray, heading_bias_per_m: float, trans_noise: float, rot_noise: float, seed: int
+) -> np.ndarray:
+    """Odometry poses accumulated from true increments with a systematic heading bias per metre
+    travelled and Gaussian noise proportional to each increment."""
+    rng = np.random.default_rng(seed)
+    odom = [truth[0].copy()]
+    for a, b in itertools.pairwise(truth):
+        d = relative(a, b)
+        dist = math.hypot(d[0], d[1])
+        noisy = d + np.array(
+            [
+                rng.normal(0, trans_noise * dist),
+                rng.normal(0, trans_noise * dist),
+                heading_bias_per_m * dist + rng.normal(0, rot_noise * abs(d[2]) + 1e-4),
+            ]
+        )
+        odom.append(compose(odom[-1], noisy))
+    return np.array(odom)
