@@ -1,4 +1,4 @@
-"""The sections of ``configs/fleet.yaml`` as frozen dataclasses, and the whole file as FleetConfig."""
+"""The sections of configs/fleet.yaml as frozen dataclasses, and the whole file."""
 
 from __future__ import annotations
 

@@ -1,0 +1,194 @@
+"""The Zenoh session every fleet process opens, with typed publish/subscribe and liveliness.
+
+* Processes open a **client** session connected to one or more routers (``--connect``);
+  ``fleet router`` (and ``fleet up``, embedded) runs a session in **router** mode.
+* Multicast scouting is off unless asked for, so separate fleets on one machine never meet.
+* Control traffic (plans, cmd_vel, spawn) is reliable with congestion control BLOCK; sensor
+  streams use DROP so a slow subscriber never stalls the simulator.
+* A malformed payload is counted per key and logged once per key, never raised.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import threading
+from collections import Counter
+from collections.abc import Callable, Iterable
+from typing import Any, TypeVar
+
+import zenoh
+
+from fleet.protocol import DEFAULT_FLEET, DecodeError, Keys, Message, decode
+
+log = logging.getLogger(__name__)
+
+M = TypeVar("M", bound=Message)
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def make_config(
+    mode: str = "client",
+    connect: Iterable[str] = (),
+    listen: Iterable[str] = (),
+    multicast: bool = False,
+) -> zenoh.Config:
+    """A Zenoh config: ``mode`` client, peer or router; endpoints like ``tcp/127.0.0.1:7447``."""
+    if mode not in ("client", "peer", "router"):
+        raise ValueError(f"mode must be client, peer or router, got {mode!r}")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
+    connect = list(connect)
+    listen = list(listen)
+    for ep in connect + listen:
+        validate_endpoint(ep)
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(connect))
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps(listen))
+    if mode == "client":
+        # Keep retrying the router for a while instead of failing at once when it starts late.
+        conf.insert_json5("connect/timeout_ms", "10000")
+    return conf
+
+
+def validate_endpoint(endpoint: str) -> None:
+    """Reject endpoints that are not ``proto/host:port`` with a clear message."""
+    proto, sep, rest = endpoint.partition("/")
+    host, colon, port = rest.rpartition(":")
+    if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream") or not host:
+        raise ValueError(f"bad Zenoh endpoint {endpoint!r}: expected e.g. tcp/127.0.0.1:7447")
+    if proto != "unixsock-stream" and (
+        not colon or not port.isdigit() or not 0 < int(port) < 65536
+    ):
+        raise ValueError(f"bad Zenoh endpoint {endpoint!r}: the port must be 1–65535")
+
+
+def open_router(listen: Iterable[str]) -> zenoh.Session:
+    """Open a Zenoh session in router mode listening on ``listen``."""
+    return zenoh.open(make_config("router", listen=listen))
+
+
+class Bus:
+    """One process's connection to the fleet: typed pub/sub, queries and liveliness."""
+
+    def __init__(
+        self,
+        role: str,
+        ident: str,
+        connect: Iterable[str] = (DEFAULT_ENDPOINT,),
+        fleet: str = DEFAULT_FLEET,
+        mode: str = "client",
+    ) -> None:
+        self.keys = Keys(fleet)
+        self.role = role
+        self.ident = ident
+        self.session = zenoh.open(make_config(mode, connect=connect))
+        self.decode_errors: Counter[str] = Counter()
+        self._lock = threading.Lock()
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._handles: list[Any] = []
+        self._token = self.session.liveliness().declare_token(self.keys.alive(role, ident))
+
+    def close(self) -> None:
+        for h in self._handles:
+            with contextlib.suppress(Exception):
+                h.undeclare()
+        self._handles.clear()
+        self._token.undeclare()
+        self.session.close()
+
+    def __enter__(self) -> Bus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def publish(self, key: str, msg: Message, control: bool = False) -> None:
+        """Publish ``msg`` on ``key``; ``control`` selects reliable + BLOCK, else DROP."""
+        pub = self._publishers.get(key)
+        if pub is None:
+            cc = zenoh.CongestionControl.BLOCK if control else zenoh.CongestionControl.DROP
+            pri = zenoh.Priority.INTERACTIVE_HIGH if control else zenoh.Priority.DATA
+            pub = self.session.declare_publisher(key, congestion_control=cc, priority=pri)
+            self._publishers[key] = pub
+        pub.put(msg.encode())
+
+    def _on_bad(self, key: str, err: DecodeError) -> None:
+        with self._lock:
+            self.decode_errors[key] += 1
+            n = self.decode_errors[key]
+        if n == 1 or n % 100 == 0:
+            log.warning("dropped malformed payload on %s (%d so far): %s", key, n, err)
+
+    def subscribe(self, key: str, cls: type[M], callback: Callable[[str, M], None]) -> None:
+        """Call ``callback(key, message)`` for each valid ``cls`` message on ``key``."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            k = str(sample.key_expr)
+            try:
+                msg = decode(sample.payload.to_bytes(), cls)
+            except DecodeError as e:
+                self._on_bad(k, e)
+                return
+            try:
+                callback(k, msg)
+            except Exception:
+                log.exception("handler for %s failed", k)
+
+        self._handles.append(self.session.declare_subscriber(key, on_sample))
+
+    def serve(self, key: str, cls: type[M], handler: Callable[[M], Message]) -> None:
+        """Answer queries on ``key``: decode the request, reply with ``handler``'s message."""
+
+        def on_query(query: zenoh.Query) -> None:
+            k = str(query.key_expr)
+            try:
+                req = decode(query.payload.to_bytes() if query.payload else b"", cls)
+            except DecodeError as e:
+                self._on_bad(k, e)
+                query.reply_err(str(e))
+                return
+            try:
+                reply = handler(req)
+            except Exception as e:
+                log.exception("query handler for %s failed", k)
+                query.reply_err(str(e))
+                return
+            query.reply(k, reply.encode())
+
+        self._handles.append(self.session.declare_queryable(key, on_query))
+
+    def request(self, key: str, msg: Message, reply_cls: type[M], timeout: float = 5.0) -> M:
+        """Send a query and return the first valid reply; raises TimeoutError or RuntimeError."""
+        for reply in self.session.get(key, payload=msg.encode(), timeout=timeout):
+            if reply.ok is not None:
+                return decode(reply.ok.payload.to_bytes(), reply_cls)
+            raise RuntimeError(f"{key}: {reply.err.payload.to_string()}")
+        raise TimeoutError(f"{key}: no reply within {timeout} s")
+
+    def watch_alive(
+        self,
+        role: str,
+        on_join: Callable[[str], None],
+        on_leave: Callable[[str], None],
+    ) -> None:
+        """Track liveliness tokens of ``role`` (``*`` for all); existing ones are reported too."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            ident = str(sample.key_expr).rsplit("/", 1)[-1]
+            try:
+                if sample.kind == zenoh.SampleKind.PUT:
+                    on_join(ident)
+                else:
+                    on_leave(ident)
+            except Exception:
+                log.exception("liveliness handler failed")
+
+        sub = self.session.liveliness().declare_subscriber(
+            self.keys.alive_all(role), on_sample, history=True
+        )
+        self._handles.append(sub)

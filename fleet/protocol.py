@@ -1,0 +1,467 @@
+"""Every key expression and every message on the bus, with its encoding and validation.
+
+Encoding: a msgpack map ``{"_v": SCHEMA_VERSION, "_t": <type tag>, <field>: <value>, ...}``.
+numpy arrays travel as raw little-endian bytes of a fixed dtype; their trailing shape is part of
+the schema, so only the leading length is implied by the byte count. Decoding is strict: a wrong
+version, type tag, field name, field type, array length or a NaN (and ±inf where not allowed)
+raises :class:`DecodeError`, which receivers count and log instead of crashing.
+
+Field names follow the ROS messages people know (sensor_msgs/LaserScan, nav_msgs/Odometry,
+geometry_msgs/Twist, nav_msgs/Path) where one fits.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Annotated, Any, ClassVar, TypeVar
+
+import msgpack
+import numpy as np
+
+SCHEMA_VERSION = 1
+DEFAULT_FLEET = "default"
+
+M = TypeVar("M", bound="Message")
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected type."""
+
+
+@dataclass(frozen=True)
+class Arr:
+    """Schema of an array field: dtype, trailing shape, whether ±inf is allowed (NaN never is)."""
+
+    dtype: str
+    tail: tuple[int, ...] = ()
+    allow_inf: bool = False
+
+
+@dataclass(frozen=True)
+class Num:
+    """Schema of a float field that may be infinite (never NaN)."""
+
+    allow_inf: bool = True
+
+
+# ---------------------------------------------------------------------------------------------
+# Key expressions
+
+
+class Keys:
+    """Key expressions of one fleet: ``fleet/<fleet>/...``."""
+
+    def __init__(self, fleet: str = DEFAULT_FLEET) -> None:
+        if not fleet or any(c in fleet for c in "/*$?#"):
+            raise ValueError(f"invalid fleet name {fleet!r}: no '/', '*', '$', '?' or '#'")
+        self.fleet = fleet
+        self.root = f"fleet/{fleet}"
+
+    def robot(self, robot: str, topic: str) -> str:
+        return f"{self.root}/robot/{robot}/{topic}"
+
+    def clock(self) -> str:
+        return f"{self.root}/sim/clock"
+
+    def coverage(self) -> str:
+        return f"{self.root}/sim/coverage"
+
+    def collisions(self) -> str:
+        return f"{self.root}/sim/collision"
+
+    def sim_spawn(self) -> str:
+        return f"{self.root}/sim/spawn"
+
+    def sim_report(self) -> str:
+        return f"{self.root}/sim/report"
+
+    def coverage_image(self) -> str:
+        return f"{self.root}/sim/coverage_image"
+
+    def plan(self, robot: str) -> str:
+        return f"{self.root}/coord/plan/{robot}"
+
+    def coord_state(self) -> str:
+        return f"{self.root}/coord/state"
+
+    def alive(self, role: str, ident: str) -> str:
+        return f"{self.root}/alive/{role}/{ident}"
+
+    def alive_all(self, role: str = "*") -> str:
+        return f"{self.root}/alive/{role}/*"
+
+    def all_robots(self, topic: str) -> str:
+        return f"{self.root}/robot/*/{topic}"
+
+    @staticmethod
+    def robot_of(key: str) -> str:
+        """The robot id in ``fleet/<f>/robot/<id>/<topic>``."""
+        parts = str(key).split("/")
+        return parts[3] if len(parts) > 3 and parts[2] == "robot" else ""
+
+
+# ---------------------------------------------------------------------------------------------
+# Messages
+
+
+@dataclass(frozen=True, eq=False)
+class Message:
+    TYPE: ClassVar[str] = ""
+
+    def encode(self) -> bytes:
+        return encode(self)
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        for f in dataclasses.fields(self):
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+                if not np.array_equal(a, b):
+                    return False
+            elif a != b:
+                return False
+        return True
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True, eq=False)
+class Clock(Message):
+    """Sim time (s), the requested real-time factor, and whether the sim is waiting for agents."""
+
+    TYPE: ClassVar[str] = "clock"
+    stamp: float
+    speed: float
+    waiting: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class LaserScan(Message):
+    """sensor_msgs/LaserScan; ``ranges`` is inf where there was no return."""
+
+    TYPE: ClassVar[str] = "scan"
+    stamp: float
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: Annotated[np.ndarray, Arr("<f4", (), allow_inf=True)]
+
+
+@dataclass(frozen=True, eq=False)
+class Odometry(Message):
+    """nav_msgs/Odometry in the odometry frame (the world frame at spawn) with body velocities."""
+
+    TYPE: ClassVar[str] = "odom"
+    stamp: float
+    x: float
+    y: float
+    theta: float
+    v: float
+    w: float
+
+
+@dataclass(frozen=True, eq=False)
+class Twist(Message):
+    """cmd_vel. ``stamp`` is the sim time of the newest sensor data the command answers."""
+
+    TYPE: ClassVar[str] = "cmd_vel"
+    stamp: float
+    v: float
+    w: float
+
+
+@dataclass(frozen=True, eq=False)
+class PoseEstimate(Message):
+    """geometry_msgs/PoseWithCovarianceStamped in 2D: covariance over (x, y, theta), row-major."""
+
+    TYPE: ClassVar[str] = "pose"
+    stamp: float
+    x: float
+    y: float
+    theta: float
+    covariance: Annotated[np.ndarray, Arr("<f8")] = field(default_factory=lambda: np.zeros(9))
+    source: str = "odometry"
+
+
+@dataclass(frozen=True, eq=False)
+class TruthPose(Message):
+    """The true pose of a robot (sim → dashboard and report only)."""
+
+    TYPE: ClassVar[str] = "truth"
+    stamp: float
+    x: float
+    y: float
+    theta: float
+
+
+@dataclass(frozen=True, eq=False)
+class Intent(Message):
+    """The next seconds of planned trajectory: rows of (t, x, y) with absolute sim times."""
+
+    TYPE: ClassVar[str] = "intent"
+    stamp: float
+    points: Annotated[np.ndarray, Arr("<f8", (3,))]
+
+
+@dataclass(frozen=True, eq=False)
+class RobotStatus(Message):
+    """What an agent is doing: state, task, progress along its path."""
+
+    TYPE: ClassVar[str] = "status"
+    stamp: float
+    state: str
+    task: str
+    progress: float
+    waypoint: int
+    waypoints: int
+    distance_m: float
+    decode_errors: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class Plan(Message):
+    """A waypoint path (nav_msgs/Path in 2D) for one robot; ``task`` names the job it serves."""
+
+    TYPE: ClassVar[str] = "plan"
+    stamp: float
+    plan_id: int
+    task: str
+    waypoints: Annotated[np.ndarray, Arr("<f8", (2,))]
+
+
+@dataclass(frozen=True, eq=False)
+class Collision(Message):
+    """A contact: ``kind`` is "wall" or "robot"; ``other`` is the other robot or ""."""
+
+    TYPE: ClassVar[str] = "collision"
+    stamp: float
+    kind: str
+    robot: str
+    other: str
+    x: float
+    y: float
+
+
+@dataclass(frozen=True, eq=False)
+class CoverageSummary(Message):
+    """Ground-truth cleaning progress and per-robot counters (sim → dashboard and report)."""
+
+    TYPE: ClassVar[str] = "coverage"
+    stamp: float
+    wall_s: float
+    coverage: float
+    repetition: float
+    cleanable_m2: float
+    robots: list[str]
+    path_length_m: Annotated[np.ndarray, Arr("<f8")]
+    turns: Annotated[np.ndarray, Arr("<i4")]
+    wall_collisions: Annotated[np.ndarray, Arr("<i4")]
+    robot_collisions: Annotated[np.ndarray, Arr("<i4")]
+
+
+@dataclass(frozen=True, eq=False)
+class SpawnRequest(Message):
+    TYPE: ClassVar[str] = "spawn"
+    robot: str
+    x: float
+    y: float
+    theta: float
+
+
+@dataclass(frozen=True, eq=False)
+class SpawnReply(Message):
+    """``ok`` false with ``error`` set when the pose is not free; x, y, theta the pose granted."""
+
+    TYPE: ClassVar[str] = "spawn_reply"
+    ok: bool
+    error: str
+    x: float
+    y: float
+    theta: float
+
+
+@dataclass(frozen=True, eq=False)
+class CoverageImage(Message):
+    """The ground-truth visit-count grid (uint16, row 0 = lowest y) and the cleanable mask."""
+
+    TYPE: ClassVar[str] = "coverage_image"
+    stamp: float
+    resolution: float
+    origin_x: float
+    origin_y: float
+    rows: int
+    cols: int
+    visits: Annotated[np.ndarray, Arr("<u2")]
+    cleanable: Annotated[np.ndarray, Arr("|u1")]
+
+
+MESSAGES: dict[str, type[Message]] = {
+    cls.TYPE: cls
+    for cls in (
+        Clock,
+        LaserScan,
+        Odometry,
+        Twist,
+        PoseEstimate,
+        TruthPose,
+        Intent,
+        RobotStatus,
+        Plan,
+        Collision,
+        CoverageSummary,
+        SpawnRequest,
+        SpawnReply,
+        CoverageImage,
+    )
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# Encoding
+
+
+@dataclass(frozen=True)
+class _FieldSpec:
+    name: str
+    kind: Any
+    meta: Any
+
+
+_SPECS: dict[type, tuple[_FieldSpec, ...]] = {}
+
+
+def _specs(cls: type[Message]) -> tuple[_FieldSpec, ...]:
+    specs = _SPECS.get(cls)
+    if specs is None:
+        hints = typing.get_type_hints(cls, include_extras=True)
+        out = []
+        for f in dataclasses.fields(cls):
+            tp = hints[f.name]
+            meta = None
+            if typing.get_origin(tp) is Annotated:
+                tp, meta = typing.get_args(tp)[0], typing.get_args(tp)[1]
+            out.append(_FieldSpec(f.name, tp, meta))
+        specs = _SPECS[cls] = tuple(out)
+    return specs
+
+
+def _encode_value(spec: _FieldSpec, value: Any) -> Any:
+    if isinstance(spec.meta, Arr):
+        arr = np.ascontiguousarray(value, dtype=np.dtype(spec.meta.dtype))
+        return arr.tobytes()
+    if spec.kind is float:
+        return float(value)
+    if spec.kind is int:
+        return int(value)
+    if spec.kind is list[str]:
+        return list(value)
+    return value
+
+
+def encode(msg: Message) -> bytes:
+    """Serialize a message; see the module docstring for the format."""
+    out: dict[str, Any] = {"_v": SCHEMA_VERSION, "_t": msg.TYPE}
+    for spec in _specs(type(msg)):
+        out[spec.name] = _encode_value(spec, getattr(msg, spec.name))
+    return msgpack.packb(out, use_bin_type=True)
+
+
+def _decode_value(cls: type[Message], spec: _FieldSpec, raw: Any) -> Any:
+    where = f"{cls.TYPE}.{spec.name}"
+    if isinstance(spec.meta, Arr):
+        if not isinstance(raw, bytes):
+            raise DecodeError(f"{where}: expected bytes, got {type(raw).__name__}")
+        dt = np.dtype(spec.meta.dtype)
+        per_row = dt.itemsize * math.prod(spec.meta.tail)
+        if len(raw) % per_row:
+            raise DecodeError(
+                f"{where}: {len(raw)} bytes is not a whole number of {per_row}-byte rows"
+            )
+        arr = np.frombuffer(raw, dtype=dt).reshape((-1, *spec.meta.tail)).copy()
+        if arr.dtype.kind == "f":
+            if np.isnan(arr).any():
+                raise DecodeError(f"{where}: NaN is not allowed")
+            if not spec.meta.allow_inf and np.isinf(arr).any():
+                raise DecodeError(f"{where}: infinite values are not allowed")
+        return arr.astype(dt.newbyteorder("="))
+    if spec.kind is float:
+        if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+            raise DecodeError(f"{where}: expected a number, got {type(raw).__name__}")
+        value = float(raw)
+        if math.isnan(value):
+            raise DecodeError(f"{where}: NaN is not allowed")
+        allow_inf = isinstance(spec.meta, Num) and spec.meta.allow_inf
+        if math.isinf(value) and not allow_inf:
+            raise DecodeError(f"{where}: infinite values are not allowed")
+        return value
+    if spec.kind is int:
+        if isinstance(raw, bool) or not isinstance(raw, int):
+            raise DecodeError(f"{where}: expected an integer, got {type(raw).__name__}")
+        return raw
+    if spec.kind is bool:
+        if not isinstance(raw, bool):
+            raise DecodeError(f"{where}: expected a boolean, got {type(raw).__name__}")
+        return raw
+    if spec.kind is str:
+        if not isinstance(raw, str):
+            raise DecodeError(f"{where}: expected a string, got {type(raw).__name__}")
+        return raw
+    if spec.kind == list[str]:
+        if not isinstance(raw, list) or not all(isinstance(s, str) for s in raw):
+            raise DecodeError(f"{where}: expected a list of strings")
+        return list(raw)
+    raise DecodeError(f"{where}: unsupported field type")  # pragma: no cover - schema bug
+
+
+def decode(payload: bytes | bytearray | memoryview, cls: type[M]) -> M:
+    """Parse ``payload`` as a message of type ``cls``; raises DecodeError on any mismatch."""
+    try:
+        data = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=True)
+    except Exception as e:
+        raise DecodeError(f"{cls.TYPE}: not a msgpack payload ({type(e).__name__}: {e})") from None
+    if not isinstance(data, dict):
+        raise DecodeError(f"{cls.TYPE}: expected a map, got {type(data).__name__}")
+    if data.get("_v") != SCHEMA_VERSION:
+        raise DecodeError(
+            f"{cls.TYPE}: schema version {data.get('_v')!r}, expected {SCHEMA_VERSION}"
+        )
+    if data.get("_t") != cls.TYPE:
+        raise DecodeError(f"expected a {cls.TYPE!r} message, got type {data.get('_t')!r}")
+    specs = _specs(cls)
+    names = {s.name for s in specs}
+    extra = sorted(str(k) for k in data if k not in names and k not in ("_v", "_t"))
+    if extra:
+        raise DecodeError(f"{cls.TYPE}: unknown field {extra[0]!r}")
+    kwargs = {}
+    for spec in specs:
+        if spec.name not in data:
+            raise DecodeError(f"{cls.TYPE}.{spec.name}: missing")
+        kwargs[spec.name] = _decode_value(cls, spec, data[spec.name])
+    try:
+        msg = cls(**kwargs)
+    except (TypeError, ValueError) as e:
+        raise DecodeError(f"{cls.TYPE}: {e}") from None
+    _check_shapes(msg)
+    return msg
+
+
+def _check_shapes(msg: Message) -> None:
+    """Cross-field checks that the schema alone does not express."""
+    if isinstance(msg, CoverageSummary):
+        n = len(msg.robots)
+        for name in ("path_length_m", "turns", "wall_collisions", "robot_collisions"):
+            if len(getattr(msg, name)) != n:
+                raise DecodeError(
+                    f"coverage.{name}: {len(getattr(msg, name))} values for {n} robots"
+                )
+    elif isinstance(msg, PoseEstimate) and msg.covariance.shape != (9,):
+        raise DecodeError("pose.covariance: expected 9 values (a row-major 3×3 matrix)")
+    elif isinstance(msg, CoverageImage):
+        cells = msg.rows * msg.cols
+        if msg.rows < 0 or msg.cols < 0 or len(msg.visits) != cells or len(msg.cleanable) != cells:
+            raise DecodeError(f"coverage_image: arrays do not hold rows × cols = {cells} cells")

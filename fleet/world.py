@@ -1,0 +1,401 @@
+"""Worlds: the floor plans the simulator runs and the planners plan on.
+
+Two kinds of file load as a world:
+
+* a **world YAML** (``configs/worlds/*.yaml``) with walls as thick segments, furniture as boxes
+  or circles, a charging dock and start poses — or with ``map:`` naming a ROS map_server YAML
+  whose image gives the walls;
+* a **ROS map_server YAML** (``image``, ``resolution``, ``origin``, ``negate``,
+  ``occupied_thresh``, ``free_thresh``, optional ``mode``), as written by ``map_saver``.
+
+Every error is a :class:`fleet.config.ConfigError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image, ImageDraw
+from scipy import ndimage
+
+from fleet.config import ConfigError, read_yaml
+from planners.grid import GridMap
+
+Pose = tuple[float, float, float]
+
+WORLD_FIELDS = {
+    "name",
+    "description",
+    "wall_thickness",
+    "walls",
+    "furniture",
+    "dock",
+    "starts",
+    "map",
+}
+FURNITURE_FIELDS = {"name", "type", "center", "size", "angle", "radius"}
+ROS_MAP_FIELDS = {
+    "image",
+    "resolution",
+    "origin",
+    "negate",
+    "occupied_thresh",
+    "free_thresh",
+    "mode",
+}
+CIRCLE_SIDES = 24
+DOCK_SIZE = (0.35, 0.2)
+
+
+@dataclass(frozen=True, eq=False)
+class Furniture:
+    name: str
+    polygon: np.ndarray  # (K, 2) convex, counter-clockwise
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """A static floor plan: obstacle polygons (vector worlds) or an occupancy image (map worlds)."""
+
+    name: str
+    source: Path
+    walls: tuple[np.ndarray, ...]
+    furniture: tuple[Furniture, ...]
+    map_grid: GridMap | None
+    dock: Pose | None
+    starts: tuple[Pose, ...]
+    bounds: tuple[float, float, float, float]
+
+    @property
+    def polygons(self) -> tuple[np.ndarray, ...]:
+        """All static obstacle polygons of a vector world (walls, furniture, dock)."""
+        return self.walls + tuple(f.polygon for f in self.furniture)
+
+    def grid(self, resolution: float = 0.05) -> GridMap:
+        """Rasterize the world; a cell touched by an obstacle is occupied."""
+        if self.map_grid is not None:
+            if math.isclose(resolution, self.map_grid.resolution):
+                return self.map_grid
+            return _resample(self.map_grid, resolution)
+        xmin, ymin, xmax, ymax = self.bounds
+        cols = math.ceil((xmax - xmin) / resolution)
+        rows = math.ceil((ymax - ymin) / resolution)
+        img = Image.new("1", (cols, rows), 0)
+        draw = ImageDraw.Draw(img)
+        for poly in self.polygons:
+            pix = [((x - xmin) / resolution - 0.5, (y - ymin) / resolution - 0.5) for x, y in poly]
+            draw.polygon(pix, fill=1, outline=1)
+        occ = np.array(img, dtype=bool)
+        return GridMap(occ, np.zeros_like(occ), resolution, (xmin, ymin))
+
+    def clearance(self, xy: np.ndarray, resolution: float = 0.025) -> np.ndarray:
+        """Distance (m) from points to the nearest occupied or unknown cell (0 outside the map)."""
+        g = self.grid(resolution)
+        blocked = g.occupied | g.unknown
+        dist = ndimage.distance_transform_edt(~blocked) * resolution - resolution / 2
+        rc = g.world_to_cell(np.atleast_2d(xy))
+        inside = g.in_bounds(rc)
+        out = np.zeros(len(rc))
+        out[inside] = dist[rc[inside, 0], rc[inside, 1]]
+        return np.maximum(out, 0.0)
+
+    def start_poses(self, n: int, robot_radius: float, spacing: float = 0.55) -> list[Pose]:
+        """``n`` start poses: the listed ones first, then free poses nearest the dock.
+
+        Extra poses lie in the free space reachable from the first start (or the dock, or the
+        most open point of the map), at least ``spacing`` apart and ``robot_radius + 0.1`` m from
+        any obstacle.
+        """
+        poses = list(self.starts[:n])
+        if len(poses) == n:
+            return poses
+        res = 0.05
+        g = self.grid(res)
+        blocked = g.occupied | g.unknown
+        clear = ndimage.distance_transform_edt(~blocked) * res
+        ok = clear >= robot_radius + 0.1
+        labels, _ = ndimage.label(ok)
+        if self.starts:
+            anchor = np.array(self.starts[0][:2])
+        elif self.dock is not None:
+            anchor = np.array(self.dock[:2])
+        else:
+            anchor = g.cell_to_world(np.unravel_index(np.argmax(clear), clear.shape))
+        arc = g.world_to_cell(anchor)
+        near = labels == labels[tuple(np.clip(arc, 0, np.array(clear.shape) - 1))]
+        if not near.any():
+            near = ok
+        cells = np.argwhere(near)
+        pts = g.cell_to_world(cells)
+        order = np.argsort(np.hypot(*(pts - anchor).T), kind="stable")
+        heading = self.starts[0][2] if self.starts else (self.dock[2] if self.dock else 0.0)
+        for p in pts[order]:
+            if all(math.hypot(p[0] - q[0], p[1] - q[1]) >= spacing for q in poses):
+                poses.append((float(p[0]), float(p[1]), heading))
+                if len(poses) == n:
+                    return poses
+        raise ConfigError(
+            f"{self.source}: room for only {len(poses)} robots near the start, {n} requested"
+        )
+
+
+def load_world(path: str | Path, robot_radius: float = 0.17) -> World:
+    """Load a world YAML or a ROS map_server YAML; start poses are checked against obstacles."""
+    path = Path(path)
+    data = read_yaml(path)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level")
+    if "image" in data:
+        world = _world_from_ros_map(path, data, starts=(), dock=None, name=path.stem)
+    else:
+        world = _world_from_yaml(path, data)
+    _check_starts(world, robot_radius)
+    return world
+
+
+def load_ros_map(path: str | Path) -> GridMap:
+    """Load a ROS map_server map (YAML + PGM/PNG) as a GridMap."""
+    path = Path(path)
+    data = read_yaml(path)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level")
+    return _parse_ros_map(path, data)
+
+
+def _number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{where}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _vector(value: Any, n: int, where: str) -> tuple[float, ...]:
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise ConfigError(f"{where}: expected a list of {n} numbers, got {value!r}")
+    return tuple(_number(v, f"{where}[{i}]") for i, v in enumerate(value))
+
+
+def _box(center: tuple[float, ...], size: tuple[float, ...], angle: float) -> np.ndarray:
+    hx, hy = size[0] / 2, size[1] / 2
+    corners = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    c, s = math.cos(angle), math.sin(angle)
+    return corners @ np.array([[c, s], [-s, c]]) + np.array(center[:2])
+
+
+def _thick_segment(seg: tuple[float, ...], thickness: float) -> np.ndarray:
+    x1, y1, x2, y2 = seg
+    length = math.hypot(x2 - x1, y2 - y1)
+    angle = math.atan2(y2 - y1, x2 - x1)
+    # Extend by half the thickness so walls meeting at a corner close it.
+    return _box(((x1 + x2) / 2, (y1 + y2) / 2), (length + thickness, thickness), angle)
+
+
+def _world_from_yaml(path: Path, data: dict) -> World:
+    unknown = sorted(set(data) - WORLD_FIELDS)
+    if unknown:
+        raise ConfigError(
+            f"{path}: unknown field {unknown[0]!r} (known: {', '.join(sorted(WORLD_FIELDS))})"
+        )
+    name = data.get("name", path.stem)
+    if not isinstance(name, str):
+        raise ConfigError(f"{path}: name: expected a string")
+    starts = tuple(
+        _vector(s, 3, f"{path}: starts[{i}]") for i, s in enumerate(_list(data, "starts", path))
+    )
+    dock = _vector(data["dock"], 3, f"{path}: dock") if data.get("dock") is not None else None
+    if "map" in data:
+        if data.get("walls") or data.get("furniture"):
+            raise ConfigError(
+                f"{path}: map: a map world takes its walls from the image; remove walls/furniture"
+            )
+        if not isinstance(data["map"], str):
+            raise ConfigError(f"{path}: map: expected the path of a ROS map YAML")
+        map_path = (path.parent / data["map"]).resolve()
+        map_data = read_yaml(map_path)
+        if not isinstance(map_data, dict):
+            raise ConfigError(f"{map_path}: expected a mapping at the top level")
+        return _world_from_ros_map(map_path, map_data, starts, dock, name, source=path)
+
+    thickness = _number(data.get("wall_thickness", 0.1), f"{path}: wall_thickness")
+    if thickness <= 0:
+        raise ConfigError(f"{path}: wall_thickness: must be > 0")
+    walls = []
+    for i, w in enumerate(_list(data, "walls", path)):
+        seg = _vector(w, 4, f"{path}: walls[{i}]")
+        if math.hypot(seg[2] - seg[0], seg[3] - seg[1]) == 0:
+            raise ConfigError(f"{path}: walls[{i}]: zero length")
+        walls.append(_thick_segment(seg, thickness))
+    if not walls:
+        raise ConfigError(f"{path}: walls: a world needs at least one wall")
+    furniture = [
+        _furniture(f, f"{path}: furniture[{i}]")
+        for i, f in enumerate(_list(data, "furniture", path))
+    ]
+    if dock is not None:
+        # The dock's body stands behind its pose, against the wall it faces away from.
+        back = (dock[0] - math.cos(dock[2]) * 0.3, dock[1] - math.sin(dock[2]) * 0.3)
+        furniture.append(Furniture("dock", _box(back, DOCK_SIZE[::-1], dock[2])))
+    pts = np.concatenate(walls)
+    bounds = (
+        float(pts[:, 0].min()),
+        float(pts[:, 1].min()),
+        float(pts[:, 0].max()),
+        float(pts[:, 1].max()),
+    )
+    return World(name, path, tuple(walls), tuple(furniture), None, dock, starts, bounds)
+
+
+def _list(data: dict, key: str, path: Path) -> list:
+    value = data.get(key) or []
+    if not isinstance(value, list):
+        raise ConfigError(f"{path}: {key}: expected a list")
+    return value
+
+
+def _furniture(item: Any, where: str) -> Furniture:
+    if not isinstance(item, dict):
+        raise ConfigError(f"{where}: expected a mapping")
+    unknown = sorted(set(item) - FURNITURE_FIELDS)
+    if unknown:
+        raise ConfigError(f"{where}: unknown field {unknown[0]!r}")
+    kind = item.get("type", "box")
+    name = str(item.get("name", kind))
+    if "center" not in item:
+        raise ConfigError(f"{where}.center: required field is missing")
+    center = _vector(item["center"], 2, f"{where}.center")
+    if kind == "box":
+        if "size" not in item:
+            raise ConfigError(f"{where}.size: required field is missing")
+        size = _vector(item["size"], 2, f"{where}.size")
+        if min(size) <= 0:
+            raise ConfigError(f"{where}.size: must be > 0")
+        angle = math.radians(_number(item.get("angle", 0.0), f"{where}.angle"))
+        return Furniture(name, _box(center, size, angle))
+    if kind == "circle":
+        if "radius" not in item:
+            raise ConfigError(f"{where}.radius: required field is missing")
+        r = _number(item["radius"], f"{where}.radius")
+        if r <= 0:
+            raise ConfigError(f"{where}.radius: must be > 0")
+        # Circumscribed polygon, so the polygon contains the true circle.
+        a = np.arange(CIRCLE_SIDES) * 2 * math.pi / CIRCLE_SIDES
+        rr = r / math.cos(math.pi / CIRCLE_SIDES)
+        return Furniture(
+            name, np.stack([center[0] + rr * np.cos(a), center[1] + rr * np.sin(a)], 1)
+        )
+    raise ConfigError(f"{where}.type: must be 'box' or 'circle', got {kind!r}")
+
+
+def _parse_ros_map(path: Path, data: dict) -> GridMap:
+    unknown = sorted(set(data) - ROS_MAP_FIELDS)
+    if unknown:
+        raise ConfigError(
+            f"{path}: unknown field {unknown[0]!r} (known: {', '.join(sorted(ROS_MAP_FIELDS))})"
+        )
+    for key in ("image", "resolution", "origin"):
+        if key not in data:
+            raise ConfigError(f"{path}: {key}: required field is missing")
+    if not isinstance(data["image"], str):
+        raise ConfigError(f"{path}: image: expected a file name")
+    res = _number(data["resolution"], f"{path}: resolution")
+    if res <= 0:
+        raise ConfigError(f"{path}: resolution: must be > 0")
+    origin = _vector(data["origin"], 3, f"{path}: origin")
+    if abs(origin[2]) > 1e-9:
+        raise ConfigError(f"{path}: origin: a rotated origin (yaw {origin[2]}) is not supported")
+    negate = data.get("negate", 0)
+    if negate not in (0, 1):
+        raise ConfigError(f"{path}: negate: must be 0 or 1, got {negate!r}")
+    occ_t = _number(data.get("occupied_thresh", 0.65), f"{path}: occupied_thresh")
+    free_t = _number(data.get("free_thresh", 0.196), f"{path}: free_thresh")
+    if not 0.0 <= free_t < occ_t <= 1.0:
+        raise ConfigError(
+            f"{path}: free_thresh/occupied_thresh: need 0 ≤ free_thresh < occupied_thresh ≤ 1, "
+            f"got {free_t} and {occ_t}"
+        )
+    mode = data.get("mode", "trinary")
+    if mode not in ("trinary", "scale", "raw"):
+        raise ConfigError(f"{path}: mode: must be trinary, scale or raw, got {mode!r}")
+    image_path = path.parent / data["image"]
+    try:
+        with Image.open(image_path) as im:
+            pixels = np.asarray(im.convert("L"), dtype=np.float64)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: image: file not found: {image_path}") from None
+    except OSError as e:
+        raise ConfigError(f"{path}: image: cannot read {image_path}: {e}") from None
+    if mode == "raw":
+        occ = pixels >= 100
+        unk = pixels == 255
+    else:
+        p = pixels / 255.0 if negate else (255.0 - pixels) / 255.0
+        occ = p > occ_t
+        unk = ~occ & ~(p < free_t)
+    # Image row 0 is the top (highest y); grid row 0 is the lowest y.
+    occ, unk = np.flipud(occ).copy(), np.flipud(unk).copy()
+    if not (~occ & ~unk).any():
+        raise ConfigError(
+            f"{path}: image {image_path.name} has no free cell (check negate and the thresholds)"
+        )
+    return GridMap(occ, unk, res, (origin[0], origin[1]))
+
+
+def _world_from_ros_map(
+    path: Path, data: dict, starts: tuple, dock: Pose | None, name: str, source: Path | None = None
+) -> World:
+    g = _parse_ros_map(path, data)
+    rows, cols = g.shape
+    ox, oy = g.origin
+    bounds = (ox, oy, ox + cols * g.resolution, oy + rows * g.resolution)
+    return World(name, source or path, (), (), g, dock, starts, bounds)
+
+
+def _resample(g: GridMap, resolution: float) -> GridMap:
+    """Resample a map grid to another resolution; a cell is occupied if any source cell is."""
+    rows, cols = g.shape
+    new_rows = math.ceil(rows * g.resolution / resolution)
+    new_cols = math.ceil(cols * g.resolution / resolution)
+    centres = np.stack(np.meshgrid(np.arange(new_rows), np.arange(new_cols), indexing="ij"), -1)
+    xy = np.array(g.origin) + (centres[..., ::-1] + 0.5) * resolution
+    if resolution >= g.resolution:
+        k = math.ceil(resolution / g.resolution)
+        occ = ndimage.maximum_filter(g.occupied, size=k)
+        unk = ndimage.maximum_filter(g.unknown, size=k)
+    else:
+        occ, unk = g.occupied, g.unknown
+    rc = np.clip(g.world_to_cell(xy), 0, np.array([rows - 1, cols - 1]))
+    return GridMap(
+        occ[rc[..., 0], rc[..., 1]],
+        unk[rc[..., 0], rc[..., 1]] & ~occ[rc[..., 0], rc[..., 1]],
+        resolution,
+        g.origin,
+    )
+
+
+def _check_starts(world: World, radius: float) -> None:
+    if not world.starts and world.dock is None:
+        return
+    where = world.source
+    named = [(f"starts[{i}]", s) for i, s in enumerate(world.starts)]
+    if world.dock is not None:
+        named.append(("dock", world.dock))
+    xy = np.array([p[:2] for _, p in named])
+    xmin, ymin, xmax, ymax = world.bounds
+    clear = world.clearance(xy)
+    for (field, pose), c in zip(named, clear, strict=False):
+        x, y = pose[0], pose[1]
+        if not (xmin <= x <= xmax and ymin <= y <= ymax):
+            raise ConfigError(f"{where}: {field}: ({x}, {y}) lies outside the world {world.bounds}")
+        if field != "dock" and c < radius:
+            raise ConfigError(
+                f"{where}: {field}: ({x}, {y}) is inside an obstacle or closer than the robot "
+                f"radius {radius} m to one (clearance {c:.3f} m)"
+            )
+    for i in range(len(world.starts)):
+        for j in range(i):
+            a, b = world.starts[i], world.starts[j]
+            if math.hypot(a[0] - b[0], a[1] - b[1]) < 2 * radius:
+                raise ConfigError(f"{where}: starts[{i}]: overlaps starts[{j}]")
