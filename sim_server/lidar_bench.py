@@ -66,35 +66,35 @@ def furnished_scene(n_segments: int, n_robots: int, seed: int = 0) -> Scene:
     )
 
 
-def ros_map_occupied(yaml_path: Path) -> tuple[np.ndarray, float, tuple[float, float]]:
-    """A ROS map_server map → (occupied, resolution, origin) in OccupancyGrid orientation.
+def read_ros_map(yaml_path: Path) -> tuple[np.ndarray, np.ndarray, float, tuple[float, float]]:
+    """A ROS map_server map → (occupied, free, resolution, origin), OccupancyGrid orientation.
 
     Trinary interpretation: p = (255 − v) / 255 (or v / 255 when ``negate``), occupied where
-    p > occupied_thresh. Image row 0 is the top, so rows are flipped to make row 0 the lowest y.
+    p > occupied_thresh, free where p < free_thresh. Image row 0 is the top, so rows are
+    flipped to make row 0 the lowest y.
     """
     import yaml
     from PIL import Image
 
     meta = yaml.safe_load(Path(yaml_path).read_text())
     image = np.asarray(Image.open(Path(yaml_path).parent / meta["image"]).convert("L"), float)
-    p = image / 255.0 if meta.get("negate", 0) else (255.0 - image) / 255.0
-    occupied = np.flipud(p > float(meta.get("occupied_thresh", 0.65)))
-    return occupied, float(meta["resolution"]), (float(meta["origin"][0]), float(meta["origin"][1]))
+    p = np.flipud(image / 255.0 if meta.get("negate", 0) else (255.0 - image) / 255.0)
+    occupied = p > float(meta.get("occupied_thresh", 0.65))
+    free = p < float(meta.get("free_thresh", 0.196))
+    origin = (float(meta["origin"][0]), float(meta["origin"][1]))
+    return occupied, free, float(meta["resolution"]), origin
 
 
 def map_scene(yaml_path: Path, n_robots: int, seed: int = 0) -> Scene:
-    """The boundary segments of a ROS map, with robots at random cells far from any wall."""
-    from scipy.ndimage import distance_transform_edt
+    """The boundary segments of a ROS map, with robots at random free cells clear of walls."""
+    from scipy.ndimage import binary_erosion
 
-    occupied, res, origin = ros_map_occupied(yaml_path)
+    occupied, free, res, origin = read_ros_map(yaml_path)
     segments = occupancy_to_segments(occupied, res, origin)
     rng = np.random.default_rng(seed)
-    clear = distance_transform_edt(~occupied) * res > 2 * ROBOT_RADIUS
-    # Unknown space outside the walls is also "not occupied"; keep cells inside the map's hull.
-    rows, cols = np.nonzero(occupied)
-    inside = np.zeros_like(clear)
-    inside[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1] = True
-    free_r, free_c = np.nonzero(clear & inside)
+    margin = int(np.ceil(2 * ROBOT_RADIUS / res))
+    clear = binary_erosion(free, iterations=margin)
+    free_r, free_c = np.nonzero(clear)
     pick = rng.choice(free_r.size, size=n_robots, replace=False)
     origins = np.column_stack(
         [origin[0] + (free_c[pick] + 0.5) * res, origin[1] + (free_r[pick] + 0.5) * res]

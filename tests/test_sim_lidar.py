@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from fleet.cli import app
 from sim_server.lidar import (
     SegmentIndex,
     add_noise,
@@ -14,7 +18,7 @@ from sim_server.lidar import (
     cast_scans_reference,
     occupancy_to_segments,
 )
-from sim_server.lidar_bench import furnished_scene
+from sim_server.lidar_bench import furnished_scene, map_scene, read_ros_map
 
 BEAMS = np.linspace(0.0, 2 * math.pi, 360, endpoint=False)
 NO_DISCS = np.zeros((0, 3))
@@ -287,3 +291,41 @@ def test_cast_against_grid_boundary_matches_a_cell_ray_march():
         marched = [ray_march(occ, res, origin, start, heading + b) for b in BEAMS]
         assert np.all(np.isfinite(cast))
         np.testing.assert_allclose(cast, marched, rtol=0, atol=1e-9)
+
+
+MAP_YAML = (
+    Path(__file__).resolve().parents[1].parent
+    / "shared"
+    / "data"
+    / "maps"
+    / "cob_ipa_apartment.yaml"
+)
+
+
+def test_ros_apartment_map_boundary_matches_a_cell_ray_march():
+    if not MAP_YAML.exists():
+        pytest.skip(f"shared map data not present: {MAP_YAML}")
+    occupied, _, res, origin = read_ros_map(MAP_YAML)
+    assert occupied.shape == (768, 544)
+    segments = occupancy_to_segments(occupied, res, origin)
+    assert len(segments) == 3626
+    index = SegmentIndex(segments, reach=6.0)
+    scene = map_scene(MAP_YAML, 3, seed=1)
+    ranges = cast_scans(scene.origins, scene.headings, BEAMS, index, NO_DISCS, 6.0)
+    assert np.isfinite(ranges).mean() > 0.5
+    for origin_xy, heading, scan in zip(scene.origins, scene.headings, ranges, strict=True):
+        marched = np.array(
+            [ray_march(occupied, res, origin, origin_xy, heading + b) for b in BEAMS]
+        )
+        marched[marched > 6.0] = np.inf
+        np.testing.assert_allclose(scan, marched, rtol=0, atol=1e-9)
+
+
+def test_bench_lidar_command_prints_rays_per_second_as_json():
+    result = CliRunner().invoke(
+        app, ["bench", "lidar", "--seconds", "0.05", "--no-baseline", "--json"]
+    )
+    assert result.exit_code == 0, result.output
+    rates = json.loads(result.stdout)["rays_per_s"]
+    assert set(rates) == {"1x150", "100x150+discs", "1x5000", "1x5000 indexed"}
+    assert all(r > 0 for r in rates.values())
