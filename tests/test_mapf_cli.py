@@ -1,0 +1,113 @@
+"""``fleet plan mapf`` and ``fleet bench mapf`` end to end through the typer app."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import yaml
+from typer.testing import CliRunner
+
+from fleet.cli import app
+from planners.mapf import MapfInstance, validate
+from planners.mapf.generate import random_instance, random_map
+from planners.mapf.movingai import write_map, write_scen
+from planners.mapf.yaml_format import instance_to_mapping, schedule_from_mapping, write_yaml
+
+runner = CliRunner()
+
+
+def _files(tmp_path: Path) -> tuple[Path, Path, MapfInstance]:
+    free = random_map(16, 16, 0.1, 7)
+    instance = random_instance(free, 12, 3)
+    write_map(tmp_path / "r.map", free)
+    write_scen(tmp_path / "r.scen", "r.map", instance)
+    return tmp_path / "r.map", tmp_path / "r.scen", instance
+
+
+def test_plan_json_and_schedule(tmp_path: Path) -> None:
+    map_path, scen_path, instance = _files(tmp_path)
+    out = tmp_path / "schedule.yaml"
+    args = ["plan", "mapf", str(map_path), str(scen_path), "--agents", "8", "--solver", "cbs"]
+    result = runner.invoke(app, [*args, "--json", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert {"status", "soc", "makespan", "runtime_s", "expanded"} <= set(summary)
+    assert summary["status"] == "success"
+    assert summary["valid"] is True
+    data = yaml.safe_load(out.read_text())
+    assert data["statistics"]["cost"] == summary["soc"]
+    first8 = instance.first(8)
+    assert validate(first8, schedule_from_mapping(first8, data)).soc == summary["soc"]
+
+
+def test_plan_yaml_instance_with_every_solver(tmp_path: Path) -> None:
+    _, _, instance = _files(tmp_path)
+    write_yaml(tmp_path / "in.yaml", instance_to_mapping(instance))
+    socs = {}
+    for solver in ("pp", "sipp-pp", "cbs", "ecbs"):
+        result = runner.invoke(
+            app, ["plan", "mapf", str(tmp_path / "in.yaml"), "--solver", solver, "--json"]
+        )
+        assert result.exit_code == 0, result.output
+        summary = json.loads(result.stdout)
+        assert summary["status"] == "success" and summary["valid"]
+        socs[solver] = summary["soc"]
+    assert socs["cbs"] <= min(socs.values())
+    assert socs["ecbs"] <= 1.2 * socs["cbs"]
+
+
+def test_plan_table_output(tmp_path: Path) -> None:
+    map_path, scen_path, _ = _files(tmp_path)
+    result = runner.invoke(app, ["plan", "mapf", str(map_path), str(scen_path), "-k", "3"])
+    assert result.exit_code == 0, result.output
+    assert "success" in result.stdout and "makespan" in result.stdout
+
+
+def test_plan_rejects_infeasible_and_bad_input(tmp_path: Path) -> None:
+    (tmp_path / "in.yaml").write_text(
+        "map: {dimensions: [3, 1], obstacles: [[1, 0]]}\n"
+        "agents: [{name: a, start: [0, 0], goal: [2, 0]}]\n"
+    )
+    result = runner.invoke(app, ["plan", "mapf", str(tmp_path / "in.yaml"), "--json"])
+    assert result.exit_code == 1
+    summary = json.loads(result.stdout)
+    assert summary["status"] == "infeasible"
+    assert "unreachable" in summary["message"]
+    result = runner.invoke(app, ["plan", "mapf", str(tmp_path / "in.yaml"), "--solver", "dijkstra"])
+    assert result.exit_code == 2
+    assert "--solver must be one of" in result.output
+    map_path, _, _ = _files(tmp_path)
+    result = runner.invoke(app, ["plan", "mapf", str(map_path)])
+    assert result.exit_code == 2
+    assert "give a .scen" in result.output
+
+
+def test_bench_smoke(tmp_path: Path) -> None:
+    args = [
+        "bench",
+        "mapf",
+        "--json",
+        "--map",
+        "random-32-32-10",
+        "--solver",
+        "pp",
+        "--solver",
+        "cbs",
+        "--k-step",
+        "5",
+        "--k-max",
+        "10",
+        "--time-limit",
+        "5",
+        "--keep",
+        str(tmp_path),
+    ]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    rows = {row["solver"]: row for row in report["summary"]}
+    assert rows["pp"]["max_k"] == rows["cbs"]["max_k"] == 10
+    assert rows["cbs"]["all_valid"] is True
+    assert (tmp_path / "random-32-32-10.map").exists()
+    assert (tmp_path / "random-32-32-10.scen").exists()
