@@ -1,0 +1,70 @@
+"""Polyline tools: simplification and turn counting for planned and driven paths."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def simplify(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """Ramer–Douglas–Peucker simplification (Douglas & Peucker 1973) of an (N, 2) polyline.
+
+    Iterative with an explicit stack; each split's point–line distances are one numpy call.
+    """
+    pts = np.asarray(points, dtype=float)
+    n = len(pts)
+    if n < 3:
+        return pts.copy()
+    keep = np.zeros(n, dtype=bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        a, b = pts[i], pts[j]
+        seg = b - a
+        length = math.hypot(seg[0], seg[1])
+        rel = pts[i + 1 : j] - a
+        if length < 1e-12:
+            dist = np.hypot(rel[:, 0], rel[:, 1])
+        else:
+            dist = np.abs(rel[:, 0] * seg[1] - rel[:, 1] * seg[0]) / length
+        k = int(np.argmax(dist))
+        if dist[k] > tolerance:
+            m = i + 1 + k
+            keep[m] = True
+            stack.append((i, m))
+            stack.append((m, j))
+    return pts[keep]
+
+
+def heading_changes(points: np.ndarray) -> np.ndarray:
+    """Absolute heading change (rad, in [0, π]) at each interior vertex of a polyline.
+
+    Zero-length segments are dropped first, so repeated points do not count as turns.
+    """
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 3:
+        return np.zeros(0)
+    d = np.diff(pts, axis=0)
+    d = d[np.hypot(d[:, 0], d[:, 1]) > 1e-9]
+    if len(d) < 2:
+        return np.zeros(0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    dh = np.diff(h)
+    return np.abs((dh + math.pi) % (2 * math.pi) - math.pi)
+
+
+def count_turns(points: np.ndarray, min_angle_deg: float = 45.0) -> int:
+    """Number of vertices where the heading changes by more than ``min_angle_deg``."""
+    return int(np.count_nonzero(heading_changes(points) > math.radians(min_angle_deg)))
+
+
+def path_length(points: np.ndarray) -> float:
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 2:
+        return 0.0
+    d = np.diff(pts, axis=0)
+    return float(np.hypot(d[:, 0], d[:, 1]).sum())

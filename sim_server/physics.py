@@ -1,0 +1,96 @@
+"""The pymunk world: static walls and furniture, disc robots with differential drive.
+
+Robots are dynamic discs with infinite moment: their wheel velocities are imposed every step
+(after acceleration limits), and the solver pushes them back out of walls and each other. Every
+new robot–wall or robot–robot contact is reported through ``on_contact``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pymunk
+
+from fleet.world import World
+
+WALL = 1
+ROBOT = 2
+
+
+def static_shapes(world: World, body: pymunk.Body) -> list[pymunk.Shape]:
+    """Poly shapes for a vector world; one box per horizontal run of occupied cells for a map."""
+    shapes: list[pymunk.Shape] = []
+    if world.map_grid is None:
+        shapes = [pymunk.Poly(body, [tuple(p) for p in poly]) for poly in world.polygons]
+    else:
+        g = world.map_grid
+        blocked = g.occupied | g.unknown
+        pad = np.zeros((blocked.shape[0], 1), dtype=bool)
+        edges = np.diff(np.hstack([pad, blocked, pad]).astype(np.int8), axis=1)
+        starts = np.argwhere(edges == 1)
+        ends = np.argwhere(edges == -1)
+        res = g.resolution
+        ox, oy = g.origin
+        for (r, c0), (_, c1) in zip(starts, ends, strict=True):
+            x0, x1 = ox + c0 * res, ox + c1 * res
+            y0, y1 = oy + r * res, oy + (r + 1) * res
+            shapes.append(pymunk.Poly(body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]))
+    for s in shapes:
+        s.collision_type = WALL
+        s.friction = 0.0
+    return shapes
+
+
+class Physics:
+    """A pymunk space holding the static world and the robot discs."""
+
+    def __init__(self, world: World, on_contact: Callable[[str, str, float, float], None]) -> None:
+        self.space = pymunk.Space()
+        self.space.gravity = (0.0, 0.0)
+        self.space.add(*static_shapes(world, self.space.static_body))
+        self.bodies: dict[str, pymunk.Body] = {}
+        self._on_contact = on_contact
+        self.space.on_collision(ROBOT, WALL, begin=self._begin)
+        self.space.on_collision(ROBOT, ROBOT, begin=self._begin)
+
+    def _begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object) -> None:
+        a, b = arbiter.shapes
+        points = arbiter.contact_point_set.points
+        x, y = (
+            (points[0].point_a.x, points[0].point_a.y)
+            if points
+            else (a.body.position.x, a.body.position.y)
+        )
+        other = getattr(b, "robot_id", "") if b.collision_type == ROBOT else ""
+        self._on_contact(a.robot_id, other, x, y)  # type: ignore[attr-defined]
+
+    def add_robot(
+        self, rid: str, pose: tuple[float, float, float], radius: float, mass: float
+    ) -> None:
+        body = pymunk.Body(mass, math.inf)
+        body.position = pose[0], pose[1]
+        body.angle = pose[2]
+        shape = pymunk.Circle(body, radius)
+        shape.collision_type = ROBOT
+        shape.friction = 0.0
+        shape.robot_id = rid  # type: ignore[attr-defined]
+        self.space.add(body, shape)
+        self.bodies[rid] = body
+
+    def remove_robot(self, rid: str) -> None:
+        body = self.bodies.pop(rid)
+        self.space.remove(body, *body.shapes)
+
+    def drive(self, rid: str, v: float, w: float) -> None:
+        body = self.bodies[rid]
+        body.velocity = (v * math.cos(body.angle), v * math.sin(body.angle))
+        body.angular_velocity = w
+
+    def pose(self, rid: str) -> tuple[float, float, float]:
+        body = self.bodies[rid]
+        return body.position.x, body.position.y, body.angle
+
+    def step(self, dt: float) -> None:
+        self.space.step(dt)

@@ -1,0 +1,187 @@
+"""The simulator process: steps :class:`SimCore` and talks to the fleet over Zenoh.
+
+Time: sim time advances at ``speed`` × wall time (``speed`` 0: as fast as possible), but never
+more than ``max_lag_s`` past the newest sensor stamp each live agent has answered with a
+cmd_vel. An agent whose liveliness token disappears, or that has been silent for
+``agent_timeout_s`` of wall time, no longer holds the clock back; its robot stops and stays in
+the world as an obstacle until it respawns.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from fleet.bus import Bus
+from fleet.params import FleetConfig
+from fleet.protocol import (
+    Clock,
+    CoverageImage,
+    CoverageSummary,
+    SpawnReply,
+    SpawnRequest,
+    TruthPose,
+    Twist,
+)
+from fleet.world import World
+from sim_server.core import SimCore
+
+log = logging.getLogger("sim")
+
+TRUTH_HZ = 10.0
+IMAGE_PERIOD_S = 2.0
+
+
+@dataclass
+class AgentLink:
+    ack: float
+    last_wall: float
+    alive: bool = True
+
+
+class SimServer:
+    def __init__(
+        self,
+        bus: Bus,
+        world: World,
+        cfg: FleetConfig,
+        speed: float = 1.0,
+        seed: int = 0,
+        starts_xy: np.ndarray | None = None,
+    ) -> None:
+        self.bus = bus
+        self.keys = bus.keys
+        self.cfg = cfg
+        self.speed = speed
+        self.core = SimCore(world, cfg, seed=seed, starts_xy=starts_xy)
+        self.lock = threading.Lock()
+        self.links: dict[str, AgentLink] = {}
+        self.stop = threading.Event()
+        self.wall0 = time.monotonic()
+        bus.subscribe(self.keys.all_robots("cmd_vel"), Twist, self._on_cmd)
+        bus.serve(self.keys.sim_spawn(), SpawnRequest, self._on_spawn)
+        bus.serve(self.keys.sim_report(), Clock, lambda _req: self.summary())
+        bus.serve(self.keys.coverage_image(), Clock, lambda _req: self.coverage_image())
+        bus.watch_alive("agent", lambda _rid: None, self._on_agent_left)
+
+    # ---- bus callbacks (zenoh threads) --------------------------------------------------
+
+    def _on_cmd(self, key: str, msg: Twist) -> None:
+        rid = self.keys.robot_of(key)
+        with self.lock:
+            link = self.links.get(rid)
+            if link is None or rid not in self.core.robots:
+                return
+            link.ack = max(link.ack, msg.stamp)
+            link.last_wall = time.monotonic()
+            link.alive = True
+            self.core.set_cmd(rid, msg.v, msg.w)
+
+    def _on_spawn(self, req: SpawnRequest) -> SpawnReply:
+        with self.lock:
+            try:
+                x, y, th = self.core.add_robot(req.robot, (req.x, req.y, req.theta))
+            except ValueError as e:
+                return SpawnReply(False, str(e), req.x, req.y, req.theta)
+            self.links[req.robot] = AgentLink(self.core.t, time.monotonic())
+            log.info("robot %s spawned at (%.2f, %.2f, %.2f)", req.robot, x, y, th)
+            return SpawnReply(True, "", x, y, th)
+
+    def _on_agent_left(self, rid: str) -> None:
+        with self.lock:
+            link = self.links.get(rid)
+            if link is not None:
+                link.alive = False
+                self.core.set_cmd(rid, 0.0, 0.0)
+                log.info("agent %s left; its robot stops where it is", rid)
+
+    # ---- main loop ----------------------------------------------------------------------
+
+    def summary(self) -> CoverageSummary:
+        with self.lock:
+            return self.core.summary(time.monotonic() - self.wall0)
+
+    def coverage_image(self) -> CoverageImage:
+        with self.lock:
+            c = self.core.cleaning
+            g = c.grid
+            return CoverageImage(
+                self.core.t,
+                g.resolution,
+                g.origin[0],
+                g.origin[1],
+                g.shape[0],
+                g.shape[1],
+                c.visits.reshape(-1).copy(),
+                c.cleanable.reshape(-1).astype(np.uint8),
+            )
+
+    def _held_back(self, now: float) -> bool:
+        """True when a live agent has not yet answered sensor data within the allowed lag."""
+        limit = self.core.t + self.core.dt - self.cfg.sim.max_lag_s
+        for rid, link in self.links.items():
+            if not link.alive or rid not in self.core.robots:
+                continue
+            if now - link.last_wall > self.cfg.sim.agent_timeout_s:
+                link.alive = False
+                self.core.set_cmd(rid, 0.0, 0.0)
+                log.warning(
+                    "agent %s silent for %.1f s; no longer waiting for it",
+                    rid,
+                    now - link.last_wall,
+                )
+                continue
+            if link.ack < limit - 1e-9:
+                return True
+        return False
+
+    def run(self) -> None:
+        sim = self.cfg.sim
+        clock_every = max(1, round(sim.physics_hz / sim.clock_hz))
+        truth_every = max(1, round(sim.physics_hz / TRUTH_HZ))
+        cover_every = max(1, round(sim.physics_hz / sim.coverage_hz))
+        pace_wall, pace_sim = time.monotonic(), self.core.t
+        waiting = False
+        while not self.stop.is_set():
+            now = time.monotonic()
+            with self.lock:
+                held = self._held_back(now)
+            if held:
+                if not waiting:
+                    self.bus.publish(self.keys.clock(), Clock(self.core.t, self.speed, True))
+                    waiting = True
+                time.sleep(0.0005)
+                pace_wall, pace_sim = time.monotonic(), self.core.t
+                continue
+            waiting = False
+            if self.speed > 0:
+                ahead = (self.core.t - pace_sim) / self.speed - (now - pace_wall)
+                if ahead > 0:
+                    time.sleep(min(ahead, 0.05))
+                    continue
+                if ahead < -0.2:
+                    pace_wall, pace_sim = now, self.core.t
+            with self.lock:
+                out = self.core.step()
+                steps = self.core.steps
+                truth = self.core.truth() if steps % truth_every == 0 else {}
+            k = self.keys
+            for c in out.collisions:
+                log.warning(
+                    "collision %s: %s %s at (%.2f, %.2f)", c.kind, c.robot, c.other, c.x, c.y
+                )
+                self.bus.publish(k.collisions(), c, control=True)
+            for rid, msg in out.odometry:
+                self.bus.publish(k.robot(rid, "odom"), msg)
+            for rid, msg in out.scans:
+                self.bus.publish(k.robot(rid, "scan"), msg, control=True)
+            for rid, (x, y, th) in truth.items():
+                self.bus.publish(k.robot(rid, "truth"), TruthPose(self.core.t, x, y, th))
+            if steps % clock_every == 0:
+                self.bus.publish(k.clock(), Clock(self.core.t, self.speed, False))
+            if steps % cover_every == 0:
+                self.bus.publish(k.coverage(), self.summary())
