@@ -8,8 +8,8 @@ Entry point for the rest of the system::
     result = solve(instance, "ecbs", w=1.2, time_limit_s=2.0)
     if result.status == "success":
         paths = result.solution.paths        # paths[i][t] = (row, col); agents stay at the end
-    # result.status: "success" | "timeout" | "infeasible" (rejected before search, reason in
-    # result.message) | "failed" (PP with max_restarts exhausted)
+    # result.status: "success" | "timeout" | "infeasible" (rejected before search, or CBS/ECBS
+    # exhausted their search; reason in result.message) | "failed" (PP, max_restarts exhausted)
 
 Solvers (``SOLVERS``):
 
@@ -128,6 +128,10 @@ def solve(
             options = PLAIN_CBS if solver == "cbs-plain" else (cbs_options or CbsOptions())
             search = ConflictBasedSearch(graph, starts, goals, options, deadline, stats)
             paths, _ = search.run()
+    except InfeasibleInstanceError as err:
+        return MapfResult(
+            "infeasible", solver, None, deadline.elapsed(), stats.high, stats.low, message=str(err)
+        )
     except SearchTimeout:
         return MapfResult(
             "timeout",

@@ -27,7 +27,7 @@ from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
 from planners.mapf.low_level import SearchStats, space_time_astar
 from planners.mapf.mdd import mdd_singletons
-from planners.mapf.model import path_cost
+from planners.mapf.model import InfeasibleInstanceError, path_cost
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 from planners.mapf.vertex_cover import min_vertex_cover
 
@@ -135,7 +135,7 @@ class ConflictBasedSearch:
                 children.append(child)
             for child in children:
                 self._push(open_list, child)
-        raise RuntimeError("CBS exhausted its open list")
+        raise InfeasibleInstanceError("no solution: CBS exhausted its constraint tree")
 
     def _push(self, open_list: list, node: _Node) -> None:
         self._counter += 1

@@ -16,7 +16,7 @@ from planners.mapf.conflicts import all_conflicts, conflicts_of, positions
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
 from planners.mapf.low_level import SearchStats, focal_astar
-from planners.mapf.model import path_cost
+from planners.mapf.model import InfeasibleInstanceError, path_cost
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 
 Constraint = tuple[int, int, int]
@@ -114,8 +114,10 @@ def ecbs(
     push(root)
     while True:
         deadline.check()
-        while open_heap[0][2].done:
+        while open_heap and open_heap[0][2].done:
             heappop(open_heap)
+        if not open_heap:
+            raise InfeasibleInstanceError("no solution: ECBS exhausted its constraint tree")
         bound = w * open_heap[0][0] + 1e-9
         if bound > threshold:
             threshold = bound
