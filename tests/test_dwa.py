@@ -264,3 +264,18 @@ def test_fleet_yaml_dwa_section_lists_every_parameter_with_its_default():
     assert load_fleet_config().dwa == DWAParams()
     with pytest.raises(ConfigError, match="min_vel_x"):
         from_mapping(DWAParams, {"min_vel_x": 0.6}, "fleet.yaml: dwa")
+
+
+def test_bench_dwa_prints_the_timings_as_json():
+    import json
+
+    from typer.testing import CliRunner
+
+    from fleet.cli import app
+
+    out = CliRunner().invoke(app, ["bench", "dwa", "--calls", "10", "--json"])
+    assert out.exit_code == 0, out.output
+    result = json.loads(out.stdout)
+    assert result["obstacle_points"] == 360 and result["samples"] == 160
+    assert 0 < result["ms_per_call_median"] <= result["ms_per_call_p95"]
+    assert result["rollouts_per_s"] > 0
