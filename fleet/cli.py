@@ -29,6 +29,7 @@ def _register_all() -> None:
     """Each command module adds its commands; one line per module."""
     from fleet import cli_lidar; cli_lidar.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
     from fleet import cli_mapf; cli_mapf.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
+    from fleet import cli_slam; cli_slam.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
     from fleet import cli_dwa; cli_dwa.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
 
 

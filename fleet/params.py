@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.slam.params import SlamParams
 from fleet.config import configs_dir, from_mapping, read_yaml
 from planners.dwa import DWAParams
 
@@ -119,6 +120,7 @@ class FleetConfig:
     agent: AgentParams = field(default_factory=AgentParams)
     coordinator: CoordinatorParams = field(default_factory=CoordinatorParams)
     dwa: DWAParams = field(default_factory=DWAParams)
+    slam: SlamParams = field(default_factory=SlamParams)
 
 
 def default_config_path() -> Path:

@@ -45,7 +45,7 @@ def home_segments() -> np.ndarray:
         (3.0, 4.0, 3.0, 2.0),
         # partition walls with doorways to break the symmetry
         (5.0, 0.0, 5.0, 0.7),
-        (8.5, 6.0, 8.5, 5.0),
+        (8.5, 6.0, 8.5, 5.4),
     ]
     return np.array(
         walls + box(0.4, 0.4, 0.9, 1.0) + box(8.8, 0.3, 9.6, 0.8) + box(1.0, 5.2, 2.2, 5.6)

@@ -77,7 +77,8 @@ class Slam:
 
     ``range_min``/``range_max`` are the sensor's limits; returns outside [range_min, range_max)
     (and beyond ``params.max_range``) are treated as "no return" and skipped entirely: no free
-    space is carved along them.
+    space is carved along them. With ``keep_trajectory`` every scan's pose is remembered relative
+    to its node, and ``trajectory()`` returns them all as corrected by the latest optimization.
     """
 
     def __init__(
@@ -86,8 +87,12 @@ class Slam:
         initial_pose: Pose = (0.0, 0.0, 0.0),
         range_min: float = 0.0,
         range_max: float = math.inf,
+        keep_trajectory: bool = False,
     ) -> None:
         self.params = params
+        self._keep_trajectory = keep_trajectory
+        self._anchor_ids: list[int] = []
+        self._anchor_offsets: list[np.ndarray] = []
         self.range_min = range_min
         self.range_max = min(range_max, params.max_range)
         self._matcher = CorrelativeMatcher(params)
@@ -136,6 +141,7 @@ class Slam:
         if self._last_odom is None:
             self._last_odom = odom
             self._add_node(points, odom, t)
+            self._remember_pose()
             return SlamEstimate(self.pose, self._covariance.copy(), t, True, 1.0)
         prior = compose(self._pose, relative(self._last_odom, odom))
         self._last_odom = odom
@@ -164,7 +170,22 @@ class Slam:
         self._pose = prior
         if self._is_new_node(odom, t):
             self._add_node(points, odom, t)
+        self._remember_pose()
         return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
+
+    def trajectory(self) -> np.ndarray:
+        """(scans, 3) poses of every processed scan after the latest graph optimization."""
+        if not self._keep_trajectory:
+            raise RuntimeError("construct Slam with keep_trajectory=True to read trajectory()")
+        if not self._anchor_ids:
+            return np.zeros((0, 3))
+        nodes = self._graph.poses[np.asarray(self._anchor_ids)]
+        return compose(nodes, np.asarray(self._anchor_offsets))
+
+    def _remember_pose(self) -> None:
+        if self._keep_trajectory:
+            self._anchor_ids.append(self._last_node_id)
+            self._anchor_offsets.append(relative(self._graph.poses[self._last_node_id], self._pose))
 
     def finish(self) -> None:
         """Optimize once more if loop closures came in since the last optimization."""
