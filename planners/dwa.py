@@ -36,6 +36,11 @@ class DWAParams:
     - ``goal_lookahead`` (m): how far along the path, from the robot's projection onto it, the
       local goal lies. ROS takes the last path point inside the local costmap; a fixed lookahead
       gives the same pull without a costmap.
+    - ``corner_angle`` (rad): path vertices turning more than this are stops. The local goal does
+      not pass the next one until the robot is within ``sim_granularity`` of it, so the robot
+      drives into a lane end and turns there instead of cutting across to the next lane (ROS has
+      no equivalent; its global planner rarely makes such corners). Grid paths' 45° steps stay
+      below the default and are cut smoothly.
     """
 
     max_vel_x: float = 0.5
@@ -53,6 +58,7 @@ class DWAParams:
     safety_margin: float = 0.05
     forward_point_distance: float = 0.325
     goal_lookahead: float = 1.0
+    corner_angle: float = 1.0
 
     def validate(self) -> None:
         if not 0.0 <= self.min_vel_x <= self.max_vel_x or self.max_vel_x <= 0:
@@ -69,6 +75,7 @@ class DWAParams:
             "safety_margin",
             "forward_point_distance",
             "goal_lookahead",
+            "corner_angle",
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0")
@@ -135,9 +142,10 @@ def rollout(
 
 
 class _Polyline:
-    """A path as segments with cumulative arc length; consecutive duplicate points dropped."""
+    """A path as segments with cumulative arc length and its sharp corners (vertices turning
+    more than ``corner_angle``); consecutive duplicate points dropped."""
 
-    def __init__(self, path: np.ndarray) -> None:
+    def __init__(self, path: np.ndarray, corner_angle: float) -> None:
         keep = np.ones(len(path), dtype=bool)
         keep[1:] = np.any(np.abs(np.diff(path, axis=0)) > 1e-9, axis=1)
         pts = path[keep]
@@ -149,20 +157,25 @@ class _Polyline:
         self.length = np.hypot(self.ab[:, 0], self.ab[:, 1])
         self.cum = np.concatenate([[0.0], np.cumsum(self.length)])
         self.goal = pts[-1]
+        heading = np.arctan2(self.ab[:, 1], self.ab[:, 0])
+        turn = np.abs(np.angle(np.exp(1j * np.diff(heading))))
+        self.corners = 1 + np.flatnonzero(turn > corner_angle)  # vertex indices
 
-    def nearest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For points (P, 2): distance to the path and arc length of the nearest path point."""
-        ap = p[:, None, :] - self.a[None, :, :]
-        l2 = self.length**2
+    def nearest(self, p: np.ndarray, segments: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """For points (P, 2): distance to the path (its first ``segments`` segments) and arc
+        length of the nearest path point; ties go to the earlier segment."""
+        a, ab, length = self.a[:segments], self.ab[:segments], self.length[:segments]
+        ap = p[:, None, :] - a[None, :, :]
+        l2 = length**2
         t = np.divide(
-            np.einsum("psk,sk->ps", ap, self.ab), l2, out=np.zeros((len(p), len(l2))), where=l2 > 0
+            np.einsum("psk,sk->ps", ap, ab), l2, out=np.zeros((len(p), len(l2))), where=l2 > 0
         )
         t = np.clip(t, 0.0, 1.0)
-        d = ap - t[:, :, None] * self.ab[None, :, :]
+        d = ap - t[:, :, None] * ab[None, :, :]
         dist = np.hypot(d[:, :, 0], d[:, :, 1])
         seg = np.argmin(dist, axis=1)
         rows = np.arange(len(p))
-        return dist[rows, seg], self.cum[seg] + t[rows, seg] * self.length[seg]
+        return dist[rows, seg], self.cum[seg] + t[rows, seg] * length[seg]
 
     def at(self, s: float) -> np.ndarray:
         """The path point at arc length ``s`` (clipped to the path)."""
@@ -205,20 +218,21 @@ def dwa_control(
 
     Scoring (lower is better; ROS dwa_local_planner's four map-grid costs, in metres, plus
     obstacle cost), with e the rollout's end position, n = e + forward_point_distance·(cos θe,
-    sin θe) its nose, d_path the distance to the path polyline, g the local goal (the path point
-    ``goal_lookahead`` beyond the robot's projection onto the path, or the final goal when
-    nearer), u the unit vector from the robot toward g (ROS: the angle to the goal)::
+    sin θe) its nose, g the local goal (the path point ``goal_lookahead`` beyond the robot's
+    projection onto the path, or the next stop when nearer: a sharp corner, see
+    ``corner_angle``, or the final goal), d_path the distance to the path up to g, u the unit
+    vector from the robot toward g (ROS: the angle to the goal)::
 
         cost = path_distance_bias/2 · (d_path(e) + a · d_path(n))        path + alignment
              + goal_distance_bias/2 · (|e − g| + |n − (g + f·u)|)         goal + goal front
              + occdist_scale / max(min clearance − robot_radius, ε)       obstacles
 
-    with a = 0 within ``forward_point_distance`` of the final goal (as in ROS, keeping the nose
-    on the path there destabilizes the stop) and 1 elsewhere. The nose terms make rotating in
-    place toward a path behind the robot strictly better than standing still, so a robot facing
-    away turns around (v = 0 samples are in the window whenever the robot is slow). Near the
-    final goal the end-point cost is least for the speed whose rollout ends on the goal, v ≈
-    d/sim_time, so the robot slows down smoothly (the acceleration needed is ≤ v/sim_time,
+    with a = 0 within ``forward_point_distance`` of a stop that is the local goal (as in ROS,
+    keeping the nose on the path there destabilizes the stop) and 1 elsewhere. The nose terms
+    make rotating in place toward a path behind the robot strictly better than standing still,
+    so a robot facing away turns around (v = 0 samples are in the window whenever the robot is
+    slow). Near a stop the end-point cost is least for the speed whose rollout ends on the goal,
+    v ≈ d/sim_time, so the robot slows down smoothly (the acceleration needed is ≤ v/sim_time,
     within acc_lim_x with the defaults) and stops on the goal instead of overshooting.
 
     ``admissible`` is True when some collision-free sample moves the robot forward (v > 0) and
@@ -257,18 +271,25 @@ def dwa_control(
         ok = np.ones(len(v), dtype=bool)
         occ = np.zeros(len(v))
 
-    line = _Polyline(path)
+    line = _Polyline(path, p.corner_angle)
     robot_xy = np.asarray(pose[:2], dtype=float)
-    _, s_robot = line.nearest(robot_xy[None, :])
-    goal = line.at(float(s_robot[0]) + p.goal_lookahead)
+    # The robot is somewhere before the second sharp corner: on a boustrophedon path this keeps
+    # it from projecting onto the neighbouring lane.
+    reach = int(line.corners[1]) if len(line.corners) > 1 else None
+    s_robot = float(line.nearest(robot_xy[None, :], reach)[1][0])
+    ahead = line.cum[line.corners]
+    ahead = ahead[ahead > s_robot + p.sim_granularity]
+    stop = float(ahead[0]) if len(ahead) else float(line.cum[-1])
+    s_goal = min(s_robot + p.goal_lookahead, stop)
+    goal = line.at(s_goal)
     to_goal = goal - robot_xy
     dist = float(np.hypot(*to_goal))
     u = to_goal / dist if dist > 1e-9 else np.array([math.cos(pose[2]), math.sin(pose[2])])
     f = p.forward_point_distance
     end = np.column_stack([xs[:, -1], ys[:, -1]])
     nose = end + f * np.column_stack([np.cos(ths[:, -1]), np.sin(ths[:, -1])])
-    d_path = line.nearest(np.vstack([end, nose]))[0]
-    align = 0.0 if np.hypot(*(line.goal - robot_xy)) <= f else 1.0
+    d_path = line.nearest(np.vstack([end, nose]), max(1, int(np.searchsorted(line.cum, s_goal))))[0]
+    align = 0.0 if s_goal == stop and dist <= f else 1.0
     path_cost = d_path[: len(v)] + align * d_path[len(v) :]
     goal_cost = np.hypot(*(end - goal).T) + np.hypot(*(nose - (goal + f * u)).T)
     cost = p.path_distance_bias / 2 * path_cost + p.goal_distance_bias / 2 * goal_cost + occ

@@ -261,7 +261,7 @@ def test_fleet_yaml_dwa_section_lists_every_parameter_with_its_default():
 
     section = yaml.safe_load((configs_dir() / "fleet.yaml").read_text())["dwa"]
     assert set(section) == set(DWAParams.__dataclass_fields__)
-    assert load_fleet_config().dwa == DWAParams()
+    assert load_fleet_config().dwa == DWAParams(**section)
     with pytest.raises(ConfigError, match="min_vel_x"):
         from_mapping(DWAParams, {"min_vel_x": 0.6}, "fleet.yaml: dwa")
 
