@@ -17,7 +17,9 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-plan_app = typer.Typer(help="Offline planners: coverage paths, multi-agent paths.", no_args_is_help=True)
+plan_app = typer.Typer(
+    help="Offline planners: coverage paths, multi-agent paths.", no_args_is_help=True
+)
 bench_app = typer.Typer(help="Benchmarks that measure speed and quality.", no_args_is_help=True)
 slam_app = typer.Typer(help="SLAM tools: replay recorded logs.", no_args_is_help=True)
 app.add_typer(plan_app, name="plan")
@@ -27,10 +29,21 @@ app.add_typer(slam_app, name="slam")
 
 def _register_all() -> None:
     """Each command module adds its commands; one line per module."""
-    from fleet import cli_lidar; cli_lidar.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
-    from fleet import cli_mapf; cli_mapf.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
-    from fleet import cli_slam; cli_slam.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
-    from fleet import cli_dwa; cli_dwa.register(app, plan_app, bench_app, slam_app)  # noqa: E702, I001
+    from fleet import cli_processes
+
+    cli_processes.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_lidar
+
+    cli_lidar.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_mapf
+
+    cli_mapf.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_slam
+
+    cli_slam.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_dwa
+
+    cli_dwa.register(app, plan_app, bench_app, slam_app)
 
 
 _register_all()

@@ -107,8 +107,8 @@ class AgentParams:
 
 @dataclass(frozen=True)
 class CoordinatorParams:
-    lane_overlap: float = 0.1
-    done_coverage: float = 0.98
+    wall_clearance: float = 0.03
+    expected_robots_grace_s: float = 20.0
 
 
 @dataclass(frozen=True)

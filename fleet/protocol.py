@@ -235,6 +235,17 @@ class Plan(Message):
 
 
 @dataclass(frozen=True, eq=False)
+class FleetState(Message):
+    """The coordinator's view of the job: its phase and which robots hold or finished work."""
+
+    TYPE: ClassVar[str] = "fleet_state"
+    stamp: float
+    phase: str
+    robots: list[str]
+    done: list[str]
+
+
+@dataclass(frozen=True, eq=False)
 class Collision(Message):
     """A contact: ``kind`` is "wall" or "robot"; ``other`` is the other robot or ""."""
 
@@ -262,6 +273,14 @@ class CoverageSummary(Message):
     turns: Annotated[np.ndarray, Arr("<i4")]
     wall_collisions: Annotated[np.ndarray, Arr("<i4")]
     robot_collisions: Annotated[np.ndarray, Arr("<i4")]
+
+
+@dataclass(frozen=True, eq=False)
+class Request(Message):
+    """A query that carries no arguments but who asks (report, coverage image, current plan)."""
+
+    TYPE: ClassVar[str] = "request"
+    sender: str
 
 
 @dataclass(frozen=True, eq=False)
@@ -312,8 +331,10 @@ MESSAGES: dict[str, type[Message]] = {
         Intent,
         RobotStatus,
         Plan,
+        FleetState,
         Collision,
         CoverageSummary,
+        Request,
         SpawnRequest,
         SpawnReply,
         CoverageImage,

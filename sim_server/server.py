@@ -22,6 +22,7 @@ from fleet.protocol import (
     Clock,
     CoverageImage,
     CoverageSummary,
+    Request,
     SpawnReply,
     SpawnRequest,
     TruthPose,
@@ -64,8 +65,8 @@ class SimServer:
         self.wall0 = time.monotonic()
         bus.subscribe(self.keys.all_robots("cmd_vel"), Twist, self._on_cmd)
         bus.serve(self.keys.sim_spawn(), SpawnRequest, self._on_spawn)
-        bus.serve(self.keys.sim_report(), Clock, lambda _req: self.summary())
-        bus.serve(self.keys.coverage_image(), Clock, lambda _req: self.coverage_image())
+        bus.serve(self.keys.sim_report(), Request, lambda _req: self.summary())
+        bus.serve(self.keys.coverage_image(), Request, lambda _req: self.coverage_image())
         bus.watch_alive("agent", lambda _rid: None, self._on_agent_left)
 
     # ---- bus callbacks (zenoh threads) --------------------------------------------------

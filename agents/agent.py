@@ -1,0 +1,219 @@
+"""The robot process: sensors in, DWA path following, cmd_vel, pose, intent and status out.
+
+It knows only what a real robot knows: its scans, its odometry, the sim clock and what the
+coordinator sends. Each scan triggers one control step; the cmd_vel it publishes carries that
+scan's stamp, which is how the simulator knows the agent has kept up. When its odometry is
+older than ``stale_after_s`` (sim time) it commands a stop.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import queue
+import threading
+import time
+
+import numpy as np
+
+from agents.follower import FollowState, control_step, scan_points
+from agents.pose_source import OdometryPose, PoseSource
+from fleet.bus import Bus
+from fleet.params import FleetConfig
+from fleet.protocol import (
+    Clock,
+    Intent,
+    LaserScan,
+    Odometry,
+    Plan,
+    PoseEstimate,
+    Request,
+    RobotStatus,
+    SpawnReply,
+    SpawnRequest,
+    Twist,
+)
+from planners.dwa import rollout
+
+log = logging.getLogger("agent")
+
+
+class Agent:
+    def __init__(self, bus: Bus, rid: str, cfg: FleetConfig) -> None:
+        self.bus = bus
+        self.rid = rid
+        self.cfg = cfg
+        self.keys = bus.keys
+        self.scans: queue.Queue[LaserScan] = queue.Queue(maxsize=1)
+        self.lock = threading.Lock()
+        self.stop = threading.Event()
+        self.pose_source: PoseSource | None = None
+        self.odom_stamp = -1.0
+        self.velocity = (0.0, 0.0)
+        self.follow: FollowState | None = None
+        self.plan_id = -1
+        self.task = ""
+        self.state = "waiting"
+        self.distance_m = 0.0
+        self.clock = 0.0
+        self._last_xy: tuple[float, float] | None = None
+        self._last_status = -1e9
+
+    def spawn(self, start: tuple[float, float, float], timeout: float = 30.0) -> None:
+        """Ask the simulator to place the robot; retry until it answers or ``timeout`` passes."""
+        deadline = time.monotonic() + timeout
+        req = SpawnRequest(self.rid, *start)
+        while True:
+            try:
+                reply = self.bus.request(self.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
+                break
+            except (TimeoutError, RuntimeError) as e:
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"no simulator answered the spawn request: {e}") from None
+                time.sleep(0.2)
+        if not reply.ok:
+            raise ValueError(f"spawn refused: {reply.error}")
+        self.pose_source = OdometryPose((reply.x, reply.y, reply.theta))
+        k = self.keys
+        self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
+        self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
+        self.bus.subscribe(k.clock(), Clock, self._on_clock)
+        self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
+        log.info("%s spawned at (%.2f, %.2f, %.2f)", self.rid, reply.x, reply.y, reply.theta)
+
+    def fetch_plan(self) -> None:
+        """Late joiners ask the coordinator for their current plan instead of waiting for one."""
+        try:
+            plan = self.bus.request(self.keys.plan(self.rid), Request(self.rid), Plan, timeout=1.0)
+        except (TimeoutError, RuntimeError):
+            return
+        self._on_plan("", plan)
+
+    # ---- bus callbacks ------------------------------------------------------------------
+
+    def _on_odom(self, _key: str, msg: Odometry) -> None:
+        with self.lock:
+            assert self.pose_source is not None
+            self.pose_source.on_odometry(msg)
+            self.odom_stamp = msg.stamp
+            self.velocity = (msg.v, msg.w)
+
+    def _on_scan(self, _key: str, msg: LaserScan) -> None:
+        with contextlib.suppress(queue.Empty):
+            self.scans.get_nowait()
+        self.scans.put_nowait(msg)
+
+    def _on_clock(self, _key: str, msg: Clock) -> None:
+        self.clock = max(self.clock, msg.stamp)
+
+    def _on_plan(self, _key: str, msg: Plan) -> None:
+        with self.lock:
+            if msg.plan_id == self.plan_id:
+                return
+            self.plan_id = msg.plan_id
+            self.task = msg.task
+            self.follow = FollowState(msg.waypoints) if len(msg.waypoints) else None
+            self.state = "driving" if self.follow is not None else "done"
+        log.info(
+            "%s: plan %d (%s) with %d waypoints",
+            self.rid,
+            msg.plan_id,
+            msg.task,
+            len(msg.waypoints),
+        )
+
+    # ---- control ------------------------------------------------------------------------
+
+    def step(self, scan: LaserScan) -> Twist:
+        """One control step on a fresh scan."""
+        a = self.cfg.agent
+        with self.lock:
+            src = self.pose_source
+            assert src is not None
+            src.on_scan(scan)
+            pose = src.pose()
+            velocity = self.velocity
+            stale = scan.stamp - self.odom_stamp > a.stale_after_s
+            follow = self.follow
+        if self._last_xy is not None:
+            self.distance_m += float(
+                np.hypot(pose[0] - self._last_xy[0], pose[1] - self._last_xy[1])
+            )
+        self._last_xy = pose[:2]
+        v = w = 0.0
+        if stale:
+            state = "stale"
+        elif follow is None:
+            state = "waiting" if self.plan_id < 0 else "done"
+        else:
+            obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
+            follow, result = control_step(
+                follow,
+                pose,
+                velocity,
+                obstacles,
+                self.cfg.dwa,
+                self.cfg.robot.radius,
+                1.0 / self.cfg.lidar.rate_hz,
+                a.waypoint_tolerance,
+                a.goal_tolerance,
+            )
+            with self.lock:
+                if self.follow is not None and self.follow.waypoints is follow.waypoints:
+                    self.follow = follow
+            if result is None:
+                state = "done"
+            else:
+                v, w = result.v, result.w
+                state = "driving" if result.admissible else "blocked"
+        self.state = state
+        self._publish(scan.stamp, pose, v, w, follow)
+        return Twist(scan.stamp, v, w)
+
+    def _publish(
+        self,
+        stamp: float,
+        pose: tuple[float, float, float],
+        v: float,
+        w: float,
+        follow: FollowState | None,
+    ) -> None:
+        k, a = self.keys, self.cfg.agent
+        self.bus.publish(k.robot(self.rid, "cmd_vel"), Twist(stamp, v, w), control=True)
+        assert self.pose_source is not None
+        self.bus.publish(
+            k.robot(self.rid, "pose"),
+            PoseEstimate(stamp, *pose, self.pose_source.covariance(), self.pose_source.name),
+        )
+        t = np.linspace(0.0, a.intent_horizon_s, 11)
+        xs, ys, _ = rollout(pose, np.array([v]), np.array([w]), t)
+        self.bus.publish(
+            k.robot(self.rid, "intent"), Intent(stamp, np.column_stack([stamp + t, xs[0], ys[0]]))
+        )
+        if stamp - self._last_status >= 1.0 / a.status_hz or self.state == "done":
+            self._last_status = stamp
+            n = len(follow.waypoints) if follow is not None else 0
+            idx = follow.index if follow is not None else 0
+            self.bus.publish(
+                k.robot(self.rid, "status"),
+                RobotStatus(
+                    stamp,
+                    self.state,
+                    self.task,
+                    idx / n if n else (1.0 if self.state == "done" else 0.0),
+                    idx,
+                    n,
+                    self.distance_m,
+                    sum(self.bus.decode_errors.values()),
+                ),
+                control=True,
+            )
+
+    def run(self) -> None:
+        self.fetch_plan()
+        while not self.stop.is_set():
+            try:
+                scan = self.scans.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            self.step(scan)

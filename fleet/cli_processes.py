@@ -1,0 +1,225 @@
+"""Commands that run one fleet process each: router, sim, agent, coordinator; and `fleet up`."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from fleet.bus import DEFAULT_ENDPOINT
+from fleet.protocol import DEFAULT_FLEET
+
+ConnectOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--connect",
+        "-c",
+        help="Zenoh router endpoint to connect to (repeatable), e.g. tcp/192.168.1.5:7447.",
+    ),
+]
+FleetOpt = Annotated[str, typer.Option("--fleet", help="Fleet name: the key prefix fleet/<name>/.")]
+ConfigOpt = Annotated[
+    Path | None,
+    typer.Option("--config", help="Parameter file (default: the built-in configs/fleet.yaml)."),
+]
+WorldOpt = Annotated[
+    str,
+    typer.Option(
+        "--world",
+        "-w",
+        help="World YAML or ROS map_server YAML, or a built-in world name (home, small).",
+    ),
+]
+
+
+def _fail(message: str) -> None:
+    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(2)
+
+
+def _setup_logging(name: str) -> None:
+    import logging
+    import sys
+
+    logging.basicConfig(
+        level=logging.INFO,
+        stream=sys.stderr,
+        format=f"%(asctime)s {name} %(levelname)s %(message)s",
+        datefmt="%H:%M:%S",
+    )
+
+
+def _stop_on_signals(event: threading.Event) -> None:
+    def handler(signum: int, _frame: object) -> None:
+        event.set()
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+
+
+def _load(config: Path | None, world: str | None = None):
+    from fleet.config import ConfigError, resolve_world
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
+
+    try:
+        cfg = load_fleet_config(config)
+        w = load_world(resolve_world(world), cfg.robot.radius) if world is not None else None
+    except ConfigError as e:
+        _fail(str(e))
+    return cfg, w
+
+
+def _bus(role: str, ident: str, connect: list[str] | None, fleet: str):
+    from fleet.bus import Bus
+
+    try:
+        return Bus(role, ident, connect or [DEFAULT_ENDPOINT], fleet=fleet)
+    except ValueError as e:
+        _fail(str(e))
+    except Exception as e:  # zenoh raises ZError for unreachable routers
+        _fail(f"cannot connect to {connect or [DEFAULT_ENDPOINT]}: {e}")
+
+
+def router(
+    listen: Annotated[
+        list[str] | None,
+        typer.Option("--listen", "-l", help="Endpoint to listen on (repeatable)."),
+    ] = None,
+) -> None:
+    """Run a Zenoh router, so fleet processes on this or other machines can meet.
+
+    Example: `fleet router --listen tcp/0.0.0.0:7447`, then on each machine
+    `fleet agent --id robot-0 --connect tcp/<router-host>:7447`.
+    """
+    from fleet.bus import open_router
+
+    _setup_logging("router")
+    endpoints = listen or [DEFAULT_ENDPOINT]
+    try:
+        session = open_router(endpoints)
+    except ValueError as e:
+        _fail(str(e))
+    except Exception as e:
+        _fail(f"cannot listen on {endpoints}: {e}")
+    import logging
+
+    logging.getLogger("router").info("Zenoh router listening on %s", ", ".join(endpoints))
+    stop = threading.Event()
+    _stop_on_signals(stop)
+    stop.wait()
+    session.close()
+
+
+def sim(
+    world: WorldOpt = "home",
+    speed: Annotated[
+        float,
+        typer.Option("--speed", help="Real-time factor; 0 runs as fast as the agents keep up."),
+    ] = 1.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed for sensor noise.")] = 0,
+    connect: ConnectOpt = None,
+    fleet: FleetOpt = DEFAULT_FLEET,
+    config: ConfigOpt = None,
+) -> None:
+    """Run the world simulator: physics, lidar, odometry, collisions and ground-truth cleaning."""
+    import numpy as np
+
+    from sim_server.server import SimServer
+
+    if speed < 0:
+        _fail("--speed must be >= 0")
+    _setup_logging("sim")
+    cfg, w = _load(config, world)
+    bus = _bus("sim", "sim", connect, fleet)
+    starts = np.array([p[:2] for p in w.start_poses(1, cfg.robot.radius)])
+    server = SimServer(bus, w, cfg, speed=speed, seed=seed, starts_xy=starts)
+    _stop_on_signals(server.stop)
+    try:
+        server.run()
+    finally:
+        bus.close()
+
+
+def agent(
+    robot_id: Annotated[str, typer.Option("--id", help="Robot id, e.g. robot-0.")],
+    start: Annotated[
+        str | None,
+        typer.Option(
+            "--start", help="Spawn pose x,y,theta (m, m, rad); default: the world's next start."
+        ),
+    ] = None,
+    world: WorldOpt = "home",
+    connect: ConnectOpt = None,
+    fleet: FleetOpt = DEFAULT_FLEET,
+    config: ConfigOpt = None,
+) -> None:
+    """Run one robot agent: follows its plan with DWA on its own pose estimate."""
+    from agents.agent import Agent
+
+    _setup_logging(robot_id)
+    if not robot_id or "/" in robot_id or "*" in robot_id:
+        _fail(f"--id {robot_id!r}: a robot id must be non-empty without '/' or '*'")
+    if start is not None:
+        try:
+            pose = tuple(float(v) for v in start.split(","))
+        except ValueError:
+            pose = ()
+        if len(pose) != 3:
+            _fail(f"--start {start!r}: expected x,y,theta, e.g. --start 1.0,0.5,1.57")
+        cfg, _ = _load(config)
+    else:
+        cfg, w = _load(config, world)
+        pose = w.start_poses(1, cfg.robot.radius)[0]
+    bus = _bus("agent", robot_id, connect, fleet)
+    a = Agent(bus, robot_id, cfg)
+    _stop_on_signals(a.stop)
+    try:
+        a.spawn(pose)  # type: ignore[arg-type]
+        a.run()
+    except (TimeoutError, ValueError) as e:
+        _fail(f"{robot_id}: {e}")
+    finally:
+        bus.close()
+
+
+def coordinator(
+    robots: Annotated[
+        int, typer.Option("--robots", "-n", help="Robots to wait for before planning.")
+    ] = 1,
+    world: WorldOpt = "home",
+    connect: ConnectOpt = None,
+    fleet: FleetOpt = DEFAULT_FLEET,
+    config: ConfigOpt = None,
+) -> None:
+    """Run the coordinator: splits the floor among the robots and sends each its path."""
+    from fleet.coordinator.planning import CoveragePlanner
+    from fleet.coordinator.service import Coordinator
+
+    if robots < 1:
+        _fail("--robots must be >= 1")
+    _setup_logging("coordinator")
+    cfg, w = _load(config, world)
+    bus = _bus("coordinator", "coordinator", connect, fleet)
+    c = Coordinator(bus, CoveragePlanner(w, cfg), robots, cfg.coordinator.expected_robots_grace_s)
+    _stop_on_signals(c.stop)
+    try:
+        c.run()
+    finally:
+        bus.close()
+
+
+def register(
+    app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
+) -> None:
+    from fleet import cli_up
+
+    app.command("up")(cli_up.up)
+    app.command("router")(router)
+    app.command("sim")(sim)
+    app.command("agent")(agent)
+    app.command("coordinator")(coordinator)
+    bench_app.command("sim")(cli_up.bench_sim)

@@ -1,0 +1,242 @@
+"""`fleet up`: the whole fleet as separate processes, with a live view and a report; and
+`fleet bench sim`."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import sys
+import threading
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from fleet.cli_processes import ConfigOpt, WorldOpt, _fail, _load
+
+MAX_ROBOTS = 64
+
+
+def up(
+    robots: Annotated[int, typer.Option("--robots", "-n", help="Number of robot agents.")] = 3,
+    world: WorldOpt = "home",
+    speed: Annotated[
+        float,
+        typer.Option("--speed", help="Real-time factor; 0 runs as fast as the agents keep up."),
+    ] = 4.0,
+    headless: Annotated[
+        bool, typer.Option("--headless", help="Plain log lines instead of the live table.")
+    ] = False,
+    until_done: Annotated[
+        bool, typer.Option("--until-done", help="Stop once every robot has finished its plan.")
+    ] = False,
+    timeout: Annotated[
+        float | None, typer.Option("--timeout", help="Stop after this many wall-clock seconds.")
+    ] = None,
+    run_dir: Annotated[
+        Path | None,
+        typer.Option("--run-dir", help="Where logs and the report go (default: runs/<date-time>)."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
+    config: ConfigOpt = None,
+) -> None:
+    """Run the whole fleet: a Zenoh router, the simulator, the coordinator and N agents, each
+    its own process, with a live view; writes report.json and report.png at the end.
+
+    Examples: `fleet up --robots 3` (the home, until Ctrl-C);
+    `fleet up --robots 2 --world small --headless --until-done --timeout 300`.
+    """
+    from fleet.bus import Bus
+    from fleet.config import resolve_world
+    from fleet.dashboard import FleetWatcher
+    from fleet.launcher import Launcher, free_port, wait_for_port
+    from fleet.protocol import CoverageImage, CoverageSummary, Request
+    from fleet.report import build_report, render_png, write_json
+
+    if not 1 <= robots <= MAX_ROBOTS:
+        _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
+    if speed < 0 or not math.isfinite(speed):
+        _fail(f"--speed must be a finite number >= 0, got {speed}")
+    if timeout is not None and timeout <= 0:
+        _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    cfg, w = _load(config, world)
+    try:
+        starts = w.start_poses(robots, cfg.robot.radius)
+    except ValueError as e:
+        _fail(str(e))
+    world_path = str(resolve_world(world))
+    run_dir = run_dir or Path("runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        _fail(f"--run-dir {run_dir}: {e.strerror}")
+
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    common = ["--connect", endpoint] + (["--config", str(config)] if config else [])
+    launcher = Launcher(run_dir)
+    stop = threading.Event()
+    interrupted = []
+
+    def on_signal(signum: int, _frame: object) -> None:
+        interrupted.append(signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    out = typer.echo
+    status = "interrupted"
+    bus = None
+    t0 = time.monotonic()
+    try:
+        launcher.start("router", ["router", "--listen", endpoint])
+        if not wait_for_port("127.0.0.1", port, 15.0):
+            _fail(f"the Zenoh router did not start; see {run_dir / 'router.log'}")
+        launcher.start(
+            "sim",
+            ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed), *common],
+        )
+        launcher.start(
+            "coordinator", ["coordinator", "--robots", str(robots), "--world", world_path, *common]
+        )
+        for i, (x, y, th) in enumerate(starts):
+            rid = f"robot-{i}"
+            launcher.start(rid, ["agent", "--id", rid, "--start", f"{x},{y},{th}", *common])
+        bus = Bus("dashboard", "up", [endpoint])
+        watcher = FleetWatcher(bus)
+        out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
+        status = _watch(watcher, launcher, stop, until_done, timeout, headless, t0)
+        wall_s = time.monotonic() - t0
+        summary = bus.request(bus.keys.sim_report(), Request("up"), CoverageSummary, timeout=10.0)
+        image = bus.request(bus.keys.coverage_image(), Request("up"), CoverageImage, timeout=10.0)
+        makespan = watcher.makespan() if status == "done" else None
+        report = build_report(
+            summary,
+            makespan,
+            wall_s,
+            status,
+            {"world": world_path, "robot_count": robots, "speed": speed, "seed": seed},
+        )
+        write_json(run_dir / "report.json", report)
+        with watcher.lock:
+            tracks = {rid: list(v.track) for rid, v in watcher.robots.items()}
+        render_png(run_dir / "report.png", image, tracks)
+        out(
+            f"{status}: coverage {100 * report['coverage']:.1f} %, repetition "
+            f"{100 * report['repetition']:.1f} %, makespan {report['makespan_s']} s sim, "
+            f"{report['wall_s']} s wall, collisions {report['collisions']} — "
+            f"{run_dir / 'report.json'}, {run_dir / 'report.png'}",
+            err=True,
+        )
+    except (TimeoutError, RuntimeError) as e:
+        typer.secho(
+            f"error: could not collect the report: {e}; logs in {run_dir}/", fg="red", err=True
+        )
+        status = "error"
+    finally:
+        if bus is not None:
+            bus.close()
+        launcher.stop_all()
+    if status not in ("done", "stopped", "timeout"):
+        raise typer.Exit(1 if status != "interrupted" else 130)
+
+
+def _watch(watcher, launcher, stop, until_done, timeout, headless, t0) -> str:
+    """Show progress until done, timeout, a signal or a dead process; returns why it stopped."""
+    from rich.console import Console
+    from rich.live import Live
+
+    console = Console(stderr=True)
+    live = (
+        None if headless or not console.is_terminal else Live(console=console, auto_refresh=False)
+    )
+    last_line = -1e9
+    try:
+        if live is not None:
+            live.start()
+        while not stop.wait(0.25):
+            wall = time.monotonic() - t0
+            if live is not None:
+                live.update(watcher.table(wall), refresh=True)
+            elif wall - last_line >= 5.0:
+                print(watcher.line(wall), file=sys.stderr, flush=True)
+                last_line = wall
+            dead = {
+                n: c for n, c in launcher.dead().items() if n in ("router", "sim", "coordinator")
+            }
+            if dead:
+                name, code = next(iter(dead.items()))
+                console.print(
+                    f"[red]{name} exited with code {code}; see {launcher.run_dir / (name + '.log')}"
+                )
+                return "error"
+            if until_done and watcher.done:
+                return "done"
+            if timeout is not None and wall > timeout:
+                return "timeout"
+        return "done" if watcher.done else "stopped"
+    finally:
+        if live is not None:
+            live.stop()
+        print(watcher.line(time.monotonic() - t0), file=sys.stderr, flush=True)
+
+
+def bench_sim(
+    robots: Annotated[int, typer.Option("--robots", "-n", help="Scripted robots.")] = 3,
+    seconds: Annotated[float, typer.Option("--seconds", "-s", help="Sim seconds to run.")] = 60.0,
+    world: WorldOpt = "home",
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    config: ConfigOpt = None,
+) -> None:
+    """Run the simulator core alone with scripted robots (no bus) and print its real-time
+    factor (`rtf`) and lidar rays per second (`rays_per_s`).
+
+    Robots drive arcs whose curvature changes slowly, so they sweep the world, hit walls and
+    each other; everything a live run computes (physics, lidar, odometry, cleaning) is computed.
+    """
+    import numpy as np
+
+    from sim_server.core import SimCore
+
+    if robots < 1 or seconds <= 0:
+        _fail("--robots must be >= 1 and --seconds > 0")
+    cfg, w = _load(config, world)
+    try:
+        starts = w.start_poses(robots, cfg.robot.radius, spacing=2 * cfg.robot.radius + 0.06)
+    except ValueError as e:
+        _fail(str(e))
+    core = SimCore(w, cfg, seed=0)
+    for i, pose in enumerate(starts):
+        core.add_robot(f"r{i}", pose)
+    rng = np.random.default_rng(1)
+    phase = rng.uniform(0, 2 * np.pi, robots)
+    steps = round(seconds * cfg.sim.physics_hz)
+    scans = 0
+    t0 = time.perf_counter()
+    for k in range(steps):
+        if k % 10 == 0:
+            t = core.t
+            for i in range(robots):
+                core.set_cmd(f"r{i}", 0.4, 0.8 * math.sin(0.3 * t + phase[i]))
+        scans += len(core.step().scans)
+    wall = time.perf_counter() - t0
+    result = {
+        "robots": robots,
+        "world": w.name,
+        "sim_seconds": round(core.t, 3),
+        "wall_s": round(wall, 3),
+        "rtf": round(core.t / wall, 2),
+        "rays_per_s": round(scans * cfg.lidar.beams / wall),
+        "scans": scans,
+        "coverage": round(core.cleaning.coverage(), 4),
+    }
+    if as_json:
+        print(json.dumps(result))
+    else:
+        typer.echo(
+            f"{robots} robots, {result['sim_seconds']} sim s in {result['wall_s']} s wall: "
+            f"{result['rtf']}× real time, {result['rays_per_s']:,} rays/s"
+        )

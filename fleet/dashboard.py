@@ -1,0 +1,145 @@
+"""Watching a run: collects coverage, robot status, collisions and true poses from the bus.
+
+The dashboard reads truth (for metrics and the report picture) and commands nothing.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+
+from rich.table import Table
+
+from fleet.bus import Bus
+from fleet.protocol import Clock, Collision, CoverageSummary, FleetState, RobotStatus, TruthPose
+
+TRACK_STEP_M = 0.05
+
+
+@dataclass
+class RobotView:
+    status: RobotStatus | None = None
+    done_at: float | None = None
+    track: list[tuple[float, float]] = field(default_factory=list)
+
+
+class FleetWatcher:
+    def __init__(self, bus: Bus) -> None:
+        self.keys = bus.keys
+        self.lock = threading.Lock()
+        self.clock = 0.0
+        self.coverage: CoverageSummary | None = None
+        self.fleet: FleetState | None = None
+        self.robots: dict[str, RobotView] = {}
+        self.collisions: list[Collision] = []
+        k = self.keys
+        bus.subscribe(k.clock(), Clock, self._on_clock)
+        bus.subscribe(k.coverage(), CoverageSummary, self._on_coverage)
+        bus.subscribe(k.coord_state(), FleetState, self._on_fleet)
+        bus.subscribe(k.all_robots("status"), RobotStatus, self._on_status)
+        bus.subscribe(k.all_robots("truth"), TruthPose, self._on_truth)
+        bus.subscribe(k.collisions(), Collision, self._on_collision)
+
+    def _robot(self, key: str) -> RobotView:
+        return self.robots.setdefault(self.keys.robot_of(key), RobotView())
+
+    def _on_clock(self, _k: str, m: Clock) -> None:
+        with self.lock:
+            self.clock = max(self.clock, m.stamp)
+
+    def _on_coverage(self, _k: str, m: CoverageSummary) -> None:
+        with self.lock:
+            self.coverage = m
+
+    def _on_fleet(self, _k: str, m: FleetState) -> None:
+        with self.lock:
+            self.fleet = m
+
+    def _on_status(self, key: str, m: RobotStatus) -> None:
+        with self.lock:
+            r = self._robot(key)
+            r.status = m
+            if m.state == "done" and m.task and r.done_at is None:
+                r.done_at = m.stamp
+            elif m.state != "done":
+                r.done_at = None
+
+    def _on_truth(self, key: str, m: TruthPose) -> None:
+        with self.lock:
+            track = self._robot(key).track
+            if not track or abs(track[-1][0] - m.x) + abs(track[-1][1] - m.y) >= TRACK_STEP_M:
+                track.append((m.x, m.y))
+
+    def _on_collision(self, _k: str, m: Collision) -> None:
+        with self.lock:
+            self.collisions.append(m)
+
+    @property
+    def done(self) -> bool:
+        with self.lock:
+            return self.fleet is not None and self.fleet.phase == "done"
+
+    def makespan(self) -> float | None:
+        with self.lock:
+            stamps = [r.done_at for r in self.robots.values() if r.status and r.status.task]
+        return max(stamps) if stamps and all(s is not None for s in stamps) else None  # type: ignore[type-var]
+
+    def table(self, wall_s: float) -> Table:
+        with self.lock:
+            cov = self.coverage
+            phase = self.fleet.phase if self.fleet else "starting"
+            rtf = self.clock / wall_s if wall_s > 0 else 0.0
+            title = (
+                f"fleet — {phase} — sim {self.clock:7.1f} s ({rtf:4.1f}× real time) — "
+                f"coverage {100 * cov.coverage if cov else 0:5.1f} % — "
+                f"repetition {100 * cov.repetition if cov else 0:4.1f} %"
+            )
+            t = Table(title=title, expand=False)
+            for col in (
+                "robot",
+                "state",
+                "task",
+                "progress",
+                "distance m",
+                "wall hits",
+                "robot hits",
+            ):
+                t.add_column(
+                    col, justify="right" if col not in ("robot", "state", "task") else "left"
+                )
+            hits = {}
+            if cov is not None:
+                hits = {
+                    r: (int(cov.wall_collisions[i]), int(cov.robot_collisions[i]))
+                    for i, r in enumerate(cov.robots)
+                }
+            for rid in sorted(self.robots):
+                s = self.robots[rid].status
+                w, r = hits.get(rid, (0, 0))
+                if s is None:
+                    t.add_row(rid, "—", "", "", "", str(w), str(r))
+                    continue
+                t.add_row(
+                    rid,
+                    s.state,
+                    s.task,
+                    f"{100 * s.progress:5.1f} %",
+                    f"{s.distance_m:7.1f}",
+                    str(w),
+                    str(r),
+                )
+            return t
+
+    def line(self, wall_s: float) -> str:
+        with self.lock:
+            cov = self.coverage
+            phase = self.fleet.phase if self.fleet else "starting"
+            states = ", ".join(
+                f"{rid}={v.status.state}:{100 * v.status.progress:.0f}%"
+                for rid, v in sorted(self.robots.items())
+                if v.status is not None
+            )
+            return (
+                f"[{wall_s:6.1f} s] {phase} sim={self.clock:.1f}s "
+                f"coverage={100 * cov.coverage if cov else 0:.1f}% {states}"
+            )
