@@ -110,4 +110,4 @@ def test_bench_smoke(tmp_path: Path) -> None:
     assert rows["pp"]["max_k"] == rows["cbs"]["max_k"] == 10
     assert rows["cbs"]["all_valid"] is True
     assert (tmp_path / "random-32-32-10.map").exists()
-    assert (tmp_path / "random-32-32-10.scen").exists()
+    assert (tmp_path / "random-32-32-10-0.scen").exists()

@@ -1,10 +1,10 @@
 """The MAPF benchmark behind ``fleet bench mapf``: the largest k each solver solves per map.
 
-Each map of ``generate.benchmark_maps`` is written as a MovingAI ``.map`` with one seeded
-``.scen`` of ``k_max`` agents, read back through the parsers, and every solver runs on the first
-k agents for k = k_step, 2·k_step, ... until it fails (timeout) or k_max. Every solution goes
-through the validator; CBS runs also record whether their SOC equals the optimum found by the
-other CBS variant at the same k.
+Each map of ``generate.benchmark_maps`` is written as a MovingAI ``.map`` with ``scenarios``
+seeded ``.scen`` files of ``k_max`` agents, read back through the parsers, and every solver runs
+on the first k agents of each scenario for k = k_step, 2·k_step, ... up to k_max, stopping after
+the first k at which it solves none. Every solution goes through the validator; CBS runs also
+record whether their SOC equals the optimum found by the other CBS variant at the same k.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from planners.mapf.movingai import load_instance, write_map, write_scen
 class BenchRun:
     map_name: str
     solver: str
+    scenario: int
     k: int
     status: str
     runtime_s: float
@@ -33,89 +34,107 @@ class BenchRun:
 
 
 def write_suite(
-    directory: Path, k_max: int, seed: int, maps: Sequence[str] | None = None
-) -> dict[str, tuple[Path, Path]]:
-    """Write ``<name>.map`` and ``<name>.scen`` for each benchmark map; returns their paths."""
+    directory: Path, k_max: int, seed: int, scenarios: int = 1, maps: Sequence[str] | None = None
+) -> dict[str, tuple[Path, list[Path]]]:
+    """Write ``<name>.map`` and ``<name>-<i>.scen`` per benchmark map; returns their paths."""
     out = {}
     for name, free in benchmark_maps(seed).items():
         if maps and name not in maps:
             continue
         k = min(k_max, int(free.sum()) // 2)
-        map_path, scen_path = directory / f"{name}.map", directory / f"{name}.scen"
+        map_path = directory / f"{name}.map"
         write_map(map_path, free)
-        write_scen(scen_path, f"{name}.map", random_instance(free, k, seed))
-        out[name] = (map_path, scen_path)
+        scens = []
+        for i in range(scenarios):
+            scen_path = directory / f"{name}-{i}.scen"
+            write_scen(scen_path, f"{name}.map", random_instance(free, k, seed + 1000 * i))
+            scens.append(scen_path)
+        out[name] = (map_path, scens)
     return out
 
 
 def run_suite(
-    files: dict[str, tuple[Path, Path]],
+    files: dict[str, tuple[Path, list[Path]]],
     solvers: Sequence[str],
     k_values: Sequence[int],
     time_limit_s: float,
     w: float,
     progress: Callable[[BenchRun], None] | None = None,
 ) -> list[BenchRun]:
-    """Each solver on each map for increasing k, stopping a (map, solver) at its first failure."""
+    """Each solver on each map for increasing k, until a k at which no scenario is solved."""
     runs: list[BenchRun] = []
-    for name, (map_path, scen_path) in files.items():
-        full = load_instance(map_path, scen_path)
-        graph = GridGraph(full.free)
+    for name, (map_path, scen_paths) in files.items():
+        fulls = [load_instance(map_path, scen) for scen in scen_paths]
+        graph = GridGraph(fulls[0].free)
         for solver in solvers:
             for k in k_values:
-                if k > full.num_agents:
+                if k > fulls[0].num_agents:
                     break
-                instance = full.first(k)
-                result = solve(instance, solver, w=w, time_limit_s=time_limit_s, graph=graph)
-                valid = None
-                if result.solution is not None:
-                    valid = validate(instance, result.solution.paths).valid
-                run = BenchRun(
-                    name,
-                    solver,
-                    k,
-                    result.status,
-                    result.runtime_s,
-                    result.soc,
-                    result.lower_bound,
-                    result.expanded,
-                    valid,
-                )
-                runs.append(run)
-                if progress is not None:
-                    progress(run)
-                if result.status != "success":
+                solved = 0
+                for i, full in enumerate(fulls):
+                    instance = full.first(k)
+                    result = solve(instance, solver, w=w, time_limit_s=time_limit_s, graph=graph)
+                    valid = None
+                    if result.solution is not None:
+                        valid = validate(instance, result.solution.paths).valid
+                    run = BenchRun(
+                        name,
+                        solver,
+                        i,
+                        k,
+                        result.status,
+                        result.runtime_s,
+                        result.soc,
+                        result.lower_bound,
+                        result.expanded,
+                        valid,
+                    )
+                    runs.append(run)
+                    solved += result.status == "success"
+                    if progress is not None:
+                        progress(run)
+                if not solved:
                     break
     return runs
 
 
 def summarize(runs: Sequence[BenchRun]) -> list[dict[str, object]]:
-    """Per (map, solver): the largest k solved, its runtime, and the runtime at every k."""
-    table: dict[tuple[str, str], dict[str, object]] = {}
+    """Per (map, solver): the largest k with every scenario solved, solved counts and mean
+    runtime (of the solved runs) at every k."""
+    groups: dict[tuple[str, str], dict[int, list[BenchRun]]] = {}
     for run in runs:
-        row = table.setdefault(
-            (run.map_name, run.solver),
+        groups.setdefault((run.map_name, run.solver), {}).setdefault(run.k, []).append(run)
+    rows = []
+    for (name, solver), by_k in groups.items():
+        max_k, at_max = 0, None
+        solved_by_k, runtime_by_k = {}, {}
+        valid = True
+        for k, group in sorted(by_k.items()):
+            ok = [r for r in group if r.status == "success"]
+            solved_by_k[k] = f"{len(ok)}/{len(group)}"
+            if ok:
+                runtime_by_k[k] = round(sum(r.runtime_s for r in ok) / len(ok), 3)
+                valid = valid and all(bool(r.valid) for r in ok)
+            if len(ok) == len(group) and k > max_k:
+                max_k, at_max = k, runtime_by_k[k]
+        rows.append(
             {
-                "map": run.map_name,
-                "solver": run.solver,
-                "max_k": 0,
-                "runtime_at_max_k_s": None,
-                "runtime_by_k": {},
-                "all_valid": True,
-            },
+                "map": name,
+                "solver": solver,
+                "max_k": max_k,
+                "runtime_at_max_k_s": at_max,
+                "solved_by_k": solved_by_k,
+                "mean_runtime_by_k_s": runtime_by_k,
+                "all_valid": valid,
+            }
         )
-        if run.status == "success":
-            row["max_k"] = run.k
-            row["runtime_at_max_k_s"] = round(run.runtime_s, 3)
-            row["runtime_by_k"][run.k] = round(run.runtime_s, 3)  # type: ignore[index]
-            row["all_valid"] = bool(row["all_valid"]) and bool(run.valid)
-    return list(table.values())
+    return rows
 
 
-def optimal_soc_mismatches(runs: Sequence[BenchRun]) -> list[tuple[str, int]]:
-    """(map, k) where two optimal CBS variants returned different SOC (should be empty)."""
-    socs: dict[tuple[str, int], set[int]] = {}
+def optimal_soc_mismatches(runs: Sequence[BenchRun]) -> list[tuple[str, int, int]]:
+    """(map, scenario, k) where the two optimal CBS variants disagree on SOC (should be none)."""
+    socs: dict[tuple[str, int, int], set[int]] = {}
     for run in runs:
         if run.solver in ("cbs", "cbs-plain") and run.soc is not None:
-            socs.setdefault((run.map_name, run.k), set()).add(run.soc)
+            socs.setdefault((run.map_name, run.scenario, run.k), set()).add(run.soc)
     return sorted(key for key, values in socs.items() if len(values) > 1)
