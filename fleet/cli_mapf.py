@@ -34,9 +34,8 @@ def plan_mapf(
         typer.Argument(
             exists=True,
             dir_okay=False,
-            metavar="MAP",
             help="A MovingAI .map file, or a libMultiRobotPlanning YAML instance "
-            "(map.dimensions, map.obstacles, agents) - then leave SCEN out.",
+            "(map.dimensions, map.obstacles, agents) - then leave SCEN_FILE out.",
         ),
     ],
     scen_file: Annotated[
@@ -44,7 +43,6 @@ def plan_mapf(
         typer.Argument(
             exists=True,
             dir_okay=False,
-            metavar="[SCEN]",
             help="A MovingAI .scen file (x = column, y = row from the top).",
         ),
     ] = None,

@@ -36,13 +36,21 @@ class _Node:
         "soc",
     )
 
-    def __init__(self, parent, agent, constraint, paths, costs, lbs) -> None:
+    def __init__(
+        self,
+        parent: _Node | None,
+        agent: int,
+        constraint: Constraint | None,
+        paths: list[list[int]],
+        costs: list[int],
+        lbs: list[int],
+    ) -> None:
         self.parent = parent
         self.agent = agent
         self.constraint = constraint
-        self.paths: list[list[int]] = paths
-        self.costs: list[int] = costs
-        self.lbs: list[int] = lbs
+        self.paths = paths
+        self.costs = costs
+        self.lbs = lbs
         self.soc = sum(costs)
         self.lb = sum(lbs)
         self.conflicts: list[tuple[int, int, int, int, int]] = []
