@@ -145,7 +145,11 @@ class ConflictBasedSearch:
         n = self.graph.num_cells
         paths: list[list[int]] = []
         for i in range(self.k):
-            cat = ConflictAvoidanceTable(n, paths) if self.options.avoidance_table else None
+            cat = (
+                ConflictAvoidanceTable.from_paths(n, paths)
+                if self.options.avoidance_table
+                else None
+            )
             path = space_time_astar(
                 self.graph,
                 self.starts[i],
@@ -187,9 +191,10 @@ class ConflictBasedSearch:
     ) -> _Node | None:
         child = _Node(node, agent, constraint, list(node.paths), list(node.costs), dict(node.mdds))
         child.mdds.pop(agent, None)
-        others = node.paths[:agent] + node.paths[agent + 1 :]
         cat = (
-            ConflictAvoidanceTable(self.graph.num_cells, others)
+            ConflictAvoidanceTable.from_positions(
+                self.graph.num_cells, pos, [len(p) for p in node.paths], agent
+            )
             if self.options.avoidance_table
             else None
         )

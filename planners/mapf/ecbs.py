@@ -92,7 +92,7 @@ def ecbs(
             starts[i],
             goals[i],
             ConstraintTable(n),
-            ConflictAvoidanceTable(n, paths),
+            ConflictAvoidanceTable.from_paths(n, paths),
             w,
             deadline,
             stats,
@@ -143,17 +143,17 @@ def ecbs(
         t, a, b, u, v = min(node.conflicts)
         split = [(a, (u, -1, t)), (b, (u, -1, t))] if v == -1 else [(a, (u, v, t)), (b, (v, u, t))]
         pos = positions(node.paths)
+        lengths = [len(p) for p in node.paths]
         for agent, constraint in split:
             child = _Node(
                 node, agent, constraint, list(node.paths), list(node.costs), list(node.lbs)
             )
-            others = node.paths[:agent] + node.paths[agent + 1 :]
             found = focal_astar(
                 graph,
                 starts[agent],
                 goals[agent],
                 table_for(child, agent),
-                ConflictAvoidanceTable(n, others),
+                ConflictAvoidanceTable.from_positions(n, pos, lengths, agent),
                 w,
                 deadline,
                 stats,

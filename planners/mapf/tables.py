@@ -8,6 +8,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
+from planners.mapf.conflicts import positions
+
 
 class ConstraintTable:
     """Forbidden vertices, forbidden moves, and cells blocked forever from some time on.
@@ -62,31 +66,57 @@ class ConstraintTable:
 class ConflictAvoidanceTable:
     """How many other agents' paths a vertex or move collides with (Standley 2010's CAT).
 
-    Used to break ties among equal-cost paths (CBS) and as the focal heuristic (ECBS).
+    Used to break ties among equal-cost paths (CBS) and as the focal heuristic (ECBS). Built with
+    numpy from a padded positions array: one sort instead of a Python loop over every step.
     """
 
     __slots__ = ("edge", "horizon", "n", "parked", "vertex")
 
-    def __init__(self, n: int, paths: Sequence[Sequence[int]]) -> None:
+    def __init__(
+        self,
+        n: int,
+        vertex: dict[int, int],
+        edge: dict[int, int],
+        parked: dict[int, int],
+        horizon: int,
+    ) -> None:
         self.n = n
-        vertex: dict[int, int] = {}
-        edge: dict[int, int] = {}
-        parked: dict[int, int] = {}
-        horizon = 0
-        for path in paths:
-            last = len(path) - 1
-            horizon = max(horizon, last)
-            prev = path[0]
-            for t in range(last):
-                key = t * n + path[t]
-                vertex[key] = vertex.get(key, 0) + 1
-                cur = path[t + 1]
-                if cur != prev:
-                    ekey = ((t + 1) * n + cur) * n + prev
-                    edge[ekey] = edge.get(ekey, 0) + 1
-                prev = cur
-            parked[path[last]] = last
         self.vertex = vertex
         self.edge = edge
         self.parked = parked
         self.horizon = horizon
+
+    @classmethod
+    def from_paths(cls, n: int, paths: Sequence[Sequence[int]]) -> ConflictAvoidanceTable:
+        if not paths:
+            return cls(n, {}, {}, {}, 0)
+        return cls.from_positions(n, positions(paths), [len(p) for p in paths], -1)
+
+    @classmethod
+    def from_positions(
+        cls, n: int, pos: np.ndarray, lengths: Sequence[int], exclude: int
+    ) -> ConflictAvoidanceTable:
+        """The table of every row of ``pos`` (paths padded with their last cell) but ``exclude``.
+
+        A path of length L occupies ``(pos[t], t)`` for t < L - 1 and is parked at its last cell
+        from ``L - 1`` on; its moves are recorded under the key of the reverse move (a swap).
+        """
+        k, horizon = pos.shape
+        last = np.asarray(lengths, dtype=np.int64) - 1
+        keep = np.arange(k) != exclude
+        t = np.arange(horizon, dtype=np.int64)[None, :]
+        moving = t < last[:, None]
+        v_mask = moving & keep[:, None]
+        vkeys, vcounts = np.unique((t * n + pos)[v_mask], return_counts=True)
+        frm, to = pos[:, :-1], pos[:, 1:]
+        e_mask = v_mask[:, :-1] & (frm != to)
+        ekeys, ecounts = np.unique((((t[:, 1:]) * n + to) * n + frm)[e_mask], return_counts=True)
+        rows = np.nonzero(keep)[0]
+        parked = dict(zip(pos[rows, last[rows]].tolist(), last[rows].tolist(), strict=True))
+        return cls(
+            n,
+            dict(zip(vkeys.tolist(), vcounts.tolist(), strict=True)),
+            dict(zip(ekeys.tolist(), ecounts.tolist(), strict=True)),
+            parked,
+            int(last[rows].max()) if len(rows) else 0,
+        )
