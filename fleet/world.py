@@ -214,6 +214,8 @@ def _world_from_yaml(path: Path, data: dict) -> World:
         if not isinstance(data["map"], str):
             raise ConfigError(f"{path}: map: expected the path of a ROS map YAML")
         map_path = (path.parent / data["map"]).resolve()
+        if not map_path.is_file():
+            raise ConfigError(f"{path}: map: ROS map file not found: {map_path}")
         map_data = read_yaml(map_path)
         if not isinstance(map_data, dict):
             raise ConfigError(f"{map_path}: expected a mapping at the top level")
