@@ -69,6 +69,32 @@ def test_robots_driving_into_each_other_are_one_collision(world: World, cfg: Fle
     assert _counters(sim) == {"a": (0, 1), "b": (0, 1)}
 
 
+def test_bouncing_off_a_wall_within_a_second_is_one_collision(
+    world: World, cfg: FleetConfig
+) -> None:
+    brisk = dataclasses.replace(cfg, robot=dataclasses.replace(cfg.robot, acc_lim_x=50.0))
+    sim = SimCore(world, brisk)
+    touching = 0.05 + cfg.robot.radius
+    sim.add_robot("r0", (0.4, 2.3, math.pi))
+
+    def drive(v: float, seconds: float) -> list[Collision]:
+        sim.set_cmd("r0", v, 0.0)
+        return _run(sim, seconds)
+
+    first = drive(0.3, 0.7)
+    assert [e.kind for e in first] == ["wall"]
+    assert not drive(-0.3, 0.2)
+    assert sim.truth()["r0"][0] > touching + 0.01, "the robot did not leave the wall"
+    assert not drive(0.3, 0.3), "a re-touch within the debounce time counted again"
+    assert sim.truth()["r0"][0] < touching
+    drive(-0.3, 1.0)
+    drive(0.0, 1.0)
+    second = drive(0.3, 1.5)
+    assert [e.kind for e in second] == ["wall"]
+    assert second[0].stamp - first[0].stamp > 1.0
+    assert _counters(sim) == {"r0": (2, 0)}
+
+
 PENETRATION = pytest.mark.xfail(
     strict=True,
     reason="physics imposes the commanded wheel velocity every step, so a robot pushing an "
