@@ -1,7 +1,8 @@
 """Ground-truth cleaning: which floor cells each robot's brush has swept, and how often.
 
 The floor is a grid of ``cell_size`` cells. A robot's brush is a disc of diameter
-``cleaning_width`` centred on the robot, so moving straight it sweeps a band of that width.
+``cleaning_width`` centred on the robot, so moving straight it sweeps a band of that width; a
+cell is under the brush when its centre is.
 A cell's visit count goes up by one each time it *enters* a robot's brush (it was not under that
 brush at the previous update), so a robot standing still does not inflate the counts and a pass
 over a cell counts once however slowly it is made.
@@ -60,21 +61,30 @@ class CleaningGrid:
         self.grid = grid
         self.cleanable = cleanable
         self.visits = np.zeros(grid.shape, dtype=np.uint16)
-        self._brush = disc_offsets(cleaning_width / 2, grid.resolution)
-        self._centre: dict[str, tuple[int, int]] = {}
+        self.radius = cleaning_width / 2
+        k = int(np.ceil(self.radius / grid.resolution)) + 1
+        self._window = np.stack(np.mgrid[-k : k + 1, -k : k + 1], axis=-1).reshape(-1, 2)
+        self._pos: dict[str, tuple[float, float]] = {}
         self._last: dict[str, np.ndarray] = {}
 
-    def update(self, robot: str, x: float, y: float) -> None:
-        """Sweep ``robot``'s brush at (x, y); cheap when it has not left its cell."""
+    def footprint(self, x: float, y: float) -> np.ndarray:
+        """Flat indices of the cells whose centres lie within the brush radius of (x, y)."""
         g = self.grid
-        centre = (int((y - g.origin[1]) // g.resolution), int((x - g.origin[0]) // g.resolution))
-        if self._centre.get(robot) == centre:
-            return
-        self._centre[robot] = centre
+        centre = g.world_to_cell(np.array([x, y]))
+        rc = self._window + centre
+        xy = g.cell_to_world(rc)
+        inside = np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= self.radius + 1e-9
         rows, cols = g.shape
-        rc = self._brush + np.array(centre)
-        ok = (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)
-        flat = rc[ok, 0] * cols + rc[ok, 1]
+        rc = rc[inside & (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)]
+        return rc[:, 0] * cols + rc[:, 1]
+
+    def update(self, robot: str, x: float, y: float) -> None:
+        """Sweep ``robot``'s brush at (x, y); a no-op until it has moved a quarter cell."""
+        last = self._pos.get(robot)
+        if last is not None and abs(x - last[0]) + abs(y - last[1]) < self.grid.resolution / 4:
+            return
+        self._pos[robot] = (x, y)
+        flat = self.footprint(x, y)
         prev = self._last.get(robot)
         new = flat if prev is None else flat[~np.isin(flat, prev, assume_unique=True)]
         np.add.at(self.visits.reshape(-1), new, 1)
@@ -83,7 +93,7 @@ class CleaningGrid:
     def forget(self, robot: str) -> None:
         """A robot left; its next appearance starts a fresh pass."""
         self._last.pop(robot, None)
-        self._centre.pop(robot, None)
+        self._pos.pop(robot, None)
 
     @property
     def cleanable_m2(self) -> float:

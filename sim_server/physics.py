@@ -1,8 +1,10 @@
 """The pymunk world: static walls and furniture, disc robots with differential drive.
 
-Robots are dynamic discs with infinite moment: their wheel velocities are imposed every step
-(after acceleration limits), and the solver pushes them back out of walls and each other. Every
-new robot–wall or robot–robot contact is reported through ``on_contact``.
+Robots are dynamic discs driven through joints to a kinematic control body, as in pymunk's
+"tank" example: the control body moves at the commanded wheel velocities and a pivot and a gear
+joint with bounded force pull the robot after it, so contacts win over the drive and a robot
+pushing a wall stays outside it. Every new robot–wall or robot–robot contact is reported
+through ``on_contact``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,10 @@ from fleet.world import World
 
 WALL = 1
 ROBOT = 2
+# Force and torque limits (per kg of robot) of the joints that drive a robot: strong enough to
+# follow any commanded acceleration, weak against a wall's contact impulses.
+DRIVE_FORCE_PER_KG = 30.0
+DRIVE_TORQUE_PER_KG = 3.0
 
 
 def static_shapes(world: World, body: pymunk.Body) -> list[pymunk.Shape]:
@@ -51,6 +57,7 @@ class Physics:
         self.space.gravity = (0.0, 0.0)
         self.space.add(*static_shapes(world, self.space.static_body))
         self.bodies: dict[str, pymunk.Body] = {}
+        self.controls: dict[str, pymunk.Body] = {}
         self._on_contact = on_contact
         self.space.on_collision(ROBOT, WALL, begin=self._begin)
         self.space.on_collision(ROBOT, ROBOT, begin=self._begin)
@@ -69,24 +76,38 @@ class Physics:
     def add_robot(
         self, rid: str, pose: tuple[float, float, float], radius: float, mass: float
     ) -> None:
-        body = pymunk.Body(mass, math.inf)
+        body = pymunk.Body(mass, pymunk.moment_for_circle(mass, 0, radius))
         body.position = pose[0], pose[1]
         body.angle = pose[2]
         shape = pymunk.Circle(body, radius)
         shape.collision_type = ROBOT
         shape.friction = 0.0
+        shape.elasticity = 0.0
         shape.robot_id = rid  # type: ignore[attr-defined]
-        self.space.add(body, shape)
+        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        control.position = body.position
+        pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
+        pivot.max_bias = 0.0
+        pivot.max_force = DRIVE_FORCE_PER_KG * mass
+        gear = pymunk.GearJoint(control, body, 0.0, 1.0)
+        gear.error_bias = 0.0
+        gear.max_bias = 0.0
+        gear.max_force = DRIVE_TORQUE_PER_KG * mass
+        self.space.add(body, shape, control, pivot, gear)
         self.bodies[rid] = body
+        self.controls[rid] = control
 
     def remove_robot(self, rid: str) -> None:
         body = self.bodies.pop(rid)
-        self.space.remove(body, *body.shapes)
+        control = self.controls.pop(rid)
+        self.space.remove(body, *body.shapes, *body.constraints)
+        self.space.remove(control)
 
     def drive(self, rid: str, v: float, w: float) -> None:
         body = self.bodies[rid]
-        body.velocity = (v * math.cos(body.angle), v * math.sin(body.angle))
-        body.angular_velocity = w
+        control = self.controls[rid]
+        control.velocity = (v * math.cos(body.angle), v * math.sin(body.angle))
+        control.angular_velocity = w
 
     def pose(self, rid: str) -> tuple[float, float, float]:
         body = self.bodies[rid]

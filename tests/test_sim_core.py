@@ -95,14 +95,6 @@ def test_bouncing_off_a_wall_within_a_second_is_one_collision(
     assert _counters(sim) == {"r0": (2, 0)}
 
 
-PENETRATION = pytest.mark.xfail(
-    strict=True,
-    reason="physics imposes the commanded wheel velocity every step, so a robot pushing an "
-    "obstacle sinks about its radius into it (sim_server/physics.py)",
-)
-
-
-@PENETRATION
 def test_a_robot_pushing_a_wall_stays_outside_it(world: World, cfg: FleetConfig) -> None:
     sim = SimCore(world, cfg)
     sim.add_robot("r0", (1.0, 2.3, math.pi))
@@ -111,7 +103,6 @@ def test_a_robot_pushing_a_wall_stays_outside_it(world: World, cfg: FleetConfig)
     assert sim.truth()["r0"][0] >= 0.05 + cfg.robot.radius - 0.02
 
 
-@PENETRATION
 def test_robots_pushing_each_other_do_not_overlap(world: World, cfg: FleetConfig) -> None:
     sim = SimCore(world, cfg)
     sim.add_robot("a", (1.0, 2.3, 0.0))
