@@ -157,6 +157,7 @@ class Agent:
                 1.0 / self.cfg.lidar.rate_hz,
                 a.waypoint_tolerance,
                 a.goal_tolerance,
+                a.give_up_after_s,
             )
             with self.lock:
                 if self.follow is not None and self.follow.waypoints is follow.waypoints:

@@ -10,13 +10,14 @@ next point.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from planners.dwa import DWAParams, DWAResult, dwa_control
 
 LOCAL_PATH_M = 3.0
+PROGRESS_M = 0.02
 MEDIAN_BEAMS = 5
 
 
@@ -24,6 +25,8 @@ MEDIAN_BEAMS = 5
 class FollowState:
     waypoints: np.ndarray
     index: int = 0
+    stalled_s: float = 0.0
+    best_dist: float = math.inf
 
     @property
     def done(self) -> bool:
@@ -91,12 +94,23 @@ def control_step(
     dt: float,
     tolerance: float,
     goal_tolerance: float,
+    give_up_s: float,
 ) -> tuple[FollowState, DWAResult | None]:
-    """Advance along the path and choose a command; ``None`` when the path is finished."""
+    """Advance along the path and choose a command; ``None`` when the path is finished.
+
+    A waypoint the robot has come no closer to (by ``PROGRESS_M``) for ``give_up_s`` is
+    skipped, so a robot whose way is shut, that is caught in a local minimum of the DWA costs,
+    or whose pose estimate has drifted into a wall moves on instead of waiting forever; the
+    skipped spot stays uncleaned and shows in the coverage.
+    """
     xy = np.array(pose[:2])
     state = advance(state, xy, tolerance, goal_tolerance)
     if state.done:
         return state, None
-    return state, dwa_control(
-        pose, velocity, local_path(state, xy), obstacles, params, robot_radius, dt
-    )
+    result = dwa_control(pose, velocity, local_path(state, xy), obstacles, params, robot_radius, dt)
+    dist = math.dist(xy, state.waypoints[state.index])
+    if dist < state.best_dist - PROGRESS_M:
+        return replace(state, stalled_s=0.0, best_dist=dist), result
+    if state.stalled_s + dt >= give_up_s:
+        return FollowState(state.waypoints, state.index + 1), result
+    return replace(state, stalled_s=state.stalled_s + dt), result

@@ -101,13 +101,15 @@ class AgentParams:
     stale_after_s: float = 0.5
     waypoint_tolerance: float = 0.15
     goal_tolerance: float = 0.1
+    give_up_after_s: float = 3.0
     intent_horizon_s: float = 2.0
     status_hz: float = 2.0
 
 
 @dataclass(frozen=True)
 class CoordinatorParams:
-    wall_clearance: float = 0.03
+    wall_clearance: float = 0.015
+    lane_overlap: float = 0.15
     expected_robots_grace_s: float = 20.0
 
 
