@@ -12,6 +12,7 @@ is free and A* on the grid where it is not.
 from __future__ import annotations
 
 import heapq
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -55,7 +56,7 @@ def split_strips(free: np.ndarray, k: int) -> list[np.ndarray]:
         [0] + [int(np.searchsorted(cum, cum[-1] * i / k)) for i in range(1, k)] + [free.shape[1]]
     )
     out = []
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         m = np.zeros_like(free)
         m[:, a:b] = free[:, a:b]
         out.append(m)
@@ -68,7 +69,7 @@ def lane_rows(mask: np.ndarray, spacing_cells: float) -> list[int]:
     if len(rows) == 0:
         return []
     lo, hi = int(rows[0]), int(rows[-1])
-    chosen = {int(round(r)) for r in np.arange(lo, hi + 1e-9, spacing_cells)} | {hi}
+    chosen = {round(r) for r in np.arange(lo, hi + 1e-9, spacing_cells)} | {hi}
     diff = (mask[1:] != mask[:-1]).sum(axis=1)
     for r in np.nonzero(diff > SHAPE_CHANGE_CELLS)[0]:
         for row in (int(r), int(r) + 1):

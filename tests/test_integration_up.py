@@ -1,0 +1,114 @@
+"""`fleet up` end to end: real processes over a real Zenoh router on a free loopback port."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
+
+WORLD = Path(__file__).resolve().parents[1] / "configs" / "worlds" / "small.yaml"
+
+
+def _children_of(pid: int) -> list[int]:
+    """Every process whose parent chain leads to ``pid`` (read from /proc)."""
+    parents = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            parents[int(entry)] = int(stat.rsplit(")", 1)[1].split()[1])
+    out, frontier = [], [pid]
+    while frontier:
+        p = frontier.pop()
+        kids = [c for c, pp in parents.items() if pp == p]
+        out += kids
+        frontier += kids
+    return out
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    run_dir = tmp_path_factory.mktemp("up")
+    cmd = [
+        sys.executable,
+        "-m",
+        "fleet.cli",
+        "up",
+        "--robots",
+        "3",
+        "--world",
+        str(WORLD),
+        "--headless",
+        "--until-done",
+        "--timeout",
+        "150",
+        "--speed",
+        "0",
+        "--run-dir",
+        str(run_dir),
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    children: set[int] = set()
+    try:
+        deadline = time.monotonic() + 300
+        while proc.poll() is None and time.monotonic() < deadline:
+            children.update(_children_of(proc.pid))
+            time.sleep(0.5)
+        output = proc.communicate(timeout=60)[0].decode(errors="replace")
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            proc.wait(30)
+    time.sleep(1.0)
+    left = [p for p in children if Path(f"/proc/{p}").exists()]
+    for p in left:
+        os.kill(p, signal.SIGKILL)
+    return {
+        "rc": proc.returncode,
+        "output": output,
+        "dir": run_dir,
+        "children": children,
+        "left": left,
+    }
+
+
+def test_all_processes_started_and_none_left_behind(run: dict) -> None:
+    assert len(run["children"]) >= 6, run["output"]  # router, sim, coordinator, 3 agents
+    assert run["left"] == [], f"orphans: {run['left']}"
+    for name in ("router", "sim", "coordinator", "robot-0", "robot-1", "robot-2"):
+        assert (run["dir"] / f"{name}.log").stat().st_size > 0, name
+
+
+def test_report_is_written_and_valid(run: dict) -> None:
+    report = json.loads((run["dir"] / "report.json").read_text())
+    for key in ("coverage", "repetition", "makespan_s", "wall_s", "collisions", "robots"):
+        assert key in report
+    assert 0.0 < report["coverage"] <= 1.0
+    assert report["repetition"] >= 0.0
+    assert set(report["collisions"]) == {"robot_wall", "robot_robot"}
+    assert set(report["robots"]) == {"robot-0", "robot-1", "robot-2"}
+    for r in report["robots"].values():
+        assert r["path_length_m"] > 0.5 and r["turns"] >= 0
+    assert (run["dir"] / "report.png").stat().st_size > 0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known gap: with an odometry-only pose and the current DWA tuning, robots get caught "
+    "near the dock and in lane transitions and skip waypoints; coverage stays well under 0.95",
+)
+def test_small_world_is_cleaned_without_wall_collisions(run: dict) -> None:
+    report = json.loads((run["dir"] / "report.json").read_text())
+    assert run["rc"] == 0 and report["status"] == "done", run["output"]
+    assert report["coverage"] >= 0.95
+    assert report["collisions"]["robot_wall"] == 0
