@@ -52,6 +52,23 @@ def home_segments() -> np.ndarray:
     )
 
 
+def ring_segments() -> np.ndarray:
+    """A 16 m × 10 m ring of 2 m wide corridors around a solid block. The bottom corridor is
+    featureless: mid-way, both its ends are beyond a 6 m lidar, so scans fix the position across
+    it but not along it and odometry drift leaks into the estimate until the loop is closed. The
+    other corridors have a sawtooth outer wall that pins the position along them."""
+    walls = [(0.0, 0.0, 16.0, 0.0), (2.0, 2.0, 14.0, 2.0), (14.0, 2.0, 14.0, 8.0)]
+    walls += [(14.0, 8.0, 2.0, 8.0), (2.0, 8.0, 2.0, 2.0)]
+    xs = np.arange(16.0, -0.01, -0.5)
+    top = [(x, 10.0 if i % 2 == 0 else 9.7) for i, x in enumerate(xs)]
+    ys = np.arange(0.0, 10.01, 0.5)
+    right = [(16.0 if i % 2 == 0 else 15.7, y) for i, y in enumerate(ys)]
+    left = [(0.0 if i % 2 == 0 else 0.3, y) for i, y in enumerate(ys[::-1])]
+    for line in (right, top, left):
+        walls += [(a[0], a[1], b[0], b[1]) for a, b in itertools.pairwise(line)]
+    return np.array(walls)
+
+
 def raycast(
     segments: np.ndarray, pose: np.ndarray, angles: np.ndarray, max_range: float
 ) -> np.ndarray:
@@ -125,10 +142,15 @@ def loop_route(waypoints: list[tuple[float, float]], speed: float, rate_hz: floa
 
 
 def drifting_odometry(
-    truth: np.ndarray, heading_bias_per_m: float, trans_noise: float, rot_noise: float, seed: int
+    truth: np.ndarray,
+    heading_bias_per_m: float,
+    trans_noise: float,
+    rot_noise: float,
+    seed: int,
+    scale_bias: float = 0.0,
 ) -> np.ndarray:
     """Odometry poses accumulated from true increments with a systematic heading bias per metre
-    travelled and Gaussian noise proportional to each increment."""
+    travelled, a distance scale error (wheel radius) and noise proportional to each increment."""
     rng = np.random.default_rng(seed)
     odom = [truth[0].copy()]
     for a, b in itertools.pairwise(truth):
@@ -136,8 +158,8 @@ def drifting_odometry(
         dist = math.hypot(d[0], d[1])
         noisy = d + np.array(
             [
-                rng.normal(0, trans_noise * dist),
-                rng.normal(0, trans_noise * dist),
+                scale_bias * d[0] + rng.normal(0, trans_noise * dist),
+                scale_bias * d[1] + rng.normal(0, trans_noise * dist),
                 heading_bias_per_m * dist + rng.normal(0, rot_noise * abs(d[2]) + 1e-4),
             ]
         )

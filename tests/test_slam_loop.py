@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from slam_sim import drifting_odometry, home_segments, loop_route, scan
+from slam_sim import drifting_odometry, loop_route, ring_segments, scan
 
 from agents.slam.geometry import relative
 from agents.slam.params import SlamParams
@@ -15,10 +15,13 @@ from agents.slam.slam import Slam
 
 
 def _lap(params: SlamParams) -> tuple[np.ndarray, np.ndarray, Slam]:
-    segments = home_segments()
-    truth = loop_route([(1.5, 1.0), (8.5, 1.0), (8.5, 5.0), (1.5, 5.0)], 0.3, 10.0)
+    """One lap of the corridor ring; odometry over-counts distance by 3 % and drifts in heading.
+    In the featureless corridor the scale error leaks into the SLAM estimate (the scans cannot
+    tell where along it the robot is), which only a loop closure can undo."""
+    segments = ring_segments()
+    truth = loop_route([(1.0, 1.0), (15.0, 1.0), (15.0, 9.0), (1.0, 9.0)], 0.4, 10.0)
     odom = drifting_odometry(
-        truth, heading_bias_per_m=0.01, trans_noise=0.02, rot_noise=0.02, seed=1
+        truth, heading_bias_per_m=0.004, trans_noise=0.02, rot_noise=0.02, seed=1, scale_bias=0.03
     )
     rng = np.random.default_rng(0)
     slam = Slam(params, tuple(truth[0]), range_min=0.1, range_max=6.0, keep_trajectory=True)
@@ -54,7 +57,7 @@ def test_loop_closure_reduces_end_to_start_error(laps):
     err_closed = _end_to_start_error(closed.trajectory(), truth)
     err_open = _end_to_start_error(open_.trajectory(), truth)
     assert err_closed < 0.5 * err_open
-    assert err_closed < 0.05
+    assert err_closed < 0.06
 
 
 def test_trajectory_after_loop_closure_is_close_to_truth(laps):

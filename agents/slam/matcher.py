@@ -114,11 +114,14 @@ class CorrelativeMatcher:
         window_theta: float,
         coarse_factor: int,
         penalize: bool = True,
+        search_points: int | None = None,
     ) -> MatchResult:
         """Match ``points`` (N, 2, sensor frame) against ``field`` around ``prior`` (field frame).
 
         With ``penalize`` the score is reduced with the squared distance from the prior (an
-        odometry prior); loop-closure searches turn it off, their prior carries drift.
+        odometry prior); loop-closure searches turn it off, their prior carries drift. With
+        ``search_points`` the discrete search uses an evenly strided subset of that many points
+        (and refines only the best coarse cells); the refinement and the score use all points.
         """
         p = self.params
         t_pen = p.translation_penalty if penalize else 0.0
@@ -127,6 +130,11 @@ class CorrelativeMatcher:
         rows, cols = field.shape
         prior = np.asarray(prior, dtype=float)
         n_points = points.shape[0]
+        all_points = points
+        margin = p.covariance_margin
+        if search_points is not None and n_points > search_points:
+            points = points[:: math.ceil(n_points / search_points)]
+            margin = 0.0
         n_xy = math.ceil(window_xy / res - 1e-9)
         n_th = math.ceil(window_theta / p.angular_step - 1e-9)
         d_theta = np.arange(-n_th, n_th + 1) * p.angular_step
@@ -153,7 +161,7 @@ class CorrelativeMatcher:
         best = -np.inf
         batch = 4
         for k in range(0, order.size, batch):
-            if coarse_sorted[k] < best - p.covariance_margin:
+            if coarse_sorted[k] < best - margin:
                 break
             ti, jy, jx = np.unravel_index(order[k : k + batch], coarse.shape)
             ky = starts[jy][:, None] + offs  # (B, f)
@@ -176,8 +184,8 @@ class CorrelativeMatcher:
         top = cand[np.argmax(cand[:, 3])]
         covariance = self._covariance(cand, n_points, res)
         start = prior + top[:3]
-        pose = self._refine(field, points, start, prior, t_pen, r_pen)
-        score = float(field.bilinear(*self._transform(pose, points))[0].mean())
+        pose = self._refine(field, all_points, start, prior, t_pen, r_pen)
+        score = float(field.bilinear(*self._transform(pose, all_points))[0].mean())
         return MatchResult(pose=pose, score=score, covariance=covariance)
 
     @staticmethod
@@ -218,7 +226,10 @@ class CorrelativeMatcher:
         t_pen: float,
         r_pen: float,
     ) -> np.ndarray:
-        """Gauss–Newton on Σ(1 − F)²/N + penalties, kept within one search cell of ``start``."""
+        """Gauss–Newton on Σ(1 − F)/N + penalties (the search's own objective), kept within one
+        search cell of ``start``. The residuals are √(1 − F): near a wall 1 − F ≈ d²/2σ², so they
+        grow linearly with the distance d and the fit pulls like point-to-wall ICP; residuals
+        1 − F would be flat (quartic cost) near the optimum and let the prior penalty win."""
         p = self.params
         n = points.shape[0]
         wt, wr = math.sqrt(t_pen), math.sqrt(r_pen)
@@ -232,9 +243,11 @@ class CorrelativeMatcher:
             dx_dt = -s * points[:, 0] - c * points[:, 1]
             dy_dt = c * points[:, 0] - s * points[:, 1]
             scale = 1.0 / math.sqrt(n)
+            miss = np.sqrt(np.maximum(1.0 - value, 0.0))
+            d_miss = -0.5 / np.maximum(miss, 1e-4) * scale
             r = np.concatenate(
                 [
-                    (1.0 - value) * scale,
+                    miss * scale,
                     [
                         wt * (pose[0] - prior[0]),
                         wt * (pose[1] - prior[1]),
@@ -243,9 +256,9 @@ class CorrelativeMatcher:
                 ]
             )
             jac = np.empty((n + 3, 3))
-            jac[:n, 0] = -gx * scale
-            jac[:n, 1] = -gy * scale
-            jac[:n, 2] = -(gx * dx_dt + gy * dy_dt) * scale
+            jac[:n, 0] = d_miss * gx
+            jac[:n, 1] = d_miss * gy
+            jac[:n, 2] = d_miss * (gx * dx_dt + gy * dy_dt)
             jac[n:] = np.diag([wt, wt, wr])
             return r, jac
 

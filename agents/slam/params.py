@@ -27,21 +27,21 @@ class SlamParams:
     patch_tolerance: int = 5  # percent; smaller changes of a cell do not re-send its tile
 
     # Nodes (scans kept in the pose graph) and submaps (Hess et al. 2016)
-    node_min_distance: float = 0.05  # a scan becomes a node after this much motion ...
-    node_min_rotation: float = 0.05  # ... or this much rotation ...
+    node_min_distance: float = 0.1  # a scan becomes a node after this much motion ...
+    node_min_rotation: float = 0.1  # ... or this much rotation ...
     node_max_interval: float = 2.0  # ... or this much time
     submap_nodes: int = 40  # nodes per submap; a new one starts every submap_nodes/2
     submap_travel: float = 3.0  # or when the robot is this far from the newest submap's origin
     field_refresh_nodes: int = 4  # recompute the matching submap's likelihood field this often
 
     # Correlative scan matcher (Olson 2009), tracking
-    match_sigma: float = 0.05  # Gaussian width of the likelihood field around occupied cells
+    match_sigma: float = 0.075  # Gaussian width of the likelihood field around occupied cells
     search_window_xy: float = 0.2
     search_window_theta: float = 0.2
     angular_step: float = 0.008  # ≈ resolution / typical range: a far point moves ≤ one cell
     coarse_factor: int = 4  # low-resolution level = max-pool over coarse_factor² cells
-    translation_penalty: float = 0.3  # score penalty per m² away from the odometry prior
-    rotation_penalty: float = 0.1  # score penalty per rad² away from the odometry prior
+    translation_penalty: float = 20.0  # score penalty per m² away from the odometry prior
+    rotation_penalty: float = 40.0  # score penalty per rad² away from the odometry prior
     min_match_score: float = 0.35  # below this mean likelihood, trust odometry instead
     refine_iterations: int = 6  # Gauss–Newton steps on the interpolated field after the search
     score_information_gain: float = 0.1  # Olson §IV weights exp(gain·N·(score − best))
@@ -56,6 +56,7 @@ class SlamParams:
     loop_min_score: float = 0.6
     loop_min_submap_gap: int = 2  # never close against the newest few submaps
     loop_max_candidates: int = 2
+    loop_search_points: int = 90  # the loop-closure search scores this many evenly spaced points
 
     # Pose graph (sparse least squares)
     constraint_sigma_xy: float = 0.02
@@ -102,7 +103,13 @@ class SlamParams:
         for name in ("coarse_factor", "loop_coarse_factor"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
-        for name in ("map_tile", "field_refresh_nodes", "loop_every_nodes", "optimize_every_nodes"):
+        for name in (
+            "map_tile",
+            "loop_search_points",
+            "field_refresh_nodes",
+            "loop_every_nodes",
+            "optimize_every_nodes",
+        ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
         if self.search_window_theta > math.pi or self.loop_window_theta > math.pi:

@@ -113,6 +113,10 @@ class Slam:
         self._optimizations = 0
         self._cache: _MapCache | None = None
         self._half_size = self.range_max + params.submap_travel
+        # Cell boundaries of the map lie at (k + ½)·resolution, so walls drawn on round
+        # coordinates fall on cell centres. A wall on a boundary is split between two cells by
+        # range noise, and matching then settles it into one cell, shifting the map half a cell.
+        self._lattice_offset = 0.5 * params.resolution
 
     @property
     def pose(self) -> Pose:
@@ -203,8 +207,9 @@ class Slam:
                 p.resolution,
                 (float(self._pose[0]), float(self._pose[1])),
             )
-        lo = np.floor(np.min([b[0] for b in boxes], axis=0) / tile) * tile
-        hi = np.ceil(np.max([b[1] for b in boxes], axis=0) / tile) * tile
+        shift = self._lattice_offset
+        lo = np.floor((np.min([b[0] for b in boxes], axis=0) - shift) / tile) * tile + shift
+        hi = np.ceil((np.max([b[1] for b in boxes], axis=0) - shift) / tile) * tile + shift
         origin = (float(lo[0]), float(lo[1]))
         shape = (
             round((hi[1] - lo[1]) / p.resolution),
@@ -244,12 +249,14 @@ class Slam:
     def _new_submap(self, pose: np.ndarray) -> None:
         """Start a submap at ``pose``'s position, its grid axis-aligned with the map frame and
         snapped to the map's cell lattice: all submaps then quantize a wall into the same cells,
-        so the half-cell discretization bias does not differ (and accumulate) between submaps."""
+        so the discretization bias does not differ (and accumulate) between submaps, and the
+        map is composed from them without resampling across lattices."""
         p = self.params
+        shift = self._lattice_offset
         snapped = np.array(
             [
-                round(pose[0] / p.resolution) * p.resolution,
-                round(pose[1] / p.resolution) * p.resolution,
+                round((pose[0] - shift) / p.resolution) * p.resolution + shift,
+                round((pose[1] - shift) / p.resolution) * p.resolution + shift,
                 0.0,
             ]
         )
@@ -332,6 +339,7 @@ class Slam:
                 p.loop_window_theta,
                 p.loop_coarse_factor,
                 penalize=False,
+                search_points=p.loop_search_points,
             )
             if result.score >= p.loop_min_score:
                 self._graph.add_constraint(
