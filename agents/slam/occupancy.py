@@ -97,5 +97,28 @@ class LogOddsGrid:
                 c0, c1 = min(c0, self.touched[2]), max(c1, self.touched[3])
             self.touched = (int(r0), int(r1), int(c0), int(c1))
 
+    def cropped(self, margin: int) -> LogOddsGrid:
+        """A copy holding only the observed cells plus ``margin`` cells around them, for a
+        submap that will not change any more (saves memory and its likelihood field's size)."""
+        if self.touched is None:
+            return self
+        rows, cols = self.shape
+        r0, r1, c0, c1 = self.touched
+        r0, c0 = max(r0 - margin, 0), max(c0 - margin, 0)
+        r1, c1 = min(r1 + margin, rows), min(c1 + margin, cols)
+        out = object.__new__(LogOddsGrid)
+        out.log_odds = self.log_odds[r0:r1, c0:c1].copy()
+        out.origin = (
+            self.origin[0] + c0 * self.resolution,
+            self.origin[1] + r0 * self.resolution,
+        )
+        out.resolution = self.resolution
+        out.l_hit, out.l_miss = self.l_hit, self.l_miss
+        out.l_min, out.l_max = self.l_min, self.l_max
+        out._mark = np.zeros(0, dtype=bool)
+        t = self.touched
+        out.touched = (t[0] - r0, t[1] - r0, t[2] - c0, t[3] - c0)
+        return out
+
     def probabilities(self) -> np.ndarray:
         return 1.0 / (1.0 + np.exp(-self.log_odds))

@@ -276,6 +276,8 @@ class Slam:
         if len(self._active) > 2:
             old = self._active.pop(0)
             old.finished = True
+            margin = math.ceil(max(p.loop_window_xy, 3.0 * p.match_sigma) / p.resolution) + 1
+            old.grid = old.grid.cropped(margin)
             old.field = LikelihoodField(old.grid, p.match_sigma)
             old.field_nodes = old.nodes
 
