@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,3 +47,55 @@ class GridMap:
         rc = np.asarray(rc)
         rows, cols = self.shape
         return (rc[..., 0] >= 0) & (rc[..., 0] < rows) & (rc[..., 1] >= 0) & (rc[..., 1] < cols)
+
+
+def clearance(grid: GridMap) -> np.ndarray:
+    """Distance (m) from each cell centre to the nearest occupied or unknown cell's edge.
+
+    Euclidean distance transform (scipy.ndimage) between cell centres, less half a cell so the
+    value is the distance to the blocking cell's boundary; outside the grid counts as blocked.
+    """
+    blocked = np.pad(grid.occupied | grid.unknown, 1, constant_values=True)
+    dist = ndimage.distance_transform_edt(~blocked)[1:-1, 1:-1]
+    return np.maximum(dist - 0.5, 0.0) * grid.resolution
+
+
+def inflate(grid: GridMap, radius: float) -> np.ndarray:
+    """Cells where a disc robot of ``radius`` centred on the cell would touch a blocked cell."""
+    return clearance(grid) < radius
+
+
+def disc(radius: float, resolution: float) -> np.ndarray:
+    """Boolean kernel of the cells whose centres lie strictly within ``radius`` of the centre cell."""
+    n = int(np.ceil(radius / resolution))
+    off = np.arange(-n, n + 1) * resolution
+    return np.hypot(off[:, None], off[None, :]) < radius - 1e-9
+
+
+def dilate(mask: np.ndarray, radius: float, resolution: float) -> np.ndarray:
+    """``mask`` grown by a disc of ``radius`` (cell centres strictly inside count)."""
+    kernel = disc(radius, resolution)
+    if kernel.size <= 1:
+        return mask.copy()
+    return ndimage.binary_dilation(mask, structure=kernel)
+
+
+def reachable(free_centres: np.ndarray, start_cells: np.ndarray) -> np.ndarray:
+    """The cells of ``free_centres`` 4-connected to any of ``start_cells`` ((K, 2) row, col).
+
+    4-connectivity is what an 8-connected path that never cuts a blocked corner can reach.
+    """
+    labels, _ = ndimage.label(free_centres)
+    starts = np.atleast_2d(np.asarray(start_cells, dtype=np.int64))
+    ids = labels[starts[:, 0], starts[:, 1]]
+    ids = np.unique(ids[ids > 0])
+    return np.isin(labels, ids)
+
+
+def cleanable(grid: GridMap, reachable_centres: np.ndarray, swath_radius: float) -> np.ndarray:
+    """Free cells a swath of ``swath_radius`` around some reachable robot-centre cell touches.
+
+    The cleanable area is the reachable centre cells dilated by the swath footprint (cells whose
+    centres lie strictly within ``swath_radius`` of a reachable centre), limited to free cells.
+    """
+    return dilate(reachable_centres, swath_radius, grid.resolution) & grid.free

@@ -1,0 +1,82 @@
+"""Boustrophedon cellular decomposition (Choset 2000) of a grid mask, swept row by row.
+
+A slice (one row of the mask) falls into runs of free cells. Sweeping from the first row to the
+last, a run continues the cell of the run below when exactly one run of each row touches the
+other; where the number of touching runs changes (an obstacle starts or ends: Choset's critical
+points) cells end and new ones begin. Every row of a cell is therefore one interval, which a
+boustrophedon path sweeps with lanes along the rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+
+@dataclass(frozen=True, eq=False)
+class MonotoneCell:
+    """Rows ``row0 .. row0 + len(left) - 1``; in row ``row0 + k`` columns ``left[k] .. right[k]``."""
+
+    row0: int
+    left: np.ndarray
+    right: np.ndarray
+
+    @property
+    def rows(self) -> int:
+        return len(self.left)
+
+    @property
+    def cells(self) -> int:
+        return int((self.right - self.left + 1).sum())
+
+
+def row_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(row, first col, last col) of every run of True cells, sorted by row then column."""
+    padded = np.pad(mask.astype(np.int8), ((0, 0), (1, 1)))
+    d = np.diff(padded, axis=1)
+    r_start, c_start = np.nonzero(d == 1)
+    r_end, c_end = np.nonzero(d == -1)
+    return r_start, c_start, c_end - 1
+
+
+def decompose(mask: np.ndarray) -> tuple[np.ndarray, list[MonotoneCell]]:
+    """Label image (0 outside, 1..n) and the cells of the boustrophedon decomposition of ``mask``."""
+    row, c0, c1 = row_runs(mask)
+    n = len(row)
+    labels = np.zeros(mask.shape, dtype=np.int32)
+    if n == 0:
+        return labels, []
+    width = mask.shape[1] + 2
+    key_start = row * width + c0
+    key_end = row * width + c1
+    # runs of the next row that touch run a: start <= a.c1 and end >= a.c0 (4-connectivity)
+    lo = np.searchsorted(key_end, (row + 1) * width + c0, side="left")
+    hi = np.searchsorted(key_start, (row + 1) * width + c1, side="right")
+    up = np.maximum(hi - lo, 0)
+    down = np.zeros(n, dtype=np.int64)
+    single = up == 1
+    src = np.repeat(np.arange(n), up)
+    dst = lo[src] + _ranks(up)
+    np.add.at(down, dst, 1)
+    keep = single[src] & (down[dst] == 1)
+    graph = coo_matrix((np.ones(int(keep.sum())), (src[keep], dst[keep])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    order = np.lexsort((row, comp))
+    bounds = np.flatnonzero(np.diff(comp[order])) + 1
+    cells = [
+        MonotoneCell(int(row[ids[0]]), c0[ids].copy(), c1[ids].copy())
+        for ids in np.split(order, bounds)
+    ]
+    lengths = c1 - c0 + 1
+    rr = np.repeat(row, lengths)
+    cc = np.repeat(c0, lengths) + _ranks(lengths)
+    labels[rr, cc] = np.repeat(comp + 1, lengths)
+    return labels, cells
+
+
+def _ranks(counts: np.ndarray) -> np.ndarray:
+    """0, 1, .., counts[0]-1, 0, 1, .., counts[1]-1, ... (positions within repeated groups)."""
+    return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)

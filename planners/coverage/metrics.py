@@ -1,0 +1,188 @@
+"""Coverage metrics of any set of paths on a grid: what users of robot vacuums compare.
+
+Definitions (cells are judged by their centres, so areas are counted in whole cells):
+
+* **cleanable area** — the free cells within the swath of some robot-centre cell reachable from
+  a start (``planners.grid.cleanable``): reachable centres dilated by a disc of radius
+  ``cleaning_width / 2``. The cleaning swath, not the robot's body, is the footprint: a robot of
+  radius 0.17 m with a 0.30 m brush never cleans the last few centimetres along a wall.
+* **covered** — cleanable cells whose centre lies strictly within ``cleaning_width / 2`` of a
+  path (the union of the capsules around its segments: the swath of a brush that is
+  ``cleaning_width`` wide, including the disc swept when turning on the spot).
+* **coverage** — covered cleanable cells / cleanable cells.
+* **repetition** — every straight segment sweeps the rectangle of cells whose centre projects
+  into ``[0, length)`` along it and lies within ``cleaning_width / 2`` across it (a brush bar
+  across the direction of travel). Repetition = Σ passes over all cells / cells passed at least
+  once − 1: 0 when no cell is swept twice, 0.1 when on average a tenth is swept again.
+* **turns** — vertices of the path simplified with tolerance ``simplify_tolerance``
+  (Ramer–Douglas–Peucker) where the heading changes by more than ``turn_angle_deg``.
+* **estimated time** — length / ``max_speed`` + turns · ``turn_cost_s``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from planners.grid import GridMap, cleanable, inflate, reachable
+from planners.polyline import count_turns, path_length, simplify
+
+_PIECE_CELLS = 24.0
+
+
+@dataclass(frozen=True)
+class PathMetrics:
+    """The table row of one path (or of all paths together, ``est_time_s`` being their max)."""
+
+    coverage: float
+    repetition: float
+    path_length_m: float
+    turns: int
+    est_time_s: float
+    covered_area_m2: float
+
+
+@dataclass(frozen=True)
+class CoverageMetrics:
+    robots: tuple[PathMetrics, ...]
+    total: PathMetrics
+    makespan_s: float
+    cleanable_area_m2: float
+    unreachable_free_m2: float
+
+
+def swath(grid: GridMap, path: np.ndarray, half_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """(covered, passes): cells within the capsules of ``path``, and per-cell pass counts.
+
+    Long segments are cut into pieces of at most ``_PIECE_CELLS`` cells, which leaves both
+    results unchanged (the half-open rectangles of the pieces tile the segment's rectangle).
+    """
+    covered = np.zeros(grid.shape, dtype=bool)
+    passes = np.zeros(grid.shape, dtype=np.int32)
+    pts = _to_cells(grid, path)
+    if len(pts) == 0:
+        return covered, passes
+    hw = half_width / grid.resolution
+    if len(pts) == 1:
+        _stamp(covered, passes, pts[0], pts[0], hw)
+        return covered, passes
+    for a, b in zip(pts[:-1], pts[1:]):
+        n = max(1, math.ceil(math.hypot(*(b - a)) / _PIECE_CELLS))
+        for k in range(n):
+            _stamp(covered, passes, a + (b - a) * (k / n), a + (b - a) * ((k + 1) / n), hw)
+    return covered, passes
+
+
+def _to_cells(grid: GridMap, path: np.ndarray) -> np.ndarray:
+    """World points → continuous (row, col) with cell centres at integers."""
+    p = np.asarray(path, dtype=float).reshape(-1, 2)
+    col = (p[:, 0] - grid.origin[0]) / grid.resolution - 0.5
+    row = (p[:, 1] - grid.origin[1]) / grid.resolution - 0.5
+    return np.stack([row, col], axis=1)
+
+
+def _stamp(covered: np.ndarray, passes: np.ndarray, a: np.ndarray, b: np.ndarray, hw: float):
+    rows, cols = covered.shape
+    lo = np.floor(np.minimum(a, b) - hw).astype(int)
+    hi = np.ceil(np.maximum(a, b) + hw).astype(int) + 1
+    r0, c0 = max(lo[0], 0), max(lo[1], 0)
+    r1, c1 = min(hi[0], rows), min(hi[1], cols)
+    if r0 >= r1 or c0 >= c1:
+        return
+    rr = np.arange(r0, r1, dtype=float)[:, None] - a[0]
+    cc = np.arange(c0, c1, dtype=float)[None, :] - a[1]
+    d = b - a
+    length = math.hypot(d[0], d[1])
+    if length < 1e-9:
+        covered[r0:r1, c0:c1] |= rr**2 + cc**2 < hw**2 - 1e-9
+        return
+    t = (rr * d[0] + cc * d[1]) / length
+    perp = np.abs(rr * d[1] - cc * d[0]) / length
+    rect = (t >= 0) & (t < length) & (perp < hw - 1e-9)
+    tc = np.clip(t, 0.0, length)
+    capsule = (rr - tc * d[0] / length) ** 2 + (cc - tc * d[1] / length) ** 2 < hw**2 - 1e-9
+    covered[r0:r1, c0:c1] |= capsule
+    passes[r0:r1, c0:c1] += rect
+
+
+def path_time(
+    path: np.ndarray,
+    max_speed: float,
+    turn_cost_s: float,
+    turn_angle_deg: float = 45.0,
+    simplify_tolerance: float = 0.03,
+) -> tuple[float, int, float]:
+    """(length m, turns, estimated seconds) of one path."""
+    pts = np.asarray(path, dtype=float).reshape(-1, 2)
+    length = path_length(pts)
+    turns = count_turns(simplify(pts, simplify_tolerance), turn_angle_deg) if len(pts) > 2 else 0
+    return length, turns, length / max_speed + turns * turn_cost_s
+
+
+def coverage_metrics(
+    grid: GridMap,
+    paths: Sequence[np.ndarray],
+    robot_radius: float,
+    cleaning_width: float,
+    *,
+    max_speed: float = 0.5,
+    turn_cost_s: float = 2.0,
+    turn_angle_deg: float = 45.0,
+    simplify_tolerance: float = 0.03,
+    cleanable_mask: np.ndarray | None = None,
+) -> CoverageMetrics:
+    """Metrics of ``paths`` (world metres, one (N, 2) array per robot) on ``grid``.
+
+    The cleanable area is ``cleanable_mask`` if given, else computed from the first point of
+    every non-empty path as the start (see the module docstring for every definition).
+    """
+    area = grid.resolution**2
+    if cleanable_mask is None:
+        starts = [np.asarray(p, dtype=float)[0] for p in paths if len(p)]
+        blocked = inflate(grid, robot_radius)
+        cells = grid.world_to_cell(np.array(starts)) if starts else np.zeros((0, 2), int)
+        ok = grid.in_bounds(cells)
+        cells = cells[ok]
+        cells = cells[~blocked[cells[:, 0], cells[:, 1]]] if len(cells) else cells
+        reach = reachable(~blocked, cells) if len(cells) else np.zeros(grid.shape, bool)
+        cleanable_mask = cleanable(grid, reach, cleaning_width / 2)
+    n_clean = int(cleanable_mask.sum())
+    all_covered = np.zeros(grid.shape, dtype=bool)
+    all_passes = np.zeros(grid.shape, dtype=np.int32)
+    rows = []
+    for p in paths:
+        covered, passes = swath(grid, p, cleaning_width / 2)
+        all_covered |= covered
+        all_passes += passes
+        length, turns, t = path_time(p, max_speed, turn_cost_s, turn_angle_deg, simplify_tolerance)
+        rows.append(_row(covered, passes, cleanable_mask, n_clean, area, length, turns, t))
+    makespan = max((r.est_time_s for r in rows), default=0.0)
+    total = _row(
+        all_covered,
+        all_passes,
+        cleanable_mask,
+        n_clean,
+        area,
+        sum(r.path_length_m for r in rows),
+        sum(r.turns for r in rows),
+        makespan,
+    )
+    unreachable = float((grid.free & ~cleanable_mask).sum() * area)
+    return CoverageMetrics(tuple(rows), total, makespan, n_clean * area, unreachable)
+
+
+def _row(covered, passes, clean, n_clean, area, length, turns, t) -> PathMetrics:
+    hit = int((covered & clean).sum())
+    swept = int(np.count_nonzero(passes))
+    repetition = float(passes.sum()) / swept - 1.0 if swept else 0.0
+    return PathMetrics(
+        coverage=hit / n_clean if n_clean else 0.0,
+        repetition=repetition,
+        path_length_m=float(length),
+        turns=int(turns),
+        est_time_s=float(t),
+        covered_area_m2=hit * area,
+    )

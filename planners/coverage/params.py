@@ -1,0 +1,51 @@
+"""Tunables of the coverage planner (the ``coverage:`` section of ``configs/fleet.yaml``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class CoverageParams:
+    """How to plan coverage paths.
+
+    ``robot_radius`` and ``cleaning_width`` must equal the ``robot:`` section (0.17 m, 0.30 m).
+    Lanes are ``cleaning_width · (1 − overlap)`` apart. Rooms are separated at openings narrower
+    than ``door_width``; a room smaller than ``min_room_area`` joins its largest neighbour. For k
+    robots a boustrophedon cell is cut into lane groups of at most ``max_task_area`` so the work
+    can be balanced finely. Time estimates use ``max_speed`` plus ``turn_cost_s`` per turn
+    (a heading change over ``turn_angle_deg``).
+    """
+
+    robot_radius: float = 0.17
+    cleaning_width: float = 0.30
+    overlap: float = 0.0
+    method: Literal["bcd", "spiral"] = "bcd"
+    edge_pass: bool = False
+    max_speed: float = 0.5
+    turn_cost_s: float = 2.0
+    turn_angle_deg: float = 45.0
+    door_width: float = 1.0
+    min_room_area: float = 2.0
+    max_task_area: float = 4.0
+    simplify_tolerance: float = 0.03
+
+    def validate(self) -> None:
+        for name in ("robot_radius", "cleaning_width", "max_speed", "door_width"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0")
+        if self.cleaning_width > 2 * self.robot_radius + 1e-9:
+            raise ValueError("cleaning_width must not exceed the robot diameter (2·robot_radius)")
+        if not 0.0 <= self.overlap < 0.9:
+            raise ValueError("overlap must be within [0, 0.9)")
+        if self.method not in ("bcd", "spiral"):
+            raise ValueError(f"method must be 'bcd' or 'spiral', got {self.method!r}")
+        if self.turn_cost_s < 0 or not 0 < self.turn_angle_deg < 180:
+            raise ValueError("turn_cost_s must be >= 0 and turn_angle_deg within (0, 180)")
+        if self.min_room_area < 0 or self.max_task_area <= 0 or self.simplify_tolerance < 0:
+            raise ValueError("min_room_area, simplify_tolerance must be >= 0, max_task_area > 0")
+
+    @property
+    def lane_spacing(self) -> float:
+        return self.cleaning_width * (1.0 - self.overlap)
