@@ -20,14 +20,15 @@ from planners.coverage.bcd import MonotoneCell
 
 
 def lane_rows(cell: MonotoneCell, spacing_cells: float) -> np.ndarray:
-    """Row coordinates (absolute, half-integers unless the cell is one row high) of its lanes."""
+    """Row coordinates (absolute; half-integers unless the cell is one row high) of its lanes:
+    from half a row inside the first row, every ``spacing_cells`` (rounded down to whole rows,
+    so swaths never leave a gap), and the last lane half a row inside the last row."""
     if cell.rows == 1:
         return np.array([float(cell.row0)])
-    span = cell.rows - 2
-    m = math.ceil(span / spacing_cells) + 1 if span > 0 else 1
-    if m == 1:
-        return np.array([cell.row0 + 0.5])
-    return cell.row0 + 0.5 + np.round(np.arange(m) * span / (m - 1))
+    step = max(1, math.floor(spacing_cells + 1e-9))
+    last = cell.rows - 2
+    ys = list(range(0, last, step)) + [last]
+    return cell.row0 + 0.5 + np.array(ys, dtype=float)
 
 
 def lane_extent(cell: MonotoneCell, y: float) -> tuple[int, int]:

@@ -1,0 +1,307 @@
+"""The coverage planner: rooms, their boustrophedon cells, sweep tasks, order, split, metrics."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+from scipy import ndimage
+from scipy.sparse.csgraph import dijkstra
+
+from planners.coverage.bcd import decompose
+from planners.coverage.frame import dominant_direction, frame_for, resample
+from planners.coverage.metrics import CoverageMetrics, coverage_metrics
+from planners.coverage.ordering import choose_variants, order_tasks, split_tour, two_opt_path
+from planners.coverage.params import CoverageParams
+from planners.coverage.rooms import grid_graph, segment_rooms, shared_borders
+from planners.coverage.tasks import SweepTask, cell_tasks, spiral_task
+from planners.coverage.transit import Transit
+from planners.grid import GridMap, cleanable, clearance, reachable
+
+# A wall direction this close to a grid axis is taken as the axis: lanes then lie exactly
+# between rows of cells, and the rasterized walls of an axis-aligned plan measure slightly off.
+AXIS_SNAP = math.radians(1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class CoveragePlan:
+    """The result of :func:`plan_coverage`.
+
+    ``paths[i]`` is robot i's (N, 2) waypoint path in world metres, beginning at its start.
+    ``room_labels`` / ``cell_labels`` are grid-shaped int32 images (0 = not cleanable) of the
+    rooms and of the boustrophedon cells; ``room_graph`` and ``cell_graph`` are their adjacency
+    graphs (node attributes ``area_m2``, ``entry_points`` (K, 2) world, and ``room``/``angle``;
+    room edges carry ``door`` (x, y) and ``width_m``). ``assignment`` maps every cell to the robot
+    that sweeps the most of it (a large cell may be shared: see ``tasks``). ``unreachable`` marks
+    the free cells no robot can clean (beyond the swath of every reachable centre, or cut off).
+    """
+
+    paths: tuple[np.ndarray, ...]
+    starts: tuple[tuple[float, float], ...]
+    room_labels: np.ndarray
+    cell_labels: np.ndarray
+    room_graph: nx.Graph
+    cell_graph: nx.Graph
+    assignment: dict[int, int]
+    tasks: tuple[tuple[SweepTask, ...], ...]
+    metrics: CoverageMetrics
+    cleanable: np.ndarray
+    unreachable: np.ndarray
+    unreachable_area_m2: float
+    plan_time_s: float
+    params: CoverageParams
+
+
+class PlanningError(ValueError):
+    """The map or the starts do not allow a plan (the message says why)."""
+
+
+def plan_coverage(
+    grid: GridMap, starts: Sequence[tuple[float, float]], params: CoverageParams
+) -> CoveragePlan:
+    """Plan coverage of all floor reachable from ``starts`` (one per robot, world metres).
+
+    Steps: robot-centre cells (clearance ≥ robot_radius) 4-connected to a start; rooms by
+    distance-transform segmentation; per room the dominant wall direction, a frame rotated to
+    it and the boustrophedon decomposition (Choset 2000) of the room in that frame; sweep tasks
+    per cell (boustrophedon lanes or a spiral); rooms ordered by 2-opt on geodesic distances,
+    tasks greedily within a room; for k robots the tour is cut into contiguous pieces balancing
+    estimated time. Transits are straight when clear, A* on the inflated grid otherwise.
+    """
+    t0 = time.perf_counter()
+    params.validate()
+    if not grid.free.any():
+        raise PlanningError("the map has no free cell")
+    if len(starts) == 0:
+        raise PlanningError("no start given")
+    clear = clearance(grid)
+    centres = clear >= params.robot_radius
+    start_xy = np.array(starts, dtype=float).reshape(-1, 2)
+    start_cells = grid.world_to_cell(start_xy)
+    for (x, y), rc in zip(start_xy, start_cells, strict=True):
+        if not grid.in_bounds(rc):
+            raise PlanningError(f"start ({x:.2f}, {y:.2f}) is outside the map")
+        if not centres[rc[0], rc[1]]:
+            what = (
+                "inside an obstacle"
+                if not grid.free[rc[0], rc[1]]
+                else (f"closer than the robot radius {params.robot_radius} m to an obstacle")
+            )
+            raise PlanningError(f"start ({x:.2f}, {y:.2f}) is {what}")
+    reach = reachable(centres, start_cells)
+    clean = cleanable(grid, reach, params.cleaning_width / 2)
+    unreachable = grid.free & ~clean
+    res = grid.resolution
+
+    rooms = segment_rooms(reach, clear, res, params.door_width, params.min_room_area)
+    n_rooms = int(rooms.max())
+    multi = len(start_xy) > 1
+    max_area = params.max_task_area if multi else math.inf
+    cell_labels = np.zeros(grid.shape, dtype=np.int32)
+    room_tasks: list[list[SweepTask]] = []
+    room_angle: list[float] = []
+    cell_room: list[int] = []
+    for room in range(1, n_rooms + 1):
+        mask = rooms == room
+        angle = _sweep_angle(mask, res)
+        frame = frame_for(grid, mask, angle)
+        rot = resample(grid, mask, frame)
+        labels, cells = decompose(rot)
+        base = len(cell_room)
+        tasks: list[SweepTask] = []
+        for k, cell in enumerate(cells, start=1):
+            cid = base + k
+            cell_room.append(room)
+            if params.method == "spiral":
+                tasks.append(spiral_task(room, cid, cell, frame, params))
+            else:
+                tasks.extend(cell_tasks(room, cid, cell, frame, params, max_area))
+        _paint_cells(grid, mask, frame, labels, base, cell_labels)
+        room_tasks.append(tasks)
+        room_angle.append(angle)
+
+    room_img = _extend_labels(rooms, clean)
+    cell_img = _extend_labels(cell_labels, clean)
+    transit = Transit(grid, reach)
+    tour = _single_tour(reach, rooms, room_tasks, start_xy[0], res)
+    if multi:
+        pieces = split_tour(tour, start_xy, params.max_speed)
+    else:
+        pieces = [tour]
+    paths = []
+    robot_tasks = []
+    for s, piece in zip(start_xy, pieces, strict=True):
+        if len(piece) > 1:
+            d_first = min(np.hypot(*(v[0] - s)) for v in piece[0].variants)
+            d_last = min(np.hypot(*(v[0] - s)) for v in piece[-1].variants)
+            if d_last < d_first:
+                piece = piece[::-1]
+        paths.append(_drive(s, piece, transit))
+        robot_tasks.append(tuple(piece))
+
+    metrics = coverage_metrics(
+        grid,
+        paths,
+        params.robot_radius,
+        params.cleaning_width,
+        max_speed=params.max_speed,
+        turn_cost_s=params.turn_cost_s,
+        turn_angle_deg=params.turn_angle_deg,
+        simplify_tolerance=params.simplify_tolerance,
+        cleanable_mask=clean,
+    )
+    room_graph = _room_graph(grid, room_img, room_angle, transit)
+    cell_graph = _cell_graph(grid, cell_img, cell_room, robot_tasks)
+    assignment = {
+        c: int(r) for c, r in nx.get_node_attributes(cell_graph, "robot").items() if r >= 0
+    }
+    return CoveragePlan(
+        paths=tuple(paths),
+        starts=tuple((float(x), float(y)) for x, y in start_xy),
+        room_labels=room_img,
+        cell_labels=cell_img,
+        room_graph=room_graph,
+        cell_graph=cell_graph,
+        assignment=assignment,
+        tasks=tuple(robot_tasks),
+        metrics=metrics,
+        cleanable=clean,
+        unreachable=unreachable,
+        unreachable_area_m2=float(unreachable.sum() * res * res),
+        plan_time_s=time.perf_counter() - t0,
+        params=params,
+    )
+
+
+def _sweep_angle(mask: np.ndarray, res: float) -> float:
+    """Lanes along the dominant wall direction, the one of its two axes giving longer lanes."""
+    rr, cc = np.nonzero(mask)
+    sl = (slice(rr.min(), rr.max() + 1), slice(cc.min(), cc.max() + 1))
+    angle = dominant_direction(np.pad(mask[sl], 3))
+    if min(angle, math.pi / 2 - angle) < AXIS_SNAP:
+        angle = 0.0 if angle < math.pi / 4 else math.pi / 2
+    xy = np.stack([cc, rr], axis=1) * res
+    spans = []
+    for a in (angle, angle + math.pi / 2):
+        across = -math.sin(a) * xy[:, 0] + math.cos(a) * xy[:, 1]
+        spans.append(np.ptp(across))
+    return angle if spans[0] <= spans[1] else angle + math.pi / 2
+
+
+def _paint_cells(grid, mask, frame, labels, base, out) -> None:
+    """Give every grid cell of the room the label of the rotated cell holding its centre."""
+    rc = np.argwhere(mask)
+    q = np.rint(frame.from_world(grid.cell_to_world(rc))).astype(int)
+    ok = (q[:, 0] >= 0) & (q[:, 0] < frame.shape[0]) & (q[:, 1] >= 0) & (q[:, 1] < frame.shape[1])
+    lab = np.zeros(len(rc), dtype=np.int32)
+    lab[ok] = labels[q[ok, 0], q[ok, 1]]
+    lab[lab > 0] += base
+    out[rc[:, 0], rc[:, 1]] = lab
+
+
+def _extend_labels(labels: np.ndarray, clean: np.ndarray) -> np.ndarray:
+    """Labels over the whole cleanable area: each unlabelled cell takes its nearest label."""
+    if not (labels > 0).any():
+        return np.zeros_like(labels)
+    _, idx = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+    out = labels[idx[0], idx[1]]
+    out[~clean] = 0
+    return out
+
+
+def _single_tour(reach, rooms, room_tasks, start, res) -> list[SweepTask]:
+    """All tasks in one robot's order: rooms by 2-opt on geodesic distances, tasks greedily."""
+    n = len(room_tasks)
+    graph, index = grid_graph(reach)
+    anchors = []
+    for room in range(1, n + 1):
+        rr, cc = np.nonzero(rooms == room)
+        k = np.argmin((rr - rr.mean()) ** 2 + (cc - cc.mean()) ** 2)
+        anchors.append(index[rr[k], cc[k]])
+    dist = dijkstra(graph.tocsr(), indices=anchors)[:, anchors] * res
+    dist = np.where(np.isfinite(dist), dist, 1e9)
+    start_room = _nearest_room(rooms, room_tasks, start)
+    order = two_opt_path(dist, start_room) if n > 1 else [0]
+    out: list[SweepTask] = []
+    p = start
+    for r in order:
+        seq = order_tasks(room_tasks[r], p)
+        if seq:
+            out.extend(seq)
+            p = choose_variants(seq, p)[-1][-1]
+    return out
+
+
+def _nearest_room(rooms, room_tasks, start) -> int:
+    best, best_d = 0, math.inf
+    for r, tasks in enumerate(room_tasks):
+        for t in tasks:
+            d = min(float(np.hypot(*(v[0] - start))) for v in t.variants)
+            if d < best_d:
+                best, best_d = r, d
+    return best
+
+
+def _drive(start: np.ndarray, tasks: Sequence[SweepTask], transit: Transit) -> np.ndarray:
+    """The robot's whole path: transit to each task's nearest variant, then sweep it."""
+    parts = [start[None, :]]
+    p = start
+    for v in choose_variants(tasks, start):
+        leg = transit.path(p, v[0])
+        parts.append(leg[1:])
+        parts.append(v[1:])
+        p = v[-1]
+    path = np.vstack(parts)
+    keep = np.ones(len(path), dtype=bool)
+    keep[1:] = np.hypot(*np.diff(path, axis=0).T) > 1e-9
+    return path[keep]
+
+
+def _room_graph(grid, room_img, angles, transit) -> nx.Graph:
+    g = nx.Graph()
+    res = grid.resolution
+    for room in range(1, int(room_img.max()) + 1):
+        g.add_node(
+            room, area_m2=float((room_img == room).sum() * res * res), angle=angles[room - 1]
+        )
+    for (a, b), n in shared_borders(room_img).items():
+        rr, cc = np.nonzero(((room_img == a) & _touching(room_img == b)))
+        door = grid.cell_to_world(np.array([rr.mean(), cc.mean()]))
+        rc = transit.snap(door)
+        door = grid.cell_to_world(np.array(rc, dtype=float))
+        g.add_edge(a, b, door=(float(door[0]), float(door[1])), width_m=float(len(rr) * res))
+    for room in g.nodes:
+        doors = [g.edges[room, o]["door"] for o in g.neighbors(room)]
+        g.nodes[room]["entry_points"] = np.array(doors, dtype=float).reshape(-1, 2)
+    return g
+
+
+def _cell_graph(grid, cell_img, cell_room, robot_tasks) -> nx.Graph:
+    g = nx.Graph()
+    res = grid.resolution
+    areas = np.bincount(cell_img.ravel(), minlength=len(cell_room) + 1)
+    share: dict[int, dict[int, float]] = {}
+    entries: dict[int, list[np.ndarray]] = {}
+    for robot, tasks in enumerate(robot_tasks):
+        for t in tasks:
+            share.setdefault(t.cell, {}).setdefault(robot, 0.0)
+            share[t.cell][robot] += t.area_m2
+            entries.setdefault(t.cell, []).extend(v[0] for v in t.variants)
+    for cid, room in enumerate(cell_room, start=1):
+        owners = share.get(cid, {})
+        robot = max(owners, key=owners.get) if owners else -1
+        pts = np.array(entries.get(cid, []), dtype=float).reshape(-1, 2)
+        g.add_node(
+            cid, room=room, area_m2=float(areas[cid] * res * res), robot=robot, entry_points=pts
+        )
+    for (a, b), n in shared_borders(cell_img).items():
+        g.add_edge(a, b, border_m=float(n * res))
+    return g
+
+
+def _touching(mask: np.ndarray) -> np.ndarray:
+    return ndimage.binary_dilation(mask, structure=ndimage.generate_binary_structure(2, 1))

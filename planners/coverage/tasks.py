@@ -1,0 +1,116 @@
+"""Sweep tasks: the units of work the planner orders and splits among robots.
+
+A task is a run of consecutive lanes of one boustrophedon cell (or one cell's spiral), with its
+four ways to drive it: starting at either end of the lane run, in either direction.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from planners.coverage.bcd import MonotoneCell
+from planners.coverage.frame import RotatedFrame
+from planners.coverage.metrics import path_time
+from planners.coverage.params import CoverageParams
+from planners.coverage.sweeps import boustrophedon, eroded_sides, lane_extent, lane_rows
+from planners.polyline import simplify
+
+
+@dataclass(frozen=True, eq=False)
+class SweepTask:
+    """One task: ``variants`` are (N, 2) world paths covering the same lanes."""
+
+    room: int
+    cell: int
+    variants: tuple[np.ndarray, ...]
+    area_m2: float
+    time_s: float
+
+    @property
+    def centroid(self) -> np.ndarray:
+        return self.variants[0].mean(axis=0)
+
+
+def cell_tasks(
+    room: int,
+    cell_id: int,
+    cell: MonotoneCell,
+    frame: RotatedFrame,
+    params: CoverageParams,
+    max_area: float,
+) -> list[SweepTask]:
+    """The boustrophedon tasks of one cell, lanes grouped so each group is ≤ ``max_area``."""
+    res = frame.resolution
+    ys = lane_rows(cell, params.lane_spacing / res)
+    lengths = np.array([np.diff(lane_extent(cell, float(y)))[0] + 1 for y in ys]) * res
+    lane_area = lengths * params.lane_spacing
+    groups: list[list[int]] = [[]]
+    acc = 0.0
+    for k, a in enumerate(lane_area):
+        if groups[-1] and acc + a > max_area:
+            groups.append([])
+            acc = 0.0
+        groups[-1].append(k)
+        acc += a
+    tasks = []
+    for g in groups:
+        sel = ys[g]
+        variants = tuple(
+            _to_world(frame, boustrophedon(cell, order, left), params)
+            for order in (sel, sel[::-1])
+            for left in (True, False)
+        )
+        _, _, t = path_time(
+            variants[0], params.max_speed, params.turn_cost_s, params.turn_angle_deg
+        )
+        tasks.append(SweepTask(room, cell_id, variants, float(lane_area[g].sum()), t))
+    return tasks
+
+
+def spiral_task(
+    room: int, cell_id: int, cell: MonotoneCell, frame: RotatedFrame, params: CoverageParams
+) -> SweepTask:
+    """An inward spiral over the cell: ring 0 runs along the outermost cells, ring j ≥ 1 along the
+    cell eroded by ``j·step − ½`` cells (lanes between cell centres, like the boustrophedon
+    lanes); the core too thin for another ring is swept by boustrophedon lanes.
+    """
+    res = frame.resolution
+    step = max(1, math.floor(params.lane_spacing / res + 1e-9))
+    parts: list[np.ndarray] = []
+    j = 0
+    while True:
+        rows, left, right = eroded_sides(cell, j * step)
+        if len(rows) <= step or np.any(np.diff(rows) != 1):
+            break
+        shift = 0.0 if j == 0 else 0.5
+        parts.append(_ring(rows.astype(float), left - shift, right + shift, step, shift))
+        j += 1
+    rows, left, right = eroded_sides(cell, max(0, (j - 1) * step + 3) if j else 0)
+    if len(rows) and not np.any(np.diff(rows) != 1):
+        core = MonotoneCell(int(rows[0]), left, right)
+        parts.append(boustrophedon(core, lane_rows(core, params.lane_spacing / res), True))
+    world = _to_world(frame, np.vstack(parts), params)
+    _, _, t = path_time(world, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
+    return SweepTask(room, cell_id, (world, world[::-1]), cell.cells * res * res, t)
+
+
+def _ring(rows: np.ndarray, left: np.ndarray, right: np.ndarray, step: int, shift: float):
+    """One spiral ring: bottom edge, up the right side, top edge, down the left side to the
+    row where the next ring begins."""
+    bottom, top = rows[0] - shift, rows[-1] + shift
+    down = np.arange(len(rows) - 1, min(step, len(rows) - 1) - 1, -1)
+    return np.vstack(
+        [
+            [[bottom, left[0]], [bottom, right[0]]],
+            np.stack([rows, right], axis=1),
+            [[top, right[-1]], [top, left[-1]]],
+            np.stack([rows[down], left[down]], axis=1),
+        ]
+    )
+
+
+def _to_world(frame: RotatedFrame, rc: np.ndarray, params: CoverageParams) -> np.ndarray:
+    return simplify(frame.to_world(rc), params.simplify_tolerance)
