@@ -44,6 +44,9 @@ def _register_all() -> None:
     from fleet import cli_dwa
 
     cli_dwa.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_coverage
+
+    cli_coverage.register(app, plan_app, bench_app, slam_app)
 
 
 _register_all()

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from agents.slam.params import SlamParams
 from fleet.config import configs_dir, from_mapping, read_yaml
+from planners.coverage.params import CoverageParams
 from planners.dwa import DWAParams
 
 
@@ -123,6 +124,7 @@ class FleetConfig:
     coordinator: CoordinatorParams = field(default_factory=CoordinatorParams)
     dwa: DWAParams = field(default_factory=DWAParams)
     slam: SlamParams = field(default_factory=SlamParams)
+    coverage: CoverageParams = field(default_factory=CoverageParams)
 
 
 def default_config_path() -> Path:

@@ -18,7 +18,7 @@ from planners.coverage.metrics import CoverageMetrics, coverage_metrics
 from planners.coverage.ordering import choose_variants, order_tasks, split_tour, two_opt_path
 from planners.coverage.params import CoverageParams
 from planners.coverage.rooms import grid_graph, segment_rooms, shared_borders
-from planners.coverage.tasks import SweepTask, cell_tasks, spiral_task
+from planners.coverage.tasks import SweepTask, cell_tasks, edge_task, spiral_task
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, cleanable, clearance, reachable
 
@@ -116,6 +116,8 @@ def plan_coverage(
         for k, cell in enumerate(cells, start=1):
             cid = base + k
             cell_room.append(room)
+            if params.edge_pass:
+                tasks.append(edge_task(room, cid, cell, frame, params))
             if params.method == "spiral":
                 tasks.append(spiral_task(room, cid, cell, frame, params))
             else:

@@ -1,0 +1,333 @@
+"""``fleet plan coverage`` and ``fleet bench coverage``: coverage paths on any floor plan."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+APARTMENT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
+
+
+def register(
+    app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
+) -> None:
+    plan_app.command("coverage")(plan_coverage_cmd)
+    bench_app.command("coverage")(bench_coverage)
+
+
+def _fail(message: str, code: int = 2) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def _parse_start(text: str) -> tuple[float, float]:
+    parts = text.replace(" ", "").split(",")
+    try:
+        x, y = (float(p) for p in parts)
+    except ValueError:
+        _fail(f"--start {text!r}: expected X,Y in metres, e.g. --start 2.5,1.0")
+    return x, y
+
+
+def plan_coverage_cmd(
+    map_path: Annotated[
+        str,
+        typer.Argument(
+            metavar="MAP",
+            help="A world YAML (configs/worlds/*.yaml, or the name of a built-in world: home, "
+            "small) or a ROS map_server YAML (image, resolution, origin, thresholds).",
+        ),
+    ],
+    robots: Annotated[
+        int, typer.Option("--robots", "-k", min=1, help="Number of robots to split the work.")
+    ] = 1,
+    method: Annotated[
+        str | None,
+        typer.Option(
+            help="bcd = boustrophedon lanes per cell; spiral = inward spiral per cell. "
+            "Default: coverage.method in configs/fleet.yaml."
+        ),
+    ] = None,
+    start: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--start",
+            help="Start X,Y in metres (world frame), once per robot. Default: the world's "
+            "start poses, else free spots near the dock or the most open point of the map.",
+        ),
+    ] = None,
+    edge_pass: Annotated[
+        bool | None,
+        typer.Option("--edge-pass/--no-edge-pass", help="Also drive once around every cell."),
+    ] = None,
+    resolution: Annotated[float, typer.Option(min=0.01, help="Grid cell size (m).")] = 0.05,
+    out: Annotated[
+        Path, typer.Option(help="Directory for paths.json and plan.png (created if missing).")
+    ] = Path("coverage_plan"),
+    config: Annotated[
+        Path | None, typer.Option(help="fleet.yaml to read (default: configs/fleet.yaml).")
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the metrics as one JSON object.")
+    ] = False,
+) -> None:
+    """Plan coverage paths on MAP and report coverage, repetition, length, turns and time.
+
+    Rooms are segmented, each swept in the direction of its dominant walls (boustrophedon cell
+    decomposition, Choset 2000); with several robots the work is split to minimize the makespan.
+    Writes DIR/paths.json (world metres) and DIR/plan.png (regions coloured, paths drawn, free
+    space no robot can clean hatched red), and prints the table per robot and in total.
+
+    Examples:
+
+      fleet plan coverage home --robots 3
+
+      fleet plan coverage ../shared/data/maps/cob_ipa_apartment.yaml --method spiral --json
+
+      fleet plan coverage configs/worlds/small.yaml --start 0.6,0.85 --out /tmp/small
+    """
+    from fleet.config import ConfigError, resolve_world
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
+    from planners.coverage import PlanningError, plan_coverage
+    from planners.coverage.render import render_plan
+
+    try:
+        cfg = load_fleet_config(config)
+        path = resolve_world(map_path)
+        world = load_world(path, cfg.robot.radius)
+        grid = world.grid(resolution)
+    except ConfigError as err:
+        _fail(str(err))
+    params = dataclasses.replace(
+        cfg.coverage, robot_radius=cfg.robot.radius, cleaning_width=cfg.robot.cleaning_width
+    )
+    if method is not None:
+        if method not in ("bcd", "spiral"):
+            _fail(f"--method must be bcd or spiral, got {method!r}")
+        params = dataclasses.replace(params, method=method)
+    if edge_pass is not None:
+        params = dataclasses.replace(params, edge_pass=edge_pass)
+    if start:
+        starts = [_parse_start(s) for s in start]
+        if robots not in (1, len(starts)):
+            _fail(f"--robots {robots} but {len(starts)} --start given: give one start per robot")
+        robots = len(starts)
+    else:
+        try:
+            starts = [p[:2] for p in world.start_poses(robots, cfg.robot.radius)]
+        except ConfigError as err:
+            _fail(str(err))
+    try:
+        plan = plan_coverage(grid, starts, params)
+    except PlanningError as err:
+        _fail(f"{path}: {err}")
+    out.mkdir(parents=True, exist_ok=True)
+    doc = {
+        "frame": "world",
+        "robots": [
+            {"id": i, "start": [float(s[0]), float(s[1])], "path": p.round(4).tolist()}
+            for i, (s, p) in enumerate(zip(plan.starts, plan.paths, strict=True))
+        ],
+        "cleaning_width_m": params.cleaning_width,
+        "robot_radius_m": params.robot_radius,
+    }
+    (out / "paths.json").write_text(json.dumps(doc))
+    render_plan(grid, plan.room_labels, list(plan.paths), plan.unreachable).save(out / "plan.png")
+    summary = _summary(plan)
+    summary["map"] = str(path)
+    summary["files"] = {"paths": str(out / "paths.json"), "plan": str(out / "plan.png")}
+    if as_json:
+        print(json.dumps(summary))
+        return
+    _print_table(plan, f"Coverage of {path.name}: {robots} robot(s), {params.method}")
+    from rich.console import Console
+
+    console = Console()
+    console.print(
+        f"cleanable area {summary['cleanable_area_m2']:.2f} m², "
+        f"{plan.room_labels.max()} rooms, {plan.cell_labels.max()} cells, "
+        f"planned in {summary['plan_time_s']:.2f} s"
+    )
+    console.print(
+        f"unreachable free space: {summary['unreachable_free_m2']:.2f} m² "
+        f"(free cells no robot can clean from these starts: cut off, or too close to walls "
+        f"for the {params.cleaning_width:.2f} m swath), hatched red in plan.png"
+    )
+    console.print(f"wrote {out / 'paths.json'} and {out / 'plan.png'}")
+
+
+def _summary(plan: Any) -> dict[str, Any]:
+    m = plan.metrics
+    t = m.total
+    return {
+        "coverage": round(t.coverage, 5),
+        "repetition": round(t.repetition, 5),
+        "path_length_m": round(t.path_length_m, 3),
+        "turns": t.turns,
+        "est_time_s": round(sum(r.est_time_s for r in m.robots), 2),
+        "makespan_s": round(m.makespan_s, 2),
+        "plan_time_s": round(plan.plan_time_s, 4),
+        "cleanable_area_m2": round(m.cleanable_area_m2, 3),
+        "unreachable_free_m2": round(plan.unreachable_area_m2, 3),
+        "robots": [
+            {
+                "id": i,
+                "coverage": round(r.coverage, 5),
+                "repetition": round(r.repetition, 5),
+                "path_length_m": round(r.path_length_m, 3),
+                "turns": r.turns,
+                "est_time_s": round(r.est_time_s, 2),
+            }
+            for i, r in enumerate(m.robots)
+        ],
+    }
+
+
+def _print_table(plan: Any, title: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title)
+    for col in ("robot", "coverage", "repetition", "length (m)", "turns", "est. time (s)"):
+        table.add_column(col, justify="right")
+    m = plan.metrics
+    for i, r in enumerate(m.robots):
+        table.add_row(
+            str(i),
+            f"{100 * r.coverage:.2f} %",
+            f"{100 * r.repetition:.1f} %",
+            f"{r.path_length_m:.1f}",
+            str(r.turns),
+            f"{r.est_time_s:.0f}",
+        )
+    t = m.total
+    table.add_row(
+        "total",
+        f"{100 * t.coverage:.2f} %",
+        f"{100 * t.repetition:.1f} %",
+        f"{t.path_length_m:.1f}",
+        str(t.turns),
+        f"makespan {m.makespan_s:.0f}",
+        style="bold",
+    )
+    Console().print(table)
+
+
+def bench_coverage(
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Coverage quality and planning time on the built-in home and the real apartment map.
+
+    For each map: 1 robot and 3 robots with the boustrophedon planner, 1 robot with the spiral,
+    and as the baseline the coordinator's strip-and-lanes planner (planners/lanes.py) judged by
+    the same metrics. Reports coverage of the cleanable area, repetition, length, turns, the
+    makespan ratio of 3 robots to 1, and planning time (wall clock, one run; the machine may be
+    shared). The apartment (../shared/data/maps/cob_ipa_apartment.yaml) is skipped if absent.
+    """
+    from fleet.config import configs_dir
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
+    from planners.coverage import coverage_metrics, plan_coverage
+    from planners.lanes import LaneParams, plan_lanes
+
+    cfg = load_fleet_config()
+    params = dataclasses.replace(
+        cfg.coverage, robot_radius=cfg.robot.radius, cleaning_width=cfg.robot.cleaning_width
+    )
+    maps = [("home", configs_dir() / "worlds" / "home.yaml")]
+    apt = APARTMENT / "cob_ipa_apartment.yaml"
+    if apt.exists():
+        maps.append(("apartment", apt))
+    rows: list[dict[str, Any]] = []
+    for name, path in maps:
+        world = load_world(path, params.robot_radius)
+        grid = world.grid(0.05)
+        s1 = [p[:2] for p in world.start_poses(1, params.robot_radius)]
+        s3 = [p[:2] for p in world.start_poses(3, params.robot_radius)]
+        single = None
+        for label, starts, p in (
+            ("bcd k=1", s1, params),
+            ("bcd k=3", s3, params),
+            ("spiral k=1", s1, dataclasses.replace(params, method="spiral")),
+        ):
+            plan = plan_coverage(grid, starts, p)
+            row = {"map": name, "planner": label, **_summary(plan)}
+            row.pop("robots")
+            row["free_m2"] = round(float(grid.free.sum()) * grid.resolution**2, 2)
+            if label == "bcd k=1":
+                single = plan
+            if label == "bcd k=3" and single is not None:
+                row["makespan_ratio_vs_k1"] = round(
+                    plan.metrics.makespan_s / single.metrics.makespan_s, 3
+                )
+            rows.append(row)
+        for label, starts in (("baseline lanes k=1", s1), ("baseline lanes k=3", s3)):
+            t0 = time.perf_counter()
+            paths = plan_lanes(
+                grid,
+                starts,
+                LaneParams(params.robot_radius, params.cleaning_width, params.overlap),
+            )
+            dt = time.perf_counter() - t0
+            m = coverage_metrics(
+                grid,
+                paths,
+                params.robot_radius,
+                params.cleaning_width,
+                max_speed=params.max_speed,
+                turn_cost_s=params.turn_cost_s,
+                cleanable_mask=single.cleanable if single is not None else None,
+            )
+            rows.append(
+                {
+                    "map": name,
+                    "planner": label,
+                    "coverage": round(m.total.coverage, 5),
+                    "repetition": round(m.total.repetition, 5),
+                    "path_length_m": round(m.total.path_length_m, 3),
+                    "turns": m.total.turns,
+                    "makespan_s": round(m.makespan_s, 2),
+                    "plan_time_s": round(dt, 4),
+                }
+            )
+    if as_json:
+        print(json.dumps({"results": rows}))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(
+        title="fleet bench coverage (cleaning width 0.30 m, robot radius 0.17 m, 5 cm grid)"
+    )
+    cols = (
+        "map",
+        "planner",
+        "coverage",
+        "repetition",
+        "length (m)",
+        "turns",
+        "makespan (s)",
+        "k3/k1",
+        "plan (s)",
+    )
+    for c in cols:
+        table.add_column(c, justify="right")
+    for r in rows:
+        table.add_row(
+            r["map"],
+            r["planner"],
+            f"{100 * r['coverage']:.2f} %",
+            f"{100 * r['repetition']:.1f} %",
+            f"{r['path_length_m']:.1f}",
+            str(r["turns"]),
+            f"{r['makespan_s']:.0f}",
+            str(r.get("makespan_ratio_vs_k1", "")),
+            f"{r['plan_time_s']:.2f}",
+        )
+    Console().print(table)
