@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import connected_components
 
 @dataclass(frozen=True, eq=False)
 class MonotoneCell:
-    """Rows ``row0 .. row0 + len(left) - 1``; in row ``row0 + k`` columns ``left[k] .. right[k]``."""
+    """Rows ``row0 .. row0 + len(left) - 1``; row ``row0 + k`` spans ``left[k] .. right[k]``."""
 
     row0: int
     left: np.ndarray
@@ -38,12 +38,12 @@ def row_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     padded = np.pad(mask.astype(np.int8), ((0, 0), (1, 1)))
     d = np.diff(padded, axis=1)
     r_start, c_start = np.nonzero(d == 1)
-    r_end, c_end = np.nonzero(d == -1)
+    _r_end, c_end = np.nonzero(d == -1)
     return r_start, c_start, c_end - 1
 
 
 def decompose(mask: np.ndarray, max_step: int = 6) -> tuple[np.ndarray, list[MonotoneCell]]:
-    """Label image (0 outside, 1..n) and the cells of the boustrophedon decomposition of ``mask``."""
+    """Label image (0 outside, 1..n) and the cells of the boustrophedon decomposition."""
     row, c0, c1 = row_runs(mask)
     n = len(row)
     labels = np.zeros(mask.shape, dtype=np.int32)
@@ -95,8 +95,9 @@ def decompose(mask: np.ndarray, max_step: int = 6) -> tuple[np.ndarray, list[Mon
 def _merge_stacked(cells: list[MonotoneCell], max_step: int) -> list[int]:
     """Group cells into vertical chains: a cell and the cell right above it merge when each is
     the other's widest touching neighbour and their sides shift by at most ``max_step`` cells
-    where they meet (a larger shoulder would leave its rim unswept). A chain is still one interval per row, so it is swept
-    like one cell with fewer transits (the merging step of most BCD implementations)."""
+    where they meet (a larger shoulder would leave its rim unswept). A chain is still one
+    interval per row, so it is swept like one cell with fewer transits (the merging step of
+    most BCD implementations)."""
     tops: dict[int, list[int]] = {}
     for k, c in enumerate(cells):
         tops.setdefault(c.row0 + c.rows - 1, []).append(k)

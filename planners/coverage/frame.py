@@ -52,14 +52,15 @@ def frame_for(grid: GridMap, mask: np.ndarray, angle: float) -> RotatedFrame:
     res = grid.resolution
     q0 = (float(qx.min()) - res, float(qy.min()) - res)
     shape = (
-        int(math.ceil((qy.max() - q0[1]) / res)) + 2,
-        int(math.ceil((qx.max() - q0[0]) / res)) + 2,
+        math.ceil((qy.max() - q0[1]) / res) + 2,
+        math.ceil((qx.max() - q0[0]) / res) + 2,
     )
     return RotatedFrame(angle, q0, res, shape)
 
 
 def resample(grid: GridMap, mask: np.ndarray, frame: RotatedFrame) -> np.ndarray:
-    """``mask`` seen in ``frame``: a rotated cell takes the value of the grid cell holding its centre."""
+    """``mask`` seen in ``frame``: a rotated cell takes the value of the grid cell holding its
+    centre."""
     ii, jj = np.indices(frame.shape)
     rc = grid.world_to_cell(frame.to_world(np.stack([ii, jj], axis=-1)))
     inside = grid.in_bounds(rc)

@@ -21,6 +21,7 @@ Definitions (cells are judged by their centres, so areas are counted in whole ce
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -69,7 +70,7 @@ def swath(grid: GridMap, path: np.ndarray, half_width: float) -> tuple[np.ndarra
     if len(pts) == 1:
         _stamp(covered, passes, pts[0], pts[0], hw)
         return covered, passes
-    for a, b in zip(pts[:-1], pts[1:]):
+    for a, b in itertools.pairwise(pts):
         n = max(1, math.ceil(math.hypot(*(b - a)) / _PIECE_CELLS))
         for k in range(n):
             _stamp(covered, passes, a + (b - a) * (k / n), a + (b - a) * ((k + 1) / n), hw)
@@ -101,7 +102,7 @@ def _stamp(covered: np.ndarray, passes: np.ndarray, a: np.ndarray, b: np.ndarray
         return
     t = (rr * d[0] + cc * d[1]) / length
     perp = np.abs(rr * d[1] - cc * d[0]) / length
-    rect = (t >= 0) & (t < length) & (perp < hw - 1e-9)
+    rect = (t >= -1e-9) & (t < length - 1e-9) & (perp < hw - 1e-9)
     tc = np.clip(t, 0.0, length)
     capsule = (rr - tc * d[0] / length) ** 2 + (cc - tc * d[1] / length) ** 2 < hw**2 - 1e-9
     covered[r0:r1, c0:c1] |= capsule

@@ -129,11 +129,7 @@ def plan_coverage(
     room_img = _extend_labels(rooms, clean)
     cell_img = _extend_labels(cell_labels, clean)
     transit = Transit(grid, reach)
-    tour = _single_tour(reach, rooms, room_tasks, start_xy[0], res)
-    if multi:
-        pieces = split_tour(tour, start_xy, params.max_speed)
-    else:
-        pieces = [tour]
+    pieces = _split_by_component(reach, rooms, room_tasks, start_xy, start_cells, params)
     paths = []
     robot_tasks = []
     for s, piece in zip(start_xy, pieces, strict=True):
@@ -215,30 +211,54 @@ def _extend_labels(labels: np.ndarray, clean: np.ndarray) -> np.ndarray:
     return out
 
 
-def _single_tour(reach, rooms, room_tasks, start, res) -> list[SweepTask]:
-    """All tasks in one robot's order: rooms by 2-opt on geodesic distances, tasks greedily."""
-    n = len(room_tasks)
+def _split_by_component(reach, rooms, room_tasks, start_xy, start_cells, params):
+    """Each robot's tasks: the rooms of each connected part of the floor go to the robots that
+    start in it, in one tour cut into balanced pieces when several robots share the part."""
+    comp, _ = ndimage.label(reach)
+    robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
+    room_comp = ndimage.maximum(comp, rooms, index=np.arange(1, len(room_tasks) + 1))
+    pieces: list[list[SweepTask]] = [[] for _ in range(len(start_xy))]
+    for c in np.unique(robot_comp):
+        robots = np.flatnonzero(robot_comp == c)
+        ids = [r for r in range(len(room_tasks)) if room_comp[r] == c]
+        tour = _single_tour(reach & (comp == c), rooms, room_tasks, ids, start_xy[robots[0]])
+        if len(robots) == 1:
+            pieces[robots[0]] = tour
+        else:
+            for i, piece in zip(
+                robots, split_tour(tour, start_xy[robots], params.max_speed), strict=True
+            ):
+                pieces[i] = piece
+    return pieces
+
+
+def _single_tour(reach, rooms, room_tasks, ids, start) -> list[SweepTask]:
+    """The tasks of rooms ``ids`` in one robot's order: rooms by 2-opt on geodesic distances
+    between their central cells, tasks by 2-opt within each room."""
+    n = len(ids)
+    if n == 0:
+        return []
     graph, index = grid_graph(reach)
     anchors = []
-    for room in range(1, n + 1):
-        rr, cc = np.nonzero(rooms == room)
+    for room in ids:
+        rr, cc = np.nonzero(rooms == room + 1)
         k = np.argmin((rr - rr.mean()) ** 2 + (cc - cc.mean()) ** 2)
         anchors.append(index[rr[k], cc[k]])
-    dist = dijkstra(graph.tocsr(), indices=anchors)[:, anchors] * res
+    dist = dijkstra(graph.tocsr(), indices=anchors)[:, anchors]
     dist = np.where(np.isfinite(dist), dist, 1e9)
-    start_room = _nearest_room(rooms, room_tasks, start)
+    start_room = _nearest_room([room_tasks[r] for r in ids], start)
     order = two_opt_path(dist, start_room) if n > 1 else [0]
     out: list[SweepTask] = []
     p = start
     for r in order:
-        seq = order_tasks(room_tasks[r], p)
+        seq = order_tasks(room_tasks[ids[r]], p)
         if seq:
             out.extend(seq)
             p = choose_variants(seq, p)[-1][-1]
     return out
 
 
-def _nearest_room(rooms, room_tasks, start) -> int:
+def _nearest_room(room_tasks, start) -> int:
     best, best_d = 0, math.inf
     for r, tasks in enumerate(room_tasks):
         for t in tasks:
@@ -270,8 +290,8 @@ def _room_graph(grid, room_img, angles, transit) -> nx.Graph:
         g.add_node(
             room, area_m2=float((room_img == room).sum() * res * res), angle=angles[room - 1]
         )
-    for (a, b), n in shared_borders(room_img).items():
-        rr, cc = np.nonzero(((room_img == a) & _touching(room_img == b)))
+    for (a, b), _n in shared_borders(room_img).items():
+        rr, cc = np.nonzero((room_img == a) & _touching(room_img == b))
         door = grid.cell_to_world(np.array([rr.mean(), cc.mean()]))
         rc = transit.snap(door)
         door = grid.cell_to_world(np.array(rc, dtype=float))

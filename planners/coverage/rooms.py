@@ -4,9 +4,9 @@ Following the distance-transform method compared by Bormann et al. (ICRA 2016, "
 segmentation: survey, implementation, and analysis"): the cells farther than a threshold from any
 obstacle fall into separate "cores" where openings are narrower than twice the threshold. The
 threshold is raised from half a door width in 5 cm steps and the one giving the most cores of at
-least ``min_core_area`` is kept; each core seeds a room, and every reachable cell joins the
-geodesically nearest core (multi-source Dijkstra on the 8-connected grid). Rooms smaller than a minimum area join the neighbour they share the longest
-border with.
+least ``MIN_CORE_AREA`` is kept; each core seeds a room, and every reachable cell joins the
+geodesically nearest core (multi-source Dijkstra on the 8-connected grid). Rooms smaller than a
+minimum area join the neighbour they share the longest border with.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def segment_rooms(
     label_of_node[ok] = seed_label[pos[sources[ok]]]
     labels = np.zeros(reach.shape, dtype=np.int32)
     labels[reach] = label_of_node
-    return _merge_small(labels, int(math.ceil(min_room_area / resolution**2)))
+    return _merge_small(labels, math.ceil(min_room_area / resolution**2))
 
 
 def _best_cores(
@@ -109,7 +109,8 @@ def shared_borders(labels: np.ndarray) -> dict[tuple[int, int], int]:
         hi = np.maximum(a[ok], b[ok]).astype(np.int64)
         pairs.append(lo * (1 << 31) + hi)
     codes, counts = np.unique(np.concatenate(pairs), return_counts=True)
-    return {(int(c >> 31), int(c & ((1 << 31) - 1))): int(k) for c, k in zip(codes, counts)}
+    mask = (1 << 31) - 1
+    return {(int(c >> 31), int(c & mask)): int(k) for c, k in zip(codes, counts, strict=True)}
 
 
 def _merge_small(labels: np.ndarray, min_cells: int) -> np.ndarray:

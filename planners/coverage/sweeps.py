@@ -27,7 +27,7 @@ def lane_rows(cell: MonotoneCell, spacing_cells: float) -> np.ndarray:
         return np.array([float(cell.row0)])
     step = max(1, math.floor(spacing_cells + 1e-9))
     last = cell.rows - 2
-    ys = list(range(0, last, step)) + [last]
+    ys = [*list(range(0, last, step)), last]
     return cell.row0 + 0.5 + np.array(ys, dtype=float)
 
 

@@ -40,7 +40,7 @@ class Transit:
         """Whether every cell the segment a–b passes through (sampled at ⅓ cell) is free."""
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
-        n = max(2, int(math.ceil(3 * np.hypot(*(b - a)) / self.grid.resolution)) + 1)
+        n = max(2, math.ceil(3 * np.hypot(*(b - a)) / self.grid.resolution) + 1)
         pts = a + (b - a) * np.linspace(0.0, 1.0, n)[:, None]
         rc = self.grid.world_to_cell(pts)
         if not self.grid.in_bounds(rc).all():
