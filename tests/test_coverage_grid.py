@@ -3,7 +3,7 @@
 import numpy as np
 from coverage_maps import boxed, grid_of
 
-from planners.grid import clearance, cleanable, disc, inflate, reachable
+from planners.grid import cleanable, clearance, disc, inflate, reachable
 
 
 def test_clearance_is_distance_to_the_blocking_cell_edge():

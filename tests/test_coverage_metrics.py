@@ -1,5 +1,6 @@
 """Coverage metrics against values computed by hand on tiny grids."""
 
+import itertools
 import math
 
 import numpy as np
@@ -62,7 +63,7 @@ def test_swath_matches_brute_force_distance_on_a_diagonal():
     covered, _ = swath(g, path, 0.15)
     centres = g.cell_to_world(np.argwhere(np.ones((30, 30), bool))).reshape(30, 30, 2)
     dmin = np.full((30, 30), np.inf)
-    for a, b in zip(path[:-1], path[1:], strict=True):
+    for a, b in itertools.pairwise(path):
         d = b - a
         t = np.clip(((centres - a) @ d) / (d @ d), 0, 1)
         dmin = np.minimum(dmin, np.linalg.norm(centres - (a + t[..., None] * d), axis=-1))

@@ -1,5 +1,6 @@
 """plan_coverage: analytic cases, safety of every path, decomposition invariants, splitting."""
 
+import itertools
 import math
 
 import numpy as np
@@ -43,7 +44,7 @@ def test_empty_rectangle_lanes_length_and_coverage():
 
 def _crossings(grid, path):
     pts = [path[:1]]
-    for a, b in zip(path[:-1], path[1:], strict=True):
+    for a, b in itertools.pairwise(path):
         n = max(2, int(np.ceil(np.hypot(*(b - a)) / (grid.resolution / 4))) + 1)
         pts.append(a + (b - a) * np.linspace(0, 1, n)[:, None])
     rc = grid.world_to_cell(np.vstack(pts))

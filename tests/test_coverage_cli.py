@@ -1,0 +1,84 @@
+"""fleet plan coverage: outputs, JSON keys, and clear errors for bad maps and starts."""
+
+import json
+
+import numpy as np
+from coverage_maps import write_ros_map
+from typer.testing import CliRunner
+
+from fleet.cli import app
+
+runner = CliRunner()
+
+KEYS = {"coverage", "repetition", "path_length_m", "turns", "est_time_s", "makespan_s"}
+
+
+def _plan(*args):
+    return runner.invoke(app, ["plan", "coverage", *map(str, args)])
+
+
+def _room_pixels(rows=60, cols=90):
+    px = np.full((rows, cols), 254, dtype=np.uint8)
+    px[0, :] = px[-1, :] = px[:, 0] = px[:, -1] = 0
+    return px
+
+
+def test_writes_paths_json_and_plan_png_and_prints_metrics(tmp_path):
+    res = _plan("small", "--robots", "2", "--out", tmp_path, "--json")
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)
+    assert KEYS | {"plan_time_s"} <= set(summary)
+    assert 0.9 < summary["coverage"] <= 1.0
+    doc = json.loads((tmp_path / "paths.json").read_text())
+    assert doc["frame"] == "world" and len(doc["robots"]) == 2
+    assert doc["cleaning_width_m"] == 0.30 and doc["robot_radius_m"] == 0.17
+    for i, robot in enumerate(doc["robots"]):
+        assert robot["id"] == i and np.array(robot["path"]).shape[1] == 2
+        assert np.allclose(robot["path"][0], robot["start"])
+    assert (tmp_path / "plan.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_table_names_the_unreachable_free_space(tmp_path):
+    px = _room_pixels()
+    px[:, 45] = 0  # the right half has no door
+    ros = write_ros_map(tmp_path, px)
+    res = _plan(ros, "--start", "1.0,1.5", "--out", tmp_path / "out")
+    assert res.exit_code == 0, res.output
+    assert "unreachable free space" in res.output
+    line = next(x for x in res.output.splitlines() if "unreachable free space" in x)
+    assert float(line.split(":")[1].split("m²")[0]) > 2.0  # the right half: 2.2 m × 2.9 m
+
+
+def test_missing_image_names_the_file(tmp_path):
+    ros = write_ros_map(tmp_path, _room_pixels(), image="nowhere.pgm")
+    res = _plan(ros, "--out", tmp_path / "out")
+    assert res.exit_code == 2
+    assert "map.yaml" in res.output and "nowhere.pgm" in res.output
+
+
+def test_bad_thresholds_name_the_field(tmp_path):
+    ros = write_ros_map(tmp_path, _room_pixels(), occupied_thresh=0.1, free_thresh=0.5)
+    res = _plan(ros, "--out", tmp_path / "out")
+    assert res.exit_code == 2
+    assert "map.yaml" in res.output and "thresh" in res.output
+
+
+def test_no_free_space_is_an_error(tmp_path):
+    ros = write_ros_map(tmp_path, np.zeros((20, 20), dtype=np.uint8))
+    res = _plan(ros, "--start", "0.5,0.5", "--out", tmp_path / "out")
+    assert res.exit_code == 2
+    assert "map.yaml" in res.output and "no free cell" in res.output
+
+
+def test_start_inside_an_obstacle_is_an_error(tmp_path):
+    ros = write_ros_map(tmp_path, _room_pixels())
+    res = _plan(ros, "--start", "0.02,1.0", "--out", tmp_path / "out")
+    assert res.exit_code == 2
+    assert "map.yaml" in res.output and "inside an obstacle" in res.output
+    res = _plan(ros, "--start", "1.0;1.0", "--out", tmp_path / "out")
+    assert res.exit_code == 2 and "X,Y" in res.output
+
+
+def test_starts_must_match_robots(tmp_path):
+    res = _plan("small", "--robots", "3", "--start", "0.6,0.85", "--out", tmp_path)
+    assert res.exit_code == 2 and "one start per robot" in res.output
