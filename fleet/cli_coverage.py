@@ -302,9 +302,7 @@ def bench_coverage(
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(
-        title="fleet bench coverage (cleaning width 0.30 m, robot radius 0.17 m, 5 cm grid)"
-    )
+    table = Table(title="fleet bench coverage (cleaning width 0.30 m, robot radius 0.17 m, 5 cm)")
     cols = (
         "map",
         "planner",
@@ -330,4 +328,7 @@ def bench_coverage(
             str(r.get("makespan_ratio_vs_k1", "")),
             f"{r['plan_time_s']:.2f}",
         )
-    Console().print(table)
+    console = Console()
+    if console.width < 120:
+        console = Console(width=120)
+    console.print(table)
