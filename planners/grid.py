@@ -66,7 +66,7 @@ def inflate(grid: GridMap, radius: float) -> np.ndarray:
 
 
 def disc(radius: float, resolution: float) -> np.ndarray:
-    """Boolean kernel of the cells whose centres lie strictly within ``radius`` of the centre cell."""
+    """Boolean kernel of the cells whose centres lie strictly within ``radius`` of the centre."""
     n = int(np.ceil(radius / resolution))
     off = np.arange(-n, n + 1) * resolution
     return np.hypot(off[:, None], off[None, :]) < radius - 1e-9
