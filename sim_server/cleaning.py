@@ -2,7 +2,8 @@
 
 The floor is a grid of ``cell_size`` cells. A robot's brush is a disc of diameter
 ``cleaning_width`` centred on the robot, so moving straight it sweeps a band of that width; a
-cell is under the brush when its centre is.
+cell is under the brush when its centre lies strictly inside the disc, the footprint rule of
+``planners.grid.disc``.
 A cell's visit count goes up by one each time it *enters* a robot's brush (it was not under that
 brush at the previous update), so a robot standing still does not inflate the counts and a pass
 over a cell counts once however slowly it is made.
@@ -16,42 +17,22 @@ dilated by the brush. Coverage = swept cleanable cells / cleanable cells; repeti
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
-from planners.grid import GridMap
-
-
-def disc_offsets(radius: float, resolution: float) -> np.ndarray:
-    """(K, 2) integer (row, col) offsets of the cells whose centres lie within ``radius``."""
-    k = int(np.ceil(radius / resolution))
-    r, c = np.mgrid[-k : k + 1, -k : k + 1]
-    inside = np.hypot(r, c) * resolution <= radius + 1e-9
-    return np.stack([r[inside], c[inside]], axis=1)
-
-
-def reachable_centres(grid: GridMap, starts_xy: np.ndarray, robot_radius: float) -> np.ndarray:
-    """Cells a robot centre can occupy and reach from any of the starts (boolean grid)."""
-    blocked = grid.occupied | grid.unknown
-    # Clearance of a cell centre to the nearest blocked cell's edge.
-    clearance = ndimage.distance_transform_edt(~blocked) * grid.resolution - grid.resolution / 2
-    ok = clearance >= robot_radius
-    labels, _ = ndimage.label(ok)
-    rc = grid.world_to_cell(np.atleast_2d(starts_xy))
-    rc = rc[grid.in_bounds(rc)]
-    ids = {int(labels[r, c]) for r, c in rc} - {0}
-    return np.isin(labels, sorted(ids)) if ids else np.zeros_like(ok)
+from planners.grid import GridMap, cleanable, inflate, reachable
 
 
 def cleanable_mask(
     grid: GridMap, starts_xy: np.ndarray, robot_radius: float, cleaning_width: float
 ) -> np.ndarray:
-    """Reachable robot-centre cells dilated by the brush disc, limited to free cells."""
-    centres = reachable_centres(grid, starts_xy, robot_radius)
-    brush = disc_offsets(cleaning_width / 2, grid.resolution)
-    k = int(np.abs(brush).max()) if len(brush) else 0
-    fp = np.zeros((2 * k + 1, 2 * k + 1), dtype=bool)
-    fp[brush[:, 0] + k, brush[:, 1] + k] = True
-    return ndimage.binary_dilation(centres, structure=fp) & grid.free
+    """The reference area, as the planners define it (``planners.grid``): robot-centre cells
+    with clearance ≥ ``robot_radius`` connected to a start, grown by the brush disc."""
+    free_centres = ~inflate(grid, robot_radius)
+    cells = grid.world_to_cell(np.atleast_2d(starts_xy))
+    cells = cells[grid.in_bounds(cells)]
+    cells = cells[free_centres[cells[:, 0], cells[:, 1]]]
+    if len(cells) == 0:
+        return np.zeros(grid.shape, dtype=bool)
+    return cleanable(grid, reachable(free_centres, cells), cleaning_width / 2)
 
 
 class CleaningGrid:
@@ -73,7 +54,7 @@ class CleaningGrid:
         centre = g.world_to_cell(np.array([x, y]))
         rc = self._window + centre
         xy = g.cell_to_world(rc)
-        inside = np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= self.radius + 1e-9
+        inside = np.hypot(xy[:, 0] - x, xy[:, 1] - y) < self.radius - 1e-9
         rows, cols = g.shape
         rc = rc[inside & (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)]
         return rc[:, 0] * cols + rc[:, 1]

@@ -66,31 +66,15 @@ def furnished_scene(n_segments: int, n_robots: int, seed: int = 0) -> Scene:
     )
 
 
-def read_ros_map(yaml_path: Path) -> tuple[np.ndarray, np.ndarray, float, tuple[float, float]]:
-    """A ROS map_server map → (occupied, free, resolution, origin), OccupancyGrid orientation.
-
-    Trinary interpretation: p = (255 − v) / 255 (or v / 255 when ``negate``), occupied where
-    p > occupied_thresh, free where p < free_thresh. Image row 0 is the top, so rows are
-    flipped to make row 0 the lowest y.
-    """
-    import yaml
-    from PIL import Image
-
-    meta = yaml.safe_load(Path(yaml_path).read_text())
-    image = np.asarray(Image.open(Path(yaml_path).parent / meta["image"]).convert("L"), float)
-    p = np.flipud(image / 255.0 if meta.get("negate", 0) else (255.0 - image) / 255.0)
-    occupied = p > float(meta.get("occupied_thresh", 0.65))
-    free = p < float(meta.get("free_thresh", 0.196))
-    origin = (float(meta["origin"][0]), float(meta["origin"][1]))
-    return occupied, free, float(meta["resolution"]), origin
-
-
 def map_scene(yaml_path: Path, n_robots: int, seed: int = 0) -> Scene:
     """The boundary segments of a ROS map, with robots at random free cells clear of walls."""
     from scipy.ndimage import binary_erosion
 
-    occupied, free, res, origin = read_ros_map(yaml_path)
-    segments = occupancy_to_segments(occupied, res, origin)
+    from fleet.world import load_ros_map
+
+    grid = load_ros_map(yaml_path)
+    free, res, origin = grid.free, grid.resolution, grid.origin
+    segments = occupancy_to_segments(grid.occupied, res, origin)
     rng = np.random.default_rng(seed)
     margin = int(np.ceil(2 * ROBOT_RADIUS / res))
     clear = binary_erosion(free, iterations=margin)

@@ -11,6 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fleet.cli import app
+from fleet.world import load_ros_map
 from sim_server.lidar import (
     SegmentIndex,
     add_noise,
@@ -18,7 +19,7 @@ from sim_server.lidar import (
     cast_scans_reference,
     occupancy_to_segments,
 )
-from sim_server.lidar_bench import furnished_scene, map_scene, read_ros_map
+from sim_server.lidar_bench import furnished_scene, map_scene
 
 BEAMS = np.linspace(0.0, 2 * math.pi, 360, endpoint=False)
 NO_DISCS = np.zeros((0, 3))
@@ -305,7 +306,8 @@ MAP_YAML = (
 def test_ros_apartment_map_boundary_matches_a_cell_ray_march():
     if not MAP_YAML.exists():
         pytest.skip(f"shared map data not present: {MAP_YAML}")
-    occupied, _, res, origin = read_ros_map(MAP_YAML)
+    grid = load_ros_map(MAP_YAML)
+    occupied, res, origin = grid.occupied, grid.resolution, grid.origin
     assert occupied.shape == (768, 544)
     segments = occupancy_to_segments(occupied, res, origin)
     assert len(segments) == 3626
