@@ -110,7 +110,6 @@ class AgentParams:
 @dataclass(frozen=True)
 class CoordinatorParams:
     wall_clearance: float = 0.015
-    lane_overlap: float = 0.15
     expected_robots_grace_s: float = 20.0
 
 

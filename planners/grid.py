@@ -14,7 +14,7 @@ from scipy import ndimage
 
 @dataclass(frozen=True, eq=False)
 class GridMap:
-    """A 2D occupancy grid: ``occupied`` and ``unknown`` are boolean arrays of shape (rows, cols)."""
+    """A 2D occupancy grid: boolean ``occupied`` and ``unknown`` arrays of shape (rows, cols)."""
 
     occupied: np.ndarray
     unknown: np.ndarray

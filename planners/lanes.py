@@ -1,4 +1,4 @@
-"""Boustrophedon lanes over a grid, split among k robots: the coordinator's first planner.
+"""Boustrophedon lanes over a grid split among k robots: the baseline of `fleet bench coverage`.
 
 The free space a robot centre may use (clearance ≥ ``robot_radius``, connected to a start) is
 split into k vertical strips of equal area; each strip is swept by horizontal lanes spaced

@@ -1,17 +1,19 @@
 """How the coordinator turns the floor plan and the robots' start positions into paths.
 
-For now the floor is split into one strip of equal area per robot, each swept by boustrophedon
-lanes (``planners.lanes``). Region decomposition, auctions and space-time deconfliction replace
-this behind the same ``plan`` call.
+One coverage plan (``planners.coverage.plan_coverage``: rooms, boustrophedon cells, ordered
+sweeps, a makespan-balanced split) gives each robot its path. Auctions and space-time
+deconfliction replace the split behind the same ``plan`` call.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
 from fleet.params import FleetConfig
 from fleet.world import World
-from planners.lanes import LaneParams, plan_lanes
+from planners.coverage import plan_coverage
 
 PLAN_RESOLUTION = 0.025
 
@@ -21,15 +23,16 @@ class CoveragePlanner:
 
     def __init__(self, world: World, cfg: FleetConfig) -> None:
         self.grid = world.grid(PLAN_RESOLUTION)
-        # Lanes keep wall_clearance more than the robot radius from obstacles: the DWA needs
+        # Paths keep wall_clearance more than the robot radius from obstacles: the DWA needs
         # clearance above the radius plus the noise of a median-filtered scan.
-        self.params = LaneParams(
+        self.params = dataclasses.replace(
+            cfg.coverage,
             robot_radius=cfg.robot.radius + cfg.coordinator.wall_clearance,
             cleaning_width=cfg.robot.cleaning_width,
-            overlap=cfg.coordinator.lane_overlap,
+            max_speed=cfg.robot.max_vel_x,
         )
 
     def plan(self, starts: dict[str, tuple[float, float]]) -> dict[str, np.ndarray]:
         ids = list(starts)
-        paths = plan_lanes(self.grid, [starts[r] for r in ids], self.params)
-        return dict(zip(ids, paths, strict=True))
+        result = plan_coverage(self.grid, [starts[r] for r in ids], self.params)
+        return {rid: np.asarray(result.paths[i], dtype=float) for i, rid in enumerate(ids)}
