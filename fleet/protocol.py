@@ -15,6 +15,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import typing
+import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Annotated, Any, ClassVar, TypeVar
 
@@ -319,6 +321,76 @@ class CoverageImage(Message):
     cleanable: Annotated[np.ndarray, Arr("|u1")]
 
 
+@dataclass(frozen=True, eq=False)
+class MapPatches(Message):
+    """Changed tiles of a robot's SLAM map (nav_msgs/OccupancyGrid values: int8, −1 unknown,
+    0..100 occupancy percent), zlib-compressed.
+
+    The map is ``rows`` × ``cols`` cells of ``resolution`` m, cell (0, 0) at the origin, row 0 =
+    lowest y. Patch i is the ``tile`` × ``tile`` block whose lower-left cell is
+    (``patch_rows[i]``, ``patch_cols[i]``); ``data`` is the zlib stream of all blocks' cells,
+    block after block, row-major. ``full`` means the receiver must drop its copy first (first
+    message, or the map grew). ``seq`` counts messages so a receiver can notice a gap and ask
+    for the whole map.
+    """
+
+    TYPE: ClassVar[str] = "map_patches"
+    stamp: float
+    seq: int
+    full: bool
+    rows: int
+    cols: int
+    resolution: float
+    origin_x: float
+    origin_y: float
+    tile: int
+    patch_rows: Annotated[np.ndarray, Arr("<i4")]
+    patch_cols: Annotated[np.ndarray, Arr("<i4")]
+    data: Annotated[np.ndarray, Arr("|u1")]
+
+    @classmethod
+    def pack(
+        cls,
+        stamp: float,
+        seq: int,
+        full: bool,
+        shape: tuple[int, int],
+        resolution: float,
+        origin: tuple[float, float],
+        tile: int,
+        blocks: Sequence[tuple[int, int, np.ndarray]],
+    ) -> MapPatches:
+        """Build a message from (row, col, tile × tile int8 block) triples."""
+        cells = b"".join(np.ascontiguousarray(b, dtype=np.int8).tobytes() for _, _, b in blocks)
+        return cls(
+            stamp,
+            seq,
+            full,
+            shape[0],
+            shape[1],
+            resolution,
+            origin[0],
+            origin[1],
+            tile,
+            np.array([r for r, _, _ in blocks], dtype=np.int32),
+            np.array([c for _, c, _ in blocks], dtype=np.int32),
+            np.frombuffer(zlib.compress(cells, 6), dtype=np.uint8),
+        )
+
+    def blocks(self) -> np.ndarray:
+        """The patches' cells as an int8 array (patches, tile, tile); raises DecodeError if
+        the compressed data does not hold exactly that many cells."""
+        n = len(self.patch_rows) * self.tile * self.tile
+        inflater = zlib.decompressobj()
+        try:
+            raw = inflater.decompress(self.data.tobytes(), n + 1)
+        except zlib.error as e:
+            raise DecodeError(f"{self.TYPE}.data: not a zlib stream ({e})") from None
+        if len(raw) != n or not inflater.eof:
+            raise DecodeError(f"{self.TYPE}.data: expected {n} cells after decompression")
+        return np.frombuffer(raw, dtype=np.int8).reshape(-1, self.tile, self.tile).copy()
+
+
 MESSAGES: dict[str, type[Message]] = {
     cls.TYPE: cls
     for cls in (
@@ -338,6 +410,7 @@ MESSAGES: dict[str, type[Message]] = {
         SpawnRequest,
         SpawnReply,
         CoverageImage,
+        MapPatches,
     )
 }
 
@@ -447,10 +520,9 @@ def decode(payload: bytes | bytearray | memoryview, cls: type[M]) -> M:
         raise DecodeError(f"{cls.TYPE}: not a msgpack payload ({type(e).__name__}: {e})") from None
     if not isinstance(data, dict):
         raise DecodeError(f"{cls.TYPE}: expected a map, got {type(data).__name__}")
-    if data.get("_v") != SCHEMA_VERSION:
-        raise DecodeError(
-            f"{cls.TYPE}: schema version {data.get('_v')!r}, expected {SCHEMA_VERSION}"
-        )
+    version = data.get("_v")
+    if type(version) is not int or version != SCHEMA_VERSION:
+        raise DecodeError(f"{cls.TYPE}: schema version {version!r}, expected {SCHEMA_VERSION}")
     if data.get("_t") != cls.TYPE:
         raise DecodeError(f"expected a {cls.TYPE!r} message, got type {data.get('_t')!r}")
     specs = _specs(cls)
@@ -486,3 +558,34 @@ def _check_shapes(msg: Message) -> None:
         cells = msg.rows * msg.cols
         if msg.rows < 0 or msg.cols < 0 or len(msg.visits) != cells or len(msg.cleanable) != cells:
             raise DecodeError(f"coverage_image: arrays do not hold rows × cols = {cells} cells")
+    elif isinstance(msg, MapPatches):
+        _check_map_patches(msg)
+
+
+MAX_MAP_TILE = 1024
+MAX_MAP_CELLS = 1 << 20
+
+
+def _check_map_patches(msg: MapPatches) -> None:
+    where = msg.TYPE
+    if not (
+        1 <= msg.tile <= MAX_MAP_TILE
+        and 0 <= msg.rows <= MAX_MAP_CELLS
+        and 0 <= msg.cols <= MAX_MAP_CELLS
+    ):
+        raise DecodeError(f"{where}: tile or map size out of range")
+    if msg.rows % msg.tile or msg.cols % msg.tile:
+        raise DecodeError(f"{where}: map {msg.rows} × {msg.cols} is not whole tiles of {msg.tile}")
+    if not msg.resolution > 0:
+        raise DecodeError(f"{where}.resolution: must be > 0")
+    if len(msg.patch_rows) != len(msg.patch_cols):
+        raise DecodeError(f"{where}: {len(msg.patch_rows)} patch rows, {len(msg.patch_cols)} cols")
+    for name, arr, limit in (
+        ("patch_rows", msg.patch_rows, msg.rows),
+        ("patch_cols", msg.patch_cols, msg.cols),
+    ):
+        if len(arr) and (arr.min() < 0 or arr.max() > limit - msg.tile or (arr % msg.tile).any()):
+            raise DecodeError(f"{where}.{name}: patches must be whole tiles inside the map")
+    blocks = msg.blocks()
+    if len(blocks) and (blocks.min() < -1 or blocks.max() > 100):
+        raise DecodeError(f"{where}.data: cells must be -1 (unknown) or 0..100")

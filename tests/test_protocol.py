@@ -11,6 +11,7 @@ import socket
 import threading
 import time
 import typing
+import zlib
 from collections.abc import Callable
 from typing import Annotated, Any
 
@@ -30,6 +31,7 @@ from fleet.protocol import (
     CoverageSummary,
     DecodeError,
     LaserScan,
+    MapPatches,
     Message,
     Num,
     PoseEstimate,
@@ -97,6 +99,8 @@ def _scalar(tp: Any, meta: Any) -> st.SearchStrategy:
 @st.composite
 def messages(draw: st.DrawFn, cls: type[Message]) -> Message:
     """A valid ``cls`` message, keeping the cross-field constraints of ``_check_shapes``."""
+    if cls is MapPatches:
+        return draw(map_patches())
     fixed: dict[str, Any] = {}
     lengths: dict[str, int] = {}
     if cls is CoverageSummary:
@@ -120,6 +124,28 @@ def messages(draw: st.DrawFn, cls: type[Message]) -> Message:
         else:
             kwargs[name] = draw(_scalar(tp, meta))
     return cls(**kwargs)
+
+
+@st.composite
+def map_patches(draw: st.DrawFn) -> MapPatches:
+    tile = draw(st.integers(1, 4))
+    rows, cols = draw(st.integers(1, 4)) * tile, draw(st.integers(1, 4)) * tile
+    cells = [(r, c) for r in range(0, rows, tile) for c in range(0, cols, tile)]
+    chosen = draw(st.lists(st.sampled_from(cells), unique=True, max_size=len(cells)))
+    blocks = [
+        (r, c, draw(hnp.arrays(np.int8, (tile, tile), elements=st.integers(-1, 100))))
+        for r, c in chosen
+    ]
+    return MapPatches.pack(
+        draw(_scalar(float, None)),
+        draw(st.integers(0, 2**31)),
+        draw(st.booleans()),
+        (rows, cols),
+        draw(st.floats(0.01, 1.0)),
+        (draw(_scalar(float, None)), draw(_scalar(float, None))),
+        tile,
+        blocks,
+    )
 
 
 def _any_message() -> st.SearchStrategy[Message]:
@@ -263,6 +289,9 @@ def _corrupt_field(cls: type[Message], pred: Callable[[Any, Any], bool], value: 
 
 def _example(cls: type[Message]) -> Message:
     """A fixed valid message of ``cls`` with non-empty arrays."""
+    if cls is MapPatches:
+        blocks = [(0, 2, np.full((2, 2), 50, np.int8)), (2, 0, np.full((2, 2), -1, np.int8))]
+        return MapPatches.pack(1.5, 4, True, (4, 6), 0.05, (1.5, 1.5), 2, blocks)
     kwargs: dict[str, Any] = {}
     for name, tp, meta in _fields(cls):
         if isinstance(meta, Arr):
@@ -302,6 +331,8 @@ Applies = Callable[[Any, Any], bool] | None
 MUTATIONS: dict[str, tuple[Applies, Callable[[type[Message]], bytes]]] = {
     "wrong version": (None, lambda c: _envelope(c, _v=SCHEMA_VERSION + 1)),
     "version as string": (None, lambda c: _envelope(c, _v=str(SCHEMA_VERSION))),
+    "version as bool": (None, lambda c: _envelope(c, _v=True)),
+    "version as float": (None, lambda c: _envelope(c, _v=float(SCHEMA_VERSION))),
     "no version": (None, lambda c: _without(c, "_v")),
     "unknown type tag": (None, lambda c: _envelope(c, _t="no_such_type")),
     "other message's tag": (
@@ -399,6 +430,33 @@ def test_cross_field_shapes_are_checked() -> None:
     image["cols"], image["rows"] = -3, -2
     with pytest.raises(DecodeError):
         decode(_pack(image), CoverageImage)
+
+
+def test_map_patches_round_trip_their_cells_and_reject_bad_geometry() -> None:
+    msg = _example(MapPatches)
+    blocks = decode(encode(msg), MapPatches).blocks()
+    assert blocks.shape == (2, 2, 2) and blocks[0, 0, 0] == 50 and blocks[1, 1, 1] == -1
+    bad = {
+        "cols": 5,  # not whole tiles
+        "patch_cols": np.array([2, 5], "<i4").tobytes(),  # a patch past the right edge
+        "patch_rows": np.array([0], "<i4").tobytes(),  # fewer rows than cols
+        "data": zlib.compress(b"\x00" * 7),  # cells for less than two patches
+        "resolution": 0.0,
+        "tile": 0,
+        "rows": 2**40,
+    }
+    for name, value in bad.items():
+        raw = _valid_map(msg)
+        raw[name] = value
+        with pytest.raises(DecodeError):
+            decode(_pack(raw), MapPatches)
+    raw = _valid_map(msg)
+    raw["data"] = zlib.compress(np.full(8, 101, np.int8).tobytes())
+    with pytest.raises(DecodeError, match=r"0\.\.100"):
+        decode(_pack(raw), MapPatches)
+    raw["data"] = b"not zlib at all"
+    with pytest.raises(DecodeError, match="zlib"):
+        decode(_pack(raw), MapPatches)
 
 
 # ---------------------------------------------------------------------------------------------
