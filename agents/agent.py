@@ -17,13 +17,15 @@ import time
 import numpy as np
 
 from agents.follower import FollowState, control_step, scan_points
-from agents.pose_source import OdometryPose, PoseSource
+from agents.pose_source import OdometryPose, PoseSource, SlamPose
+from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
 from fleet.bus import Bus
 from fleet.params import FleetConfig
 from fleet.protocol import (
     Clock,
     Intent,
     LaserScan,
+    MapPatches,
     Odometry,
     Plan,
     PoseEstimate,
@@ -58,6 +60,10 @@ class Agent:
         self.clock = 0.0
         self._last_xy: tuple[float, float] | None = None
         self._last_status = -1e9
+        self._last_map = -1e9
+        self._map_seq = 0
+        self._map_snapshot: SlamMap | None = None
+        self._patches = PatchTracker(cfg.slam.map_tile, cfg.slam.patch_tolerance)
 
     def spawn(self, start: tuple[float, float, float], timeout: float = 30.0) -> None:
         """Ask the simulator to place the robot; retry until it answers or ``timeout`` passes."""
@@ -73,13 +79,20 @@ class Agent:
                 time.sleep(0.2)
         if not reply.ok:
             raise ValueError(f"spawn refused: {reply.error}")
-        self.pose_source = OdometryPose((reply.x, reply.y, reply.theta))
+        self.pose_source = self._make_pose_source((reply.x, reply.y, reply.theta))
         k = self.keys
         self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
         self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
         self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
+        self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
         log.info("%s spawned at (%.2f, %.2f, %.2f)", self.rid, reply.x, reply.y, reply.theta)
+
+    def _make_pose_source(self, start: tuple[float, float, float]) -> PoseSource:
+        if self.cfg.agent.pose_source == "odometry":
+            return OdometryPose(start)
+        lidar = self.cfg.lidar
+        return SlamPose(self.cfg.slam, start, lidar.range_min, lidar.range_max)
 
     def fetch_plan(self) -> None:
         """Late joiners ask the coordinator for their current plan instead of waiting for one."""
@@ -121,6 +134,14 @@ class Agent:
             msg.task,
             len(msg.waypoints),
         )
+
+    def _on_map_request(self, _req: Request) -> MapPatches:
+        """The whole current map, for whoever joins late or noticed a gap in ``seq``."""
+        snapshot = self._map_snapshot
+        if snapshot is None:
+            raise LookupError(f"{self.rid} has no map yet")
+        update = PatchTracker(self.cfg.slam.map_tile, 0).update(snapshot)
+        return _map_message(self.clock, self._map_seq, self.cfg.slam.map_tile, update)
 
     # ---- control ------------------------------------------------------------------------
 
@@ -210,6 +231,22 @@ class Agent:
                 control=True,
             )
 
+    def publish_map(self, stamp: float) -> None:
+        """Publish the map's changed tiles, at most ``agent.map_hz`` times per sim second."""
+        if stamp - self._last_map < 1.0 / self.cfg.agent.map_hz:
+            return
+        assert self.pose_source is not None
+        snapshot = self.pose_source.occupancy()
+        if snapshot is None:
+            return
+        self._last_map = stamp
+        self._map_snapshot = snapshot
+        update = self._patches.update(snapshot)
+        if update.full or update.patches:
+            self._map_seq += 1
+            msg = _map_message(stamp, self._map_seq, self.cfg.slam.map_tile, update)
+            self.bus.publish(self.keys.robot(self.rid, "map"), msg)
+
     def run(self) -> None:
         self.fetch_plan()
         while not self.stop.is_set():
@@ -218,3 +255,17 @@ class Agent:
             except queue.Empty:
                 continue
             self.step(scan)
+            self.publish_map(scan.stamp)
+
+
+def _map_message(stamp: float, seq: int, tile: int, update: MapUpdate) -> MapPatches:
+    return MapPatches.pack(
+        stamp,
+        seq,
+        update.full,
+        update.shape,
+        update.resolution,
+        update.origin,
+        tile,
+        [(p.row, p.col, p.data) for p in update.patches],
+    )

@@ -6,7 +6,13 @@ from typing import Protocol
 
 import numpy as np
 
+from agents.slam.geometry import compose, relative
+from agents.slam.params import SlamParams
+from agents.slam.slam import Slam
+from agents.slam.slam_map import SlamMap
 from fleet.protocol import LaserScan, Odometry
+
+Pose = tuple[float, float, float]
 
 
 class PoseSource(Protocol):
@@ -18,9 +24,11 @@ class PoseSource(Protocol):
 
     def on_scan(self, msg: LaserScan) -> None: ...
 
-    def pose(self) -> tuple[float, float, float]: ...
+    def pose(self) -> Pose: ...
 
     def covariance(self) -> np.ndarray: ...
+
+    def occupancy(self) -> SlamMap | None: ...
 
 
 class OdometryPose:
@@ -28,7 +36,7 @@ class OdometryPose:
 
     name = "odometry"
 
-    def __init__(self, start: tuple[float, float, float]) -> None:
+    def __init__(self, start: Pose) -> None:
         self._pose = start
 
     def on_odometry(self, msg: Odometry) -> None:
@@ -37,8 +45,53 @@ class OdometryPose:
     def on_scan(self, msg: LaserScan) -> None:
         return None
 
-    def pose(self) -> tuple[float, float, float]:
+    def pose(self) -> Pose:
         return self._pose
 
     def covariance(self) -> np.ndarray:
         return np.zeros(9)
+
+    def occupancy(self) -> SlamMap | None:
+        return None
+
+
+class SlamPose:
+    """The agent's own SLAM (``agents.slam``), its map frame tied to the world by the spawn pose.
+
+    Each scan is matched with the latest odometry pose as the prior; between scans the pose
+    follows the odometry increments, so a control step always sees the freshest estimate.
+    """
+
+    name = "slam"
+
+    def __init__(self, params: SlamParams, start: Pose, range_min: float, range_max: float) -> None:
+        self._slam = Slam(params, start, range_min=range_min, range_max=range_max)
+        self._odom: Pose | None = None
+        self._odom_at_scan: Pose | None = None
+        self._at_scan: Pose = start
+        self._covariance = np.zeros(9)
+
+    def on_odometry(self, msg: Odometry) -> None:
+        self._odom = (msg.x, msg.y, msg.theta)
+
+    def on_scan(self, msg: LaserScan) -> None:
+        if self._odom is None:
+            return
+        est = self._slam.process(
+            msg.ranges.astype(np.float64), msg.angle_min, msg.angle_increment, self._odom, msg.stamp
+        )
+        self._at_scan = est.pose
+        self._odom_at_scan = self._odom
+        self._covariance = est.covariance.reshape(9)
+
+    def pose(self) -> Pose:
+        if self._odom is None or self._odom_at_scan is None:
+            return self._at_scan
+        x, y, theta = compose(self._at_scan, relative(self._odom_at_scan, self._odom))
+        return (float(x), float(y), float(theta))
+
+    def covariance(self) -> np.ndarray:
+        return self._covariance.copy()
+
+    def occupancy(self) -> SlamMap | None:
+        return self._slam.occupancy()

@@ -142,7 +142,10 @@ class Bus:
         self._handles.append(self.session.declare_subscriber(key, on_sample))
 
     def serve(self, key: str, cls: type[M], handler: Callable[[M], Message]) -> None:
-        """Answer queries on ``key``: decode the request, reply with ``handler``'s message."""
+        """Answer queries on ``key``: decode the request, reply with ``handler``'s message.
+
+        A handler raises LookupError for "nothing to give yet" (an error reply, no log line);
+        any other exception is logged with its traceback and also answered as an error."""
 
         def on_query(query: zenoh.Query) -> None:
             k = str(query.key_expr)
@@ -154,6 +157,9 @@ class Bus:
                 return
             try:
                 reply = handler(req)
+            except LookupError as e:
+                query.reply_err(str(e))
+                return
             except Exception as e:
                 log.exception("query handler for %s failed", k)
                 query.reply_err(str(e))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 from agents.slam.params import SlamParams
 from fleet.config import configs_dir, from_mapping, read_yaml
@@ -98,6 +99,8 @@ class SimParams:
 
 @dataclass(frozen=True)
 class AgentParams:
+    pose_source: Literal["slam", "odometry"] = "slam"
+    map_hz: float = 1.0
     control_hz: float = 10.0
     stale_after_s: float = 0.5
     waypoint_tolerance: float = 0.15
@@ -105,6 +108,11 @@ class AgentParams:
     give_up_after_s: float = 3.0
     intent_horizon_s: float = 2.0
     status_hz: float = 2.0
+
+    def validate(self) -> None:
+        for name in ("map_hz", "status_hz", "stale_after_s", "give_up_after_s"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0")
 
 
 @dataclass(frozen=True)
