@@ -5,8 +5,17 @@ The floor is a grid of ``cell_size`` cells. A robot's brush is a disc of diamete
 cell is under the brush when its centre lies strictly inside the disc, the footprint rule of
 ``planners.grid.disc``.
 A cell's visit count goes up by one each time it *enters* a robot's brush (it was not under that
-brush at the previous update), so a robot standing still does not inflate the counts and a pass
-over a cell counts once however slowly it is made.
+brush a moment before), so a robot standing still does not inflate the counts and a pass over a
+cell counts once however slowly it is made.
+
+Between two updates a robot is taken to have moved along the straight segment joining its two
+positions, and its brush swept the whole capsule around that segment (the Minkowski sum of the
+segment and the brush disc): a cell enters the brush when its centre lies strictly within the
+brush radius of the segment but was not within it of the segment's start. This is exact for a
+straight move: a point's distance to a point moving along a line is convex in time, so a cell is
+under the brush during one interval of the move and enters it at most once. It equals sampling
+the brush at every point of the path, so updates can be sparse (the simulator makes them at
+10 Hz, when a robot has moved at most a few centimetres along a nearly straight arc).
 
 The reference is the **cleanable area**: cells whose centre a robot centre can reach from the
 start poses (clearance ≥ robot radius from occupied or unknown cells, connected to a start),
@@ -43,37 +52,56 @@ class CleaningGrid:
         self.cleanable = cleanable
         self.visits = np.zeros(grid.shape, dtype=np.uint16)
         self.radius = cleaning_width / 2
-        k = int(np.ceil(self.radius / grid.resolution)) + 1
-        self._window = np.stack(np.mgrid[-k : k + 1, -k : k + 1], axis=-1).reshape(-1, 2)
         self._pos: dict[str, tuple[float, float]] = {}
-        self._last: dict[str, np.ndarray] = {}
 
-    def footprint(self, x: float, y: float) -> np.ndarray:
-        """Flat indices of the cells whose centres lie within the brush radius of (x, y)."""
+    def swept(self, start: np.ndarray, end: np.ndarray, fresh: np.ndarray) -> np.ndarray:
+        """Flat indices of the cells that enter the brush as it moves from ``start`` to ``end``.
+
+        ``start`` and ``end`` are (M, 2) positions of M brushes, ``fresh`` (M,) marks brushes that
+        were not on the floor at ``start`` (all their cells enter). An index appears once per
+        brush it enters, so one cell may appear several times.
+        """
         g = self.grid
-        centre = g.world_to_cell(np.array([x, y]))
-        rc = self._window + centre
-        xy = g.cell_to_world(rc)
-        inside = np.hypot(xy[:, 0] - x, xy[:, 1] - y) < self.radius - 1e-9
-        rows, cols = g.shape
-        rc = rc[inside & (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)]
-        return rc[:, 0] * cols + rc[:, 1]
+        start = np.asarray(start, dtype=np.float64).reshape(-1, 2)
+        end = np.asarray(end, dtype=np.float64).reshape(-1, 2)
+        seg = end - start
+        length2 = np.einsum("ij,ij->i", seg, seg)
+        half = int(np.ceil((self.radius + 0.5 * np.sqrt(length2.max())) / g.resolution)) + 1
+        window = np.stack(np.mgrid[-half : half + 1, -half : half + 1], axis=-1).reshape(-1, 2)
+        rc = g.world_to_cell(0.5 * (start + end))[:, None, :] + window[None]
+        rel = g.cell_to_world(rc) - start[:, None, :]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            along = np.einsum("mwk,mk->mw", rel, seg) / length2[:, None]
+        along = np.clip(np.nan_to_num(along, nan=0.0), 0.0, 1.0)
+        to_path = rel - along[..., None] * seg[:, None, :]
+        inner = self.radius - 1e-9
+        in_capsule = np.einsum("mwk,mwk->mw", to_path, to_path) < inner * inner
+        at_start = np.einsum("mwk,mwk->mw", rel, rel) < inner * inner
+        entered = in_capsule & (np.asarray(fresh, dtype=bool)[:, None] | ~at_start)
+        entered &= g.in_bounds(rc)
+        return rc[entered, 0] * g.shape[1] + rc[entered, 1]
 
-    def update(self, robot: str, x: float, y: float) -> None:
-        """Sweep ``robot``'s brush at (x, y); a no-op until it has moved a quarter cell."""
-        last = self._pos.get(robot)
-        if last is not None and abs(x - last[0]) + abs(y - last[1]) < self.grid.resolution / 4:
+    def update(self, robots: list[str], xy: np.ndarray) -> None:
+        """Sweep each robot's brush from its previous update to ``xy`` ((N, 2), one per robot).
+
+        A robot seen for the first time cleans its footprint. A robot that has moved less than
+        a quarter cell (L1) since its previous update is left where it was, so physics jitter
+        does not count cells at the brush's rim again and again.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        prev = np.array([self._pos.get(r, (np.nan, np.nan)) for r in robots]).reshape(-1, 2)
+        fresh = np.isnan(prev[:, 0])
+        prev = np.where(fresh[:, None], xy, prev)
+        moved = fresh | (np.abs(xy - prev).sum(axis=1) >= self.grid.resolution / 4)
+        idx = np.nonzero(moved)[0]
+        if idx.size == 0:
             return
-        self._pos[robot] = (x, y)
-        flat = self.footprint(x, y)
-        prev = self._last.get(robot)
-        new = flat if prev is None else flat[~np.isin(flat, prev, assume_unique=True)]
-        np.add.at(self.visits.reshape(-1), new, 1)
-        self._last[robot] = flat
+        for i, pos in zip(idx.tolist(), xy[idx].tolist(), strict=True):
+            self._pos[robots[i]] = (pos[0], pos[1])
+        np.add.at(self.visits.reshape(-1), self.swept(prev[idx], xy[idx], fresh[idx]), 1)
 
     def forget(self, robot: str) -> None:
         """A robot left; its next appearance starts a fresh pass."""
-        self._last.pop(robot, None)
         self._pos.pop(robot, None)
 
     @property

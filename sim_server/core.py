@@ -28,17 +28,19 @@ SEGMENT_INDEX_MIN = 400
 # A contact between the same pair within this long (sim s) of their previous contact belongs to
 # the same collision: a robot grinding along a wall re-touches it many times a second.
 COLLISION_DEBOUNCE_S = 1.0
+# The cleaning grid sweeps each robot's brush along the chord between its poses this often. At
+# ≤ 0.5 m/s and ≤ 1 rad/s the arc between two updates leaves its chord by ≤ v·ω/(8·hz²) ≈ 0.6 mm,
+# far below the 5 cm cells; the coverage rates published by the server divide it, so published
+# coverage is always current.
+CLEANING_HZ = 10.0
 
 
 @dataclass
 class RobotState:
+    """A robot's metrics; they outlive its departure and continue when it comes back."""
+
     rid: str
-    odom: OdometryModel
-    cmd: tuple[float, float] = (0.0, 0.0)
-    v: float = 0.0
-    w: float = 0.0
     path_length_m: float = 0.0
-    last_xy: tuple[float, float] = (0.0, 0.0)
     samples: list[tuple[float, float]] = field(default_factory=list)
     wall_collisions: int = 0
     robot_collisions: int = 0
@@ -64,7 +66,12 @@ def world_segments(world: World) -> np.ndarray:
 
 
 class SimCore:
-    """Steps the world by ``1 / physics_hz`` and emits the sensor data that falls due."""
+    """Steps the world by ``1 / physics_hz`` and emits the sensor data that falls due.
+
+    Per-robot state that changes every step (commands, velocities, poses, odometry, distance
+    driven) lives in arrays with one row per robot in ``self.robots`` order, so a step costs a
+    few numpy calls whatever the number of robots; only the pymunk bodies are touched one by one.
+    """
 
     def __init__(
         self, world: World, cfg: FleetConfig, seed: int = 0, starts_xy: np.ndarray | None = None
@@ -77,6 +84,7 @@ class SimCore:
         self.steps = 0
         self.scan_every = max(1, round(cfg.sim.physics_hz / cfg.lidar.rate_hz))
         self.odom_every = max(1, round(cfg.sim.physics_hz / cfg.odometry.rate_hz))
+        self.clean_every = max(1, round(cfg.sim.physics_hz / CLEANING_HZ))
         from sim_server.physics import Physics
 
         self.physics = Physics(world, self._on_contact)
@@ -97,7 +105,14 @@ class SimCore:
         self.departed: dict[str, RobotState] = {}
         self._pending_collisions: list[Collision] = []
         self._last_contact: dict[tuple[str, str], float] = {}
-        self._clearance_grid = world.grid(0.025)
+        self._ids: list[str] = []
+        self._row: dict[str, int] = {}
+        self._poses = np.zeros((0, 3))
+        self._cmd = np.zeros((0, 2))
+        self._vel = np.zeros((0, 2))
+        self._path = np.zeros(0)
+        self._sampled_xy = np.zeros((0, 2))
+        self._odom = OdometryModel(cfg.odometry, self.rng, np.zeros((0, 3)))
 
     # ---- robots -------------------------------------------------------------------------
 
@@ -110,7 +125,7 @@ class SimCore:
         for rid in self.robots:
             if rid == ignore:
                 continue
-            x, y, _ = self.physics.pose(rid)
+            x, y, _ = self._poses[self._row[rid]]
             if math.hypot(x - pose[0], y - pose[1]) < 2 * r:
                 return f"({pose[0]:.2f}, {pose[1]:.2f}) overlaps robot {rid}"
         return ""
@@ -123,31 +138,49 @@ class SimCore:
         if why:
             raise ValueError(why)
         self.physics.add_robot(rid, pose, self.cfg.robot.radius, self.cfg.robot.mass)
-        old = self.departed.pop(rid, None)
-        state = RobotState(rid, OdometryModel(self.cfg.odometry, self.rng, pose))
-        if old is not None:
-            state.path_length_m = old.path_length_m
-            state.samples = old.samples
-            state.wall_collisions = old.wall_collisions
-            state.robot_collisions = old.robot_collisions
-        state.last_xy = (pose[0], pose[1])
-        state.samples.append(state.last_xy)
+        state = self.departed.pop(rid, None) or RobotState(rid)
+        state.samples.append((pose[0], pose[1]))
         self.robots[rid] = state
+        self._reindex()
+        self._poses = self.physics.poses(self._ids)
+        placed = self._poses[-1:]
+        self._cmd = np.vstack([self._cmd, np.zeros((1, 2))])
+        self._vel = np.vstack([self._vel, np.zeros((1, 2))])
+        self._path = np.append(self._path, state.path_length_m)
+        self._sampled_xy = np.vstack([self._sampled_xy, placed[:, :2]])
+        self._odom.add(pose)
+        self.cleaning.update([rid], placed[:, :2])
         return pose
 
     def remove_robot(self, rid: str) -> None:
-        state = self.robots.pop(rid, None)
-        if state is not None:
-            self.physics.remove_robot(rid)
-            self.cleaning.forget(rid)
-            self.departed[rid] = state
+        state = self.robots.get(rid)
+        if state is None:
+            return
+        i = self._row[rid]
+        self.cleaning.update([rid], self._poses[i : i + 1, :2])
+        self.cleaning.forget(rid)
+        state.path_length_m = float(self._path[i])
+        self.physics.remove_robot(rid)
+        del self.robots[rid]
+        self._reindex()
+        self._poses, self._cmd, self._vel, self._path, self._sampled_xy = (
+            np.delete(a, i, axis=0)
+            for a in (self._poses, self._cmd, self._vel, self._path, self._sampled_xy)
+        )
+        self._odom.remove(i)
+        self.departed[rid] = state
+
+    def _reindex(self) -> None:
+        self._ids = list(self.robots)
+        self._row = {rid: i for i, rid in enumerate(self._ids)}
 
     def set_cmd(self, rid: str, v: float, w: float) -> None:
-        if rid in self.robots:
+        i = self._row.get(rid)
+        if i is not None:
             rp = self.cfg.robot
             v = min(max(v, -rp.max_vel_x), rp.max_vel_x)
             w = min(max(w, -rp.max_vel_theta), rp.max_vel_theta)
-            self.robots[rid].cmd = (v, w)
+            self._cmd[i] = v, w
 
     def _on_contact(self, robot: str, other: str, x: float, y: float) -> None:
         pair = (min(robot, other), max(robot, other)) if other else (robot, "")
@@ -166,43 +199,47 @@ class SimCore:
     # ---- stepping -----------------------------------------------------------------------
 
     def step(self) -> StepOutput:
-        rp = self.cfg.robot
-        dv, dw = rp.acc_lim_x * self.dt, rp.acc_lim_theta * self.dt
-        for rid, s in self.robots.items():
-            s.v += min(max(s.cmd[0] - s.v, -dv), dv)
-            s.w += min(max(s.cmd[1] - s.w, -dw), dw)
-            self.physics.drive(rid, s.v, s.w)
+        ids = self._ids
+        if ids:
+            rp = self.cfg.robot
+            limit = np.array([rp.acc_lim_x, rp.acc_lim_theta]) * self.dt
+            self._vel += np.clip(self._cmd - self._vel, -limit, limit)
+            self.physics.drive(ids, self._vel[:, 0], self._vel[:, 1], self._poses[:, 2])
         self.physics.step(self.dt)
         self.steps += 1
         self.t = self.steps * self.dt
-        for rid, s in self.robots.items():
-            x, y, _ = self.physics.pose(rid)
-            step = math.hypot(x - s.last_xy[0], y - s.last_xy[1])
-            s.path_length_m += step
-            s.last_xy = (x, y)
-            last = s.samples[-1]
-            if math.hypot(x - last[0], y - last[1]) >= TRAJECTORY_SAMPLE_M:
-                s.samples.append((x, y))
-            self.cleaning.update(rid, x, y)
         out = StepOutput(collisions=self._pending_collisions)
         self._pending_collisions = []
-        if not self.robots:
+        if not ids:
             return out
+        prev_xy = self._poses[:, :2]
+        self._poses = poses = self.physics.poses(ids)
+        xy = poses[:, :2]
+        self._path += np.hypot(xy[:, 0] - prev_xy[:, 0], xy[:, 1] - prev_xy[:, 1])
+        far = np.hypot(xy[:, 0] - self._sampled_xy[:, 0], xy[:, 1] - self._sampled_xy[:, 1])
+        for i in np.nonzero(far >= TRAJECTORY_SAMPLE_M)[0].tolist():
+            self.robots[ids[i]].samples.append((float(xy[i, 0]), float(xy[i, 1])))
+            self._sampled_xy[i] = xy[i]
+        if self.steps % self.clean_every == 0:
+            self.cleaning.update(ids, xy)
         if self.steps % self.odom_every == 0:
-            for rid, s in self.robots.items():
-                ox, oy, oth = s.odom.update(self.physics.pose(rid))
-                out.odometry.append((rid, Odometry(self.t, ox, oy, oth, s.v, s.w)))
+            odom = self._odom.update(poses).tolist()
+            vel = self._vel.tolist()
+            out.odometry = [
+                (rid, Odometry(self.t, *o, *v)) for rid, o, v in zip(ids, odom, vel, strict=True)
+            ]
         if self.steps % self.scan_every == 0:
             out.scans = self.scan_all()
         return out
 
     def truth(self) -> dict[str, tuple[float, float, float]]:
-        return {rid: self.physics.pose(rid) for rid in self.robots}
+        poses = self._poses.tolist()
+        return {rid: (p[0], p[1], p[2]) for rid, p in zip(self._ids, poses, strict=True)}
 
     def scan_all(self) -> list[tuple[str, LaserScan]]:
         """One noisy scan per robot, all cast in one vectorized call."""
-        ids = list(self.robots)
-        poses = np.array([self.physics.pose(r) for r in ids])
+        ids = self._ids
+        poses = self._poses
         discs = np.column_stack([poses[:, :2], np.full(len(ids), self.cfg.robot.radius)])
         lidar = self.cfg.lidar
         ranges = cast_scans(
@@ -236,6 +273,11 @@ class SimCore:
         return {**self.departed, **self.robots}
 
     def summary(self, wall_s: float) -> CoverageSummary:
+        """Metrics so far; sweeps the cleaning grid up to the current poses first."""
+        if self._ids:
+            self.cleaning.update(self._ids, self._poses[:, :2])
+        for rid, length in zip(self._ids, self._path.tolist(), strict=True):
+            self.robots[rid].path_length_m = length
         robots = self.all_robots()
         ids = sorted(robots)
         return CoverageSummary(

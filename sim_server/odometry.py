@@ -100,7 +100,9 @@ class OdometryModel:
 
     Odometry starts at the robot's true start pose, as a robot knows its dock. Call
     :meth:`update` with the current true pose(s) at the odometry rate; it returns the odometry
-    pose(s). One call for N robots costs about as much as one call for one robot.
+    pose(s). One call for N robots costs about as much as one call for one robot, and draws the
+    same noise as N single-robot models sharing the generator would, in row order. Robots join
+    and leave an (N, 3) model with :meth:`add` and :meth:`remove`.
     """
 
     def __init__(
@@ -134,3 +136,18 @@ class OdometryModel:
         self._odom = odometry_step(self._odom, self._true, cur, self.params, normals)
         self._true = cur
         return self._odom.copy()
+
+    def add(self, initial_pose: tuple[float, float, float]) -> None:
+        """Append a robot as the last row; its odometry starts at its true ``initial_pose``."""
+        if self._true.ndim != 2:
+            raise ValueError("OdometryModel.add: only a model of shape (N, 3) takes robots")
+        row = np.array(initial_pose, dtype=np.float64).reshape(1, 3)
+        self._true = np.vstack([self._true, row])
+        self._odom = np.vstack([self._odom, row])
+
+    def remove(self, index: int) -> None:
+        """Drop the robot in row ``index``; later rows move up by one."""
+        if self._true.ndim != 2:
+            raise ValueError("OdometryModel.remove: only a model of shape (N, 3) has rows")
+        self._true = np.delete(self._true, index, axis=0)
+        self._odom = np.delete(self._odom, index, axis=0)

@@ -9,7 +9,6 @@ through ``on_contact``.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import numpy as np
@@ -103,15 +102,30 @@ class Physics:
         self.space.remove(body, *body.shapes, *body.constraints)
         self.space.remove(control)
 
-    def drive(self, rid: str, v: float, w: float) -> None:
-        body = self.bodies[rid]
-        control = self.controls[rid]
-        control.velocity = (v * math.cos(body.angle), v * math.sin(body.angle))
-        control.angular_velocity = w
+    def drive(self, ids: list[str], v: np.ndarray, w: np.ndarray, headings: np.ndarray) -> None:
+        """Command robots ``ids`` to (v, ω); ``headings`` are their current body angles."""
+        vx = (v * np.cos(headings)).tolist()
+        vy = (v * np.sin(headings)).tolist()
+        controls = self.controls
+        for rid, cx, cy, cw in zip(ids, vx, vy, w.tolist(), strict=True):
+            control = controls[rid]
+            control.velocity = (cx, cy)
+            control.angular_velocity = cw
 
     def pose(self, rid: str) -> tuple[float, float, float]:
         body = self.bodies[rid]
-        return body.position.x, body.position.y, body.angle
+        x, y = body.position
+        return x, y, body.angle
+
+    def poses(self, ids: list[str]) -> np.ndarray:
+        """(N, 3) poses x, y, θ of robots ``ids``, in that order."""
+        rows = []
+        bodies = self.bodies
+        for rid in ids:
+            body = bodies[rid]
+            x, y = body.position
+            rows.append((x, y, body.angle))
+        return np.array(rows, dtype=np.float64).reshape(-1, 3)
 
     def step(self, dt: float) -> None:
         self.space.step(dt)

@@ -207,3 +207,51 @@ def test_noise_free_lidar_matches_the_walls(world: World, cfg: FleetConfig) -> N
     ((_, scan2),) = sim2.scan_all()
     ahead = int(np.argmin(np.abs(angles)))
     assert scan2.ranges[ahead] == pytest.approx(3.0 - inner - y, abs=1e-3)
+
+
+def test_straight_drive_cleans_exactly_the_capsule_between_start_and_end(
+    world: World, cfg: FleetConfig
+) -> None:
+    sim = SimCore(world, cfg)
+    start = np.array([0.8, 2.3])
+    sim.add_robot("r0", (*start, 0.0))
+    sim.set_cmd("r0", 0.5, 0.0)
+    _run(sim, 2.37)  # not a whole number of cleaning updates: summary() sweeps the rest
+    end = np.array(sim.truth()["r0"][:2])
+    sim.summary(0.0)
+    g = sim.cleaning.grid
+    centres = g.cell_to_world(np.argwhere(np.ones(g.shape, dtype=bool)))
+    seg = end - start
+    along = np.clip((centres - start) @ seg / (seg @ seg), 0.0, 1.0)
+    dist = np.hypot(*(centres - start - along[:, None] * seg).T)
+    capsule = (dist < cfg.robot.cleaning_width / 2 - 1e-9).reshape(g.shape)
+    np.testing.assert_array_equal(sim.cleaning.visits > 0, capsule)
+    assert sim.cleaning.visits.max() == 1
+
+
+def test_a_robot_that_leaves_keeps_its_metrics_and_its_last_sweep(
+    world: World, cfg: FleetConfig
+) -> None:
+    sim = SimCore(world, cfg)
+    sim.add_robot("r0", (0.8, 2.3, 0.0))
+    sim.set_cmd("r0", 0.5, 0.0)
+    _run(sim, 1.55)
+    x_left = sim.truth()["r0"][0]
+    sim.remove_robot("r0")
+    assert sim.truth() == {}
+    assert not sim.step().odometry
+    summary = sim.summary(0.0)
+    assert summary.robots == ["r0"]
+    assert summary.path_length_m[0] == pytest.approx(x_left - 0.8, abs=1e-9)
+    g = sim.cleaning.grid
+    swept_x = g.cell_to_world(np.argwhere(sim.cleaning.visits > 0))[:, 0]
+    radius = cfg.robot.cleaning_width / 2
+    # The brush was swept right up to where the robot left, not to its last 10 Hz update.
+    assert swept_x.max() > x_left + radius - g.resolution
+    # Back elsewhere: a fresh pass, and the distance driven continues from where it stopped.
+    sim.add_robot("r0", (3.0, 0.6, math.pi / 2))
+    sim.set_cmd("r0", 0.3, 0.0)
+    _run(sim, 1.0)
+    y = sim.truth()["r0"][1]
+    assert sim.summary(0.0).path_length_m[0] == pytest.approx(x_left - 0.8 + y - 0.6, abs=1e-6)
+    assert sim.cleaning.visits.max() == 1

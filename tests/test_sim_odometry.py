@@ -199,3 +199,32 @@ def test_shape_mismatch_is_an_error():
     model = OdometryModel(OdometryParams(), np.random.default_rng(0), (0.0, 0.0, 0.0))
     with pytest.raises(ValueError, match="shape"):
         model.update(np.zeros((2, 3)))
+
+
+def test_robots_joining_and_leaving_a_batch_draw_the_noise_single_models_would():
+    params = OdometryParams(alpha_trans=0.02, alpha_rot=0.05, alpha_rot_trans=0.01)
+    path = straight(1.0, 30)
+    shifts = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.5, 0.0]])
+    batch_rng, single_rng = np.random.default_rng(9), np.random.default_rng(9)
+    batch = OdometryModel(params, batch_rng, np.zeros((0, 3)))
+    singles: dict[int, OdometryModel] = {}
+    for k, pose in enumerate(path):
+        if k in (0, 10):  # robots 0 and 1 join first, robot 2 at step 10
+            for r in (0, 1) if k == 0 else (2,):
+                batch.add(pose + shifts[r])
+                singles[r] = OdometryModel(params, single_rng, pose + shifts[r])
+            continue
+        if k == 20:  # robot 0 leaves; robots 1 and 2 move up a row
+            batch.remove(0)
+            del singles[0]
+        rows = sorted(singles)
+        got = batch.update(np.array([pose + shifts[r] for r in rows]))
+        want = np.array([singles[r].update(pose + shifts[r]) for r in rows])
+        np.testing.assert_array_equal(got, want)
+    assert not np.allclose(got[:, :2], path[-1, :2] + shifts[[1, 2], :2], atol=1e-4)
+
+
+def test_a_single_robot_model_has_no_rows_to_add():
+    model = OdometryModel(OdometryParams(), np.random.default_rng(0), (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="N, 3"):
+        model.add((1.0, 0.0, 0.0))
