@@ -66,10 +66,14 @@ def decompose(mask: np.ndarray, max_step: int = 6) -> tuple[np.ndarray, list[Mon
     _, comp = connected_components(graph, directed=False)
     order = np.lexsort((row, comp))
     bounds = np.flatnonzero(np.diff(comp[order])) + 1
-    cells = [
-        MonotoneCell(int(row[ids[0]]), c0[ids].copy(), c1[ids].copy())
-        for ids in np.split(order, bounds)
-    ]
+    chains = np.split(order, bounds)
+    comp = np.zeros(n, dtype=np.int64)
+    pieces = []
+    for ids in chains:
+        for part in _split_at_shoulders(ids, c0, c1, max_step):
+            comp[part] = len(pieces)
+            pieces.append(part)
+    cells = [MonotoneCell(int(row[ids[0]]), c0[ids].copy(), c1[ids].copy()) for ids in pieces]
     group = _merge_stacked(cells, max_step)
     merged: list[MonotoneCell] = []
     new_id = np.zeros(len(cells), dtype=np.int32)
@@ -90,6 +94,13 @@ def decompose(mask: np.ndarray, max_step: int = 6) -> tuple[np.ndarray, list[Mon
     cc = np.repeat(c0, lengths) + _ranks(lengths)
     labels[rr, cc] = np.repeat(new_id[comp], lengths)
     return labels, merged
+
+
+def _split_at_shoulders(ids: np.ndarray, c0: np.ndarray, c1: np.ndarray, max_step: int):
+    """Cut a chain of runs (sorted by row) where a side moves by more than ``max_step`` cells
+    from one row to the next: a lane cannot sweep the shoulder of a wider row beyond it."""
+    jump = np.maximum(np.abs(np.diff(c0[ids])), np.abs(np.diff(c1[ids]))) > max_step
+    return np.split(ids, np.flatnonzero(jump) + 1)
 
 
 def _merge_stacked(cells: list[MonotoneCell], max_step: int) -> list[int]:

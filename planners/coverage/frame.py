@@ -43,17 +43,17 @@ class RotatedFrame:
         )
 
 
-def frame_for(grid: GridMap, mask: np.ndarray, angle: float) -> RotatedFrame:
-    """The smallest rotated frame (one cell of margin) holding every cell of ``mask``."""
+def frame_for(grid: GridMap, mask: np.ndarray, angle: float, margin: int = 1) -> RotatedFrame:
+    """The smallest rotated frame (``margin`` cells around) holding every cell of ``mask``."""
     pts = grid.cell_to_world(np.argwhere(mask))
     c, s = math.cos(angle), math.sin(angle)
     qx = c * pts[:, 0] + s * pts[:, 1]
     qy = -s * pts[:, 0] + c * pts[:, 1]
     res = grid.resolution
-    q0 = (float(qx.min()) - res, float(qy.min()) - res)
+    q0 = (float(qx.min()) - margin * res, float(qy.min()) - margin * res)
     shape = (
-        math.ceil((qy.max() - q0[1]) / res) + 2,
-        math.ceil((qx.max() - q0[0]) / res) + 2,
+        math.ceil((qy.max() - q0[1]) / res) + margin + 1,
+        math.ceil((qx.max() - q0[0]) / res) + margin + 1,
     )
     return RotatedFrame(angle, q0, res, shape)
 

@@ -14,6 +14,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from planners.coverage.bcd import decompose
 from planners.coverage.frame import dominant_direction, frame_for, resample
+from planners.coverage.lattice import room_lanes
 from planners.coverage.metrics import CoverageMetrics, coverage_metrics
 from planners.coverage.ordering import choose_variants, order_tasks, split_tour, two_opt_path
 from planners.coverage.params import CoverageParams
@@ -102,15 +103,19 @@ def plan_coverage(
     multi = len(start_xy) > 1
     max_area = params.max_task_area if multi else math.inf
     cell_labels = np.zeros(grid.shape, dtype=np.int32)
+    room_img = _extend_labels(rooms, clean)
+    step = max(1, math.floor(params.lane_spacing / res + 1e-9))
+    hw = params.cleaning_width / 2 / res
     room_tasks: list[list[SweepTask]] = []
     room_angle: list[float] = []
     cell_room: list[int] = []
     for room in range(1, n_rooms + 1):
         mask = rooms == room
         angle = _sweep_angle(mask, res)
-        frame = frame_for(grid, mask, angle)
+        frame = frame_for(grid, mask, angle, margin=math.ceil(hw) + 1)
         rot = resample(grid, mask, frame)
         labels, cells = decompose(rot)
+        lanes = room_lanes(cells, rot, resample(grid, room_img == room, frame), labels, step, hw)
         base = len(cell_room)
         tasks: list[SweepTask] = []
         for k, cell in enumerate(cells, start=1):
@@ -120,8 +125,8 @@ def plan_coverage(
                 tasks.append(edge_task(room, cid, cell, frame, params))
             if params.method == "spiral":
                 tasks.append(spiral_task(room, cid, cell, frame, params))
-            else:
-                tasks.extend(cell_tasks(room, cid, cell, frame, params, max_area))
+            elif len(lanes[k - 1]):
+                tasks.extend(cell_tasks(room, cid, cell, lanes[k - 1], frame, params, max_area))
         _paint_cells(grid, mask, frame, labels, base, cell_labels)
         room_tasks.append(tasks)
         room_angle.append(angle)

@@ -38,15 +38,15 @@ def lane_extent(cell: MonotoneCell, y: float) -> tuple[int, int]:
     return int(max(cell.left[a], cell.left[b])), int(min(cell.right[a], cell.right[b]))
 
 
-def boustrophedon(cell: MonotoneCell, ys: np.ndarray, left_first: bool) -> np.ndarray:
-    """(P, 2) (row, col) polyline over the lanes ``ys`` in the given order, zig-zagging.
+def boustrophedon(cell: MonotoneCell, lanes: np.ndarray, left_first: bool) -> np.ndarray:
+    """(P, 2) (row, col) polyline over ``lanes`` ((n, 3): row coordinate, first and last
+    column) in the given order, zig-zagging.
 
     The first lane runs left → right when ``left_first``; each turn follows the cell side.
     """
     pts: list[tuple[float, float]] = []
     to_right = left_first
-    for k, y in enumerate(ys):
-        lo, hi = lane_extent(cell, float(y))
+    for k, (y, lo, hi) in enumerate(np.asarray(lanes, dtype=float).reshape(-1, 3)):
         a, b = (lo, hi) if to_right else (hi, lo)
         if k > 0:
             pts.extend(_side(cell, pts[-1], (float(y), float(a)), right=not to_right))
@@ -54,6 +54,11 @@ def boustrophedon(cell: MonotoneCell, ys: np.ndarray, left_first: bool) -> np.nd
         pts.append((float(y), float(b)))
         to_right = not to_right
     return np.array(pts, dtype=float)
+
+
+def lanes_of(cell: MonotoneCell, ys: np.ndarray) -> np.ndarray:
+    """(n, 3) lanes at row coordinates ``ys`` spanning the cell's full extent."""
+    return np.array([(float(y), *lane_extent(cell, float(y))) for y in ys], dtype=float)
 
 
 def _side(

@@ -15,7 +15,7 @@ from planners.coverage.bcd import MonotoneCell
 from planners.coverage.frame import RotatedFrame
 from planners.coverage.metrics import path_time
 from planners.coverage.params import CoverageParams
-from planners.coverage.sweeps import boustrophedon, eroded_sides, lane_extent, lane_rows
+from planners.coverage.sweeps import boustrophedon, eroded_sides, lane_rows, lanes_of
 from planners.polyline import simplify
 
 
@@ -38,14 +38,15 @@ def cell_tasks(
     room: int,
     cell_id: int,
     cell: MonotoneCell,
+    lanes: np.ndarray,
     frame: RotatedFrame,
     params: CoverageParams,
     max_area: float,
 ) -> list[SweepTask]:
-    """The boustrophedon tasks of one cell, lanes grouped so each group is ≤ ``max_area``."""
+    """The boustrophedon tasks of one cell over ``lanes`` ((n, 3) row coordinate, first and
+    last column, sorted by row), lanes grouped so each group is ≤ ``max_area``."""
     res = frame.resolution
-    ys = lane_rows(cell, params.lane_spacing / res)
-    lengths = np.array([np.diff(lane_extent(cell, float(y)))[0] + 1 for y in ys]) * res
+    lengths = (lanes[:, 2] - lanes[:, 1] + 1) * res
     lane_area = lengths * params.lane_spacing
     groups: list[list[int]] = [[]]
     acc = 0.0
@@ -57,7 +58,7 @@ def cell_tasks(
         acc += a
     tasks = []
     for g in groups:
-        sel = ys[g]
+        sel = lanes[g]
         variants = tuple(
             _to_world(frame, boustrophedon(cell, order, left), params)
             for order in (sel, sel[::-1])
@@ -91,7 +92,8 @@ def spiral_task(
     rows, left, right = eroded_sides(cell, max(0, (j - 1) * step + 3) if j else 0)
     if len(rows) and not np.any(np.diff(rows) != 1):
         core = MonotoneCell(int(rows[0]), left, right)
-        parts.append(boustrophedon(core, lane_rows(core, params.lane_spacing / res), True))
+        ys = lane_rows(core, params.lane_spacing / res)
+        parts.append(boustrophedon(core, lanes_of(core, ys), True))
     world = _to_world(frame, np.vstack(parts), params)
     _, _, t = path_time(world, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
     return SweepTask(room, cell_id, (world, world[::-1]), cell.cells * res * res, t)
