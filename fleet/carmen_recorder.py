@@ -124,8 +124,8 @@ class CarmenRecorder:
         self.flush()
 
     def flush(self) -> None:
-        self._log.flush()
         self._truth.flush()
+        self._log.flush()
 
     def close(self) -> None:
         self._log.close()

@@ -124,6 +124,20 @@ def sim(
     connect: ConnectOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,
     config: ConfigOpt = None,
+    record_carmen: Annotated[
+        Path | None,
+        typer.Option(
+            "--record-carmen",
+            help="Write one robot's scans (ROBOTLASER1) and odometry (ODOM) to this CARMEN log, "
+            "and its true poses at each scan to FILE.truth.csv; `fleet slam replay FILE` reads it.",
+        ),
+    ] = None,
+    record_robot: Annotated[
+        str | None,
+        typer.Option(
+            "--record-robot", help="Robot to record (default: the first robot that spawns)."
+        ),
+    ] = None,
 ) -> None:
     """Run the world simulator: physics, lidar, odometry, collisions and ground-truth cleaning."""
     import numpy as np
@@ -134,14 +148,24 @@ def sim(
         _fail("--speed must be >= 0")
     _setup_logging("sim")
     cfg, w = _load(config, world)
+    recorder = None
+    if record_carmen is not None:
+        from fleet.carmen_recorder import CarmenRecorder
+
+        try:
+            recorder = CarmenRecorder(record_carmen, record_robot, comment=f"world {w.name}")
+        except OSError as e:
+            _fail(f"--record-carmen: cannot write {record_carmen}: {e}")
     bus = _bus("sim", "sim", connect, fleet)
     starts = np.array([p[:2] for p in w.start_poses(1, cfg.robot.radius)])
-    server = SimServer(bus, w, cfg, speed=speed, seed=seed, starts_xy=starts)
+    server = SimServer(bus, w, cfg, speed=speed, seed=seed, starts_xy=starts, recorder=recorder)
     _stop_on_signals(server.stop)
     try:
         server.run()
     finally:
         bus.close()
+        if recorder is not None:
+            recorder.close()
 
 
 def agent(

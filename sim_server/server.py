@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fleet.bus import Bus
+from fleet.carmen_recorder import CarmenRecorder
 from fleet.params import FleetConfig
 from fleet.protocol import (
     Clock,
@@ -53,8 +54,11 @@ class SimServer:
         speed: float = 1.0,
         seed: int = 0,
         starts_xy: np.ndarray | None = None,
+        recorder: CarmenRecorder | None = None,
     ) -> None:
+        """``recorder``, when given, writes one robot's scans and odometry every step."""
         self.bus = bus
+        self.recorder = recorder
         self.keys = bus.keys
         self.cfg = cfg
         self.speed = speed
@@ -168,6 +172,8 @@ class SimServer:
                     pace_wall, pace_sim = now, self.core.t
             with self.lock:
                 out = self.core.step()
+                if self.recorder is not None:
+                    self.recorder.record(out.odometry, out.scans, self.core.truth)
                 steps = self.core.steps
                 truth = self.core.truth() if steps % truth_every == 0 else {}
             k = self.keys
