@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from agents.slam.evaluation import (
     align_rigid_2d,
@@ -115,3 +117,44 @@ def test_mismatched_trajectories_are_refused():
         ate_rmse(ref[:-1], ref)
     with pytest.raises(ValueError, match="no pose pairs"):
         relative_pose_error(ref[:5], ref[:5], *pairs_by_time(ref[:5, 0], 10.0))
+
+
+BENCH_KEYS = {
+    "ate_rmse_m",
+    "odom_ate_rmse_m",
+    "rpe_trans_m",
+    "rpe_rot_deg",
+    "ms_per_scan_median",
+    "ms_per_scan_p95",
+    "replay_speedup",
+}
+
+
+def test_fleet_bench_slam_short_route_beats_odometry_and_keeps_its_files(tmp_path):
+    from fleet.cli import app
+
+    out = tmp_path / "bench"
+    result = CliRunner().invoke(
+        app, ["bench", "slam", "--seconds", "40", "--json", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout.strip().splitlines()[-1])
+    assert summary.keys() >= BENCH_KEYS
+    assert summary["scans"] == 400
+    assert summary["wall_collisions"] == 0
+    assert summary["path_length_m"] > 4.0
+    assert summary["ate_rmse_m"] < summary["odom_ate_rmse_m"]
+    assert summary["ate_rmse_m"] < 0.05
+    assert summary["rpe_rot_deg"] < summary["odom_rpe_rot_deg"]
+    for name in ("slam.log", "slam.log.truth.csv", "map.png", "trajectory.csv", "bench.json"):
+        assert (out / name).is_file(), name
+
+
+def test_fleet_bench_slam_refuses_bad_options():
+    from fleet.cli import app
+
+    result = CliRunner().invoke(app, ["bench", "slam", "--seconds", "1"])
+    assert result.exit_code == 2
+    result = CliRunner().invoke(app, ["bench", "slam", "--world", "no-such-world"])
+    assert result.exit_code == 2
+    assert "no-such-world" in result.output
