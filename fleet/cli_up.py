@@ -196,7 +196,11 @@ def bench_sim(
 
     Robots drive arcs whose curvature changes slowly, so they sweep the world, hit walls and
     each other; everything a live run computes (physics, lidar, odometry, cleaning) is computed.
+    On a shared machine compare `rtf_cpu` (sim seconds per CPU second of this process), which
+    other work disturbs much less than `rtf`; `load_avg` is the 1-minute load when it finished.
     """
+    import os
+
     import numpy as np
 
     from sim_server.core import SimCore
@@ -215,7 +219,7 @@ def bench_sim(
     phase = rng.uniform(0, 2 * np.pi, robots)
     steps = round(seconds * cfg.sim.physics_hz)
     scans = 0
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     for k in range(steps):
         if k % 10 == 0:
             t = core.t
@@ -223,12 +227,16 @@ def bench_sim(
                 core.set_cmd(f"r{i}", 0.4, 0.8 * math.sin(0.3 * t + phase[i]))
         scans += len(core.step().scans)
     wall = time.perf_counter() - t0
+    cpu = time.process_time() - cpu0
     result = {
         "robots": robots,
         "world": w.name,
         "sim_seconds": round(core.t, 3),
         "wall_s": round(wall, 3),
         "rtf": round(core.t / wall, 2),
+        "cpu_s": round(cpu, 3),
+        "rtf_cpu": round(core.t / cpu, 2),
+        "load_avg": round(os.getloadavg()[0], 2),
         "rays_per_s": round(scans * cfg.lidar.beams / wall),
         "scans": scans,
         "coverage": round(core.cleaning.coverage(), 4),
@@ -238,5 +246,6 @@ def bench_sim(
     else:
         typer.echo(
             f"{robots} robots, {result['sim_seconds']} sim s in {result['wall_s']} s wall: "
-            f"{result['rtf']}× real time, {result['rays_per_s']:,} rays/s"
+            f"{result['rtf']}× real time ({result['rtf_cpu']}× per CPU second), "
+            f"{result['rays_per_s']:,} rays/s, load average {result['load_avg']}"
         )
