@@ -12,13 +12,14 @@ from planners.coverage.bcd import decompose
 from planners.coverage.rooms import shared_borders
 
 PARAMS = CoverageParams()
+SWEEPS_ONLY = CoverageParams(fill_in=False)
 
 
 def test_corridor_one_lane_matches_the_analytic_values():
     # walls at rows 0 and 9, columns 0 and 49: robot centres fit on rows 4–5, columns 4–45
     g = grid_of(boxed(10, 50))
     start = ((4 + 0.5) * RES, 5 * RES)  # on the lane between rows 4 and 5, at its first column
-    plan = plan_coverage(g, [start], PARAMS)
+    plan = plan_coverage(g, [start], SWEEPS_ONLY)
     m = plan.metrics.total
     assert math.isclose(m.path_length_m, 41 * RES, abs_tol=1e-9)
     assert m.turns == 0 and m.repetition == 0.0
@@ -31,7 +32,7 @@ def test_corridor_one_lane_matches_the_analytic_values():
 def test_empty_rectangle_lanes_length_and_coverage():
     g = grid_of(boxed(40, 60))  # robot centres: rows 4–35, columns 4–55
     start = (4.5 * RES, 5 * RES)
-    plan = plan_coverage(g, [start], PARAMS)
+    plan = plan_coverage(g, [start], SWEEPS_ONLY)
     m = plan.metrics.total
     # 6 lanes 51 cells long (rows 4.5, 10.5, …, 34.5) and 5 turns of 6 rows along the sides
     assert math.isclose(m.path_length_m, (6 * 51 + 5 * 6) * RES, abs_tol=1e-9)

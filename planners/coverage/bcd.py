@@ -70,7 +70,7 @@ def decompose(mask: np.ndarray, max_step: int = 6) -> tuple[np.ndarray, list[Mon
     comp = np.zeros(n, dtype=np.int64)
     pieces = []
     for ids in chains:
-        for part in _split_at_shoulders(ids, c0, c1, max_step):
+        for part in _split_at_shoulders(ids, c0, c1, 10**6):
             comp[part] = len(pieces)
             pieces.append(part)
     cells = [MonotoneCell(int(row[ids[0]]), c0[ids].copy(), c1[ids].copy()) for ids in pieces]

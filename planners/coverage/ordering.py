@@ -42,13 +42,54 @@ def two_opt_path(dist: np.ndarray, start: int) -> list[int]:
 
 
 def order_tasks(tasks: Sequence[SweepTask], p: np.ndarray) -> list[SweepTask]:
-    """Tasks in 2-opt order over their centroids, as an open path beginning nearest ``p``."""
-    if len(tasks) <= 1:
+    """Tasks in an order with short hops from each task's exit to the next one's entry.
+
+    Every task has variants (ways to drive it) whose reversals are variants too, so the order
+    is an open tour over directed pieces: greedy nearest entry from ``p``, then 2-opt where
+    reversing a stretch drives each of its tasks backwards (the asymmetric-endpoint form of
+    Croes' move). The variants are chosen afterwards by :func:`choose_variants`.
+    """
+    n = len(tasks)
+    if n <= 1:
         return list(tasks)
-    pts = np.vstack([p[None, :], [t.centroid for t in tasks]])
-    dist = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
-    tour = two_opt_path(dist, 0)
-    return [tasks[k - 1] for k in tour[1:]]
+    starts = [np.array([v[0] for v in t.variants]) for t in tasks]
+    ends = [np.array([v[-1] for v in t.variants]) for t in tasks]
+    seq: list[tuple[int, int]] = []
+    left = set(range(n))
+    cur = np.asarray(p, dtype=float)
+    while left:
+        best = min(
+            ((k, v) for k in left for v in range(len(starts[k]))),
+            key=lambda kv: float(np.hypot(*(starts[kv[0]][kv[1]] - cur))),
+        )
+        seq.append(best)
+        left.remove(best[0])
+        cur = ends[best[0]][best[1]]
+    s = np.array([starts[k][v] for k, v in seq])
+    e = np.array([ends[k][v] for k, v in seq])
+    s = np.vstack([[np.nan, np.nan], s])
+    e = np.vstack([np.asarray(p, dtype=float)[None, :], e])
+    order = list(range(n + 1))
+
+    def d(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.hypot(*(a - b)))
+
+    improved = True
+    while improved:
+        improved = False
+        for i in range(1, n):
+            for j in range(i + 1, n + 1):
+                a, b, c = order[i - 1], order[i], order[j]
+                nxt = order[j + 1] if j < n else None
+                before = d(e[a], s[b]) + (d(e[c], s[nxt]) if nxt is not None else 0.0)
+                after = d(e[a], e[c]) + (d(s[b], s[nxt]) if nxt is not None else 0.0)
+                if after < before - 1e-9:
+                    seg = order[i : j + 1][::-1]
+                    for k in seg:
+                        s[k], e[k] = e[k].copy(), s[k].copy()
+                    order[i : j + 1] = seg
+                    improved = True
+    return [tasks[seq[k - 1][0]] for k in order[1:]]
 
 
 def choose_variants(tasks: Sequence[SweepTask], p: np.ndarray) -> list[np.ndarray]:

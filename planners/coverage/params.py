@@ -11,11 +11,13 @@ class CoverageParams:
     """How to plan coverage paths.
 
     ``robot_radius`` and ``cleaning_width`` must equal the ``robot:`` section (0.17 m, 0.30 m).
-    Lanes are ``cleaning_width · (1 − overlap)`` apart. Rooms are separated at openings narrower
-    than ``door_width``; a room smaller than ``min_room_area`` joins its largest neighbour. For k
-    robots a boustrophedon cell is cut into lane groups of at most ``max_task_area`` so the work
-    can be balanced finely. Time estimates use ``max_speed`` plus ``turn_cost_s`` per turn
-    (a heading change over ``turn_angle_deg``).
+    Lanes are ``cleaning_width · (1 − overlap)`` apart. With ``fill_in`` the floor the sweeps
+    miss is cleaned by short targeted detours afterwards, the most cells per metre first, until
+    ``fill_in_target`` of the cleanable area is covered (1.0: every detour). Rooms are separated
+    at openings narrower than ``door_width``; a room smaller than ``min_room_area`` joins its
+    largest neighbour. For k robots a boustrophedon cell is cut into lane groups of at most
+    ``max_task_area`` so the work can be balanced finely. Time estimates use ``max_speed`` plus
+    ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``).
     """
 
     robot_radius: float = 0.17
@@ -23,6 +25,8 @@ class CoverageParams:
     overlap: float = 0.0
     method: Literal["bcd", "spiral"] = "bcd"
     edge_pass: bool = False
+    fill_in: bool = True
+    fill_in_target: float = 0.997
     max_speed: float = 0.5
     turn_cost_s: float = 2.0
     turn_angle_deg: float = 45.0
@@ -43,6 +47,8 @@ class CoverageParams:
             raise ValueError(f"method must be 'bcd' or 'spiral', got {self.method!r}")
         if self.turn_cost_s < 0 or not 0 < self.turn_angle_deg < 180:
             raise ValueError("turn_cost_s must be >= 0 and turn_angle_deg within (0, 180)")
+        if not 0.0 <= self.fill_in_target <= 1.0:
+            raise ValueError("fill_in_target must be within [0, 1]")
         if self.min_room_area < 0 or self.max_task_area <= 0 or self.simplify_tolerance < 0:
             raise ValueError("min_room_area, simplify_tolerance must be >= 0, max_task_area > 0")
 

@@ -13,6 +13,7 @@ from scipy import ndimage
 from scipy.sparse.csgraph import dijkstra
 
 from planners.coverage.bcd import decompose
+from planners.coverage.fill_in import add_fill_in
 from planners.coverage.frame import dominant_direction, frame_for, resample
 from planners.coverage.lattice import room_lanes
 from planners.coverage.metrics import CoverageMetrics, coverage_metrics
@@ -145,6 +146,13 @@ def plan_coverage(
                 piece = piece[::-1]
         paths.append(_drive(s, piece, transit))
         robot_tasks.append(tuple(piece))
+    if params.fill_in:
+        paths = [
+            _dedupe(p)
+            for p in add_fill_in(
+                grid, paths, clean, reach, params.cleaning_width / 2, transit, params.fill_in_target
+            )
+        ]
 
     metrics = coverage_metrics(
         grid,
@@ -282,7 +290,11 @@ def _drive(start: np.ndarray, tasks: Sequence[SweepTask], transit: Transit) -> n
         parts.append(leg[1:])
         parts.append(v[1:])
         p = v[-1]
-    path = np.vstack(parts)
+    return _dedupe(np.vstack(parts))
+
+
+def _dedupe(path: np.ndarray) -> np.ndarray:
+    """The path without repeated consecutive points."""
     keep = np.ones(len(path), dtype=bool)
     keep[1:] = np.hypot(*np.diff(path, axis=0).T) > 1e-9
     return path[keep]
