@@ -16,7 +16,13 @@ from fleet.protocol import Collision, CoverageSummary, LaserScan, Odometry
 from fleet.world import World
 from planners.polyline import count_turns, simplify
 from sim_server.cleaning import CleaningGrid, cleanable_mask
-from sim_server.lidar import SegmentIndex, add_noise, cast_scans, occupancy_to_segments
+from sim_server.lidar import (
+    SegmentIndex,
+    add_noise,
+    cast_scans,
+    occupancy_to_segments,
+    polygon_edges,
+)
 from sim_server.odometry import OdometryModel
 
 # Driven paths are sampled every this many metres and simplified with this tolerance before
@@ -57,12 +63,12 @@ class StepOutput:
 
 
 def world_segments(world: World) -> np.ndarray:
-    """The static edges the lidar sees: polygon edges, or the boundaries of blocked map cells."""
+    """The static edges the lidar sees: counter-clockwise polygon edges (see
+    :func:`sim_server.lidar.polygon_edges`), or the boundaries of blocked map cells."""
     if world.map_grid is not None:
         g = world.map_grid
         return occupancy_to_segments(g.occupied | g.unknown, g.resolution, g.origin)
-    edges = [np.hstack([poly, np.roll(poly, -1, axis=0)]) for poly in world.polygons]
-    return np.vstack(edges)
+    return polygon_edges(world.polygons)
 
 
 class SimCore:
@@ -250,6 +256,7 @@ class SimCore:
             discs,
             lidar.range_max,
             self_index=np.arange(len(ids)),
+            one_sided=self.world.map_grid is None,
         )
         ranges = add_noise(ranges, lidar.noise_sigma, lidar.range_min, lidar.range_max, self.rng)
         return [

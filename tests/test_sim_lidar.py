@@ -18,6 +18,7 @@ from sim_server.lidar import (
     cast_scans,
     cast_scans_reference,
     occupancy_to_segments,
+    polygon_edges,
 )
 from sim_server.lidar_bench import furnished_scene, map_scene
 
@@ -175,6 +176,58 @@ def test_matches_brute_force_reference_on_a_furnished_scene(beams):
     for got in (fast, indexed):
         np.testing.assert_array_equal(np.isfinite(got), finite)
         np.testing.assert_allclose(got[finite], expected[finite], rtol=0, atol=1e-9)
+
+
+def _overlapping_boxes(seed: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """Rotated boxes (every other one clockwise, some overlapping, walls made of thick boxes)
+    and sensors outside all of them."""
+    rng = np.random.default_rng(seed)
+    walls = [(3.0, 0.0, 6.2, 0.2, 0.0), (3.0, 5.0, 6.2, 0.2, 0.0)]
+    walls += [(0.0, 2.5, 0.2, 5.2, 0.0), (6.0, 2.5, 0.2, 5.2, 0.0)]
+    furniture = rng.uniform([0.5, 0.5, 0.2, 0.2, 0.0], [5.5, 4.5, 1.2, 0.8, 3.0], (14, 5))
+    polys = [rotated_box(*b)[:, :2] for b in [*walls, *furniture]]
+    polys = [p if i % 2 else p[::-1] for i, p in enumerate(polys)]
+    origins = []
+    while len(origins) < 40:
+        q = rng.uniform([0.2, 0.2], [5.8, 4.8])
+        if not any(_inside_convex(q, p) for p in polys):
+            origins.append(q)
+    return polys, np.array(origins), rng.uniform(-math.pi, math.pi, 40)
+
+
+def _inside_convex(q: np.ndarray, poly: np.ndarray) -> bool:
+    e = np.roll(poly, -1, axis=0) - poly
+    w = q - poly
+    cross = e[:, 0] * w[:, 1] - e[:, 1] * w[:, 0]
+    return bool(np.all(cross > -1e-6) or np.all(cross < 1e-6))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_one_sided_polygon_edges_give_the_same_ranges_as_two_sided(seed):
+    polys, origins, headings = _overlapping_boxes(seed)
+    edges = polygon_edges(polys)
+    discs = np.column_stack([origins[:5], np.full(5, 0.17)])
+    args = (origins, headings, BEAMS)
+    rest = (discs, 6.0, np.r_[np.arange(5), np.full(35, -1)])
+    two_sided = cast_scans(*args, edges, *rest)
+    assert np.isfinite(two_sided).mean() > 0.9
+    for segments in (edges, SegmentIndex(edges, cell=0.7, reach=6.0)):
+        np.testing.assert_array_equal(cast_scans(*args, segments, *rest, one_sided=True), two_sided)
+    # Edges turned clockwise show their inner side: one-sided casting then sees through walls.
+    clockwise = polygon_edges(polys)[:, [2, 3, 0, 1]]
+    assert not np.array_equal(cast_scans(*args, clockwise, *rest, one_sided=True), two_sided)
+
+
+def test_polygon_edges_turn_every_polygon_counter_clockwise():
+    square = np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0]])  # clockwise
+    edges = polygon_edges([square, square[::-1] + 2.0])
+    assert edges.shape == (8, 4)
+    ux, uy = edges[:, 2] - edges[:, 0], edges[:, 3] - edges[:, 1]
+    mx, my = (edges[:, 0] + edges[:, 2]) / 2, (edges[:, 1] + edges[:, 3]) / 2
+    centre = np.repeat([[0.5, 0.5], [2.5, 2.5]], 4, axis=0)
+    # The centre is on the left of every edge.
+    assert np.all(ux * (centre[:, 1] - my) - uy * (centre[:, 0] - mx) > 0)
+    assert polygon_edges([]).shape == (0, 4)
 
 
 def test_segment_index_rejects_a_reach_shorter_than_the_range():
