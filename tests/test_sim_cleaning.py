@@ -24,7 +24,7 @@ def _cleaning(grid: GridMap) -> CleaningGrid:
     return CleaningGrid(grid, np.ones(grid.shape, dtype=bool), WIDTH)
 
 
-def _dense_visits(grid: GridMap, path: np.ndarray, spacing: float = 5e-4) -> np.ndarray:
+def _dense_visits(grid: GridMap, path: np.ndarray, spacing: float = 1e-3) -> np.ndarray:
     """Visit counts from the brush sampled every ``spacing`` m along the polyline ``path``:
     a cell counts each time it is under the brush at a sample and was not at the one before."""
     points = [path[:1]]
@@ -34,12 +34,15 @@ def _dense_visits(grid: GridMap, path: np.ndarray, spacing: float = 5e-4) -> np.
     samples = np.vstack(points)
     rows, cols = grid.shape
     centres = grid.cell_to_world(np.argwhere(np.ones((rows, cols), dtype=bool)))
-    d2 = (samples[:, None, 0] - centres[None, :, 0]) ** 2
-    d2 += (samples[:, None, 1] - centres[None, :, 1]) ** 2
-    inside = d2 < (R - 1e-9) ** 2
-    entered = inside.copy()
-    entered[1:] &= ~inside[:-1]
-    return entered.sum(axis=0).reshape(rows, cols)
+    visits = np.zeros(rows * cols, dtype=np.int64)
+    before = np.zeros(rows * cols, dtype=bool)
+    for chunk in np.array_split(samples, max(1, len(samples) // 1000)):
+        d2 = (chunk[:, None, 0] - centres[None, :, 0]) ** 2
+        d2 += (chunk[:, None, 1] - centres[None, :, 1]) ** 2
+        inside = d2 < (R - 1e-9) ** 2
+        visits += (inside & ~np.vstack([before, inside[:-1]])).sum(axis=0)
+        before = inside[-1]
+    return visits.reshape(rows, cols)
 
 
 def _distance_to_path(points: np.ndarray, path: np.ndarray) -> np.ndarray:
