@@ -66,14 +66,10 @@ def decompose(mask: np.ndarray, max_step: int = 6) -> tuple[np.ndarray, list[Mon
     _, comp = connected_components(graph, directed=False)
     order = np.lexsort((row, comp))
     bounds = np.flatnonzero(np.diff(comp[order])) + 1
-    chains = np.split(order, bounds)
-    comp = np.zeros(n, dtype=np.int64)
-    pieces = []
-    for ids in chains:
-        for part in _split_at_shoulders(ids, c0, c1, 10**6):
-            comp[part] = len(pieces)
-            pieces.append(part)
-    cells = [MonotoneCell(int(row[ids[0]]), c0[ids].copy(), c1[ids].copy()) for ids in pieces]
+    cells = [
+        MonotoneCell(int(row[ids[0]]), c0[ids].copy(), c1[ids].copy())
+        for ids in np.split(order, bounds)
+    ]
     group = _merge_stacked(cells, max_step)
     merged: list[MonotoneCell] = []
     new_id = np.zeros(len(cells), dtype=np.int32)
@@ -96,17 +92,11 @@ def decompose(mask: np.ndarray, max_step: int = 6) -> tuple[np.ndarray, list[Mon
     return labels, merged
 
 
-def _split_at_shoulders(ids: np.ndarray, c0: np.ndarray, c1: np.ndarray, max_step: int):
-    """Cut a chain of runs (sorted by row) where a side moves by more than ``max_step`` cells
-    from one row to the next: a lane cannot sweep the shoulder of a wider row beyond it."""
-    jump = np.maximum(np.abs(np.diff(c0[ids])), np.abs(np.diff(c1[ids]))) > max_step
-    return np.split(ids, np.flatnonzero(jump) + 1)
-
-
 def _merge_stacked(cells: list[MonotoneCell], max_step: int) -> list[int]:
     """Group cells into vertical chains: a cell and the cell right above it merge when each is
     the other's widest touching neighbour and their sides shift by at most ``max_step`` cells
-    where they meet (a larger shoulder would leave its rim unswept). A chain is still one
+    where they meet (the coverage planner allows any step: its clamp lanes and fill-in passes sweep
+    the rim of a shoulder). A chain is still one
     interval per row, so it is swept like one cell with fewer transits (the merging step of
     most BCD implementations)."""
     tops: dict[int, list[int]] = {}

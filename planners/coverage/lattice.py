@@ -88,20 +88,21 @@ def _lattice_lanes(cell: MonotoneCell, rot: np.ndarray, phase: float, step: int)
             lanes.append((float(y), lo, hi))
         y += step
     if abs(y - (top + 0.5)) < 1e-9 and top + 1 < rot.shape[0]:
-        span = _longest_run(rot[top + 1], int(cell.left[-1]), int(cell.right[-1]))
+        span = _single_run(rot[top + 1], int(cell.left[-1]), int(cell.right[-1]))
         if span is not None:
             lanes.append((float(y), *span))
     return lanes
 
 
-def _longest_run(row: np.ndarray, lo: int, hi: int) -> tuple[int, int] | None:
+def _single_run(row: np.ndarray, lo: int, hi: int) -> tuple[int, int] | None:
+    """The run of ``row[lo..hi]`` if there is exactly one: where the row above splits (an
+    obstacle begins), each part is left to its own cell and to this cell's top clamp lane."""
     seg = np.concatenate([[False], row[lo : hi + 1], [False]]).astype(np.int8)
     d = np.diff(seg)
     starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
-    if len(starts) == 0:
+    if len(starts) != 1:
         return None
-    k = int(np.argmax(ends - starts))
-    return lo + int(starts[k]), lo + int(ends[k])
+    return lo + int(starts[0]), lo + int(ends[0])
 
 
 def _clamp_lane(cell: MonotoneCell, mine: np.ndarray, ys: list[float], below: bool, hw: float):

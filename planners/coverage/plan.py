@@ -115,7 +115,8 @@ def plan_coverage(
         angle = _sweep_angle(mask, res)
         frame = frame_for(grid, mask, angle, margin=math.ceil(hw) + 1)
         rot = resample(grid, mask, frame)
-        labels, cells = decompose(rot)
+        # stacked cells always merge: the lattice, clamp lanes and fill-in take their shoulders
+        labels, cells = decompose(rot, max_step=max(rot.shape))
         lanes = room_lanes(cells, rot, resample(grid, room_img == room, frame), labels, step, hw)
         base = len(cell_room)
         tasks: list[SweepTask] = []

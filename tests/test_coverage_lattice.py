@@ -1,0 +1,102 @@
+"""Lanes on one lattice per room, clamp lanes, and targeted fill-in passes."""
+
+import itertools
+
+import numpy as np
+from coverage_maps import boxed, furnished, grid_of, open_spots
+
+from planners.coverage import CoverageParams, plan_coverage
+from planners.coverage.bcd import decompose
+from planners.coverage.fill_in import chains, fill_points
+from planners.coverage.lattice import room_lanes
+from planners.coverage.metrics import swath
+from planners.coverage.sweeps import lane_rows, lanes_of
+from planners.grid import dilate
+
+
+def _ring_room():
+    """A square room around a table: four cells (below, left, right, above the table)."""
+    mask = np.zeros((70, 70), dtype=bool)
+    mask[5:65, 5:65] = True
+    mask[28:41, 20:46] = False
+    labels, cells = decompose(mask, max_step=0)
+    clean = dilate(mask, 3.0, 1.0)
+    return mask, labels, cells, clean
+
+
+def _sweep_counts(shape, lanes):
+    swept = np.zeros(shape, dtype=int)
+    for ln in lanes:
+        for y, lo, hi in ln:
+            rows = np.arange(int(np.ceil(y - 3 + 1e-9)), int(np.floor(y + 3 - 1e-9)) + 1)
+            swept[rows[:, None], np.arange(int(lo), int(hi) + 1)[None, :]] += 1
+    return swept
+
+
+def test_cells_around_a_table_share_one_lattice_and_rarely_sweep_the_same_strip():
+    mask, labels, cells, clean = _ring_room()
+    assert len(cells) == 4
+    lanes = room_lanes(cells, mask, clean, labels, 6, 3.0)
+    for ln in lanes:  # lane centres stay on robot-centre cells
+        for y, lo, hi in ln:
+            for r in {int(np.floor(y)), int(np.ceil(y))}:
+                assert mask[r, int(lo) : int(hi) + 1].all()
+    swept = _sweep_counts(mask.shape, lanes)
+    assert (swept[mask] >= 1).mean() > 0.97
+    # each cell placing its own lanes from its first to its last row sweeps the strips at the
+    # table's top and bottom twice; on one lattice only the clamp lanes at walls overlap
+    per_cell = [lanes_of(c, lane_rows(c, 6.0)) for c in cells]
+    twice_own = int((_sweep_counts(mask.shape, per_cell) > 1).sum())
+    twice = int((swept > 1).sum())
+    assert twice < 0.6 * twice_own
+
+
+def test_fill_points_reach_every_missed_cell_and_lie_on_robot_centres():
+    rng = np.random.default_rng(3)
+    reach = np.zeros((40, 40), dtype=bool)
+    reach[8:32, 8:32] = True
+    clean = dilate(reach, 3.0, 1.0)
+    covered = clean & (rng.random(clean.shape) < 0.7)
+    pts, gain = fill_points(clean, covered, reach, 3.0)
+    assert reach[pts[:, 0], pts[:, 1]].all()
+    assert gain.sum() == (clean & ~covered).sum()
+    hit = covered.copy()
+    rr, cc = np.indices(clean.shape)
+    for r, c in pts:
+        hit |= (rr - r) ** 2 + (cc - c) ** 2 < 9 - 1e-9
+    assert (clean & ~hit).sum() == 0
+    for group in chains(pts, 6.0):
+        assert sorted(group.tolist()) == sorted(set(group.tolist()))
+
+
+def _crossings(grid, path):
+    pts = [path[:1]]
+    for a, b in itertools.pairwise(path):
+        n = max(2, int(np.ceil(np.hypot(*(b - a)) / (grid.resolution / 4))) + 1)
+        pts.append(a + (b - a) * np.linspace(0, 1, n)[:, None])
+    rc = grid.world_to_cell(np.vstack(pts))
+    return int((grid.occupied | grid.unknown)[rc[:, 0], rc[:, 1]].sum())
+
+
+def test_fill_in_reaches_the_target_and_its_detours_never_cross_blocked_cells():
+    for seed in (4, 5):
+        g = furnished(seed)
+        starts = open_spots(g, 1)
+        without = plan_coverage(g, starts, CoverageParams(fill_in=False))
+        full = plan_coverage(g, starts, CoverageParams(fill_in_target=1.0))
+        assert full.metrics.total.coverage > without.metrics.total.coverage
+        assert full.metrics.total.coverage >= 0.999
+        assert all(_crossings(g, p) == 0 for p in full.paths)
+        # the detours only add to the sweeps: everything the sweeps covered stays covered
+        before, _ = swath(g, without.paths[0], 0.15)
+        after, _ = swath(g, full.paths[0], 0.15)
+        assert not (before & ~after).any()
+
+
+def test_fill_in_target_bounds_the_detours():
+    g = grid_of(boxed(60, 90))
+    start = (1.0, 1.0)
+    loose = plan_coverage(g, [start], CoverageParams(fill_in_target=0.9))
+    tight = plan_coverage(g, [start], CoverageParams(fill_in_target=1.0))
+    assert tight.metrics.total.coverage == 1.0
+    assert loose.metrics.total.path_length_m <= tight.metrics.total.path_length_m
