@@ -69,10 +69,13 @@ def plan_coverage(
 
     Steps: robot-centre cells (clearance ≥ robot_radius) 4-connected to a start; rooms by
     distance-transform segmentation; per room the dominant wall direction, a frame rotated to
-    it and the boustrophedon decomposition (Choset 2000) of the room in that frame; sweep tasks
-    per cell (boustrophedon lanes or a spiral); rooms ordered by 2-opt on geodesic distances,
+    it and the boustrophedon decomposition (Choset 2000) of the room in that frame; lanes on
+    one lattice per room (``lattice.room_lanes``); sweep tasks per cell (boustrophedon lanes or
+    a spiral); rooms ordered by 2-opt on geodesic distances,
     tasks greedily within a room; for k robots the tour is cut into contiguous pieces balancing
     estimated time. Transits are straight when clear, A* on the inflated grid otherwise.
+    Finally, with ``params.fill_in``, targeted detours clean the floor the paths still miss
+    (``fill_in.add_fill_in``).
     """
     t0 = time.perf_counter()
     params.validate()

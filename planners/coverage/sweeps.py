@@ -2,11 +2,11 @@
 
 Lanes run along rows, on the lines between two cell rows (half-integer row coordinates), so a
 swath of width ``w`` spans exactly ``w / resolution`` rows of cell centres and lanes
-``spacing`` apart tile the cell without double counting. The first and last lanes lie half a row
-inside the cell's outermost rows so the swath reaches the wall side; lanes in between are spread
-evenly, never further apart than ``spacing``. Consecutive lanes are joined along the cell's side
-(its outermost cells row by row), so the swath also reaches into the corners a straight lane
-misses.
+``spacing`` apart tile the cell without double counting. Where the lanes lie is decided by
+:mod:`planners.coverage.lattice` (one lattice per room); :func:`lane_rows` is the simple
+per-cell placement (first and last lanes half a row inside the outermost rows) used by the
+spiral's core. Consecutive lanes are joined along the cell's side (its outermost cells row by
+row), so the swath also reaches into the corners a straight lane misses.
 """
 
 from __future__ import annotations
