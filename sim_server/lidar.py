@@ -42,6 +42,10 @@ _ENDPOINT_SLACK = 1e-9
 _PARALLEL_SIN = 1e-12
 # An origin this close (m) to a segment or inside a disc is blocked: range 0 on every beam.
 _TOUCH = 1e-9
+# Sensors are cast in blocks of about this many rays, so the (ray, primitive) temporaries stay
+# a few hundred kB: reused from the heap and in cache, where whole-fleet arrays of many MB are
+# mapped fresh from the OS on every call (page faults cost more than the arithmetic).
+_RAYS_PER_BLOCK = 4096
 
 
 def _segment_geometry(segments: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -293,26 +297,33 @@ def cast_scans(
     out = np.full(r_count * b_count, np.inf)
     if r_count == 0 or b_count == 0:
         return out.reshape(r_count, b_count)
-    ox, oy = origins[:, 0], origins[:, 1]
-    bc, bs = np.cos(beam_angles), np.sin(beam_angles)
-    hc, hs = np.cos(headings)[:, None], np.sin(headings)[:, None]
-    dirs = np.stack([(hc * bc - hs * bs).ravel(), (hs * bc + hc * bs).ravel()])
     if isinstance(segments, SegmentIndex):
         if segments.reach < range_max:
             raise ValueError(
                 f"cast_scans: SegmentIndex reach {segments.reach} < range_max {range_max}"
             )
         geom = (segments.ax, segments.ay, segments.ux, segments.uy, segments.length)
-        sensor, seg = segments.candidates(ox, oy)
     else:
         geom = _segment_geometry(segments)
-        s_count = geom[0].size
-        sensor = np.repeat(np.arange(r_count), s_count)
-        seg = np.tile(np.arange(s_count), r_count)
-    if seg.size:
-        _cast_segments(out, dirs, ox, oy, headings, beams, geom, sensor, seg, range_max, one_sided)
-    if discs.shape[0]:
-        _cast_discs(out, dirs, ox, oy, headings, beams, discs, self_index, range_max)
+    bc, bs = np.cos(beam_angles), np.sin(beam_angles)
+    chunk = max(1, _RAYS_PER_BLOCK // b_count)
+    for lo in range(0, r_count, chunk):
+        hi = min(lo + chunk, r_count)
+        ox, oy, heading = origins[lo:hi, 0], origins[lo:hi, 1], headings[lo:hi]
+        hc, hs = np.cos(heading)[:, None], np.sin(heading)[:, None]
+        dirs = np.stack([(hc * bc - hs * bs).ravel(), (hs * bc + hc * bs).ravel()])
+        block = out[lo * b_count : hi * b_count]
+        if isinstance(segments, SegmentIndex):
+            sensor, seg = segments.candidates(ox, oy)
+        else:
+            sensor = np.repeat(np.arange(hi - lo), geom[0].size)
+            seg = np.tile(np.arange(geom[0].size), hi - lo)
+        if seg.size:
+            _cast_segments(
+                block, dirs, ox, oy, heading, beams, geom, sensor, seg, range_max, one_sided
+            )
+        if discs.shape[0]:
+            _cast_discs(block, dirs, ox, oy, heading, beams, discs, self_index[lo:hi], range_max)
     out[out > range_max] = np.inf
     return out.reshape(r_count, b_count)
 
