@@ -25,6 +25,8 @@ dilated by the brush. Coverage = swept cleanable cells / cleanable cells; repeti
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from planners.grid import GridMap, cleanable, inflate, reachable
@@ -42,6 +44,12 @@ def cleanable_mask(
     if len(cells) == 0:
         return np.zeros(grid.shape, dtype=bool)
     return cleanable(grid, reachable(free_centres, cells), cleaning_width / 2)
+
+
+@functools.lru_cache(maxsize=8)
+def _window(half: int) -> np.ndarray:
+    """(row, col) offsets of the (2·half + 1)² cells around a cell."""
+    return np.stack(np.mgrid[-half : half + 1, -half : half + 1], axis=-1).reshape(-1, 2)
 
 
 class CleaningGrid:
@@ -67,8 +75,7 @@ class CleaningGrid:
         seg = end - start
         length2 = np.einsum("ij,ij->i", seg, seg)
         half = int(np.ceil((self.radius + 0.5 * np.sqrt(length2.max())) / g.resolution)) + 1
-        window = np.stack(np.mgrid[-half : half + 1, -half : half + 1], axis=-1).reshape(-1, 2)
-        rc = g.world_to_cell(0.5 * (start + end))[:, None, :] + window[None]
+        rc = g.world_to_cell(0.5 * (start + end))[:, None, :] + _window(half)[None]
         rel = g.cell_to_world(rc) - start[:, None, :]
         with np.errstate(divide="ignore", invalid="ignore"):
             along = np.einsum("mwk,mk->mw", rel, seg) / length2[:, None]

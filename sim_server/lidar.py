@@ -228,9 +228,9 @@ def _cast_discs(out, dirs, ox, oy, headings, beams, discs, self_index, range_max
     r_count, d_count = ox.size, discs.shape[0]
     mx = (discs[None, :, 0] - ox[:, None]).ravel()
     my = (discs[None, :, 1] - oy[:, None]).ravel()
-    rad = np.tile(discs[:, 2], r_count)
+    rad = np.broadcast_to(discs[:, 2], (r_count, d_count)).ravel()
     sensor = np.repeat(np.arange(r_count), d_count)
-    disc = np.tile(np.arange(d_count), r_count)
+    disc = np.broadcast_to(np.arange(d_count), (r_count, d_count)).ravel()
     dist = np.hypot(mx, my)
     keep = np.nonzero((dist - rad <= range_max) & (disc != self_index[sensor]))[0]
     if keep.size == 0:
@@ -317,7 +317,7 @@ def cast_scans(
             sensor, seg = segments.candidates(ox, oy)
         else:
             sensor = np.repeat(np.arange(hi - lo), geom[0].size)
-            seg = np.tile(np.arange(geom[0].size), hi - lo)
+            seg = np.broadcast_to(np.arange(geom[0].size), (hi - lo, geom[0].size)).ravel()
         if seg.size:
             _cast_segments(
                 block, dirs, ox, oy, heading, beams, geom, sensor, seg, range_max, one_sided
