@@ -39,6 +39,7 @@ DEFAULT_ODOM_NOISE_SCALE = 5.0
 RPE_DELTA_S = 1.0
 RPE_DELTA_M = 1.0
 LOG_NAME = "slam.log"
+MIN_TOUR_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,10 @@ def room_tour(world: World, robot_radius: float, params: DriveParams) -> np.ndar
         here = centres[k]
     stops = [start, *order, start]
     legs = [transit.path(a, b) for a, b in itertools.pairwise(stops)]
-    return np.vstack([legs[0]] + [leg[1:] for leg in legs[1:]])
+    tour = np.vstack([legs[0]] + [leg[1:] for leg in legs[1:]])
+    if np.hypot(*np.diff(tour, axis=0).T).sum() < MIN_TOUR_M:
+        raise ValueError(f"{world.source}: the room tour is shorter than {MIN_TOUR_M} m")
+    return tour
 
 
 def route_waypoints(tour: np.ndarray) -> Iterator[np.ndarray]:
