@@ -176,9 +176,7 @@ class Agent:
                 self.cfg.dwa,
                 self.cfg.robot.radius,
                 1.0 / self.cfg.lidar.rate_hz,
-                a.waypoint_tolerance,
-                a.goal_tolerance,
-                a.give_up_after_s,
+                a,
             )
             with self.lock:
                 if self.follow is not None and self.follow.waypoints is follow.waypoints:

@@ -1,10 +1,17 @@
 """Following a waypoint path with DWA: the agent's pure control step.
 
 The agent keeps an index of the next waypoint; a waypoint counts as reached when the robot is
-within ``waypoint_tolerance`` of it or has passed it (its projection on the segment into the
-waypoint lies beyond the waypoint). DWA is given the local path from the previous waypoint on,
-a few metres long, so its path-distance cost keeps the robot on the lane, not merely near the
-next point.
+level with it along the segment into it, near that segment (see :func:`advance`). DWA is given
+the local path from the previous waypoint on, a few metres long, so its path-distance cost
+keeps the robot on the lane, not merely near the next point. On the approach to a sharp corner
+the speed follows the braking profile of :func:`stop_speed`.
+
+DWA scores where a rollout goes, not the way a robot turns onto a lane: a robot that faces far
+off its next segment takes an arc that bulges a quarter metre off the path — on a coverage path
+that sweeps the neighbouring lane instead of its own. So, as move_base's planners rotate in
+place toward the path first, a robot whose heading is more than ``align_enter`` off the
+direction to its next waypoint stops and turns in place (time-optimal under the angular
+acceleration limit) until it is within ``align_exit``, and only then drives.
 """
 
 from __future__ import annotations
@@ -14,10 +21,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planners.dwa import DWAParams, DWAResult, dwa_control
+from fleet.params import AgentParams
+from planners.dwa import DWAParams, DWAResult, dwa_control, rollout
 
 LOCAL_PATH_M = 3.0
 PROGRESS_M = 0.02
+TURN_PROGRESS_RAD = 0.05
 MEDIAN_BEAMS = 5
 
 
@@ -27,29 +36,37 @@ class FollowState:
     index: int = 0
     stalled_s: float = 0.0
     best_dist: float = math.inf
+    aligning: bool = False
+    best_error: float = math.inf
 
     @property
     def done(self) -> bool:
         return self.index >= len(self.waypoints)
 
 
-def advance(
-    state: FollowState, xy: np.ndarray, tolerance: float, goal_tolerance: float
-) -> FollowState:
-    """Skip the waypoints the robot at ``xy`` has reached or passed."""
+def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowState:
+    """Skip the waypoints the robot at ``xy`` has reached: it is at most ``along_tolerance``
+    short of (or past) the waypoint along the segment into it and at most
+    ``waypoint_tolerance`` beside that segment, or within ``along_tolerance`` of it
+    (``goal_tolerance`` for the last one). Lanes thus end where they end, whatever the robot's
+    small sideways offset, instead of being cut short by a radius around their ends."""
     wps, i = state.waypoints, state.index
     n = len(wps)
     while i < n:
-        tol = goal_tolerance if i == n - 1 else tolerance
-        if math.dist(xy, wps[i]) <= tol:
+        near = agent.goal_tolerance if i == n - 1 else agent.along_tolerance
+        if math.dist(xy, wps[i]) <= near:
             i += 1
             continue
-        if 0 < i < n - 1:
+        if i > 0:
             seg = wps[i] - wps[i - 1]
-            length2 = float(seg @ seg)
-            if length2 > 1e-12 and float((xy - wps[i - 1]) @ seg) / length2 > 1.0:
-                i += 1
-                continue
+            length = float(np.hypot(*seg))
+            if length > 1e-9:
+                rel = xy - wps[i - 1]
+                along = float(rel @ seg) / length
+                beside = abs(float(rel[0] * seg[1] - rel[1] * seg[0])) / length
+                if along >= length - agent.along_tolerance and beside <= agent.waypoint_tolerance:
+                    i += 1
+                    continue
         break
     return FollowState(wps, i) if i != state.index else state
 
@@ -84,6 +101,67 @@ def scan_points(
     return np.column_stack([pose[0] + r[ok] * np.cos(a), pose[1] + r[ok] * np.sin(a)])
 
 
+def carrot(state: FollowState, xy: np.ndarray, lookahead: float) -> np.ndarray:
+    """The point ``lookahead`` metres beyond the robot's projection onto the segment into the
+    next waypoint, clipped to that waypoint (pure pursuit's carrot): aiming there merges the
+    robot back onto the lane instead of cutting across to the lane's end."""
+    target = state.waypoints[state.index]
+    if state.index == 0:
+        return target
+    start = state.waypoints[state.index - 1]
+    seg = target - start
+    length = float(np.hypot(*seg))
+    if length < 1e-9:
+        return target
+    along = float((xy - start) @ seg) / length
+    return start + seg * min(1.0, max(0.0, along + lookahead) / length)
+
+
+def stop_speed(
+    state: FollowState, xy: np.ndarray, params: DWAParams, along_tolerance: float
+) -> float | None:
+    """The speed for the approach to a stop, or None when the next waypoint is no stop or is
+    farther than the braking distance from full speed.
+
+    A stop is the last waypoint or one where the path turns by more than ``corner_angle``. The
+    speed is the largest from which the robot can still brake to rest on it,
+    v = √(2·acc_lim_x·d) with d the distance left along the segment (Fox et al. 1997's
+    admissible velocity, applied to the stop as to an obstacle). DWA alone would aim its
+    rollouts' end points at the stop and approach it at v ≈ d/sim_time, ever more slowly.
+    """
+    wps, i = state.waypoints, state.index
+    if 0 < i < len(wps) - 1:
+        a, b = wps[i] - wps[i - 1], wps[i + 1] - wps[i]
+        turn = abs(math.remainder(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]), 2 * math.pi))
+        if turn <= params.corner_angle:
+            return None
+    seg = wps[i] - (wps[i - 1] if i > 0 else xy)
+    length = float(np.hypot(*seg))
+    left = (
+        math.dist(xy, wps[i])
+        if length < 1e-9
+        else length - float((xy - wps[i] + seg) @ seg) / length
+    )
+    braking = params.max_vel_x**2 / (2 * params.acc_lim_x)
+    if left > braking + along_tolerance:
+        return None
+    return math.sqrt(2 * params.acc_lim_x * max(left - along_tolerance / 2, 0.0))
+
+
+def rotate_in_place(
+    heading_error: float, velocity: tuple[float, float], params: DWAParams, dt: float
+) -> tuple[float, float]:
+    """(v, ω) that brakes to a stop and turns by ``heading_error``: the turn rate is the
+    largest from which the robot can still stop on the heading, √(2·acc_lim_theta·|error|),
+    capped at max_vel_theta and reached within the acceleration limits."""
+    v0, w0 = velocity
+    v = max(0.0, v0 - params.acc_lim_x * dt)
+    rate = min(params.max_vel_theta, math.sqrt(2.0 * params.acc_lim_theta * abs(heading_error)))
+    dw = params.acc_lim_theta * dt
+    w = min(max(math.copysign(rate, heading_error), w0 - dw), w0 + dw)
+    return v, w
+
+
 def control_step(
     state: FollowState,
     pose: tuple[float, float, float],
@@ -92,25 +170,52 @@ def control_step(
     params: DWAParams,
     robot_radius: float,
     dt: float,
-    tolerance: float,
-    goal_tolerance: float,
-    give_up_s: float,
+    agent: AgentParams,
 ) -> tuple[FollowState, DWAResult | None]:
     """Advance along the path and choose a command; ``None`` when the path is finished.
 
-    A waypoint the robot has come no closer to (by ``PROGRESS_M``) for ``give_up_s`` is
+    A waypoint the robot has come no closer to (by ``PROGRESS_M``) for ``give_up_after_s`` is
     skipped, so a robot whose way is shut, that is caught in a local minimum of the DWA costs,
     or whose pose estimate has drifted into a wall moves on instead of waiting forever; the
-    skipped spot stays uncleaned and shows in the coverage.
+    skipped spot stays uncleaned and shows in the coverage. Turning in place counts as progress.
     """
     xy = np.array(pose[:2])
-    state = advance(state, xy, tolerance, goal_tolerance)
+    state = advance(state, xy, agent)
     if state.done:
         return state, None
-    result = dwa_control(pose, velocity, local_path(state, xy), obstacles, params, robot_radius, dt)
-    dist = math.dist(xy, state.waypoints[state.index])
-    if dist < state.best_dist - PROGRESS_M:
-        return replace(state, stalled_s=0.0, best_dist=dist), result
-    if state.stalled_s + dt >= give_up_s:
+    target = state.waypoints[state.index]
+    dist = math.dist(xy, target)
+    aim = carrot(state, xy, agent.align_lookahead)
+    error = math.remainder(math.atan2(aim[1] - xy[1], aim[0] - xy[0]) - pose[2], 2 * math.pi)
+    limit = agent.align_exit if state.aligning else agent.align_enter
+    if abs(error) > limit and dist > agent.waypoint_tolerance:
+        v, w = rotate_in_place(error, velocity, params, dt)
+        t = np.linspace(0.0, params.sim_time, 11)
+        xs, ys, ths = rollout(pose, np.array([v]), np.array([w]), t)
+        result = DWAResult(v, w, np.column_stack([xs[0], ys[0], ths[0]]), 0.0, True)
+        if not state.aligning:
+            state = replace(state, aligning=True, best_error=math.inf)
+        progressed = abs(error) < state.best_error - TURN_PROGRESS_RAD
+    else:
+        state = replace(state, aligning=False)
+        path = local_path(state, xy)
+        result = None
+        speed = stop_speed(state, xy, params, agent.along_tolerance)
+        if speed is not None:
+            v_now = velocity[0]
+            speed = min(max(speed, v_now - params.acc_lim_x * dt), v_now + params.acc_lim_x * dt)
+            fixed = replace(params, min_vel_x=speed, max_vel_x=speed, vx_samples=1)
+            result = dwa_control(pose, velocity, path, obstacles, fixed, robot_radius, dt)
+            if not (result.admissible and math.isfinite(result.cost)):
+                result = None
+        if result is None:
+            result = dwa_control(pose, velocity, path, obstacles, params, robot_radius, dt)
+        progressed = dist < state.best_dist - PROGRESS_M
+    if progressed:
+        best_error = min(state.best_error, abs(error)) if state.aligning else state.best_error
+        return replace(
+            state, stalled_s=0.0, best_dist=min(state.best_dist, dist), best_error=best_error
+        ), result
+    if state.stalled_s + dt >= agent.give_up_after_s:
         return FollowState(state.waypoints, state.index + 1), result
     return replace(state, stalled_s=state.stalled_s + dt), result

@@ -104,20 +104,27 @@ class AgentParams:
     control_hz: float = 10.0
     stale_after_s: float = 0.5
     waypoint_tolerance: float = 0.15
-    goal_tolerance: float = 0.1
+    along_tolerance: float = 0.03
+    goal_tolerance: float = 0.05
     give_up_after_s: float = 3.0
+    align_enter: float = 0.6
+    align_exit: float = 0.1
+    align_lookahead: float = 0.3
     intent_horizon_s: float = 2.0
     status_hz: float = 2.0
 
     def validate(self) -> None:
-        for name in ("map_hz", "status_hz", "stale_after_s", "give_up_after_s"):
+        for name in ("map_hz", "status_hz", "stale_after_s", "give_up_after_s", "align_exit"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
+        if not self.align_exit <= self.align_enter <= math.pi:
+            raise ValueError("need 0 < align_exit <= align_enter <= pi")
 
 
 @dataclass(frozen=True)
 class CoordinatorParams:
     wall_clearance: float = 0.015
+    lane_overlap: float = 0.1
     expected_robots_grace_s: float = 20.0
 
 

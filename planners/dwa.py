@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -41,6 +42,10 @@ class DWAParams:
       drives into a lane end and turns there instead of cutting across to the next lane (ROS has
       no equivalent; its global planner rarely makes such corners). Grid paths' 45° steps stay
       below the default and are cut smoothly.
+    - ``path_aggregation``: ``last`` scores a rollout's distance from the path at its end point
+      only, as ROS's path cost does by default; ``mean`` (our default) averages it over the
+      rollout's points (ROS's MapGridCostFunction offers a ``Sum`` aggregation for the same
+      purpose), so an arc that ends on the path but bulges off it in between scores worse.
     """
 
     max_vel_x: float = 0.5
@@ -59,6 +64,7 @@ class DWAParams:
     forward_point_distance: float = 0.325
     goal_lookahead: float = 1.0
     corner_angle: float = 1.0
+    path_aggregation: Literal["last", "mean"] = "mean"
 
     def validate(self) -> None:
         if not 0.0 <= self.min_vel_x <= self.max_vel_x or self.max_vel_x <= 0:
@@ -227,7 +233,8 @@ def dwa_control(
              + goal_distance_bias/2 · (|e − g| + |n − (g + f·u)|)         goal + goal front
              + occdist_scale / max(min clearance − robot_radius, ε)       obstacles
 
-    with a = 0 within ``forward_point_distance`` of a stop that is the local goal (as in ROS,
+    with d_path(e) the mean over all the rollout's points under ``path_aggregation: mean``, and
+    a = 0 within ``forward_point_distance`` of a stop that is the local goal (as in ROS,
     keeping the nose on the path there destabilizes the stop) and 1 elsewhere. The nose terms
     make rotating in place toward a path behind the robot strictly better than standing still,
     so a robot facing away turns around (v = 0 samples are in the window whenever the robot is
@@ -288,9 +295,17 @@ def dwa_control(
     f = p.forward_point_distance
     end = np.column_stack([xs[:, -1], ys[:, -1]])
     nose = end + f * np.column_stack([np.cos(ths[:, -1]), np.sin(ths[:, -1])])
-    d_path = line.nearest(np.vstack([end, nose]), max(1, int(np.searchsorted(line.cum, s_goal))))[0]
+    reach_goal = max(1, int(np.searchsorted(line.cum, s_goal)))
+    if p.path_aggregation == "mean":
+        body = np.column_stack([xs[:, 1:].ravel(), ys[:, 1:].ravel()])
+        d_body = line.nearest(np.vstack([body, nose]), reach_goal)[0]
+        d_end = d_body[: len(body)].reshape(len(v), steps).mean(axis=1)
+        d_nose = d_body[len(body) :]
+    else:
+        d_path = line.nearest(np.vstack([end, nose]), reach_goal)[0]
+        d_end, d_nose = d_path[: len(v)], d_path[len(v) :]
     align = 0.0 if s_goal == stop and dist <= f else 1.0
-    path_cost = d_path[: len(v)] + align * d_path[len(v) :]
+    path_cost = d_end + align * d_nose
     goal_cost = np.hypot(*(end - goal).T) + np.hypot(*(nose - (goal + f * u)).T)
     cost = p.path_distance_bias / 2 * path_cost + p.goal_distance_bias / 2 * goal_cost + occ
     cost = np.where(ok, cost, np.inf)

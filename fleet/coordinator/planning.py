@@ -24,10 +24,12 @@ class CoveragePlanner:
     def __init__(self, world: World, cfg: FleetConfig) -> None:
         self.grid = world.grid(PLAN_RESOLUTION)
         # Paths keep wall_clearance more than the robot radius from obstacles: the DWA needs
-        # clearance above the radius plus the noise of a median-filtered scan.
+        # clearance above the radius plus the noise of a median-filtered scan. Lanes overlap by
+        # lane_overlap, as a real robot tracks its lane only to a few centimetres.
         self.params = dataclasses.replace(
             cfg.coverage,
             robot_radius=cfg.robot.radius + cfg.coordinator.wall_clearance,
+            overlap=cfg.coordinator.lane_overlap,
             cleaning_width=cfg.robot.cleaning_width,
             max_speed=cfg.robot.max_vel_x,
         )
