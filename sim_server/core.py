@@ -36,14 +36,18 @@ SEGMENT_INDEX_MIN = 400
 COLLISION_DEBOUNCE_S = 1.0
 # The cleaning grid sweeps each robot's brush along the chord between its poses this often. At
 # ≤ 0.5 m/s and ≤ 1 rad/s the arc between two updates leaves its chord by ≤ v·ω/(8·hz²) ≈ 0.6 mm,
-# far below the 5 cm cells; the coverage rates published by the server divide it, so published
-# coverage is always current.
+# far below the 5 cm cells. summary() sweeps up to the current poses; the grid itself is current
+# at every step the default coverage rate (2 Hz) publishes it.
 CLEANING_HZ = 10.0
 
 
 @dataclass
 class RobotState:
-    """A robot's metrics; they outlive its departure and continue when it comes back."""
+    """A robot's metrics; they outlive its departure and continue when it comes back.
+
+    While the robot is in the world its distance driven accumulates in :class:`SimCore`'s
+    arrays; ``path_length_m`` is brought up to date by :meth:`SimCore.all_robots`.
+    """
 
     rid: str
     path_length_m: float = 0.0
@@ -277,14 +281,15 @@ class SimCore:
     # ---- metrics ------------------------------------------------------------------------
 
     def all_robots(self) -> dict[str, RobotState]:
+        """Every robot that has been in the world, with its metrics up to now."""
+        for rid, length in zip(self._ids, self._path.tolist(), strict=True):
+            self.robots[rid].path_length_m = length
         return {**self.departed, **self.robots}
 
     def summary(self, wall_s: float) -> CoverageSummary:
         """Metrics so far; sweeps the cleaning grid up to the current poses first."""
         if self._ids:
             self.cleaning.update(self._ids, self._poses[:, :2])
-        for rid, length in zip(self._ids, self._path.tolist(), strict=True):
-            self.robots[rid].path_length_m = length
         robots = self.all_robots()
         ids = sorted(robots)
         return CoverageSummary(
