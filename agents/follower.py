@@ -38,6 +38,8 @@ class FollowState:
     best_dist: float = math.inf
     aligning: bool = False
     best_error: float = math.inf
+    blocked_s: float = 0.0
+    backing_m: float = 0.0
 
     @property
     def done(self) -> bool:
@@ -162,6 +164,36 @@ def rotate_in_place(
     return v, w
 
 
+def back_up(
+    state: FollowState,
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    obstacles: np.ndarray,
+    params: DWAParams,
+    robot_radius: float,
+    dt: float,
+    agent: AgentParams,
+) -> tuple[FollowState, DWAResult] | None:
+    """Reverse straight back while ``state.backing_m`` is left and the way behind is clear —
+    no point of it nearer an obstacle than the robot radius or than the robot is now (Nav2's
+    BackUp recovery); None when it is not clear. DWA never reverses, so a robot that
+    has slid so close to an obstacle that no forward rollout is admissible needs this to get
+    out."""
+    heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
+    behind = np.asarray(pose[:2]) - np.linspace(0.02, state.backing_m, 5)[:, None] * heading
+    if len(obstacles):
+        points = np.vstack([np.asarray(pose[:2])[None, :], behind])
+        gaps = np.hypot(*(points[:, None, :] - obstacles[None, :, :]).transpose(2, 0, 1)).min(1)
+        if gaps[1:].min() < min(robot_radius, gaps[0]):
+            return None
+    v = max(-agent.backup_speed, velocity[0] - params.acc_lim_x * dt)
+    w = 0.0
+    t = np.linspace(0.0, params.sim_time, 11)
+    xs, ys, ths = rollout(pose, np.array([v]), np.array([w]), t)
+    result = DWAResult(v, w, np.column_stack([xs[0], ys[0], ths[0]]), 0.0, True)
+    return replace(state, backing_m=max(0.0, state.backing_m + min(v, 0.0) * dt)), result
+
+
 def control_step(
     state: FollowState,
     pose: tuple[float, float, float],
@@ -177,12 +209,19 @@ def control_step(
     A waypoint the robot has come no closer to (by ``PROGRESS_M``) for ``give_up_after_s`` is
     skipped, so a robot whose way is shut, that is caught in a local minimum of the DWA costs,
     or whose pose estimate has drifted into a wall moves on instead of waiting forever; the
-    skipped spot stays uncleaned and shows in the coverage. Turning in place counts as progress.
+    skipped spot stays uncleaned and shows in the coverage. Turning in place counts as progress,
+    and backing up (after DWA has found no admissible forward move for ``backup_after_s``) stops
+    the watchdog's clock.
     """
     xy = np.array(pose[:2])
     state = advance(state, xy, agent)
     if state.done:
         return state, None
+    if state.backing_m > 0:
+        backed = back_up(state, pose, velocity, obstacles, params, robot_radius, dt, agent)
+        if backed is not None:
+            return backed
+        state = replace(state, backing_m=0.0)
     target = state.waypoints[state.index]
     dist = math.dist(xy, target)
     aim = carrot(state, xy, agent.align_lookahead)
@@ -210,6 +249,11 @@ def control_step(
                 result = None
         if result is None:
             result = dwa_control(pose, velocity, path, obstacles, params, robot_radius, dt)
+        blocked = state.blocked_s + dt if not result.admissible else 0.0
+        if blocked >= agent.backup_after_s:
+            state = replace(state, blocked_s=0.0, backing_m=agent.backup_distance)
+        else:
+            state = replace(state, blocked_s=blocked)
         progressed = dist < state.best_dist - PROGRESS_M
     if progressed:
         best_error = min(state.best_error, abs(error)) if state.aligning else state.best_error

@@ -110,11 +110,22 @@ class AgentParams:
     align_enter: float = 0.6
     align_exit: float = 0.1
     align_lookahead: float = 0.3
+    backup_after_s: float = 1.0
+    backup_distance: float = 0.15
+    backup_speed: float = 0.1
     intent_horizon_s: float = 2.0
     status_hz: float = 2.0
 
     def validate(self) -> None:
-        for name in ("map_hz", "status_hz", "stale_after_s", "give_up_after_s", "align_exit"):
+        for name in (
+            "map_hz",
+            "status_hz",
+            "stale_after_s",
+            "give_up_after_s",
+            "align_exit",
+            "backup_after_s",
+            "backup_speed",
+        ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
         if not self.align_exit <= self.align_enter <= math.pi:

@@ -8,7 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from agents.follower import FollowState, advance, control_step, rotate_in_place, stop_speed
+from agents.follower import (
+    FollowState,
+    advance,
+    back_up,
+    control_step,
+    rotate_in_place,
+    stop_speed,
+)
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, rollout
 
@@ -78,3 +85,32 @@ def test_boustrophedon_is_tracked_to_centimetres_with_square_lane_ends() -> None
     for y in lanes:
         near = xy[np.abs(xy[:, 1] - y) < 0.05]
         assert near[:, 0].min() < AGENT.goal_tolerance and near[:, 0].max() > 2.96
+
+
+def test_back_up_reverses_only_while_the_way_behind_is_clear() -> None:
+    state = FollowState(np.array([[0.0, 0.0], [2.0, 0.0]]), index=1, backing_m=0.15)
+    ahead = np.array([[0.35, y] for y in np.linspace(-0.5, 0.5, 21)])
+    stepped = back_up(state, (0.0, 0.0, 0.0), (0.0, 0.0), ahead, DWA, 0.17, DT, AGENT)
+    assert stepped is not None
+    after, result = stepped
+    assert result.v == pytest.approx(-DWA.acc_lim_x * DT) and result.w == 0.0
+    assert after.backing_m == pytest.approx(0.15 - DWA.acc_lim_x * DT * DT)
+    wall_behind = np.array([[-0.25, y] for y in np.linspace(-0.5, 0.5, 21)])
+    assert back_up(state, (0.0, 0.0, 0.0), (0.0, 0.0), wall_behind, DWA, 0.17, DT, AGENT) is None
+
+
+def test_a_robot_wedged_against_a_wall_backs_up_and_then_drives_on() -> None:
+    # facing a wall 0.16 m ahead, the goal beyond it to the left: no forward move is admissible
+    wall = np.array([[0.16, y] for y in np.linspace(-1.0, 1.0, 81)])
+    path = np.array([[0.0, 0.0], [0.0, 1.0]])
+    state, pose, velocity = FollowState(path, index=1), (0.0, 0.0, 1.2), (0.0, 0.0)
+    commands = []
+    for _ in range(40):
+        state, result = control_step(state, pose, velocity, wall, DWA, 0.17, DT, AGENT)
+        assert result is not None
+        commands.append(result.v)
+        velocity = (result.v, result.w)
+        xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([DT]))
+        pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))
+    assert min(commands) < 0  # it reversed
+    assert pose[0] < -0.05 or pose[1] > 0.1  # and got away from the wall
