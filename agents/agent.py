@@ -86,7 +86,14 @@ class Agent:
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
         self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
         self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
-        log.info("%s spawned at (%.2f, %.2f, %.2f)", self.rid, reply.x, reply.y, reply.theta)
+        log.info(
+            "%s spawned at (%.2f, %.2f, %.2f), pose from %s",
+            self.rid,
+            reply.x,
+            reply.y,
+            reply.theta,
+            self.pose_source.name,
+        )
 
     def _make_pose_source(self, start: tuple[float, float, float]) -> PoseSource:
         if self.cfg.agent.pose_source == "odometry":
