@@ -137,13 +137,10 @@ def stop_speed(
         turn = abs(math.remainder(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]), 2 * math.pi))
         if turn <= params.corner_angle:
             return None
-    seg = wps[i] - (wps[i - 1] if i > 0 else xy)
+    start = wps[i - 1] if i > 0 else xy
+    seg = wps[i] - start
     length = float(np.hypot(*seg))
-    left = (
-        math.dist(xy, wps[i])
-        if length < 1e-9
-        else length - float((xy - wps[i] + seg) @ seg) / length
-    )
+    left = math.dist(xy, wps[i]) if length < 1e-9 else length - float((xy - start) @ seg) / length
     braking = params.max_vel_x**2 / (2 * params.acc_lim_x)
     if left > braking + along_tolerance:
         return None
@@ -162,6 +159,12 @@ def rotate_in_place(
     dw = params.acc_lim_theta * dt
     w = min(max(math.copysign(rate, heading_error), w0 - dw), w0 + dw)
     return v, w
+
+
+def _held(pose: tuple[float, float, float], v: float, w: float, params: DWAParams) -> DWAResult:
+    """A command chosen outside DWA, with its trajectory over ``sim_time`` for the intent."""
+    xs, ys, ths = rollout(pose, np.array([v]), np.array([w]), np.linspace(0, params.sim_time, 11))
+    return DWAResult(v, w, np.column_stack([xs[0], ys[0], ths[0]]), 0.0, True)
 
 
 def back_up(
@@ -187,10 +190,7 @@ def back_up(
         if gaps[1:].min() < min(robot_radius, gaps[0]):
             return None
     v = max(-agent.backup_speed, velocity[0] - params.acc_lim_x * dt)
-    w = 0.0
-    t = np.linspace(0.0, params.sim_time, 11)
-    xs, ys, ths = rollout(pose, np.array([v]), np.array([w]), t)
-    result = DWAResult(v, w, np.column_stack([xs[0], ys[0], ths[0]]), 0.0, True)
+    result = _held(pose, v, 0.0, params)
     return replace(state, backing_m=max(0.0, state.backing_m + min(v, 0.0) * dt)), result
 
 
@@ -228,10 +228,7 @@ def control_step(
     error = math.remainder(math.atan2(aim[1] - xy[1], aim[0] - xy[0]) - pose[2], 2 * math.pi)
     limit = agent.align_exit if state.aligning else agent.align_enter
     if abs(error) > limit and dist > agent.waypoint_tolerance:
-        v, w = rotate_in_place(error, velocity, params, dt)
-        t = np.linspace(0.0, params.sim_time, 11)
-        xs, ys, ths = rollout(pose, np.array([v]), np.array([w]), t)
-        result = DWAResult(v, w, np.column_stack([xs[0], ys[0], ths[0]]), 0.0, True)
+        result = _held(pose, *rotate_in_place(error, velocity, params, dt), params)
         if not state.aligning:
             state = replace(state, aligning=True, best_error=math.inf)
         progressed = abs(error) < state.best_error - TURN_PROGRESS_RAD

@@ -13,6 +13,7 @@ geometry_msgs/Twist, nav_msgs/Path) where one fits.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import typing
 import zlib
@@ -377,9 +378,10 @@ class MapPatches(Message):
             np.frombuffer(zlib.compress(cells, 6), dtype=np.uint8),
         )
 
+    @functools.cached_property
     def blocks(self) -> np.ndarray:
-        """The patches' cells as an int8 array (patches, tile, tile); raises DecodeError if
-        the compressed data does not hold exactly that many cells."""
+        """The patches' cells as an int8 array (patches, tile, tile), inflated once (decode
+        checks them); raises DecodeError if the data does not hold exactly that many cells."""
         n = len(self.patch_rows) * self.tile * self.tile
         inflater = zlib.decompressobj()
         try:
@@ -586,6 +588,6 @@ def _check_map_patches(msg: MapPatches) -> None:
     ):
         if len(arr) and (arr.min() < 0 or arr.max() > limit - msg.tile or (arr % msg.tile).any()):
             raise DecodeError(f"{where}.{name}: patches must be whole tiles inside the map")
-    blocks = msg.blocks()
+    blocks = msg.blocks
     if len(blocks) and (blocks.min() < -1 or blocks.max() > 100):
         raise DecodeError(f"{where}.data: cells must be -1 (unknown) or 0..100")

@@ -81,7 +81,7 @@ def test_map_messages_rebuild_the_map_exactly() -> None:
         if msg.full or received is None or received.shape != (msg.rows, msg.cols):
             received = np.full((msg.rows, msg.cols), -1, np.int8)
         t = msg.tile
-        for r, c, block in zip(msg.patch_rows, msg.patch_cols, msg.blocks(), strict=True):
+        for r, c, block in zip(msg.patch_rows, msg.patch_cols, msg.blocks, strict=True):
             received[r : r + t, c : c + t] = block
         np.testing.assert_array_equal(received, snapshot.to_ros())
     assert received is not None and (received >= 65).sum() > 100

@@ -434,7 +434,7 @@ def test_cross_field_shapes_are_checked() -> None:
 
 def test_map_patches_round_trip_their_cells_and_reject_bad_geometry() -> None:
     msg = _example(MapPatches)
-    blocks = decode(encode(msg), MapPatches).blocks()
+    blocks = decode(encode(msg), MapPatches).blocks
     assert blocks.shape == (2, 2, 2) and blocks[0, 0, 0] == 50 and blocks[1, 1, 1] == -1
     bad = {
         "cols": 5,  # not whole tiles
