@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, DWAResult, dwa_control, rollout
@@ -28,6 +29,9 @@ LOCAL_PATH_M = 3.0
 PROGRESS_M = 0.02
 TURN_PROGRESS_RAD = 0.05
 MEDIAN_BEAMS = 5
+ESCAPE_HEADINGS = 36
+ESCAPE_MARGIN_M = 0.02
+ESCAPE_HEADING_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True)
@@ -39,7 +43,9 @@ class FollowState:
     aligning: bool = False
     best_error: float = math.inf
     blocked_s: float = 0.0
-    backing_m: float = 0.0
+    escape_m: float = 0.0
+    escape_heading: float = 0.0
+    escape_sign: int = 1
 
     @property
     def done(self) -> bool:
@@ -167,7 +173,68 @@ def _held(pose: tuple[float, float, float], v: float, w: float, params: DWAParam
     return DWAResult(v, w, np.column_stack([xs[0], ys[0], ths[0]]), 0.0, True)
 
 
-def back_up(
+def escape_heading(
+    pose: tuple[float, float, float],
+    aim: np.ndarray,
+    obstacles: np.ndarray,
+    robot_radius: float,
+    distance: float,
+) -> float | None:
+    """The direction of travel of the escape move, or None when no straight move is free.
+
+    Of ``ESCAPE_HEADINGS`` directions, the free ones are those along which a straight move of
+    ``distance`` keeps every point at least min(robot_radius + ESCAPE_MARGIN_M, the gap now)
+    from the obstacles and ends farther from them than the robot is now (or clear of that
+    margin); the one closest to the direction of ``aim`` wins. A disc robot can always turn in
+    place, so any free direction can be taken: this is Nav2's Spin-then-DriveOnHeading recovery
+    with the heading chosen from the scan instead of fixed, and it frees a robot from the
+    pockets where DWA's forward arcs are all blocked and the way straight back is too."""
+    xy = np.asarray(pose[:2], dtype=float)
+    phi = np.linspace(-math.pi, math.pi, ESCAPE_HEADINGS, endpoint=False)
+    toward = math.atan2(aim[1] - xy[1], aim[0] - xy[0])
+    off = np.abs(np.remainder(phi - toward + math.pi, 2 * math.pi) - math.pi)
+    if len(obstacles) == 0:
+        return float(phi[np.argmin(off)])
+    tree = cKDTree(obstacles)
+    gap_now = float(tree.query(xy)[0])
+    steps = np.linspace(0.02, distance, 6)
+    dirs = np.column_stack([np.cos(phi), np.sin(phi)])
+    points = xy[None, None, :] + steps[None, :, None] * dirs[:, None, :]
+    gaps = tree.query(points.reshape(-1, 2))[0].reshape(len(phi), len(steps))
+    margin = robot_radius + ESCAPE_MARGIN_M
+    free = (gaps.min(axis=1) >= min(margin, gap_now)) & (
+        (gaps[:, -1] > gap_now) | (gaps[:, -1] >= margin)
+    )
+    if not free.any():
+        return None
+    return float(phi[free][np.argmin(off[free])])
+
+
+def start_escape(
+    state: FollowState,
+    pose: tuple[float, float, float],
+    obstacles: np.ndarray,
+    robot_radius: float,
+    agent: AgentParams,
+) -> FollowState:
+    """Begin the escape move toward the carrot, driving forward or in reverse, whichever needs
+    the smaller turn first; the state is unchanged when no direction is free."""
+    xy = np.asarray(pose[:2], dtype=float)
+    aim = carrot(state, xy, agent.align_lookahead)
+    travel = escape_heading(pose, aim, obstacles, robot_radius, agent.escape_distance)
+    if travel is None:
+        return state
+    forward = abs(math.remainder(travel - pose[2], 2 * math.pi)) <= math.pi / 2
+    return replace(
+        state,
+        blocked_s=0.0,
+        escape_m=agent.escape_distance,
+        escape_heading=travel if forward else math.remainder(travel + math.pi, 2 * math.pi),
+        escape_sign=1 if forward else -1,
+    )
+
+
+def escape_step(
     state: FollowState,
     pose: tuple[float, float, float],
     velocity: tuple[float, float],
@@ -177,21 +244,26 @@ def back_up(
     dt: float,
     agent: AgentParams,
 ) -> tuple[FollowState, DWAResult] | None:
-    """Reverse straight back while ``state.backing_m`` is left and the way behind is clear —
-    no point of it nearer an obstacle than the robot radius or than the robot is now (Nav2's
-    BackUp recovery); None when it is not clear. DWA never reverses, so a robot that
-    has slid so close to an obstacle that no forward rollout is admissible needs this to get
-    out."""
-    heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
-    behind = np.asarray(pose[:2]) - np.linspace(0.02, state.backing_m, 5)[:, None] * heading
+    """One step of the escape move: turn in place onto ``state.escape_heading``, then drive
+    straight (in reverse when ``escape_sign`` is −1) at ``escape_speed`` while ``escape_m`` is
+    left and the way is clear — no point of it nearer an obstacle than the robot radius or than
+    the robot is now; None when the move is over or its way has closed."""
+    error = math.remainder(state.escape_heading - pose[2], 2 * math.pi)
+    if abs(error) > ESCAPE_HEADING_TOLERANCE:
+        return state, _held(pose, *rotate_in_place(error, velocity, params, dt), params)
+    sign = state.escape_sign
+    way = sign * np.array([math.cos(pose[2]), math.sin(pose[2])])
+    ahead = np.asarray(pose[:2]) + np.linspace(0.02, state.escape_m, 5)[:, None] * way
     if len(obstacles):
-        points = np.vstack([np.asarray(pose[:2])[None, :], behind])
-        gaps = np.hypot(*(points[:, None, :] - obstacles[None, :, :]).transpose(2, 0, 1)).min(1)
+        points = np.vstack([np.asarray(pose[:2])[None, :], ahead])
+        gaps = cKDTree(obstacles).query(points)[0]
         if gaps[1:].min() < min(robot_radius, gaps[0]):
             return None
-    v = max(-agent.backup_speed, velocity[0] - params.acc_lim_x * dt)
+    v0 = velocity[0]
+    v = min(max(sign * agent.escape_speed, v0 - params.acc_lim_x * dt), v0 + params.acc_lim_x * dt)
     result = _held(pose, v, 0.0, params)
-    return replace(state, backing_m=max(0.0, state.backing_m + min(v, 0.0) * dt)), result
+    left = state.escape_m - abs(v) * dt if v * sign > 0 else state.escape_m
+    return replace(state, escape_m=max(0.0, left)), result
 
 
 def control_step(
@@ -210,18 +282,19 @@ def control_step(
     skipped, so a robot whose way is shut, that is caught in a local minimum of the DWA costs,
     or whose pose estimate has drifted into a wall moves on instead of waiting forever; the
     skipped spot stays uncleaned and shows in the coverage. Turning in place counts as progress,
-    and backing up (after DWA has found no admissible forward move for ``backup_after_s``) stops
-    the watchdog's clock.
+    and the escape move (after ``escape_after_s`` without progress while following DWA — boxed
+    in, or caught in a minimum of its costs; see :func:`escape_heading`) stops the watchdog's
+    clock.
     """
     xy = np.array(pose[:2])
     state = advance(state, xy, agent)
     if state.done:
         return state, None
-    if state.backing_m > 0:
-        backed = back_up(state, pose, velocity, obstacles, params, robot_radius, dt, agent)
-        if backed is not None:
-            return backed
-        state = replace(state, backing_m=0.0)
+    if state.escape_m > 0:
+        escaping = escape_step(state, pose, velocity, obstacles, params, robot_radius, dt, agent)
+        if escaping is not None:
+            return escaping
+        state = replace(state, escape_m=0.0)
     target = state.waypoints[state.index]
     dist = math.dist(xy, target)
     aim = carrot(state, xy, agent.align_lookahead)
@@ -246,12 +319,11 @@ def control_step(
                 result = None
         if result is None:
             result = dwa_control(pose, velocity, path, obstacles, params, robot_radius, dt)
-        blocked = state.blocked_s + dt if not result.admissible else 0.0
-        if blocked >= agent.backup_after_s:
-            state = replace(state, blocked_s=0.0, backing_m=agent.backup_distance)
-        else:
-            state = replace(state, blocked_s=blocked)
         progressed = dist < state.best_dist - PROGRESS_M
+        blocked = 0.0 if progressed else state.blocked_s + dt
+        state = replace(state, blocked_s=blocked)
+        if blocked >= agent.escape_after_s:
+            state = start_escape(state, pose, obstacles, robot_radius, agent)
     if progressed:
         best_error = min(state.best_error, abs(error)) if state.aligning else state.best_error
         return replace(

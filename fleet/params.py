@@ -110,9 +110,9 @@ class AgentParams:
     align_enter: float = 0.6
     align_exit: float = 0.1
     align_lookahead: float = 0.3
-    backup_after_s: float = 1.0
-    backup_distance: float = 0.15
-    backup_speed: float = 0.1
+    escape_after_s: float = 1.0
+    escape_distance: float = 0.15
+    escape_speed: float = 0.1
     intent_horizon_s: float = 2.0
     status_hz: float = 2.0
 
@@ -123,8 +123,9 @@ class AgentParams:
             "stale_after_s",
             "give_up_after_s",
             "align_exit",
-            "backup_after_s",
-            "backup_speed",
+            "escape_after_s",
+            "escape_distance",
+            "escape_speed",
         ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")

@@ -11,9 +11,11 @@ import pytest
 from agents.follower import (
     FollowState,
     advance,
-    back_up,
     control_step,
+    escape_heading,
+    escape_step,
     rotate_in_place,
+    start_escape,
     stop_speed,
 )
 from fleet.params import AgentParams
@@ -87,30 +89,58 @@ def test_boustrophedon_is_tracked_to_centimetres_with_square_lane_ends() -> None
         assert near[:, 0].min() < AGENT.goal_tolerance and near[:, 0].max() > 2.96
 
 
-def test_back_up_reverses_only_while_the_way_behind_is_clear() -> None:
-    state = FollowState(np.array([[0.0, 0.0], [2.0, 0.0]]), index=1, backing_m=0.15)
-    ahead = np.array([[0.35, y] for y in np.linspace(-0.5, 0.5, 21)])
-    stepped = back_up(state, (0.0, 0.0, 0.0), (0.0, 0.0), ahead, DWA, 0.17, DT, AGENT)
-    assert stepped is not None
-    after, result = stepped
-    assert result.v == pytest.approx(-DWA.acc_lim_x * DT) and result.w == 0.0
-    assert after.backing_m == pytest.approx(0.15 - DWA.acc_lim_x * DT * DT)
-    wall_behind = np.array([[-0.25, y] for y in np.linspace(-0.5, 0.5, 21)])
-    assert back_up(state, (0.0, 0.0, 0.0), (0.0, 0.0), wall_behind, DWA, 0.17, DT, AGENT) is None
+def test_escape_heading_leaves_a_pocket_toward_the_aim_and_is_none_when_enclosed() -> None:
+    # a wall to the left (x = 0.05) and a box whose corner is at lower right (0.425, 0.25): the
+    # dock pocket of the small world; the aim is straight right, which the box corner blocks
+    wall = np.array([[0.05, y] for y in np.linspace(0.0, 1.5, 61)])
+    box = np.array([[x, 0.25] for x in np.linspace(0.425, 0.8, 16)])
+    obstacles = np.vstack([wall, box])
+    pose, aim = (0.262, 0.36, 0.1), np.array([0.9, 0.38])
+    heading = escape_heading(pose, aim, obstacles, 0.17, 0.15)
+    assert heading is not None and 0.2 < heading < math.pi / 2 + 0.1
+    way = np.array([math.cos(heading), math.sin(heading)])
+    moved = np.array(pose[:2]) + np.linspace(0.0, 0.15, 16)[:, None] * way
+    gaps = np.hypot(*(moved[:, None, :] - obstacles[None]).transpose(2, 0, 1)).min(axis=1)
+    assert gaps.min() >= 0.17 and gaps[-1] > gaps[0]
+    ring = np.array([[0.19 * math.cos(a), 0.19 * math.sin(a)] for a in np.linspace(0, 6.28, 90)])
+    assert escape_heading((0.0, 0.0, 0.0), np.array([1.0, 0.0]), ring, 0.17, 0.15) is None
 
 
-def test_a_robot_wedged_against_a_wall_backs_up_and_then_drives_on() -> None:
+def test_escape_turns_first_then_drives_in_the_cheaper_sense() -> None:
+    path = np.array([[0.0, 0.0], [-2.0, 0.0]])
+    state = FollowState(path, index=1)
+    # free all round; the aim is behind the robot, so it reverses without turning
+    behind = start_escape(state, (0.0, 0.0, 0.0), np.zeros((0, 2)), 0.17, AGENT)
+    assert behind.escape_sign == -1 and behind.escape_m == AGENT.escape_distance
+    stepped = escape_step(
+        behind, (0.0, 0.0, 0.0), (0.0, 0.0), np.zeros((0, 2)), DWA, 0.17, DT, AGENT
+    )
+    assert stepped is not None and stepped[1].v < 0 and stepped[1].w == 0.0
+    # the aim is to the left: turn in place before driving
+    left = start_escape(
+        FollowState(np.array([[0.0, 0.0], [0.0, 2.0]]), index=1),
+        (0.0, 0.0, 0.0),
+        np.zeros((0, 2)),
+        0.17,
+        AGENT,
+    )
+    assert left.escape_sign == 1 and left.escape_heading == pytest.approx(math.pi / 2, abs=0.1)
+    turning = escape_step(left, (0.0, 0.0, 0.0), (0.0, 0.0), np.zeros((0, 2)), DWA, 0.17, DT, AGENT)
+    assert turning is not None and turning[1].v == 0.0 and turning[1].w > 0
+    # the way closes during the move: the escape ends
+    wall = np.array([[-0.25, y] for y in np.linspace(-0.5, 0.5, 21)])
+    assert escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), wall, DWA, 0.17, DT, AGENT) is None
+
+
+def test_a_robot_wedged_against_a_wall_escapes_and_then_drives_on() -> None:
     # facing a wall 0.16 m ahead, the goal beyond it to the left: no forward move is admissible
     wall = np.array([[0.16, y] for y in np.linspace(-1.0, 1.0, 81)])
     path = np.array([[0.0, 0.0], [0.0, 1.0]])
     state, pose, velocity = FollowState(path, index=1), (0.0, 0.0, 1.2), (0.0, 0.0)
-    commands = []
-    for _ in range(40):
+    for _ in range(60):
         state, result = control_step(state, pose, velocity, wall, DWA, 0.17, DT, AGENT)
         assert result is not None
-        commands.append(result.v)
         velocity = (result.v, result.w)
         xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([DT]))
         pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))
-    assert min(commands) < 0  # it reversed
-    assert pose[0] < -0.05 or pose[1] > 0.1  # and got away from the wall
+    assert pose[0] < -0.02 and pose[1] > 0.3  # it got off the wall and on toward the goal
