@@ -6,22 +6,21 @@ within the swath of some robot-centre cell — that is what makes it cleanable �
 robot-centre cell to it is a point a detour can visit to clean it. Missed cells are taken
 greedily (each chosen point clears every missed cell within its swath); points closer than a
 swath width form one chain, visited in nearest-neighbour order — a contour pass along the wall
-or furniture restricted to where it is needed. A chain is inserted into the path of the robot
-passing closest to it, as an out-and-back detour from that path's nearest vertex (transits by
-:class:`planners.coverage.transit.Transit`, so detours never cross blocked cells).
+or furniture restricted to where it is needed. Each chain becomes a task of its own: the tour
+(:mod:`planners.coverage.tour`) enters and leaves it wherever that costs least, so it is a leg
+of the tour rather than an out-and-back stub from the nearest path vertex.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Sequence
 
 import numpy as np
 from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from planners.coverage.metrics import swath
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, disc
 
@@ -82,79 +81,45 @@ def chains(points: np.ndarray, link: float) -> list[np.ndarray]:
     return out
 
 
-def add_fill_in(
+def fill_in_tasks(
     grid: GridMap,
-    paths: Sequence[np.ndarray],
+    covered: np.ndarray,
+    anchors: np.ndarray,
     clean: np.ndarray,
     reach: np.ndarray,
     half_width: float,
     transit: Transit,
     target: float = 1.0,
-) -> list[np.ndarray]:
-    """``paths`` with out-and-back detours covering the cleanable cells they miss.
+) -> list[tuple[np.ndarray, float]]:
+    """(path, area m²) of the passes cleaning what ``covered`` misses, until ``target``.
 
-    Detours are taken in decreasing order of missed cells cleaned per metre driven until the
-    covered share of ``clean`` reaches ``target`` (1.0: every detour).
+    Each chain of :func:`fill_points` becomes one pass (its points joined by transits, so it
+    never crosses blocked cells). Passes are taken in decreasing order of missed cells cleaned
+    per metre — the chain's length plus twice its distance from the nearest of ``anchors``
+    (the sweep paths' vertices), the detour it costs — until the covered share of ``clean``
+    reaches ``target`` (1.0: every pass). The tour then places them like any other task.
     """
-    covered = np.zeros(grid.shape, dtype=bool)
-    for p in paths:
-        covered |= swath(grid, p, half_width)[0]
     hw = half_width / grid.resolution
     pts, gain = fill_points(clean, covered, reach, hw)
     groups = chains(pts, 2 * hw)
     if not groups:
-        return list(paths)
-    verts = [np.asarray(p, dtype=float) for p in paths]
+        return []
+    tree = cKDTree(anchors) if len(anchors) else None
     options = []
     for ids in groups:
         chain = grid.cell_to_world(pts[ids])
-        i, j, flip, dist = _nearest_vertex(verts, chain)
         along = float(np.hypot(*np.diff(chain, axis=0).T).sum())
-        cost = 2 * (dist + along) + grid.resolution
-        options.append((int(gain[ids].sum()) / cost, int(gain[ids].sum()), i, j, flip, chain))
+        dist = float(tree.query(chain[[0, -1]])[0].min()) if tree is not None else 0.0
+        g = int(gain[ids].sum())
+        options.append((g / (2 * dist + along + grid.resolution), g, chain))
     options.sort(key=lambda o: -o[0])
     missing = int((clean & ~covered).sum())
     allowed = (1.0 - target) * int(clean.sum())
-    detours: list[list[tuple[int, np.ndarray]]] = [[] for _ in paths]
-    for _, g, i, j, flip, chain in options:
+    out = []
+    for _, g, chain in options:
         if missing <= allowed:
             break
         missing -= g
-        detours[i].append((j, chain[::-1] if flip else chain))
-    out = []
-    for v, ds in zip(verts, detours, strict=True):
-        if not ds:
-            out.append(v)
-            continue
-        parts = []
-        prev = 0
-        for j, chain in sorted(ds, key=lambda t: t[0]):
-            parts.append(v[prev : j + 1])
-            parts.append(_detour(v[j], chain, transit)[1:])
-            prev = j + 1
-        parts.append(v[prev:])
-        out.append(np.vstack(parts))
+        legs = [chain[:1]] + [transit.path(a, b)[1:] for a, b in itertools.pairwise(chain)]
+        out.append((np.vstack(legs), g * grid.resolution**2))
     return out
-
-
-def _nearest_vertex(verts: list[np.ndarray], chain: np.ndarray) -> tuple[int, int, bool, float]:
-    """(path, vertex, whether to drive the chain backwards, distance) of the path vertex
-    nearest to either end of the chain."""
-    best = (math.inf, 0, 0, False)
-    for i, v in enumerate(verts):
-        for flip, end in ((False, chain[0]), (True, chain[-1])):
-            d = np.hypot(*(v - end).T)
-            j = int(np.argmin(d))
-            if d[j] < best[0]:
-                best = (float(d[j]), i, j, flip)
-    return best[1], best[2], best[3], best[0]
-
-
-def _detour(v: np.ndarray, chain: np.ndarray, transit: Transit) -> np.ndarray:
-    """From ``v`` through the chain's points and back to ``v``."""
-    legs = [v[None, :]]
-    cur = v
-    for q in [*chain, v]:
-        legs.append(transit.path(cur, q)[1:])
-        cur = q
-    return np.vstack(legs)

@@ -12,11 +12,13 @@ class CoverageParams:
 
     ``robot_radius`` and ``cleaning_width`` must equal the ``robot:`` section (0.17 m, 0.30 m).
     Lanes are ``cleaning_width · (1 − overlap)`` apart. With ``fill_in`` the floor the sweeps
-    miss is cleaned by short targeted detours afterwards, the most cells per metre first, until
-    ``fill_in_target`` of the cleanable area is covered (1.0: every detour). Rooms are separated
-    at openings narrower than ``door_width``; a room smaller than ``min_room_area`` joins its
-    largest neighbour. For k robots a boustrophedon cell is cut into lane groups of at most
-    ``max_task_area`` so the work can be balanced finely. Time estimates use ``max_speed`` plus
+    miss is cleaned by targeted passes placed in the tour like any task, the most cells per
+    metre first, until the sweeps and passes cover ``fill_in_target`` of the cleanable area
+    (1.0: every pass; transits only add to it). Rooms are separated at openings narrower than
+    ``door_width``; a room smaller than ``min_room_area`` joins its largest neighbour. A
+    boustrophedon cell is cut into lane groups of at most ``max_task_area``, so the tour can
+    leave a cell part-swept to visit a neighbour and come back, and k robots can balance the
+    work finely. Time estimates use ``max_speed`` plus
     ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``).
     """
 
@@ -26,13 +28,13 @@ class CoverageParams:
     method: Literal["bcd", "spiral"] = "bcd"
     edge_pass: bool = False
     fill_in: bool = True
-    fill_in_target: float = 0.997
+    fill_in_target: float = 0.995
     max_speed: float = 0.5
     turn_cost_s: float = 2.0
     turn_angle_deg: float = 45.0
     door_width: float = 1.0
     min_room_area: float = 2.0
-    max_task_area: float = 4.0
+    max_task_area: float = 2.0
     simplify_tolerance: float = 0.03
 
     def validate(self) -> None:

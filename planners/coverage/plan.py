@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -10,17 +11,18 @@ from dataclasses import dataclass
 import networkx as nx
 import numpy as np
 from scipy import ndimage
-from scipy.sparse.csgraph import dijkstra
 
 from planners.coverage.bcd import decompose
-from planners.coverage.fill_in import add_fill_in
+from planners.coverage.fill_in import fill_in_tasks
 from planners.coverage.frame import dominant_direction, frame_for, resample
+from planners.coverage.geodesic import PathCosts
 from planners.coverage.lattice import room_lanes
-from planners.coverage.metrics import CoverageMetrics, coverage_metrics
-from planners.coverage.ordering import choose_variants, order_tasks, split_tour, two_opt_path
+from planners.coverage.metrics import CoverageMetrics, coverage_metrics, path_time, swath
+from planners.coverage.ordering import split_tour
 from planners.coverage.params import CoverageParams
-from planners.coverage.rooms import grid_graph, segment_rooms, shared_borders
+from planners.coverage.rooms import segment_rooms, shared_borders
 from planners.coverage.tasks import SweepTask, cell_tasks, edge_task, spiral_task
+from planners.coverage.tour import TaskEnds, end_points, path_of, plan_tour, task_ends
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, cleanable, clearance, reachable
 
@@ -70,12 +72,13 @@ def plan_coverage(
     Steps: robot-centre cells (clearance ≥ robot_radius) 4-connected to a start; rooms by
     distance-transform segmentation; per room the dominant wall direction, a frame rotated to
     it and the boustrophedon decomposition (Choset 2000) of the room in that frame; lanes on
-    one lattice per room (``lattice.room_lanes``); sweep tasks per cell (boustrophedon lanes or
-    a spiral); rooms ordered by 2-opt on geodesic distances,
-    tasks greedily within a room; for k robots the tour is cut into contiguous pieces balancing
-    estimated time. Transits are straight when clear, A* on the inflated grid otherwise.
-    Finally, with ``params.fill_in``, targeted detours clean the floor the paths still miss
-    (``fill_in.add_fill_in``).
+    one lattice per room (``lattice.room_lanes``); sweep tasks per cell (groups of
+    boustrophedon lanes, or a spiral); one tour over all tasks of a connected part of the floor
+    (``tour.plan_tour``: task order, direction and variant by path-cost estimates between task
+    ends, ``geodesic.PathCosts``); with ``params.fill_in``, targeted passes for the floor the
+    sweeps miss (``fill_in.fill_in_tasks``) inserted into the tour where they cost least; for
+    k robots the tour is cut into contiguous pieces balancing estimated time, each re-ordered
+    from its robot's start. Transits are straight when clear, A* on the inflated grid otherwise.
     """
     t0 = time.perf_counter()
     params.validate()
@@ -104,8 +107,7 @@ def plan_coverage(
 
     rooms = segment_rooms(reach, clear, res, params.door_width, params.min_room_area)
     n_rooms = int(rooms.max())
-    multi = len(start_xy) > 1
-    max_area = params.max_task_area if multi else math.inf
+    max_area = params.max_task_area
     cell_labels = np.zeros(grid.shape, dtype=np.int32)
     room_img = _extend_labels(rooms, clean)
     step = max(1, math.floor(params.lane_spacing / res + 1e-9))
@@ -139,24 +141,33 @@ def plan_coverage(
     room_img = _extend_labels(rooms, clean)
     cell_img = _extend_labels(cell_labels, clean)
     transit = Transit(grid, reach)
-    pieces = _split_by_component(reach, rooms, room_tasks, start_xy, start_cells, params)
-    paths = []
-    robot_tasks = []
-    for s, piece in zip(start_xy, pieces, strict=True):
-        if len(piece) > 1:
-            d_first = min(np.hypot(*(v[0] - s)) for v in piece[0].variants)
-            d_last = min(np.hypot(*(v[0] - s)) for v in piece[-1].variants)
-            if d_last < d_first:
-                piece = piece[::-1]
-        paths.append(_drive(s, piece, transit))
-        robot_tasks.append(tuple(piece))
+    tasks = [t for ts in room_tasks for t in ts]
+    costs = PathCosts(grid, reach)
+    comp, _ = ndimage.label(reach)
+    robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
+    tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy)
     if params.fill_in:
-        paths = [
-            _dedupe(p)
-            for p in add_fill_in(
-                grid, paths, clean, reach, params.cleaning_width / 2, transit, params.fill_in_target
-            )
-        ]
+        tasks, tours = _add_fill_in(
+            grid,
+            comp,
+            robot_comp,
+            tasks,
+            tours,
+            start_xy,
+            clean,
+            reach,
+            room_img,
+            cell_img,
+            transit,
+            costs,
+            params,
+        )
+    pieces = _split(tasks, tours, robot_comp, costs, start_xy, params)
+    paths = [
+        _drive(s, [path_of(tasks[t], o) for t, o in piece], transit)
+        for s, piece in zip(start_xy, pieces, strict=True)
+    ]
+    robot_tasks = [tuple(tasks[t] for t, _ in piece) for piece in pieces]
 
     metrics = coverage_metrics(
         grid,
@@ -228,70 +239,101 @@ def _extend_labels(labels: np.ndarray, clean: np.ndarray) -> np.ndarray:
     return out
 
 
-def _split_by_component(reach, rooms, room_tasks, start_xy, start_cells, params):
-    """Each robot's tasks: the rooms of each connected part of the floor go to the robots that
-    start in it, in one tour cut into balanced pieces when several robots share the part."""
-    comp, _ = ndimage.label(reach)
-    robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
-    room_comp = ndimage.maximum(comp, rooms, index=np.arange(1, len(room_tasks) + 1))
-    pieces: list[list[SweepTask]] = [[] for _ in range(len(start_xy))]
+def _ends(tasks, costs, start_xy) -> tuple[TaskEnds, int]:
+    """The tasks' ends with path costs between them and the starts (appended after them), and
+    the point index of the first start."""
+    pts = end_points(tasks)
+    return task_ends(tasks, costs.matrix(np.vstack([pts, start_xy]))), len(pts)
+
+
+def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, initial=None):
+    """Per connected part of the floor holding a start: one tour over its tasks from its first
+    robot's start (continuing ``initial[c]``, a tour over some of them, when given)."""
+    ends, n_pts = _ends(tasks, costs, start_xy)
+    first = grid.world_to_cell(np.array([t.variants[0][0] for t in tasks]).reshape(-1, 2))
+    task_comp = comp[first[:, 0], first[:, 1]]
+    tours = {}
     for c in np.unique(robot_comp):
+        r0 = int(np.flatnonzero(robot_comp == c)[0])
+        ids = [int(k) for k in np.flatnonzero(task_comp == c)]
+        start = initial[c] if initial else ()
+        tours[int(c)] = plan_tour(ids, n_pts + r0, ends, start)
+    return tours
+
+
+def _split(tasks, tours, robot_comp, costs, start_xy, params) -> list[list[tuple[int, int]]]:
+    """Each robot's (task, option) sequence: a part's tour is cut into pieces balancing the
+    estimated time among the robots starting in it (``ordering.split_tour``), each piece then
+    re-ordered from its robot's start."""
+    pieces: list[list[tuple[int, int]]] = [[] for _ in range(len(start_xy))]
+    ends = None
+    for c, tour in tours.items():
         robots = np.flatnonzero(robot_comp == c)
-        ids = [r for r in range(len(room_tasks)) if room_comp[r] == c]
-        tour = _single_tour(reach & (comp == c), rooms, room_tasks, ids, start_xy[robots[0]])
         if len(robots) == 1:
             pieces[robots[0]] = tour
-        else:
-            for i, piece in zip(
-                robots, split_tour(tour, start_xy[robots], params.max_speed), strict=True
-            ):
-                pieces[i] = piece
+            continue
+        if ends is None:
+            ends, n_pts = _ends(tasks, costs, start_xy)
+        directed = [_fixed(tasks[t], o) for t, o in tour]
+        step_of = {id(d): step for d, step in zip(directed, tour, strict=True)}
+        split = split_tour(directed, start_xy[robots], params.max_speed)
+        for r, piece in zip(robots, split, strict=True):
+            steps = [step_of[id(d)] for d in piece]
+            pieces[r] = plan_tour([t for t, _ in steps], n_pts + int(r), ends, steps)
     return pieces
 
 
-def _single_tour(reach, rooms, room_tasks, ids, start) -> list[SweepTask]:
-    """The tasks of rooms ``ids`` in one robot's order: rooms by 2-opt on geodesic distances
-    between their central cells, tasks by 2-opt within each room."""
-    n = len(ids)
-    if n == 0:
-        return []
-    graph, index = grid_graph(reach)
-    anchors = []
-    for room in ids:
-        rr, cc = np.nonzero(rooms == room + 1)
-        k = np.argmin((rr - rr.mean()) ** 2 + (cc - cc.mean()) ** 2)
-        anchors.append(index[rr[k], cc[k]])
-    dist = dijkstra(graph.tocsr(), indices=anchors)[:, anchors]
-    dist = np.where(np.isfinite(dist), dist, 1e9)
-    start_room = _nearest_room([room_tasks[r] for r in ids], start)
-    order = two_opt_path(dist, start_room) if n > 1 else [0]
-    out: list[SweepTask] = []
-    p = start
-    for r in order:
-        seq = order_tasks(room_tasks[ids[r]], p)
-        if seq:
-            out.extend(seq)
-            p = choose_variants(seq, p)[-1][-1]
-    return out
+def _fixed(task: SweepTask, option: int) -> SweepTask:
+    """The task with only the path of its chosen option (driven either way)."""
+    return dataclasses.replace(task, variants=(path_of(task, option),))
 
 
-def _nearest_room(room_tasks, start) -> int:
-    best, best_d = 0, math.inf
-    for r, tasks in enumerate(room_tasks):
-        for t in tasks:
-            d = min(float(np.hypot(*(v[0] - start))) for v in t.variants)
-            if d < best_d:
-                best, best_d = r, d
-    return best
+def _add_fill_in(
+    grid,
+    comp,
+    robot_comp,
+    tasks,
+    tours,
+    start_xy,
+    clean,
+    reach,
+    room_img,
+    cell_img,
+    transit,
+    costs,
+    params,
+):
+    """Tasks and tours with fill-in passes for the floor the sweeps miss
+    (``fill_in.fill_in_tasks``). Each sweep keeps the variant its tour chose (its coverage is
+    what the passes complete; transits are not counted on, as tours change them); the passes
+    are inserted into the tours where they cost least, then the tours are improved again."""
+    hw = params.cleaning_width / 2
+    fixed = []
+    initial = {}
+    for c, tour in tours.items():
+        initial[c] = [(len(fixed) + k, 0) for k in range(len(tour))]
+        fixed.extend(_fixed(tasks[t], o) for t, o in tour)
+    covered = np.zeros(grid.shape, dtype=bool)
+    for t in fixed:
+        covered |= swath(grid, t.variants[0], hw)[0]
+    anchors = np.vstack([start_xy, *(t.variants[0] for t in fixed)])
+    passes = fill_in_tasks(grid, covered, anchors, clean, reach, hw, transit, params.fill_in_target)
+    if not passes:
+        return tasks, tours
+    for path, area in passes:
+        rc = grid.world_to_cell(path[0])
+        _, _, t = path_time(path, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
+        room, cell = int(room_img[rc[0], rc[1]]), int(cell_img[rc[0], rc[1]])
+        fixed.append(SweepTask(room, cell, (path,), area, t))
+    return fixed, _component_tours(grid, comp, robot_comp, fixed, costs, start_xy, initial)
 
 
-def _drive(start: np.ndarray, tasks: Sequence[SweepTask], transit: Transit) -> np.ndarray:
-    """The robot's whole path: transit to each task's nearest variant, then sweep it."""
+def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> np.ndarray:
+    """The robot's whole path: transit to each task's chosen path, then drive it."""
     parts = [start[None, :]]
     p = start
-    for v in choose_variants(tasks, start):
-        leg = transit.path(p, v[0])
-        parts.append(leg[1:])
+    for v in legs:
+        parts.append(transit.path(p, v[0])[1:])
         parts.append(v[1:])
         p = v[-1]
     return _dedupe(np.vstack(parts))

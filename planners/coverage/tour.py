@@ -1,0 +1,234 @@
+"""One robot's visiting order of sweep tasks, judged by path cost between their ends.
+
+Every task can be driven in any of its variants, forwards or backwards, so ordering is an open
+generalized TSP over directed pieces (one piece per task, its entry and exit depending on the
+choice). The heuristic: greedy nearest entry from the start, then local search until no move
+gains — 2-opt where reversing a stretch drives each of its tasks backwards (the asymmetric
+form of Croes' 1958 move), Or-opt (Or 1976) moving a run of up to three tasks elsewhere,
+forwards or reversed — alternating with an exact choice of every task's variant for the
+current order (dynamic programming over the variants, Viterbi). Hop costs come from one matrix
+over all task ends (:func:`planners.coverage.geodesic.path_costs`), so a hop through a door
+is priced as the detour it is.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from planners.coverage.tasks import SweepTask
+
+_EPS = 1e-9
+_MAX_ROUNDS = 50
+
+
+@dataclass(frozen=True)
+class TaskEnds:
+    """Entry/exit point and driven length of every option of every task, and the cost matrix
+    over all points. Option ``2·v + r`` of a task is its variant ``v``, reversed when ``r`` is
+    1; option ``o`` of task ``t`` is entry ``offset[t] + o`` of the flat arrays."""
+
+    offset: np.ndarray
+    count: np.ndarray
+    entry: np.ndarray
+    exit: np.ndarray
+    length: np.ndarray
+    cost: np.ndarray
+
+    def options(self, t: int) -> slice:
+        return slice(int(self.offset[t]), int(self.offset[t] + self.count[t]))
+
+
+def end_points(tasks: Sequence[SweepTask]) -> np.ndarray:
+    """All task ends as one (M, 2) array: per variant its first and its last point."""
+    pts = [p for t in tasks for v in t.variants for p in (v[0], v[-1])]
+    return np.array(pts, dtype=float).reshape(-1, 2)
+
+
+def task_ends(tasks: Sequence[SweepTask], cost: np.ndarray) -> TaskEnds:
+    """The :class:`TaskEnds` of ``tasks`` given a cost matrix over their :func:`end_points`
+    (and any other points, e.g. robot starts, appended after them)."""
+    count = np.array([2 * len(t.variants) for t in tasks], dtype=np.int64)
+    offset = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
+    entry = np.arange(int(count.sum()), dtype=np.int64)
+    exit_ = entry ^ 1
+    length = np.repeat(
+        [float(np.hypot(*np.diff(v, axis=0).T).sum()) for t in tasks for v in t.variants], 2
+    )
+    return TaskEnds(offset, count, entry, exit_, length, cost)
+
+
+def path_of(task: SweepTask, option: int) -> np.ndarray:
+    v = task.variants[option // 2]
+    return v[::-1] if option % 2 else v
+
+
+def plan_tour(
+    ids: Sequence[int],
+    start: int,
+    ends: TaskEnds,
+    initial: Sequence[tuple[int, int]] = (),
+) -> list[tuple[int, int]]:
+    """(task id, option) in driving order for tasks ``ids``, starting at point ``start``.
+
+    Without ``initial`` the tour starts greedy; with it, the tasks of ``ids`` not in
+    ``initial`` are first added to it one by one where they lengthen it least.
+    """
+    if not ids:
+        return []
+    if initial:
+        seq = np.array([ends.offset[t] + o for t, o in initial], dtype=np.int64)
+        placed = {t for t, _ in initial}
+        for t in ids:
+            if t not in placed:
+                seq = _insert(seq, t, start, ends)
+    else:
+        seq = _greedy(list(ids), start, ends)
+    best = _total(seq, start, ends)
+    for _ in range(_MAX_ROUNDS):
+        seq = _two_opt(seq, start, ends)
+        seq = _or_opt(seq, start, ends)
+        seq = _choose_options(seq, start, ends)
+        total = _total(seq, start, ends)
+        if total > best - _EPS:
+            break
+        best = total
+    task = np.searchsorted(ends.offset, seq, side="right") - 1
+    return [(int(t), int(k - ends.offset[t])) for t, k in zip(task, seq, strict=True)]
+
+
+def _greedy(ids: list[int], start: int, ends: TaskEnds) -> np.ndarray:
+    """Sequence of flat option indices: always the nearest entry of a task not yet taken."""
+    opts = np.concatenate([np.arange(ends.offset[t], ends.offset[t] + ends.count[t]) for t in ids])
+    task = np.concatenate([np.full(ends.count[t], t) for t in ids])
+    left = np.ones(len(opts), dtype=bool)
+    seq = []
+    cur = start
+    for _ in ids:
+        d = np.where(left, ends.cost[cur, ends.entry[opts]], np.inf)
+        k = int(np.argmin(d))
+        seq.append(opts[k])
+        left &= task != task[k]
+        cur = ends.exit[opts[k]]
+    return np.array(seq, dtype=np.int64)
+
+
+def _insert(seq: np.ndarray, t: int, start: int, ends: TaskEnds) -> np.ndarray:
+    """``seq`` with task ``t`` (its best option) where it adds the least."""
+    c = ends.cost
+    before, ent = _points(seq, start, ends)
+    nxt = np.append(ent, -1)
+    open_end = nxt < 0
+    nxt0 = np.maximum(nxt, 0)
+    base = np.where(open_end, 0.0, c[before, nxt0])
+    sl = ends.options(t)
+    into = c[before[:, None], ends.entry[sl][None, :]]
+    out = np.where(open_end[:, None], 0.0, c[ends.exit[sl][None, :], nxt0[:, None]])
+    added = into + out - base[:, None] + ends.length[sl][None, :]
+    p, o = np.unravel_index(int(np.argmin(added)), added.shape)
+    return np.insert(seq, int(p), ends.offset[t] + int(o))
+
+
+def _points(seq: np.ndarray, start: int, ends: TaskEnds) -> tuple[np.ndarray, np.ndarray]:
+    """(exit before position i, with the start before 0) and (entry at position i)."""
+    return np.concatenate([[start], ends.exit[seq]]), ends.entry[seq]
+
+
+def _total(seq: np.ndarray, start: int, ends: TaskEnds) -> float:
+    """Hops plus driven length."""
+    before, ent = _points(seq, start, ends)
+    return float(ends.cost[before[:-1], ent].sum() + ends.length[seq].sum())
+
+
+def _reverse(run: np.ndarray, ends: TaskEnds) -> np.ndarray:
+    """The run driven backwards: tasks in reverse order, each in its reversed option."""
+    return run[::-1] ^ 1
+
+
+def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
+    """Reverse stretches ``seq[i..j]`` (each task driven backwards) while that shortens hops."""
+    c = ends.cost
+    n = len(seq)
+    improved = True
+    while improved:
+        improved = False
+        for i in range(n):
+            before, ent = _points(seq, start, ends)
+            ext = before[1:]
+            j = np.arange(i, n)
+            nxt = np.append(ent[i + 1 :], -1)
+            has_next = nxt >= 0
+            nxt0 = np.maximum(nxt, 0)
+            old = c[before[i], ent[i]] + np.where(has_next, c[ext[j], nxt0], 0.0)
+            new = c[before[i], ext[j]] + np.where(has_next, c[ent[i], nxt0], 0.0)
+            gain = old - new
+            k = int(np.argmax(gain))
+            if gain[k] > _EPS:
+                jj = int(j[k])
+                seq = np.concatenate([seq[:i], _reverse(seq[i : jj + 1], ends), seq[jj + 1 :]])
+                improved = True
+    return seq
+
+
+def _or_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
+    """Move runs of 1–3 consecutive tasks (forwards or reversed) to a cheaper place."""
+    c = ends.cost
+    improved = True
+    while improved:
+        improved = False
+        for length in (1, 2, 3):
+            i = 0
+            while i + length <= len(seq):
+                n = len(seq)
+                before, ent = _points(seq, start, ends)
+                a = before[i]
+                s_in, s_out = ent[i], ends.exit[seq[i + length - 1]]
+                if i + length < n:
+                    b = ent[i + length]
+                    removed = c[a, s_in] + c[s_out, b] - c[a, b]
+                else:
+                    removed = c[a, s_in]
+                rest = np.concatenate([seq[:i], seq[i + length :]])
+                pb, r_ent = _points(rest, start, ends)
+                pe = np.append(r_ent, -1)
+                open_end = pe < 0
+                pe0 = np.maximum(pe, 0)
+                base = np.where(open_end, 0.0, c[pb, pe0])
+                fwd = c[pb, s_in] + np.where(open_end, 0.0, c[s_out, pe0]) - base
+                rev = c[pb, s_out] + np.where(open_end, 0.0, c[s_in, pe0]) - base
+                cand = np.minimum(fwd, rev)
+                p = int(np.argmin(cand))
+                if cand[p] < removed - _EPS:
+                    run = seq[i : i + length]
+                    if rev[p] < fwd[p]:
+                        run = _reverse(run, ends)
+                    seq = np.concatenate([rest[:p], run, rest[p:]])
+                    improved = True
+                else:
+                    i += 1
+    return seq
+
+
+def _choose_options(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
+    """The option of every task (order fixed) minimizing hops plus driven length (Viterbi)."""
+    c = ends.cost
+    task = np.searchsorted(ends.offset, seq, side="right") - 1
+    sl = ends.options(int(task[0]))
+    cost = c[start, ends.entry[sl]] + ends.length[sl]
+    back = []
+    for p, t in itertools.pairwise(task):
+        sp, st = ends.options(int(p)), ends.options(int(t))
+        hop = c[np.ix_(ends.exit[sp], ends.entry[st])]
+        total = cost[:, None] + hop + ends.length[st][None, :]
+        back.append(np.argmin(total, axis=0))
+        cost = total.min(axis=0)
+    k = int(np.argmin(cost))
+    picks = [k]
+    for b in reversed(back):
+        k = int(b[k])
+        picks.append(k)
+    picks.reverse()
+    return ends.offset[task] + np.array(picks, dtype=np.int64)
