@@ -36,7 +36,8 @@ def _sweep_counts(shape, lanes):
 def test_cells_around_a_table_share_one_lattice_and_rarely_sweep_the_same_strip():
     mask, labels, cells, clean = _ring_room()
     assert len(cells) == 4
-    lanes = room_lanes(cells, mask, clean, labels, 6, 3.0)
+    lanes, shoulders = room_lanes(cells, mask, clean, labels, 6, 3.0)
+    lanes = lanes + shoulders
     for ln in lanes:  # lane centres stay on robot-centre cells
         for y, lo, hi in ln:
             for r in {int(np.floor(y)), int(np.ceil(y))}:

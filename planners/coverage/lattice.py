@@ -7,7 +7,11 @@ the lattice lane that straddles the border between a cell and the cell above bel
 lower cell and spans where both rows are reachable. A cell adds a lane off the lattice (a clamp
 lane, as close to the wall as the uncovered floor needs and only as long as it) only where
 cleanable floor it owns lies below its first or above its last lattice lane — typically along a
-wall; whatever a wall's shoulder still leaves is picked up later by targeted fill-in passes.
+wall. Where the cell's width changes (a shoulder beside furniture or a doorway: the lattice lane
+stops short of a wall that steps out), a short shoulder lane, as close to the missed floor as the
+cell allows and only as long as it, sweeps each patch of at least ``SHOULDER_CELLS`` missed
+cells; shoulder lanes are tasks of their own, so the tour reaches them from whichever lane end
+is nearest. What is left (mostly single cells at lane ends) is for targeted fill-in passes.
 The phase is chosen per room among the ``step`` possible ones to minimise the total lane
 length.
 """
@@ -22,6 +26,10 @@ from scipy import ndimage
 from planners.coverage.bcd import MonotoneCell
 from planners.coverage.sweeps import lane_extent
 
+SHOULDER_CELLS = 12
+# what a separate task costs beyond its lane, in cells of lane length, when choosing the phase
+TASK_COST_CELLS = 20
+
 
 def room_lanes(
     cells: list[MonotoneCell],
@@ -30,28 +38,34 @@ def room_lanes(
     cell_labels_rot: np.ndarray,
     step: int,
     half_width: float,
-) -> list[np.ndarray]:
-    """Per cell an (n, 3) array of lanes ``(y, first col, last col)`` sorted by ``y``.
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per cell an (n, 3) array of lanes ``(y, first col, last col)`` sorted by ``y``, and per
+    cell an (m, 3) array of its shoulder lanes.
 
     ``rot`` is the room's robot-centre mask in its rotated frame, ``clean_rot`` the cleanable
     floor the room is responsible for, ``cell_labels_rot`` the cells' label image (1..n) and
     ``half_width`` the swath half-width in cells.
     """
     if not cells:
-        return []
+        return [], []
     owner = _nearest_label(cell_labels_rot, clean_rot)
     rmin = min(c.row0 for c in cells)
-    best: tuple[float, list[np.ndarray]] | None = None
+    best: tuple[float, tuple[list[np.ndarray], list[np.ndarray]]] | None = None
     for shift in range(step):
         lanes = _lanes_for_phase(cells, rot, clean_rot, owner, rmin + 0.5 + shift, step, half_width)
-        cost = float(sum((ln[:, 2] - ln[:, 1] + 1).sum() + len(ln) for ln in lanes))
+        cost = float(
+            sum((ln[:, 2] - ln[:, 1] + 1).sum() + TASK_COST_CELLS * len(ln) for ln in lanes[1])
+            + sum((ln[:, 2] - ln[:, 1] + 1).sum() + len(ln) for ln in lanes[0])
+        )
         if best is None or cost < best[0]:
             best = (cost, lanes)
     assert best is not None
     return best[1]
 
 
-def _lanes_for_phase(cells, rot, clean_rot, owner, phase, step, hw) -> list[np.ndarray]:
+def _lanes_for_phase(
+    cells, rot, clean_rot, owner, phase, step, hw
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     lattice: list[list[tuple[float, int, int]]] = []
     covered = np.zeros(rot.shape, dtype=bool)
     for cell in cells:
@@ -71,6 +85,54 @@ def _lanes_for_phase(cells, rot, clean_rot, owner, phase, step, hw) -> list[np.n
                 lanes.append(lane)
         lanes.sort()
         out.append(np.array(lanes, dtype=float).reshape(-1, 3))
+    shoulders = []
+    for k, cell in enumerate(cells, start=1):
+        mine = clean_rot & (owner == k) & ~covered
+        extra = _shoulder_lanes(cell, mine, hw)
+        for lane in extra:
+            _sweep(covered, *lane, hw)
+        shoulders.append(np.array(extra, dtype=float).reshape(-1, 3))
+    return out, shoulders
+
+
+def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
+    """Short lanes sweeping the patches of ``mine`` (the cell's missed floor) of at least
+    ``SHOULDER_CELLS`` cells, largest first: each at the row, within two of touching the
+    patch's lower or upper edge, where the cell's lane sweeps most of it, as long as the
+    patch."""
+    labels, n = ndimage.label(mine, structure=np.ones((3, 3)))
+    if n == 0:
+        return []
+    sizes = np.bincount(labels.ravel())[1:]
+    reach = math.ceil(hw - 1e-9) - 0.5
+    top = cell.row0 + cell.rows - 1
+    out = []
+    left = mine.copy()
+    for lab in np.argsort(-sizes) + 1:
+        rr, cc = np.nonzero((labels == lab) & left)
+        if len(rr) < SHOULDER_CELLS:
+            continue
+        best = None
+        wants = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
+        for want in wants:
+            if cell.rows == 1:
+                y = float(cell.row0)
+            else:
+                y = float(np.clip(want, cell.row0 + 0.5, top - 0.5))
+            lo, hi = lane_extent(cell, y)
+            if lo > hi:
+                continue
+            first = int(np.clip(cc.min() - 1, lo, hi))
+            last = int(np.clip(cc.max() + 1, lo, hi))
+            got = (np.abs(rr - y) < hw - 1e-9) & (cc >= first - 2) & (cc <= last + 2)
+            if best is None or got.sum() > best[0]:
+                best = (int(got.sum()), (y, first, last))
+        if best is None or best[0] < SHOULDER_CELLS:
+            continue
+        out.append(best[1])
+        band = np.zeros_like(left)
+        _sweep(band, *best[1], hw)
+        left &= ~band
     return out
 
 

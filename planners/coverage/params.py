@@ -16,9 +16,9 @@ class CoverageParams:
     metre first, until the sweeps and passes cover ``fill_in_target`` of the cleanable area
     (1.0: every pass; transits only add to it). Rooms are separated at openings narrower than
     ``door_width``; a room smaller than ``min_room_area`` joins its largest neighbour. A
-    boustrophedon cell is cut into lane groups of at most ``max_task_area``, so the tour can
-    leave a cell part-swept to visit a neighbour and come back, and k robots can balance the
-    work finely. Time estimates use ``max_speed`` plus
+    boustrophedon cell is cut into lane groups of at most ``max_task_area`` (0: every lane is a
+    task of its own), so the tour can leave a cell part-swept to visit a neighbour and come
+    back, and k robots can balance the work finely. Time estimates use ``max_speed`` plus
     ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``).
     """
 
@@ -34,7 +34,7 @@ class CoverageParams:
     turn_angle_deg: float = 45.0
     door_width: float = 1.0
     min_room_area: float = 2.0
-    max_task_area: float = 2.0
+    max_task_area: float = 0.0
     simplify_tolerance: float = 0.03
 
     def validate(self) -> None:
@@ -51,8 +51,8 @@ class CoverageParams:
             raise ValueError("turn_cost_s must be >= 0 and turn_angle_deg within (0, 180)")
         if not 0.0 <= self.fill_in_target <= 1.0:
             raise ValueError("fill_in_target must be within [0, 1]")
-        if self.min_room_area < 0 or self.max_task_area <= 0 or self.simplify_tolerance < 0:
-            raise ValueError("min_room_area, simplify_tolerance must be >= 0, max_task_area > 0")
+        if self.min_room_area < 0 or self.max_task_area < 0 or self.simplify_tolerance < 0:
+            raise ValueError("min_room_area, max_task_area and simplify_tolerance must be >= 0")
 
     @property
     def lane_spacing(self) -> float:

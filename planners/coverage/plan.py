@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import networkx as nx
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from planners.coverage.bcd import decompose
 from planners.coverage.fill_in import fill_in_tasks
@@ -29,6 +30,8 @@ from planners.grid import GridMap, cleanable, clearance, reachable
 # A wall direction this close to a grid axis is taken as the axis: lanes then lie exactly
 # between rows of cells, and the rasterized walls of an axis-aligned plan measure slightly off.
 AXIS_SNAP = math.radians(1.0)
+# fill-in passes change the tour and so its transits; this many rounds settle what they miss
+FILL_IN_ROUNDS = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +125,9 @@ def plan_coverage(
         rot = resample(grid, mask, frame)
         # stacked cells always merge: the lattice, clamp lanes and fill-in take their shoulders
         labels, cells = decompose(rot, max_step=max(rot.shape))
-        lanes = room_lanes(cells, rot, resample(grid, room_img == room, frame), labels, step, hw)
+        lanes, shoulders = room_lanes(
+            cells, rot, resample(grid, room_img == room, frame), labels, step, hw
+        )
         base = len(cell_room)
         tasks: list[SweepTask] = []
         for k, cell in enumerate(cells, start=1):
@@ -132,8 +137,13 @@ def plan_coverage(
                 tasks.append(edge_task(room, cid, cell, frame, params))
             if params.method == "spiral":
                 tasks.append(spiral_task(room, cid, cell, frame, params))
-            elif len(lanes[k - 1]):
-                tasks.extend(cell_tasks(room, cid, cell, lanes[k - 1], frame, params, max_area))
+            else:
+                if len(lanes[k - 1]):
+                    tasks.extend(cell_tasks(room, cid, cell, lanes[k - 1], frame, params, max_area))
+                for lane in shoulders[k - 1]:
+                    tasks.extend(
+                        cell_tasks(room, cid, cell, lane[None, :], frame, params, max_area)
+                    )
         _paint_cells(grid, mask, frame, labels, base, cell_labels)
         room_tasks.append(tasks)
         room_angle.append(angle)
@@ -146,13 +156,14 @@ def plan_coverage(
     comp, _ = ndimage.label(reach)
     robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
     tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy)
+    pieces = _split(tasks, tours, robot_comp, costs, start_xy, params)
     if params.fill_in:
-        tasks, tours = _add_fill_in(
+        tasks, pieces = _add_fill_in(
             grid,
             comp,
             robot_comp,
             tasks,
-            tours,
+            pieces,
             start_xy,
             clean,
             reach,
@@ -162,7 +173,6 @@ def plan_coverage(
             costs,
             params,
         )
-    pieces = _split(tasks, tours, robot_comp, costs, start_xy, params)
     paths = [
         _drive(s, [path_of(tasks[t], o) for t, o in piece], transit)
         for s, piece in zip(start_xy, pieces, strict=True)
@@ -293,7 +303,7 @@ def _add_fill_in(
     comp,
     robot_comp,
     tasks,
-    tours,
+    pieces,
     start_xy,
     clean,
     reach,
@@ -303,29 +313,50 @@ def _add_fill_in(
     costs,
     params,
 ):
-    """Tasks and tours with fill-in passes for the floor the sweeps miss
-    (``fill_in.fill_in_tasks``). Each sweep keeps the variant its tour chose (its coverage is
-    what the passes complete; transits are not counted on, as tours change them); the passes
-    are inserted into the tours where they cost least, then the tours are improved again."""
+    """Tasks and robot tours with fill-in passes for the floor the driven tours miss
+    (``fill_in.fill_in_tasks``), in up to ``FILL_IN_ROUNDS`` rounds. Each sweep keeps the
+    variant its tour chose; a pass goes to the robot of its floor part whose path passes
+    closest and is inserted into its tour where it costs least, then the tour is improved
+    again — which changes some transits, so the next round looks at what the new tours miss."""
     hw = params.cleaning_width / 2
-    fixed = []
-    initial = {}
-    for c, tour in tours.items():
-        initial[c] = [(len(fixed) + k, 0) for k in range(len(tour))]
-        fixed.extend(_fixed(tasks[t], o) for t, o in tour)
-    covered = np.zeros(grid.shape, dtype=bool)
-    for t in fixed:
-        covered |= swath(grid, t.variants[0], hw)[0]
-    anchors = np.vstack([start_xy, *(t.variants[0] for t in fixed)])
-    passes = fill_in_tasks(grid, covered, anchors, clean, reach, hw, transit, params.fill_in_target)
-    if not passes:
-        return tasks, tours
-    for path, area in passes:
-        rc = grid.world_to_cell(path[0])
-        _, _, t = path_time(path, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
-        room, cell = int(room_img[rc[0], rc[1]]), int(cell_img[rc[0], rc[1]])
-        fixed.append(SweepTask(room, cell, (path,), area, t))
-    return fixed, _component_tours(grid, comp, robot_comp, fixed, costs, start_xy, initial)
+    for _ in range(FILL_IN_ROUNDS):
+        fixed: list[SweepTask] = []
+        initial = []
+        driven = []
+        for s, piece in zip(start_xy, pieces, strict=True):
+            initial.append([(len(fixed) + k, 0) for k in range(len(piece))])
+            legs = [_fixed(tasks[t], o) for t, o in piece]
+            fixed.extend(legs)
+            driven.append(_drive(s, [t.variants[0] for t in legs], transit))
+        covered = np.zeros(grid.shape, dtype=bool)
+        for path in driven:
+            covered |= swath(grid, path, hw)[0]
+        passes = fill_in_tasks(
+            grid, covered, np.vstack(driven), clean, reach, hw, transit, params.fill_in_target
+        )
+        if not passes:
+            break
+        trees = [cKDTree(p) for p in driven]
+        owner = [r for r, piece in enumerate(initial) for _ in piece]
+        for path, area in passes:
+            rc = grid.world_to_cell(path[0])
+            _, _, t = path_time(path, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
+            room, cell = int(room_img[rc[0], rc[1]]), int(cell_img[rc[0], rc[1]])
+            fixed.append(SweepTask(room, cell, (path,), area, t))
+            near = [
+                tree.query(path[[0, -1]])[0].min()
+                if robot_comp[r] == comp[rc[0], rc[1]]
+                else np.inf
+                for r, tree in enumerate(trees)
+            ]
+            owner.append(int(np.argmin(near)))
+        tasks = fixed
+        ends, n_pts = _ends(tasks, costs, start_xy)
+        pieces = [
+            plan_tour([k for k, o in enumerate(owner) if o == r], n_pts + r, ends, initial[r])
+            for r in range(len(start_xy))
+        ]
+    return tasks, pieces
 
 
 def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> np.ndarray:

@@ -1,7 +1,9 @@
 """Sweep tasks: the units of work the planner orders and splits among robots.
 
 A task is a run of consecutive lanes of one boustrophedon cell (or one cell's spiral), with its
-four ways to drive it: starting at either end of the lane run, in either direction.
+ways to drive it: ``variants`` are paths, each of which may also be driven backwards (the tour
+chooses). A lane run has two (its first lane driven either way, the turns on opposite sides);
+reversed, they give the runs starting from the last lane.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from planners.polyline import simplify
 
 @dataclass(frozen=True, eq=False)
 class SweepTask:
-    """One task: ``variants`` are (N, 2) world paths covering the same lanes."""
+    """One task: ``variants`` are (N, 2) world paths covering the same lanes, each drivable in
+    either direction."""
 
     room: int
     cell: int
@@ -59,11 +62,8 @@ def cell_tasks(
     tasks = []
     for g in groups:
         sel = lanes[g]
-        variants = tuple(
-            _to_world(frame, boustrophedon(cell, order, left), params)
-            for order in (sel, sel[::-1])
-            for left in (True, False)
-        )
+        sides = (True, False) if len(sel) > 1 else (True,)
+        variants = tuple(_to_world(frame, boustrophedon(cell, sel, left), params) for left in sides)
         _, _, t = path_time(
             variants[0], params.max_speed, params.turn_cost_s, params.turn_angle_deg
         )
@@ -96,7 +96,7 @@ def spiral_task(
         parts.append(boustrophedon(core, lanes_of(core, ys), True))
     world = _to_world(frame, np.vstack(parts), params)
     _, _, t = path_time(world, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
-    return SweepTask(room, cell_id, (world, world[::-1]), cell.cells * res * res, t)
+    return SweepTask(room, cell_id, (world,), cell.cells * res * res, t)
 
 
 def edge_task(
@@ -108,7 +108,7 @@ def edge_task(
     ring = _ring(rows.astype(float), left.astype(float), right.astype(float), 0, 0.0)
     world = _to_world(frame, np.vstack([ring, ring[:1]]), params)
     _, _, t = path_time(world, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
-    return SweepTask(room, cell_id, (world, world[::-1]), 0.0, t)
+    return SweepTask(room, cell_id, (world,), 0.0, t)
 
 
 def _ring(rows: np.ndarray, left: np.ndarray, right: np.ndarray, step: int, shift: float):
