@@ -5,8 +5,12 @@ an A* transit for every pair of task ends is too slow. Instead Dijkstra runs on 
 the robot-centre grid (blocks of about ``COARSE_M``, a block free when any of its cells is):
 every point snaps to its block, and the estimate for a pair is the larger of the straight-line
 distance and the coarse 8-connected path length divided by 1.04 (the midpoint of the 1–1.082
-factor by which an 8-connected grid path overestimates the Euclidean one). Distances between
-blocks already asked for are kept, so a second, larger set of points costs only the new blocks.
+factor by which an 8-connected grid path overestimates the Euclidean one). Dijkstra from each
+point stops at ``NEAR_M``; a farther pair is priced through landmarks — ``LANDMARKS`` blocks
+spread by farthest-point sampling, each with a full Dijkstra — as the least d(a, l) + d(l, b)
+(an upper bound, tight when some landmark lies near the way, e.g. in a door on it).
+Distances between blocks already asked for are kept, so a second, larger set of points costs
+only the new blocks.
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ from planners.coverage.rooms import grid_graph
 from planners.grid import GridMap
 
 COARSE_M = 0.1
+NEAR_M = 4.0
+LANDMARKS = 64
 _OCTILE_BIAS = 1.04
 _CHUNK = 64
 _UNREACHABLE = 1e6
@@ -41,6 +47,25 @@ class PathCosts:
         _, self._near = ndimage.distance_transform_edt(~coarse, return_indices=True)
         self._nodes = np.zeros(0, dtype=np.int64)
         self._geo = np.zeros((0, 0))
+        self._landmarks = self._landmark_rows()
+
+    def _landmark_rows(self) -> np.ndarray:
+        """(K, nodes) coarse path lengths from landmarks spread by farthest-point sampling
+        (per connected part: an unreached node is infinitely far from every landmark so far)."""
+        n = self._csr.shape[0]
+        if n == 0:
+            return np.zeros((0, 0))
+        rows = []
+        nearest = np.full(n, np.inf)
+        node = 0
+        for _ in range(min(LANDMARKS, n)):
+            d = dijkstra(self._csr, indices=node)
+            rows.append(d)
+            nearest = np.minimum(nearest, d)
+            node = int(np.argmax(nearest))
+            if nearest[node] == 0:
+                break
+        return np.array(rows)
 
     def matrix(self, points: np.ndarray) -> np.ndarray:
         """(N, N) symmetric cost estimates (metres) between world ``points`` (N, 2); pairs in
@@ -65,8 +90,15 @@ class PathCosts:
             return
         nodes = np.concatenate([self._nodes, new])
         rows = np.empty((len(new), len(nodes)))
+        limit = NEAR_M / (self.f * self.grid.resolution)
+        lm_new = self._landmarks[:, new]
+        lm_all = self._landmarks[:, nodes]
         for k in range(0, len(new), _CHUNK):
-            rows[k : k + _CHUNK] = dijkstra(self._csr, indices=new[k : k + _CHUNK])[:, nodes]
+            near = dijkstra(self._csr, indices=new[k : k + _CHUNK], limit=limit)[:, nodes]
+            if len(lm_new) and not np.isfinite(near).all():
+                via = (lm_new[:, k : k + _CHUNK, None] + lm_all[:, None, :]).min(axis=0)
+                near = np.where(np.isfinite(near), near, via)
+            rows[k : k + _CHUNK] = near
         scale = self.f * self.grid.resolution / _OCTILE_BIAS
         rows = np.where(np.isfinite(rows), rows * scale, _UNREACHABLE)
         n_old = len(self._nodes)

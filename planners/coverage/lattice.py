@@ -104,14 +104,19 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
     if n == 0:
         return []
     sizes = np.bincount(labels.ravel())[1:]
+    boxes = ndimage.find_objects(labels)
     reach = math.ceil(hw - 1e-9) - 0.5
     top = cell.row0 + cell.rows - 1
     out = []
     left = mine.copy()
     for lab in np.argsort(-sizes) + 1:
-        rr, cc = np.nonzero((labels == lab) & left)
+        if sizes[lab - 1] < SHOULDER_CELLS:
+            break
+        box = boxes[lab - 1]
+        rr, cc = np.nonzero((labels[box] == lab) & left[box])
         if len(rr) < SHOULDER_CELLS:
             continue
+        rr, cc = rr + box[0].start, cc + box[1].start
         best = None
         wants = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
         for want in wants:
@@ -130,9 +135,7 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
         if best is None or best[0] < SHOULDER_CELLS:
             continue
         out.append(best[1])
-        band = np.zeros_like(left)
-        _sweep(band, *best[1], hw)
-        left &= ~band
+        left[_band(left.shape, *best[1], hw)] = False
     return out
 
 
@@ -196,13 +199,19 @@ def _clamp_lane(cell: MonotoneCell, mine: np.ndarray, ys: list[float], below: bo
 def _sweep(covered: np.ndarray, y: float, lo: int, hi: int, hw: float) -> None:
     """Mark the cells within ``hw`` across the lane from (y, lo) to (y, hi), and up to ``hw``
     beyond its ends: the swath's round ends leave corners the turns and fill-in passes take."""
-    rows, cols = covered.shape
+    covered[_band(covered.shape, y, lo, hi, hw)] = True
+
+
+def _band(shape: tuple[int, int], y: float, lo: int, hi: int, hw: float) -> tuple[slice, slice]:
+    """The rows within ``hw`` of the lane at ``y`` × its columns widened by ``hw`` − 1."""
+    rows, cols = shape
     n = math.ceil(hw - 1e-9) - 1
     r0, r1 = max(0, math.floor(y - hw)), min(rows, math.ceil(y + hw) + 1)
     rr = np.arange(r0, r1, dtype=float)
     band = rr[np.abs(rr - y) < hw - 1e-9].astype(int)
-    if len(band):
-        covered[band[0] : band[-1] + 1, max(0, lo - n) : min(cols, hi + n + 1)] = True
+    if not len(band):
+        return slice(0, 0), slice(0, 0)
+    return slice(band[0], band[-1] + 1), slice(max(0, lo - n), min(cols, hi + n + 1))
 
 
 def _nearest_label(labels: np.ndarray, where: np.ndarray) -> np.ndarray:

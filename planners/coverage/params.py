@@ -17,8 +17,9 @@ class CoverageParams:
     (1.0: every pass; transits only add to it). Rooms are separated at openings narrower than
     ``door_width``; a room smaller than ``min_room_area`` joins its largest neighbour. A
     boustrophedon cell is cut into lane groups of at most ``max_task_area`` (0: every lane is a
-    task of its own), so the tour can leave a cell part-swept to visit a neighbour and come
-    back, and k robots can balance the work finely. Time estimates use ``max_speed`` plus
+    task of its own, cut into pieces of at most ``max_lane_length``), so the tour can leave a
+    cell part-swept to visit a neighbour and come back, and k robots can balance the work
+    finely. Time estimates use ``max_speed`` plus
     ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``).
     """
 
@@ -35,10 +36,17 @@ class CoverageParams:
     door_width: float = 1.0
     min_room_area: float = 2.0
     max_task_area: float = 0.0
+    max_lane_length: float = 2.0
     simplify_tolerance: float = 0.03
 
     def validate(self) -> None:
-        for name in ("robot_radius", "cleaning_width", "max_speed", "door_width"):
+        for name in (
+            "robot_radius",
+            "cleaning_width",
+            "max_speed",
+            "door_width",
+            "max_lane_length",
+        ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
         if self.cleaning_width > 2 * self.robot_radius + 1e-9:

@@ -8,6 +8,7 @@ reversed, they give the runs starting from the last lane.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -61,6 +62,9 @@ def cell_tasks(
         acc += a
     tasks = []
     for g in groups:
+        if len(g) == 1:
+            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params))
+            continue
         sel = lanes[g]
         sides = (True, False) if len(sel) > 1 else (True,)
         variants = tuple(_to_world(frame, boustrophedon(cell, sel, left), params) for left in sides)
@@ -68,6 +72,28 @@ def cell_tasks(
             variants[0], params.max_speed, params.turn_cost_s, params.turn_angle_deg
         )
         tasks.append(SweepTask(room, cell_id, variants, float(lane_area[g].sum()), t))
+    return tasks
+
+
+def _lane_pieces(
+    room: int, cell_id: int, lane: np.ndarray, frame: RotatedFrame, params: CoverageParams
+) -> list[SweepTask]:
+    """One lane as tasks of at most ``params.max_lane_length``: equal pieces meeting at a cell
+    centre, so driving them one after the other sweeps exactly what the whole lane does (each
+    segment's brush rectangle is half-open), while the tour may also turn in the middle."""
+    res = frame.resolution
+    y, lo, hi = (float(v) for v in lane)
+    n = max(1, math.ceil((hi - lo) * res / params.max_lane_length - 1e-9))
+    cuts = np.unique(np.rint(np.linspace(lo, hi, n + 1)))
+    tasks = []
+    for a, b in itertools.pairwise(cuts):
+        path = frame.to_world(np.array([[y, a], [y, b]]))
+        length = (b - a) * res
+        t = length / params.max_speed
+        tasks.append(SweepTask(room, cell_id, (path,), length * params.lane_spacing, t))
+    if len(cuts) == 1:
+        path = frame.to_world(np.array([[y, lo], [y, hi]]))
+        tasks.append(SweepTask(room, cell_id, (path,), res * params.lane_spacing, 0.0))
     return tasks
 
 
