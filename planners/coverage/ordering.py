@@ -3,39 +3,32 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from planners.coverage.tasks import SweepTask
-
 
 def split_tour(
-    tour: Sequence[SweepTask], starts: np.ndarray, speed: float
-) -> list[list[SweepTask]]:
-    """Cut the single-robot tour into ``len(starts)`` contiguous pieces minimizing the makespan.
+    work: np.ndarray, hop: np.ndarray, to_entry: np.ndarray, to_exit: np.ndarray
+) -> list[list[int]]:
+    """Cut a tour of n tasks into k contiguous pieces (lists of tour positions, one per robot)
+    minimizing the makespan.
 
-    A piece costs the straight-line time from the nearest start to its first task, its tasks'
-    times and the straight-line times between them; a dynamic program over cut points finds the
-    cuts minimizing the largest piece, and the Hungarian method (scipy linear_sum_assignment)
-    gives each robot the piece nearest its start. Each robot's set stays contiguous along the
-    tour, so it is mostly one connected stretch of the floor.
+    ``work[i]`` is the time to drive task i, ``hop[i]`` the time from task i − 1 to task i,
+    ``to_entry[i, r]`` / ``to_exit[i, r]`` the time from robot r's start to task i's entry /
+    exit (k = ``to_entry.shape[1]``). A piece costs the time from the nearest start to its
+    first task, its tasks' times and the hops between them; a dynamic program over cut points
+    finds the cuts minimizing the largest piece, and the Hungarian method (scipy
+    linear_sum_assignment) gives each robot the piece it reaches soonest, by either end. Each
+    robot's set stays contiguous along the tour, so it is mostly one connected stretch of the
+    floor.
     """
-    k = len(starts)
-    n = len(tour)
+    n, k = to_entry.shape
     if n == 0:
         return [[] for _ in range(k)]
-    first = np.array([t.variants[0][0] for t in tour])
-    last = np.array([t.variants[0][-1] for t in tour])
-    work = np.array([t.time_s for t in tour])
-    hop = np.zeros(n)
-    hop[1:] = np.hypot(*(first[1:] - last[:-1]).T) / speed
+    hop = np.concatenate([[0.0], np.asarray(hop, dtype=float)[1:]])
     prefix = np.concatenate([[0.0], np.cumsum(work + hop)])
-    approach = np.min(
-        np.hypot(*(first[:, None, :] - starts[None, :, :]).transpose(2, 0, 1)), axis=1
-    )
-    approach = approach / speed
+    approach = to_entry.min(axis=1)
     # cost[i, j]: piece of tasks i..j-1 (j > i)
     i_idx = np.arange(n)[:, None]
     j_idx = np.arange(n + 1)[None, :]
@@ -55,12 +48,10 @@ def split_tour(
     for m in range(k, 0, -1):
         bounds.append(cut[m, bounds[-1]])
     bounds = bounds[::-1]
-    pieces = [list(tour[bounds[m] : bounds[m + 1]]) for m in range(k)]
+    pieces = [list(range(bounds[m], bounds[m + 1])) for m in range(k)]
     travel = np.zeros((k, k))
-    for r in range(k):
-        for m, piece in enumerate(pieces):
-            if piece:
-                ends = (piece[0].variants[0][0], piece[-1].variants[0][-1])
-                travel[r, m] = min(float(np.hypot(*(e - starts[r]))) for e in ends)
+    for m, piece in enumerate(pieces):
+        if piece:
+            travel[:, m] = np.minimum(to_entry[piece[0]], to_exit[piece[-1]])
     rows, cols = linear_sum_assignment(travel)
     return [pieces[c] for _, c in sorted(zip(rows, cols, strict=True))]

@@ -284,11 +284,18 @@ def _split(tasks, tours, robot_comp, costs, start_xy, params) -> list[list[tuple
             continue
         if ends is None:
             ends, n_pts = _ends(tasks, costs, start_xy)
-        directed = [_fixed(tasks[t], o) for t, o in tour]
-        step_of = {id(d): step for d, step in zip(directed, tour, strict=True)}
-        split = split_tour(directed, start_xy[robots], params.max_speed)
+        opt = np.array([ends.offset[t] + o for t, o in tour], dtype=np.int64)
+        entry, exit_ = ends.entry[opt], ends.exit[opt]
+        starts = n_pts + robots
+        v = params.max_speed
+        split = split_tour(
+            np.array([tasks[t].time_s for t, _ in tour]),
+            np.concatenate([[0.0], ends.cost[exit_[:-1], entry[1:]]]) / v,
+            ends.cost[np.ix_(entry, starts)] / v,
+            ends.cost[np.ix_(exit_, starts)] / v,
+        )
         for r, piece in zip(robots, split, strict=True):
-            steps = [step_of[id(d)] for d in piece]
+            steps = [tour[i] for i in piece]
             pieces[r] = plan_tour([t for t, _ in steps], n_pts + int(r), ends, steps)
     return pieces
 
