@@ -258,16 +258,18 @@ def _ends(tasks, costs, start_xy) -> tuple[TaskEnds, int]:
 
 def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, initial=None):
     """Per connected part of the floor holding a start: one tour over its tasks from its first
-    robot's start (continuing ``initial[c]``, a tour over some of them, when given)."""
+    robot's start (continuing ``initial[c]``, a tour over some of them, when given). Where
+    several robots share the part the tour is priced as a loop back to that start, so that
+    cut into pieces, the first and the last both begin near the starts."""
     ends, n_pts = _ends(tasks, costs, start_xy)
     first = grid.world_to_cell(np.array([t.variants[0][0] for t in tasks]).reshape(-1, 2))
     task_comp = comp[first[:, 0], first[:, 1]]
     tours = {}
     for c in np.unique(robot_comp):
-        r0 = int(np.flatnonzero(robot_comp == c)[0])
+        robots = np.flatnonzero(robot_comp == c)
         ids = [int(k) for k in np.flatnonzero(task_comp == c)]
         start = initial[c] if initial else ()
-        tours[int(c)] = plan_tour(ids, n_pts + r0, ends, start)
+        tours[int(c)] = plan_tour(ids, n_pts + int(robots[0]), ends, start, len(robots) > 1)
     return tours
 
 

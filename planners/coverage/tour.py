@@ -28,8 +28,9 @@ _MAX_ROUNDS = 50
 @dataclass(frozen=True)
 class TaskEnds:
     """Entry/exit point and driven length of every option of every task, and the cost matrix
-    over all points. Option ``2·v + r`` of a task is its variant ``v``, reversed when ``r`` is
-    1; option ``o`` of task ``t`` is entry ``offset[t] + o`` of the flat arrays."""
+    over all points, plus one last column: the cost of ending the tour at a point (set by
+    :func:`plan_tour`). Option ``2·v + r`` of a task is its variant ``v``, reversed when
+    ``r`` is 1; option ``o`` of task ``t`` is entry ``offset[t] + o`` of the flat arrays."""
 
     offset: np.ndarray
     count: np.ndarray
@@ -58,7 +59,7 @@ def task_ends(tasks: Sequence[SweepTask], cost: np.ndarray) -> TaskEnds:
     length = np.repeat(
         [float(np.hypot(*np.diff(v, axis=0).T).sum()) for t in tasks for v in t.variants], 2
     )
-    return TaskEnds(offset, count, entry, exit_, length, cost)
+    return TaskEnds(offset, count, entry, exit_, length, np.pad(cost, ((0, 0), (0, 1))))
 
 
 def path_of(task: SweepTask, option: int) -> np.ndarray:
@@ -71,14 +72,17 @@ def plan_tour(
     start: int,
     ends: TaskEnds,
     initial: Sequence[tuple[int, int]] = (),
+    closed: bool = False,
 ) -> list[tuple[int, int]]:
-    """(task id, option) in driving order for tasks ``ids``, starting at point ``start``.
+    """(task id, option) in driving order for tasks ``ids``, starting at point ``start`` (and
+    priced as coming back to it at the end when ``closed``).
 
     Without ``initial`` the tour starts greedy; with it, the tasks of ``ids`` not in
     ``initial`` are first added to it one by one where they lengthen it least.
     """
     if not ids:
         return []
+    ends.cost[:, -1] = ends.cost[:, start] if closed else 0.0
     if initial:
         seq = np.array([ends.offset[t] + o for t, o in initial], dtype=np.int64)
         placed = {t for t, _ in initial}
@@ -116,34 +120,33 @@ def _greedy(ids: list[int], start: int, ends: TaskEnds) -> np.ndarray:
     return np.array(seq, dtype=np.int64)
 
 
-def _insert(seq: np.ndarray, t: int, start: int, ends: TaskEnds) -> np.ndarray:
-    """``seq`` with task ``t`` (its best option) where it adds the least."""
-    c = ends.cost
-    before, ent = _points(seq, start, ends)
-    nxt = np.append(ent, -1)
-    open_end = nxt < 0
-    nxt0 = np.maximum(nxt, 0)
-    base = np.where(open_end, 0.0, c[before, nxt0])
-    sl = ends.options(t)
-    into = c[before[:, None], ends.entry[sl][None, :]]
-    out = np.where(open_end[:, None], 0.0, c[ends.exit[sl][None, :], nxt0[:, None]])
-    added = into + out - base[:, None] + ends.length[sl][None, :]
-    p, o = np.unravel_index(int(np.argmin(added)), added.shape)
-    return np.insert(seq, int(p), ends.offset[t] + int(o))
-
-
 def _points(seq: np.ndarray, start: int, ends: TaskEnds) -> tuple[np.ndarray, np.ndarray]:
-    """(exit before position i, with the start before 0) and (entry at position i)."""
-    return np.concatenate([[start], ends.exit[seq]]), ends.entry[seq]
+    """For every hop of the tour (into position i, and the last one out of it): where it
+    comes from (the start, then each exit) and where it goes (each entry, then the end
+    column of the cost matrix: the start again for a closed tour, nowhere for an open one)."""
+    end = ends.cost.shape[1] - 1
+    return np.concatenate([[start], ends.exit[seq]]), np.append(ends.entry[seq], end)
 
 
 def _total(seq: np.ndarray, start: int, ends: TaskEnds) -> float:
     """Hops plus driven length."""
-    before, ent = _points(seq, start, ends)
-    return float(ends.cost[before[:-1], ent].sum() + ends.length[seq].sum())
+    src, dst = _points(seq, start, ends)
+    return float(ends.cost[src, dst].sum() + ends.length[seq].sum())
 
 
-def _reverse(run: np.ndarray, ends: TaskEnds) -> np.ndarray:
+def _insert(seq: np.ndarray, t: int, start: int, ends: TaskEnds) -> np.ndarray:
+    """``seq`` with task ``t`` (its best option) where it adds the least."""
+    c = ends.cost
+    src, dst = _points(seq, start, ends)
+    sl = ends.options(t)
+    into = c[src[:, None], ends.entry[sl][None, :]]
+    out = c[ends.exit[sl][None, :], dst[:, None]]
+    added = into + out - c[src, dst][:, None] + ends.length[sl][None, :]
+    p, o = np.unravel_index(int(np.argmin(added)), added.shape)
+    return np.insert(seq, int(p), ends.offset[t] + int(o))
+
+
+def _reverse(run: np.ndarray) -> np.ndarray:
     """The run driven backwards: tasks in reverse order, each in its reversed option."""
     return run[::-1] ^ 1
 
@@ -156,19 +159,15 @@ def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
     while improved:
         improved = False
         for i in range(n):
-            before, ent = _points(seq, start, ends)
-            ext = before[1:]
+            src, dst = _points(seq, start, ends)
             j = np.arange(i, n)
-            nxt = np.append(ent[i + 1 :], -1)
-            has_next = nxt >= 0
-            nxt0 = np.maximum(nxt, 0)
-            old = c[before[i], ent[i]] + np.where(has_next, c[ext[j], nxt0], 0.0)
-            new = c[before[i], ext[j]] + np.where(has_next, c[ent[i], nxt0], 0.0)
+            old = c[src[i], dst[i]] + c[src[j + 1], dst[j + 1]]
+            new = c[src[i], src[j + 1]] + c[dst[i], dst[j + 1]]
             gain = old - new
             k = int(np.argmax(gain))
             if gain[k] > _EPS:
                 jj = int(j[k])
-                seq = np.concatenate([seq[:i], _reverse(seq[i : jj + 1], ends), seq[jj + 1 :]])
+                seq = np.concatenate([seq[:i], _reverse(seq[i : jj + 1]), seq[jj + 1 :]])
                 improved = True
     return seq
 
@@ -182,29 +181,21 @@ def _or_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
         for length in (1, 2, 3):
             i = 0
             while i + length <= len(seq):
-                n = len(seq)
-                before, ent = _points(seq, start, ends)
-                a = before[i]
-                s_in, s_out = ent[i], ends.exit[seq[i + length - 1]]
-                if i + length < n:
-                    b = ent[i + length]
-                    removed = c[a, s_in] + c[s_out, b] - c[a, b]
-                else:
-                    removed = c[a, s_in]
+                src, dst = _points(seq, start, ends)
+                a, b = src[i], dst[i + length]
+                s_in, s_out = dst[i], src[i + length]
+                removed = c[a, s_in] + c[s_out, b] - c[a, b]
                 rest = np.concatenate([seq[:i], seq[i + length :]])
-                pb, r_ent = _points(rest, start, ends)
-                pe = np.append(r_ent, -1)
-                open_end = pe < 0
-                pe0 = np.maximum(pe, 0)
-                base = np.where(open_end, 0.0, c[pb, pe0])
-                fwd = c[pb, s_in] + np.where(open_end, 0.0, c[s_out, pe0]) - base
-                rev = c[pb, s_out] + np.where(open_end, 0.0, c[s_in, pe0]) - base
+                pb, pe = _points(rest, start, ends)
+                base = c[pb, pe]
+                fwd = c[pb, s_in] + c[s_out, pe] - base
+                rev = c[pb, s_out] + c[s_in, pe] - base
                 cand = np.minimum(fwd, rev)
                 p = int(np.argmin(cand))
                 if cand[p] < removed - _EPS:
                     run = seq[i : i + length]
                     if rev[p] < fwd[p]:
-                        run = _reverse(run, ends)
+                        run = _reverse(run)
                     seq = np.concatenate([rest[:p], run, rest[p:]])
                     improved = True
                 else:
@@ -225,7 +216,8 @@ def _choose_options(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
         total = cost[:, None] + hop + ends.length[st][None, :]
         back.append(np.argmin(total, axis=0))
         cost = total.min(axis=0)
-    k = int(np.argmin(cost))
+    last = ends.options(int(task[-1]))
+    k = int(np.argmin(cost + c[ends.exit[last], -1]))
     picks = [k]
     for b in reversed(back):
         k = int(b[k])
