@@ -52,6 +52,26 @@ def test_cells_around_a_table_share_one_lattice_and_rarely_sweep_the_same_strip(
     assert twice < 0.6 * twice_own
 
 
+def test_shoulder_lanes_sweep_the_strip_a_stepped_wall_leaves():
+    # one merged cell: a doorway (rows 4–19) under the left half of a room whose floor begins
+    # at row 20 on the left and row 23 on the right; no lattice phase fits both steps
+    mask = np.zeros((60, 80), dtype=bool)
+    mask[4:20, 10:20] = True
+    mask[20:55, 5:40] = True
+    mask[23:55, 40:76] = True
+    labels, cells = decompose(mask, max_step=max(mask.shape))
+    assert len(cells) == 1
+    clean = dilate(mask, 3.0, 1.0)
+    lanes, shoulders = room_lanes(cells, mask, clean, labels, 6, 3.0)
+    assert len(shoulders[0]) >= 1
+    without = (_sweep_counts(mask.shape, lanes)[clean] >= 1).mean()
+    with_shoulders = (_sweep_counts(mask.shape, lanes + shoulders)[clean] >= 1).mean()
+    assert with_shoulders > without + 0.01
+    for y, lo, hi in shoulders[0]:  # shoulder lanes stay on robot-centre cells
+        for r in {int(np.floor(y)), int(np.ceil(y))}:
+            assert mask[r, int(lo) : int(hi) + 1].all()
+
+
 def test_fill_points_reach_every_missed_cell_and_lie_on_robot_centres():
     rng = np.random.default_rng(3)
     reach = np.zeros((40, 40), dtype=bool)
@@ -79,7 +99,7 @@ def _crossings(grid, path):
     return int((grid.occupied | grid.unknown)[rc[:, 0], rc[:, 1]].sum())
 
 
-def test_fill_in_reaches_the_target_and_its_detours_never_cross_blocked_cells():
+def test_fill_in_reaches_the_target_and_its_passes_never_cross_blocked_cells():
     for seed in (4, 5):
         g = furnished(seed)
         starts = open_spots(g, 1)
@@ -88,13 +108,13 @@ def test_fill_in_reaches_the_target_and_its_detours_never_cross_blocked_cells():
         assert full.metrics.total.coverage > without.metrics.total.coverage
         assert full.metrics.total.coverage >= 0.999
         assert all(_crossings(g, p) == 0 for p in full.paths)
-        # the detours only add to the sweeps: everything the sweeps covered stays covered
+        # the passes only add to the sweeps: everything the sweeps covered stays covered
         before, _ = swath(g, without.paths[0], 0.15)
         after, _ = swath(g, full.paths[0], 0.15)
         assert not (before & ~after).any()
 
 
-def test_fill_in_target_bounds_the_detours():
+def test_fill_in_target_bounds_the_passes():
     g = grid_of(boxed(60, 90))
     start = (1.0, 1.0)
     loose = plan_coverage(g, [start], CoverageParams(fill_in_target=0.9))
