@@ -326,9 +326,11 @@ def _add_fill_in(
     (``fill_in.fill_in_tasks``), in up to ``FILL_IN_ROUNDS`` rounds. Each sweep keeps the
     variant its tour chose; a pass goes to the robot of its floor part whose path passes
     closest and is inserted into its tour where it costs least, then the tour is improved
-    again — which changes some transits, so the next round looks at what the new tours miss."""
+    again — which changes some transits, so the next round looks at what the new tours miss.
+    Each round first drops the tasks whose floor other tasks already clean (``_prune``)."""
     hw = params.cleaning_width / 2
     for _ in range(FILL_IN_ROUNDS):
+        pieces = _prune(grid, tasks, pieces, clean, hw)
         fixed: list[SweepTask] = []
         initial = []
         driven = []
@@ -366,6 +368,44 @@ def _add_fill_in(
             for r in range(len(start_xy))
         ]
     return tasks, pieces
+
+
+def _prune(grid, tasks, pieces, clean, hw) -> list[list[tuple[int, int]]]:
+    """The robots' tours without the tasks all of whose cleanable cells other kept tasks cover
+    too (longest first): a pass whose floor later lanes sweep anyway, a lane piece that a
+    shoulder lane and its neighbours already cover."""
+    steps = [(r, k) for r, piece in enumerate(pieces) for k in range(len(piece))]
+    paths = [path_of(tasks[t], o) for piece in pieces for t, o in piece]
+    count = np.zeros(grid.shape, dtype=np.int32)
+    own = []
+    for path in paths:
+        window, cells = _footprint(grid, path, hw)
+        cells &= clean[window]
+        count[window] += cells
+        own.append((window, cells))
+    length = [float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in paths]
+    drop = set()
+    for i in np.argsort(length)[::-1]:
+        window, cells = own[i]
+        if not (count[window][cells] < 2).any():
+            count[window] -= cells
+            drop.add(steps[i])
+    return [[s for k, s in enumerate(p) if (r, k) not in drop] for r, p in enumerate(pieces)]
+
+
+def _footprint(
+    grid: GridMap, path: np.ndarray, hw: float
+) -> tuple[tuple[slice, slice], np.ndarray]:
+    """The cells within the capsules of ``path`` (``metrics.swath``), as a window of the grid
+    and the mask inside it."""
+    rc = grid.world_to_cell(path)
+    pad = math.ceil(hw / grid.resolution) + 1
+    r0, c0 = np.maximum(rc.min(axis=0) - pad, 0)
+    r1, c1 = np.minimum(rc.max(axis=0) + pad + 1, grid.shape)
+    origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
+    shape = (int(r1 - r0), int(c1 - c0))
+    window = GridMap(np.zeros(shape, bool), np.zeros(shape, bool), grid.resolution, origin)
+    return (slice(int(r0), int(r1)), slice(int(c0), int(c1))), swath(window, path, hw)[0]
 
 
 def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> np.ndarray:
