@@ -11,7 +11,15 @@ from dataclasses import dataclass, field
 from rich.table import Table
 
 from fleet.bus import Bus
-from fleet.protocol import Clock, Collision, CoverageSummary, FleetState, RobotStatus, TruthPose
+from fleet.protocol import (
+    Clock,
+    Collision,
+    CoverageSummary,
+    FleetState,
+    Plan,
+    RobotStatus,
+    TruthPose,
+)
 
 TRACK_STEP_M = 0.05
 
@@ -32,6 +40,7 @@ class FleetWatcher:
         self.fleet: FleetState | None = None
         self.robots: dict[str, RobotView] = {}
         self.collisions: list[Collision] = []
+        self.started_at: float | None = None
         k = self.keys
         bus.subscribe(k.clock(), Clock, self._on_clock)
         bus.subscribe(k.coverage(), CoverageSummary, self._on_coverage)
@@ -39,6 +48,7 @@ class FleetWatcher:
         bus.subscribe(k.all_robots("status"), RobotStatus, self._on_status)
         bus.subscribe(k.all_robots("truth"), TruthPose, self._on_truth)
         bus.subscribe(k.collisions(), Collision, self._on_collision)
+        bus.subscribe(k.plan("*"), Plan, self._on_plan)
 
     def _robot(self, key: str) -> RobotView:
         return self.robots.setdefault(self.keys.robot_of(key), RobotView())
@@ -58,17 +68,23 @@ class FleetWatcher:
     def _on_status(self, key: str, m: RobotStatus) -> None:
         with self.lock:
             r = self._robot(key)
+            if r.status is None or r.status.task != m.task:
+                r.done_at = None
             r.status = m
+            # The first "done" of a task counts: a finished robot may report "stale" later.
             if m.state == "done" and m.task and r.done_at is None:
                 r.done_at = m.stamp
-            elif m.state != "done":
-                r.done_at = None
 
     def _on_truth(self, key: str, m: TruthPose) -> None:
         with self.lock:
             track = self._robot(key).track
             if not track or abs(track[-1][0] - m.x) + abs(track[-1][1] - m.y) >= TRACK_STEP_M:
                 track.append((m.x, m.y))
+
+    def _on_plan(self, _k: str, m: Plan) -> None:
+        with self.lock:
+            if self.started_at is None or m.stamp < self.started_at:
+                self.started_at = m.stamp
 
     def _on_collision(self, _k: str, m: Collision) -> None:
         with self.lock:
@@ -80,9 +96,14 @@ class FleetWatcher:
             return self.fleet is not None and self.fleet.phase == "done"
 
     def makespan(self) -> float | None:
+        """Sim seconds from the first plan given to the last robot done; None until all are."""
         with self.lock:
-            stamps = [r.done_at for r in self.robots.values() if r.status and r.status.task]
-        return max(stamps) if stamps and all(s is not None for s in stamps) else None  # type: ignore[type-var]
+            views = [r for r in self.robots.values() if r.status and r.status.task]
+            started = self.started_at or 0.0
+        done = [r.done_at for r in views if r.done_at is not None]
+        if not views or len(done) < len(views):
+            return None
+        return max(done) - started
 
     def table(self, wall_s: float) -> Table:
         with self.lock:
