@@ -3,7 +3,9 @@
 It knows only what a real robot knows: its scans, its odometry, the sim clock and what the
 coordinator sends. Each scan triggers one control step; the cmd_vel it publishes carries that
 scan's stamp, which is how the simulator knows the agent has kept up. When its odometry is
-older than ``stale_after_s`` (sim time) it commands a stop.
+older than ``stale_after_s`` (sim time) it commands a stop. It reads the other robots' intents:
+while it works it keeps out of the way of those ranked above it, and without work it steps
+aside from anyone's (see :mod:`agents.peers`).
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import time
 
 import numpy as np
 
-from agents.follower import FollowState, control_step, scan_points
+from agents.follower import FollowState, control_step, keep_clear, scan_points
+from agents.peers import gives_way, intent_centres, intent_points, path_intent
 from agents.pose_source import OdometryPose, PoseSource, SlamPose
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
 from fleet.bus import Bus
@@ -35,9 +38,10 @@ from fleet.protocol import (
     SpawnRequest,
     Twist,
 )
-from planners.dwa import rollout
 
 log = logging.getLogger("agent")
+
+INTENT_WAYPOINTS = 30
 
 
 class Agent:
@@ -53,6 +57,8 @@ class Agent:
         self.odom_stamp = -1.0
         self.velocity = (0.0, 0.0)
         self.follow: FollowState | None = None
+        self.idle = FollowState(np.zeros((0, 2)))
+        self.peers: dict[str, np.ndarray] = {}
         self.plan_id = -1
         self.task = ""
         self.state = "waiting"
@@ -85,6 +91,7 @@ class Agent:
         self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
         self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
+        self.bus.subscribe(k.all_robots("intent"), Intent, self._on_intent)
         self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
         log.info(
             "%s spawned at (%.2f, %.2f, %.2f), pose from %s",
@@ -122,6 +129,12 @@ class Agent:
         with contextlib.suppress(queue.Empty):
             self.scans.get_nowait()
         self.scans.put_nowait(msg)
+
+    def _on_intent(self, key: str, msg: Intent) -> None:
+        rid = self.keys.robot_of(key)
+        if rid != self.rid:
+            with self.lock:
+                self.peers[rid] = msg.points
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         self.clock = max(self.clock, msg.stamp)
@@ -169,12 +182,25 @@ class Agent:
             )
         self._last_xy = pose[:2]
         v = w = 0.0
+        obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
+        dt = 1.0 / self.cfg.lidar.rate_hz
         if stale:
             state = "stale"
-        elif follow is None:
+        elif follow is None or follow.done:
             state = "waiting" if self.plan_id < 0 else "done"
+            self.idle, result = keep_clear(
+                self.idle,
+                pose,
+                velocity,
+                obstacles,
+                self._peer_centres(scan.stamp, everyone=True),
+                self.cfg.dwa,
+                self.cfg.robot.radius,
+                dt,
+                a,
+            )
+            v, w = result.v, result.w
         else:
-            obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
             follow, result = control_step(
                 follow,
                 pose,
@@ -182,8 +208,9 @@ class Agent:
                 obstacles,
                 self.cfg.dwa,
                 self.cfg.robot.radius,
-                1.0 / self.cfg.lidar.rate_hz,
+                dt,
                 a,
+                self._peer_centres(scan.stamp, everyone=False),
             )
             with self.lock:
                 if self.follow is not None and self.follow.waypoints is follow.waypoints:
@@ -196,6 +223,32 @@ class Agent:
         self.state = state
         self._publish(scan.stamp, pose, v, w, follow)
         return Twist(scan.stamp, v, w)
+
+    def _peer_centres(self, now: float, everyone: bool) -> np.ndarray:
+        """The discs the robots this one gives way to (all of them when it has no work) will
+        cover, by their intents; see :mod:`agents.peers`."""
+        with self.lock:
+            intents = [
+                pts for rid, pts in self.peers.items() if everyone or gives_way(self.rid, rid)
+            ]
+        return intent_centres(intents, now, self.cfg.agent.stale_after_s)
+
+    def _intent(
+        self,
+        stamp: float,
+        pose: tuple[float, float, float],
+        v: float,
+        w: float,
+        follow: FollowState | None,
+    ) -> np.ndarray:
+        """The path ahead at no less than half the top speed while there is one (see
+        :func:`agents.peers.path_intent`), else the current command held."""
+        horizon = self.cfg.agent.intent_horizon_s
+        if follow is None or follow.done or self.state == "stale":
+            return intent_points(pose, v, w, stamp, horizon)
+        ahead = follow.waypoints[follow.index : follow.index + INTENT_WAYPOINTS]
+        speed = max(v, 0.5 * self.cfg.dwa.max_vel_x)
+        return path_intent(np.array(pose[:2]), ahead, speed, stamp, horizon)
 
     def _publish(
         self,
@@ -212,10 +265,9 @@ class Agent:
             k.robot(self.rid, "pose"),
             PoseEstimate(stamp, *pose, self.pose_source.covariance(), self.pose_source.name),
         )
-        t = np.linspace(0.0, a.intent_horizon_s, 11)
-        xs, ys, _ = rollout(pose, np.array([v]), np.array([w]), t)
         self.bus.publish(
-            k.robot(self.rid, "intent"), Intent(stamp, np.column_stack([stamp + t, xs[0], ys[0]]))
+            k.robot(self.rid, "intent"),
+            Intent(stamp, self._intent(stamp, pose, v, w, follow)),
         )
         if stamp - self._last_status >= 1.0 / a.status_hz or self.state == "done":
             self._last_status = stamp

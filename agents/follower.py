@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
+from agents.peers import rim_points
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, DWAResult, dwa_control, rollout
 
@@ -173,10 +174,24 @@ def _held(pose: tuple[float, float, float], v: float, w: float, params: DWAParam
     return DWAResult(v, w, np.column_stack([xs[0], ys[0], ths[0]]), 0.0, True)
 
 
+def gaps(
+    points: np.ndarray, obstacles: np.ndarray, peers: np.ndarray, robot_radius: float
+) -> np.ndarray:
+    """Clearance of a robot centred at each of ``points`` (P, 2): the distance to the nearest
+    obstacle point or, for the discs of other robots centred at ``peers``, to their rim."""
+    out = np.full(len(points), np.inf)
+    if len(obstacles):
+        out = np.minimum(out, cKDTree(obstacles).query(points)[0])
+    if len(peers):
+        out = np.minimum(out, cKDTree(peers).query(points)[0] - robot_radius)
+    return out
+
+
 def escape_heading(
     pose: tuple[float, float, float],
-    aim: np.ndarray,
+    aim: np.ndarray | None,
     obstacles: np.ndarray,
+    peers: np.ndarray,
     robot_radius: float,
     distance: float,
 ) -> float | None:
@@ -184,44 +199,49 @@ def escape_heading(
 
     Of ``ESCAPE_HEADINGS`` directions, the free ones are those along which a straight move of
     ``distance`` keeps every point at least min(robot_radius + ESCAPE_MARGIN_M, the gap now)
-    from the obstacles and ends farther from them than the robot is now (or clear of that
-    margin); the one closest to the direction of ``aim`` wins. A disc robot can always turn in
+    clear (see :func:`gaps`) and ends farther out than the robot is now (or clear of that
+    margin); the one closest to the direction of ``aim`` wins, or without an aim the one that
+    ends clearest. A disc robot can always turn in
     place, so any free direction can be taken: this is Nav2's Spin-then-DriveOnHeading recovery
     with the heading chosen from the scan instead of fixed, and it frees a robot from the
     pockets where DWA's forward arcs are all blocked and the way straight back is too."""
     xy = np.asarray(pose[:2], dtype=float)
     phi = np.linspace(-math.pi, math.pi, ESCAPE_HEADINGS, endpoint=False)
-    toward = math.atan2(aim[1] - xy[1], aim[0] - xy[0])
-    off = np.abs(np.remainder(phi - toward + math.pi, 2 * math.pi) - math.pi)
-    if len(obstacles) == 0:
-        return float(phi[np.argmin(off)])
-    tree = cKDTree(obstacles)
-    gap_now = float(tree.query(xy)[0])
+    if aim is not None:
+        toward = math.atan2(aim[1] - xy[1], aim[0] - xy[0])
+        off = np.abs(np.remainder(phi - toward + math.pi, 2 * math.pi) - math.pi)
+    if len(obstacles) == 0 and len(peers) == 0:
+        return float(phi[np.argmin(off)]) if aim is not None else None
+    gap_now = float(gaps(xy[None, :], obstacles, peers, robot_radius)[0])
     steps = np.linspace(0.02, distance, 6)
     dirs = np.column_stack([np.cos(phi), np.sin(phi)])
     points = xy[None, None, :] + steps[None, :, None] * dirs[:, None, :]
-    gaps = tree.query(points.reshape(-1, 2))[0].reshape(len(phi), len(steps))
+    along = gaps(points.reshape(-1, 2), obstacles, peers, robot_radius)
+    along = along.reshape(len(phi), len(steps))
     margin = robot_radius + ESCAPE_MARGIN_M
-    free = (gaps.min(axis=1) >= min(margin, gap_now)) & (
-        (gaps[:, -1] > gap_now) | (gaps[:, -1] >= margin)
+    free = (along.min(axis=1) >= min(margin, gap_now)) & (
+        (along[:, -1] > gap_now) | (along[:, -1] >= margin)
     )
     if not free.any():
         return None
+    if aim is None:
+        return float(phi[free][np.argmax(along[free, -1])])
     return float(phi[free][np.argmin(off[free])])
 
 
 def start_escape(
     state: FollowState,
     pose: tuple[float, float, float],
+    aim: np.ndarray | None,
     obstacles: np.ndarray,
+    peers: np.ndarray,
     robot_radius: float,
     agent: AgentParams,
 ) -> FollowState:
-    """Begin the escape move toward the carrot, driving forward or in reverse, whichever needs
-    the smaller turn first; the state is unchanged when no direction is free."""
-    xy = np.asarray(pose[:2], dtype=float)
-    aim = carrot(state, xy, agent.align_lookahead)
-    travel = escape_heading(pose, aim, obstacles, robot_radius, agent.escape_distance)
+    """Begin the escape move toward ``aim`` (or to the clearest side, see
+    :func:`escape_heading`), driving forward or in reverse, whichever needs the smaller turn
+    first; the state is unchanged when no direction is free."""
+    travel = escape_heading(pose, aim, obstacles, peers, robot_radius, agent.escape_distance)
     if travel is None:
         return state
     forward = abs(math.remainder(travel - pose[2], 2 * math.pi)) <= math.pi / 2
@@ -239,6 +259,7 @@ def escape_step(
     pose: tuple[float, float, float],
     velocity: tuple[float, float],
     obstacles: np.ndarray,
+    peers: np.ndarray,
     params: DWAParams,
     robot_radius: float,
     dt: float,
@@ -254,16 +275,48 @@ def escape_step(
     sign = state.escape_sign
     way = sign * np.array([math.cos(pose[2]), math.sin(pose[2])])
     ahead = np.asarray(pose[:2]) + np.linspace(0.02, state.escape_m, 5)[:, None] * way
-    if len(obstacles):
-        points = np.vstack([np.asarray(pose[:2])[None, :], ahead])
-        gaps = cKDTree(obstacles).query(points)[0]
-        if gaps[1:].min() < min(robot_radius, gaps[0]):
-            return None
+    clear = gaps(np.vstack([np.asarray(pose[:2])[None, :], ahead]), obstacles, peers, robot_radius)
+    if clear[1:].min() < min(robot_radius, clear[0]):
+        return None
     v0 = velocity[0]
     v = min(max(sign * agent.escape_speed, v0 - params.acc_lim_x * dt), v0 + params.acc_lim_x * dt)
     result = _held(pose, v, 0.0, params)
     left = state.escape_m - abs(v) * dt if v * sign > 0 else state.escape_m
     return replace(state, escape_m=max(0.0, left)), result
+
+
+def keep_clear(
+    state: FollowState,
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    obstacles: np.ndarray,
+    peers: np.ndarray,
+    params: DWAParams,
+    robot_radius: float,
+    dt: float,
+    agent: AgentParams,
+) -> tuple[FollowState, DWAResult]:
+    """The step of a robot without work: stand still, unless a peer's intent (``peers``, the
+    centres of the discs it will cover, see :func:`agents.peers.intent_centres`) comes within
+    ``ESCAPE_MARGIN_M`` of its body — then step aside with the escape move, to the side that
+    ends clearest. A robot that has finished its path would otherwise stand on someone else's.
+    """
+    xy = np.asarray(pose[:2], dtype=float)
+    if state.escape_m <= 0 and len(peers):
+        d = np.hypot(*(peers - xy).T)
+        if d.min() < 2 * robot_radius + ESCAPE_MARGIN_M:
+            state = start_escape(state, pose, None, obstacles, peers, robot_radius, agent)
+    if state.escape_m > 0:
+        stepped = escape_step(
+            state, pose, velocity, obstacles, peers, params, robot_radius, dt, agent
+        )
+        if stepped is not None:
+            return stepped
+        state = replace(state, escape_m=0.0)
+    v0, w0 = velocity
+    v = max(0.0, v0 - params.acc_lim_x * dt)
+    w = min(max(0.0, w0 - params.acc_lim_theta * dt), w0 + params.acc_lim_theta * dt)
+    return state, _held(pose, v, w, params)
 
 
 def control_step(
@@ -275,23 +328,32 @@ def control_step(
     robot_radius: float,
     dt: float,
     agent: AgentParams,
+    peers: np.ndarray | None = None,
 ) -> tuple[FollowState, DWAResult | None]:
     """Advance along the path and choose a command; ``None`` when the path is finished.
+
+    ``obstacles`` are points (the scan); ``peers`` the centres of the discs that other robots
+    will cover (:func:`agents.peers.intent_centres`), which DWA sees as their rims.
 
     A waypoint the robot has come no closer to (by ``PROGRESS_M``) for ``give_up_after_s`` is
     skipped, so a robot whose way is shut, that is caught in a local minimum of the DWA costs,
     or whose pose estimate has drifted into a wall moves on instead of waiting forever; the
-    skipped spot stays uncleaned and shows in the coverage. Turning in place counts as progress,
-    and the escape move (after ``escape_after_s`` without progress while following DWA — boxed
-    in, or caught in a minimum of its costs; see :func:`escape_heading`) stops the watchdog's
-    clock.
+    skipped spot stays uncleaned and shows in the coverage. Turning in place toward the path
+    holds the watchdog's clock (only coming closer resets it, so a robot that turns, drives off
+    and turns back again is still given up on), and so does the escape move, which starts after
+    ``escape_after_s`` without progress under DWA — boxed in, or caught in a minimum of its
+    costs (see :func:`escape_heading`).
     """
     xy = np.array(pose[:2])
     state = advance(state, xy, agent)
     if state.done:
         return state, None
+    peers = np.zeros((0, 2)) if peers is None else peers
+    seen = np.vstack([obstacles, rim_points(peers, robot_radius)]) if len(peers) else obstacles
     if state.escape_m > 0:
-        escaping = escape_step(state, pose, velocity, obstacles, params, robot_radius, dt, agent)
+        escaping = escape_step(
+            state, pose, velocity, obstacles, peers, params, robot_radius, dt, agent
+        )
         if escaping is not None:
             return escaping
         state = replace(state, escape_m=0.0)
@@ -314,21 +376,20 @@ def control_step(
             v_now = velocity[0]
             speed = min(max(speed, v_now - params.acc_lim_x * dt), v_now + params.acc_lim_x * dt)
             fixed = replace(params, min_vel_x=speed, max_vel_x=speed, vx_samples=1)
-            result = dwa_control(pose, velocity, path, obstacles, fixed, robot_radius, dt)
+            result = dwa_control(pose, velocity, path, seen, fixed, robot_radius, dt)
             if not (result.admissible and math.isfinite(result.cost)):
                 result = None
         if result is None:
-            result = dwa_control(pose, velocity, path, obstacles, params, robot_radius, dt)
+            result = dwa_control(pose, velocity, path, seen, params, robot_radius, dt)
         progressed = dist < state.best_dist - PROGRESS_M
         blocked = 0.0 if progressed else state.blocked_s + dt
         state = replace(state, blocked_s=blocked)
         if blocked >= agent.escape_after_s:
-            state = start_escape(state, pose, obstacles, robot_radius, agent)
+            state = start_escape(state, pose, aim, obstacles, peers, robot_radius, agent)
+    if progressed and state.aligning:
+        return replace(state, best_error=abs(error)), result
     if progressed:
-        best_error = min(state.best_error, abs(error)) if state.aligning else state.best_error
-        return replace(
-            state, stalled_s=0.0, best_dist=min(state.best_dist, dist), best_error=best_error
-        ), result
+        return replace(state, stalled_s=0.0, best_dist=dist), result
     if state.stalled_s + dt >= agent.give_up_after_s:
         return FollowState(state.waypoints, state.index + 1), result
     return replace(state, stalled_s=state.stalled_s + dt), result

@@ -96,40 +96,43 @@ def test_escape_heading_leaves_a_pocket_toward_the_aim_and_is_none_when_enclosed
     box = np.array([[x, 0.25] for x in np.linspace(0.425, 0.8, 16)])
     obstacles = np.vstack([wall, box])
     pose, aim = (0.262, 0.36, 0.1), np.array([0.9, 0.38])
-    heading = escape_heading(pose, aim, obstacles, 0.17, 0.15)
+    heading = escape_heading(pose, aim, obstacles, np.zeros((0, 2)), 0.17, 0.15)
     assert heading is not None and 0.2 < heading < math.pi / 2 + 0.1
     way = np.array([math.cos(heading), math.sin(heading)])
     moved = np.array(pose[:2]) + np.linspace(0.0, 0.15, 16)[:, None] * way
     gaps = np.hypot(*(moved[:, None, :] - obstacles[None]).transpose(2, 0, 1)).min(axis=1)
     assert gaps.min() >= 0.17 and gaps[-1] > gaps[0]
     ring = np.array([[0.19 * math.cos(a), 0.19 * math.sin(a)] for a in np.linspace(0, 6.28, 90)])
-    assert escape_heading((0.0, 0.0, 0.0), np.array([1.0, 0.0]), ring, 0.17, 0.15) is None
+    assert escape_heading((0.0, 0.0, 0.0), np.array([1.0, 0.0]), ring, ring[:0], 0.17, 0.15) is None
 
 
 def test_escape_turns_first_then_drives_in_the_cheaper_sense() -> None:
     path = np.array([[0.0, 0.0], [-2.0, 0.0]])
     state = FollowState(path, index=1)
     # free all round; the aim is behind the robot, so it reverses without turning
-    behind = start_escape(state, (0.0, 0.0, 0.0), np.zeros((0, 2)), 0.17, AGENT)
+    none = np.zeros((0, 2))
+    behind = start_escape(state, (0.0, 0.0, 0.0), path[1], none, none, 0.17, AGENT)
     assert behind.escape_sign == -1 and behind.escape_m == AGENT.escape_distance
-    stepped = escape_step(
-        behind, (0.0, 0.0, 0.0), (0.0, 0.0), np.zeros((0, 2)), DWA, 0.17, DT, AGENT
-    )
+    stepped = escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, 0.17, DT, AGENT)
     assert stepped is not None and stepped[1].v < 0 and stepped[1].w == 0.0
     # the aim is to the left: turn in place before driving
     left = start_escape(
         FollowState(np.array([[0.0, 0.0], [0.0, 2.0]]), index=1),
         (0.0, 0.0, 0.0),
-        np.zeros((0, 2)),
+        np.array([0.0, 2.0]),
+        none,
+        none,
         0.17,
         AGENT,
     )
     assert left.escape_sign == 1 and left.escape_heading == pytest.approx(math.pi / 2, abs=0.1)
-    turning = escape_step(left, (0.0, 0.0, 0.0), (0.0, 0.0), np.zeros((0, 2)), DWA, 0.17, DT, AGENT)
+    turning = escape_step(left, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, 0.17, DT, AGENT)
     assert turning is not None and turning[1].v == 0.0 and turning[1].w > 0
     # the way closes during the move: the escape ends
     wall = np.array([[-0.25, y] for y in np.linspace(-0.5, 0.5, 21)])
-    assert escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), wall, DWA, 0.17, DT, AGENT) is None
+    assert (
+        escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), wall, none, DWA, 0.17, DT, AGENT) is None
+    )
 
 
 def test_a_robot_wedged_against_a_wall_escapes_and_then_drives_on() -> None:

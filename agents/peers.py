@@ -1,0 +1,78 @@
+"""The other robots' published intents, and how an agent gives way to them.
+
+Every agent publishes its intent over the next ``intent_horizon_s``: the path ahead at cruising
+speed while it follows one (:func:`path_intent`), else where its current command takes it
+(:func:`intent_points`). Robots are ranked by id (:func:`gives_way`);
+an agent treats the intents of the robots ranked above it as obstacles for the time they cover
+(:func:`intent_centres`, which DWA sees as :func:`rim_points`), so DWA keeps it out of their
+way, stops it short of a crossing, or — through the follower's escape move — makes it step
+aside when one of them comes at it. The robot with the right of way sees the other only in its
+scan. A fixed priority order is the simplest rule under which two robots never both yield to
+each other (prioritized planning, Erdmann and Lozano-Pérez 1987, applied to the robots'
+short-term trajectories). A robot without work gives way to everyone.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+
+import numpy as np
+
+from planners.dwa import rollout
+
+RIM_POINTS = 12
+
+
+def intent_points(
+    pose: tuple[float, float, float], v: float, w: float, stamp: float, horizon_s: float
+) -> np.ndarray:
+    """Rows (t, x, y): the robot's positions at 11 times over ``horizon_s`` if it holds (v, ω)."""
+    t = np.linspace(0.0, horizon_s, 11)
+    xs, ys, _ = rollout(pose, np.array([v]), np.array([w]), t)
+    return np.column_stack([stamp + t, xs[0], ys[0]])
+
+
+def path_intent(
+    xy: np.ndarray, ahead: np.ndarray, speed: float, stamp: float, horizon_s: float
+) -> np.ndarray:
+    """Rows (t, x, y): 11 positions over ``horizon_s`` along the polyline from ``xy`` through
+    the waypoints ``ahead`` at ``speed`` (clipped at its end). A robot that follows a path
+    announces the path, not its current command: one that is stopped by another still shows
+    where it needs to go, so the other can make way."""
+    t = np.linspace(0.0, horizon_s, 11)
+    pts = np.vstack([np.asarray(xy, dtype=float)[None, :], np.asarray(ahead, dtype=float)])
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    s = np.minimum(speed * t, cum[-1])
+    return np.column_stack([stamp + t, np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
+
+
+def _rank(rid: str) -> tuple:
+    """Natural order of robot ids: robot-2 before robot-10."""
+    return tuple(int(p) if p.isdigit() else p for p in re.split(r"(\d+)", rid))
+
+
+def gives_way(me: str, other: str) -> bool:
+    """True when robot ``me`` must keep out of the way of robot ``other``."""
+    return _rank(other) < _rank(me)
+
+
+def intent_centres(intents: Iterable[np.ndarray], now: float, max_age_s: float) -> np.ndarray:
+    """Centres (M, 2) of the discs the peers will cover: every sample of each intent from
+    ``max_age_s`` ago on. An intent published longer than ``max_age_s`` ago is ignored (the
+    robot stopped publishing: it is gone or its agent is stalled, and the scan still shows it)."""
+    centres = [
+        pts[pts[:, 0] >= now - max_age_s, 1:]
+        for pts in intents
+        if len(pts) and now - pts[0, 0] <= max_age_s
+    ]
+    centres = [c for c in centres if len(c)]
+    return np.vstack(centres) if centres else np.zeros((0, 2))
+
+
+def rim_points(centres: np.ndarray, robot_radius: float) -> np.ndarray:
+    """``RIM_POINTS`` points on the rim of each disc: how a planner that keeps its centre a
+    robot radius from obstacle points keeps its body off the peers' bodies."""
+    angles = np.linspace(0.0, 2 * np.pi, RIM_POINTS, endpoint=False)
+    rim = robot_radius * np.column_stack([np.cos(angles), np.sin(angles)])
+    return (np.asarray(centres)[:, None, :] + rim[None, :, :]).reshape(-1, 2)
