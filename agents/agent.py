@@ -3,7 +3,9 @@
 It knows only what a real robot knows: its scans, its odometry, the sim clock and what the
 coordinator sends. Each scan triggers one control step; the cmd_vel it publishes carries that
 scan's stamp, which is how the simulator knows the agent has kept up. When its odometry is
-older than ``stale_after_s`` (sim time) it commands a stop. It reads the other robots' intents:
+older than ``stale_after_s`` (sim time) it commands a stop. Paths are followed from the pose
+predicted for when the command will take effect (:func:`agents.follower.predict`), by the
+latency it measures against the sim clock. It reads the other robots' intents:
 while it works it keeps out of the way of those ranked above it, and without work it steps
 aside from anyone's (see :mod:`agents.peers`).
 """
@@ -18,7 +20,7 @@ import time
 
 import numpy as np
 
-from agents.follower import FollowState, control_step, keep_clear, scan_points
+from agents.follower import FollowState, control_step, keep_clear, predict, scan_points
 from agents.peers import gives_way, intent_centres, intent_points, path_intent
 from agents.pose_source import OdometryPose, PoseSource, SlamPose
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
@@ -42,6 +44,11 @@ from fleet.protocol import (
 log = logging.getLogger("agent")
 
 INTENT_WAYPOINTS = 30
+# The latency of a command (sim time from its scan to the clock when it is sent) is smoothed
+# with this gain; the simulator holds its clock within max_lag_s of the agents, so it stays small.
+LATENCY_GAIN = 0.2
+ODOM_WAIT_S = 0.02
+MAX_LATENCY_S = 0.5
 
 
 class Agent:
@@ -56,6 +63,8 @@ class Agent:
         self.pose_source: PoseSource | None = None
         self.odom_stamp = -1.0
         self.velocity = (0.0, 0.0)
+        self.command = (0.0, 0.0)
+        self.latency_s = 0.0
         self.follow: FollowState | None = None
         self.idle = FollowState(np.zeros((0, 2)))
         self.peers: dict[str, np.ndarray] = {}
@@ -168,6 +177,11 @@ class Agent:
     def step(self, scan: LaserScan) -> Twist:
         """One control step on a fresh scan."""
         a = self.cfg.agent
+        # The odometry of the scan's moment is sent first but on another stream; give it a
+        # moment to arrive, so SLAM pairs the scan with it (see SlamPose).
+        deadline = time.monotonic() + ODOM_WAIT_S
+        while self.odom_stamp < scan.stamp - 1e-9 and time.monotonic() < deadline:
+            time.sleep(0.001)
         with self.lock:
             src = self.pose_source
             assert src is not None
@@ -176,6 +190,7 @@ class Agent:
             velocity = self.velocity
             stale = scan.stamp - self.odom_stamp > a.stale_after_s
             follow = self.follow
+            planned = self.plan_id >= 0
         if self._last_xy is not None:
             self.distance_m += float(
                 np.hypot(pose[0] - self._last_xy[0], pose[1] - self._last_xy[1])
@@ -184,10 +199,11 @@ class Agent:
         v = w = 0.0
         obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
         dt = 1.0 / self.cfg.lidar.rate_hz
+        ahead = predict(pose, self.command, self.latency_s)
         if stale:
             state = "stale"
         elif follow is None or follow.done:
-            state = "waiting" if self.plan_id < 0 else "done"
+            state = "done" if planned else "waiting"
             self.idle, result = keep_clear(
                 self.idle,
                 pose,
@@ -203,7 +219,7 @@ class Agent:
         else:
             follow, result = control_step(
                 follow,
-                pose,
+                ahead,
                 velocity,
                 obstacles,
                 self.cfg.dwa,
@@ -221,6 +237,9 @@ class Agent:
                 v, w = result.v, result.w
                 state = "driving" if result.admissible else "blocked"
         self.state = state
+        self.command = (v, w)
+        lag = min(max(self.clock - scan.stamp, 0.0), MAX_LATENCY_S)
+        self.latency_s += LATENCY_GAIN * (lag - self.latency_s)
         self._publish(scan.stamp, pose, v, w, follow)
         return Twist(scan.stamp, v, w)
 

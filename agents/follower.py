@@ -93,6 +93,18 @@ def local_path(state: FollowState, xy: np.ndarray, horizon_m: float = LOCAL_PATH
     return np.array(pts, dtype=float)
 
 
+def predict(
+    pose: tuple[float, float, float], velocity: tuple[float, float], dt: float
+) -> tuple[float, float, float]:
+    """The pose after ``dt`` at ``velocity``. A command computed from a scan takes effect a
+    latency later; planning it from the pose predicted for that moment (a Smith predictor)
+    keeps the robot from weaving about its lane when the latency is a whole control period."""
+    if dt <= 0:
+        return pose
+    xs, ys, ths = rollout(pose, np.array([velocity[0]]), np.array([velocity[1]]), np.array([dt]))
+    return float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0])
+
+
 def scan_points(
     pose: tuple[float, float, float],
     ranges: np.ndarray,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Protocol
 
 import numpy as np
@@ -13,6 +14,9 @@ from agents.slam.slam_map import SlamMap
 from fleet.protocol import LaserScan, Odometry
 
 Pose = tuple[float, float, float]
+
+
+ODOM_HISTORY = 64
 
 
 class PoseSource(Protocol):
@@ -58,8 +62,11 @@ class OdometryPose:
 class SlamPose:
     """The agent's own SLAM (``agents.slam``), its map frame tied to the world by the spawn pose.
 
-    Each scan is matched with the latest odometry pose as the prior; between scans the pose
-    follows the odometry increments, so a control step always sees the freshest estimate.
+    Each scan is matched with the odometry pose at the scan's stamp as the prior (interpolated
+    in the recent odometry, which may arrive before or after the scan); between scans the pose
+    follows the odometry increments since that stamp, so a control step always sees the
+    freshest estimate. Pairing a scan with odometry from another moment would count the motion
+    between the two twice — centimetres and degrees at full speed.
     """
 
     name = "slam"
@@ -67,22 +74,42 @@ class SlamPose:
     def __init__(self, params: SlamParams, start: Pose, range_min: float, range_max: float) -> None:
         self._slam = Slam(params, start, range_min=range_min, range_max=range_max)
         self._odom: Pose | None = None
+        self._history: deque[tuple[float, Pose]] = deque(maxlen=ODOM_HISTORY)
         self._odom_at_scan: Pose | None = None
         self._at_scan: Pose = start
         self._covariance = np.zeros(9)
 
     def on_odometry(self, msg: Odometry) -> None:
+        if self._history and msg.stamp <= self._history[-1][0]:
+            return
         self._odom = (msg.x, msg.y, msg.theta)
+        self._history.append((msg.stamp, self._odom))
 
     def on_scan(self, msg: LaserScan) -> None:
         if self._odom is None:
             return
+        odom = self._odom_at(msg.stamp)
         est = self._slam.process(
-            msg.ranges.astype(np.float64), msg.angle_min, msg.angle_increment, self._odom, msg.stamp
+            msg.ranges.astype(np.float64), msg.angle_min, msg.angle_increment, odom, msg.stamp
         )
         self._at_scan = est.pose
-        self._odom_at_scan = self._odom
+        self._odom_at_scan = odom
         self._covariance = est.covariance.reshape(9)
+
+    def _odom_at(self, stamp: float) -> Pose:
+        """The odometry pose at ``stamp``: linear in x, y and θ between the two messages around
+        it; the nearest one outside the history."""
+        times = np.array([t for t, _ in self._history])
+        k = int(np.searchsorted(times, stamp))
+        if k == 0:
+            return self._history[0][1]
+        if k == len(times):
+            return self._history[-1][1]
+        (t0, a), (t1, b) = self._history[k - 1], self._history[k]
+        f = (stamp - t0) / (t1 - t0)
+        d = relative(a, b)
+        x, y, theta = compose(a, f * d)
+        return (float(x), float(y), float(theta))
 
     def pose(self) -> Pose:
         if self._odom is None or self._odom_at_scan is None:
