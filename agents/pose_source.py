@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
@@ -59,6 +60,20 @@ class OdometryPose:
         return None
 
 
+def odometry_at(history: Sequence[tuple[float, Pose]], stamp: float) -> Pose:
+    """The odometry pose at ``stamp`` from (stamp, pose) messages in time order: interpolated
+    along the relative motion between the two around it, the nearest one outside them."""
+    times = np.array([t for t, _ in history])
+    k = int(np.searchsorted(times, stamp))
+    if k == 0:
+        return history[0][1]
+    if k == len(times):
+        return history[-1][1]
+    (t0, a), (t1, b) = history[k - 1], history[k]
+    x, y, theta = compose(a, (stamp - t0) / (t1 - t0) * relative(a, b))
+    return (float(x), float(y), float(theta))
+
+
 class SlamPose:
     """The agent's own SLAM (``agents.slam``), its map frame tied to the world by the spawn pose.
 
@@ -88,28 +103,13 @@ class SlamPose:
     def on_scan(self, msg: LaserScan) -> None:
         if self._odom is None:
             return
-        odom = self._odom_at(msg.stamp)
+        odom = odometry_at(self._history, msg.stamp)
         est = self._slam.process(
             msg.ranges.astype(np.float64), msg.angle_min, msg.angle_increment, odom, msg.stamp
         )
         self._at_scan = est.pose
         self._odom_at_scan = odom
         self._covariance = est.covariance.reshape(9)
-
-    def _odom_at(self, stamp: float) -> Pose:
-        """The odometry pose at ``stamp``: linear in x, y and θ between the two messages around
-        it; the nearest one outside the history."""
-        times = np.array([t for t, _ in self._history])
-        k = int(np.searchsorted(times, stamp))
-        if k == 0:
-            return self._history[0][1]
-        if k == len(times):
-            return self._history[-1][1]
-        (t0, a), (t1, b) = self._history[k - 1], self._history[k]
-        f = (stamp - t0) / (t1 - t0)
-        d = relative(a, b)
-        x, y, theta = compose(a, f * d)
-        return (float(x), float(y), float(theta))
 
     def pose(self) -> Pose:
         if self._odom is None or self._odom_at_scan is None:

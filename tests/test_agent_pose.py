@@ -9,7 +9,7 @@ import pytest
 from slam_sim import drifting_odometry, loop_route, room_segments, scan
 
 from agents.agent import _map_message
-from agents.pose_source import OdometryPose, SlamPose
+from agents.pose_source import OdometryPose, SlamPose, odometry_at
 from agents.slam.params import SlamParams
 from agents.slam.slam_map import PatchTracker
 from fleet.protocol import LaserScan, MapPatches, Odometry, decode, encode
@@ -85,3 +85,14 @@ def test_map_messages_rebuild_the_map_exactly() -> None:
             received[r : r + t, c : c + t] = block
         np.testing.assert_array_equal(received, snapshot.to_ros())
     assert received is not None and (received >= 65).sum() > 100
+
+
+def test_odometry_at_interpolates_along_the_motion_and_clamps_outside() -> None:
+    history = [(0.0, (0.0, 0.0, 0.0)), (1.0, (1.0, 1.0, math.pi / 2))]
+    # half way: half the relative motion, composed onto the first pose
+    assert odometry_at(history, 0.5) == pytest.approx((0.5, 0.5, math.pi / 4))
+    backing = [(0.0, (0.0, 2.0, math.pi / 2)), (1.0, (0.0, 1.0, math.pi / 2))]  # in reverse
+    assert odometry_at(backing, 0.25) == pytest.approx((0.0, 1.75, math.pi / 2))
+    assert odometry_at(history, 1.0) == history[1][1]
+    assert odometry_at(history, -1.0) == history[0][1]
+    assert odometry_at(history, 2.0) == history[1][1]
