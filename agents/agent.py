@@ -230,6 +230,16 @@ class Agent:
             )
             with self.lock:
                 if self.follow is not None and self.follow.waypoints is follow.waypoints:
+                    if follow.skipped > self.follow.skipped:
+                        skipped_at = self.follow.waypoints[self.follow.index]
+                        log.warning(
+                            "%s gave up on waypoint %d at (%.2f, %.2f): no progress for %.1f s",
+                            self.rid,
+                            self.follow.index,
+                            skipped_at[0],
+                            skipped_at[1],
+                            a.give_up_after_s,
+                        )
                     self.follow = follow
             if result is None:
                 state = "done"
@@ -303,6 +313,7 @@ class Agent:
                     n,
                     self.distance_m,
                     sum(self.bus.decode_errors.values()),
+                    follow.skipped if follow is not None else 0,
                 ),
                 control=True,
             )

@@ -47,6 +47,7 @@ class FollowState:
     escape_m: float = 0.0
     escape_heading: float = 0.0
     escape_sign: int = 1
+    skipped: int = 0
 
     @property
     def done(self) -> bool:
@@ -77,7 +78,7 @@ def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowSta
                     i += 1
                     continue
         break
-    return FollowState(wps, i) if i != state.index else state
+    return FollowState(wps, i, skipped=state.skipped) if i != state.index else state
 
 
 def local_path(state: FollowState, xy: np.ndarray, horizon_m: float = LOCAL_PATH_M) -> np.ndarray:
@@ -403,5 +404,5 @@ def control_step(
     if progressed:
         return replace(state, stalled_s=0.0, best_dist=dist), result
     if state.stalled_s + dt >= agent.give_up_after_s:
-        return FollowState(state.waypoints, state.index + 1), result
+        return FollowState(state.waypoints, state.index + 1, skipped=state.skipped + 1), result
     return replace(state, stalled_s=state.stalled_s + dt), result

@@ -113,12 +113,15 @@ def up(
         summary = bus.request(bus.keys.sim_report(), Request("up"), CoverageSummary, timeout=10.0)
         image = bus.request(bus.keys.coverage_image(), Request("up"), CoverageImage, timeout=10.0)
         makespan = watcher.makespan() if status == "done" else None
+        with watcher.lock:
+            skipped = {rid: v.status.skipped for rid, v in watcher.robots.items() if v.status}
         report = build_report(
             summary,
             makespan,
             wall_s,
             status,
             {"world": world_path, "robot_count": robots, "speed": speed, "seed": seed},
+            skipped,
         )
         write_json(run_dir / "report.json", report)
         with watcher.lock:

@@ -213,7 +213,8 @@ class Intent(Message):
 
 @dataclass(frozen=True, eq=False)
 class RobotStatus(Message):
-    """What an agent is doing: state, task, progress along its path."""
+    """What an agent is doing: state, task, progress along its path, and how many waypoints of
+    it were given up as unreachable (``skipped``)."""
 
     TYPE: ClassVar[str] = "status"
     stamp: float
@@ -224,6 +225,7 @@ class RobotStatus(Message):
     waypoints: int
     distance_m: float
     decode_errors: int = 0
+    skipped: int = 0
 
 
 @dataclass(frozen=True, eq=False)

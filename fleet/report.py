@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -29,14 +30,18 @@ def build_report(
     wall_s: float,
     status: str,
     extra: dict[str, Any],
+    skipped: Mapping[str, int] | None = None,
 ) -> dict[str, Any]:
-    """The report as a JSON-ready dict. ``makespan_s`` is None when the job did not finish."""
+    """The report as a JSON-ready dict. ``makespan_s`` is None when the job did not finish;
+    ``skipped`` holds the waypoints each agent last reported giving up on (None: unknown)."""
+    skipped = skipped or {}
     robots = {
         rid: {
             "path_length_m": round(float(summary.path_length_m[i]), 3),
             "turns": int(summary.turns[i]),
             "wall_collisions": int(summary.wall_collisions[i]),
             "robot_collisions": int(summary.robot_collisions[i]),
+            "skipped_waypoints": skipped.get(rid),
         }
         for i, rid in enumerate(summary.robots)
     }

@@ -36,16 +36,16 @@ def _children_of(pid: int) -> list[int]:
     return out
 
 
-@pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    run_dir = tmp_path_factory.mktemp("up")
+def _fleet_up(run_dir: Path, robots: int) -> dict:
+    """Run ``fleet up`` headless until done on the small world; collect every process it
+    started while it ran, and kill (and report) any left after it exits."""
     cmd = [
         sys.executable,
         "-m",
         "fleet.cli",
         "up",
         "--robots",
-        "3",
+        str(robots),
         "--world",
         str(WORLD),
         "--headless",
@@ -82,6 +82,11 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
     }
 
 
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    return _fleet_up(tmp_path_factory.mktemp("up"), 3)
+
+
 def test_all_processes_started_and_none_left_behind(run: dict) -> None:
     assert len(run["children"]) >= 6, run["output"]  # router, sim, coordinator, 3 agents
     assert run["left"] == [], f"orphans: {run['left']}"
@@ -102,14 +107,22 @@ def test_report_is_written_and_valid(run: dict) -> None:
     assert (run["dir"] / "report.png").stat().st_size > 0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known gap: robots on SLAM track their lanes to a few cm, but block each other (no "
-    "deconfliction yet) and wedge into the pocket beside the dock, skip waypoints there, and "
-    "coverage stays at 0.72-0.85",
-)
 def test_small_world_is_cleaned_without_wall_collisions(run: dict) -> None:
     report = json.loads((run["dir"] / "report.json").read_text())
     assert run["rc"] == 0 and report["status"] == "done", run["output"]
-    assert report["coverage"] >= 0.95
-    assert report["collisions"]["robot_wall"] == 0
+    assert report["coverage"] >= 0.95, report
+    assert report["collisions"]["robot_wall"] == 0, report
+    assert report["makespan_s"] is not None and report["makespan_s"] > 0
+
+
+def test_one_agent_on_slam_completes_its_path_without_collision(tmp_path: Path) -> None:
+    one = _fleet_up(tmp_path, 1)
+    report = json.loads((one["dir"] / "report.json").read_text())
+    assert one["rc"] == 0 and report["status"] == "done", one["output"]
+    assert one["left"] == [], f"orphans: {one['left']}"
+    assert "pose from slam" in (one["dir"] / "robot-0.log").read_text()
+    robot = report["robots"]["robot-0"]
+    # the whole path driven: no waypoint given up, no contact with anything
+    assert robot["skipped_waypoints"] == 0, (one["dir"] / "robot-0.log").read_text()
+    assert robot["wall_collisions"] == 0 and robot["robot_collisions"] == 0
+    assert report["coverage"] >= 0.95, report
