@@ -45,7 +45,8 @@ log = logging.getLogger("agent")
 
 INTENT_WAYPOINTS = 30
 # The latency of a command (sim time from its scan to the clock when it is sent) is smoothed
-# with this gain; the simulator holds its clock within max_lag_s of the agents, so it stays small.
+# with this gain. At --speed 0 the simulator waits for each answer, so it is 0; in real time
+# it is the time a control step takes.
 LATENCY_GAIN = 0.2
 ODOM_WAIT_S = 0.02
 MAX_LATENCY_S = 0.5

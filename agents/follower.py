@@ -214,10 +214,10 @@ def escape_heading(
     ``distance`` keeps every point at least min(robot_radius + ESCAPE_MARGIN_M, the gap now)
     clear (see :func:`gaps`) and ends farther out than the robot is now (or clear of that
     margin); the one closest to the direction of ``aim`` wins, or without an aim the one that
-    ends clearest. A disc robot can always turn in
-    place, so any free direction can be taken: this is Nav2's Spin-then-DriveOnHeading recovery
-    with the heading chosen from the scan instead of fixed, and it frees a robot from the
-    pockets where DWA's forward arcs are all blocked and the way straight back is too."""
+    ends clearest. A disc robot can always turn in place, so any free direction can be taken:
+    this is Nav2's Spin-then-DriveOnHeading recovery with the heading chosen from the scan
+    instead of fixed, and it frees a robot from the pockets where DWA's forward arcs are all
+    blocked and the way straight back is too."""
     xy = np.asarray(pose[:2], dtype=float)
     phi = np.linspace(-math.pi, math.pi, ESCAPE_HEADINGS, endpoint=False)
     if aim is not None:
