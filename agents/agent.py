@@ -82,7 +82,17 @@ class Agent:
         self._patches = PatchTracker(cfg.slam.map_tile, cfg.slam.patch_tolerance)
 
     def spawn(self, start: tuple[float, float, float], timeout: float = 30.0) -> None:
-        """Ask the simulator to place the robot; retry until it answers or ``timeout`` passes."""
+        """Ask the simulator to place the robot; retry until it answers or ``timeout`` passes.
+
+        The subscriptions come first: the simulator sends the first scan right after placing
+        the robot and then holds its clock until that scan is answered."""
+        k = self.keys
+        self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
+        self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
+        self.bus.subscribe(k.clock(), Clock, self._on_clock)
+        self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
+        self.bus.subscribe(k.all_robots("intent"), Intent, self._on_intent)
+        self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
         deadline = time.monotonic() + timeout
         req = SpawnRequest(self.rid, *start)
         while True:
@@ -96,13 +106,6 @@ class Agent:
         if not reply.ok:
             raise ValueError(f"spawn refused: {reply.error}")
         self.pose_source = self._make_pose_source((reply.x, reply.y, reply.theta))
-        k = self.keys
-        self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
-        self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
-        self.bus.subscribe(k.clock(), Clock, self._on_clock)
-        self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
-        self.bus.subscribe(k.all_robots("intent"), Intent, self._on_intent)
-        self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
         log.info(
             "%s spawned at (%.2f, %.2f, %.2f), pose from %s",
             self.rid,
@@ -130,7 +133,8 @@ class Agent:
 
     def _on_odom(self, _key: str, msg: Odometry) -> None:
         with self.lock:
-            assert self.pose_source is not None
+            if self.pose_source is None:
+                return
             self.pose_source.on_odometry(msg)
             self.odom_stamp = msg.stamp
             self.velocity = (msg.v, msg.w)

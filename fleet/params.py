@@ -89,12 +89,15 @@ class SimParams:
     cell_size: float = 0.05
     max_lag_s: float = 0.1
     agent_timeout_s: float = 3.0
+    first_answer_timeout_s: float = 15.0
 
     def validate(self) -> None:
         if self.physics_hz < 20:
             raise ValueError("physics_hz must be >= 20")
         if self.cell_size <= 0 or self.max_lag_s <= 0:
             raise ValueError("cell_size and max_lag_s must be > 0")
+        if not 0 < self.agent_timeout_s <= self.first_answer_timeout_s:
+            raise ValueError("need 0 < agent_timeout_s <= first_answer_timeout_s")
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,11 @@
 """The simulator process: steps :class:`SimCore` and talks to the fleet over Zenoh.
 
-Time: sim time advances at ``speed`` × wall time (``speed`` 0: as fast as possible), but never
-more than ``max_lag_s`` past the newest sensor stamp each live agent has answered with a
-cmd_vel. An agent whose liveliness token disappears, or that has been silent for
-``agent_timeout_s`` of wall time, no longer holds the clock back; its robot stops and stays in
-the world as an obstacle until it respawns.
+Time: sim time advances at ``speed`` × wall time (``speed`` 0: as fast as the live agents
+answer; in real time while none is live), but never more than ``max_lag_s`` past the newest
+sensor stamp each live agent has answered with a cmd_vel. An agent whose liveliness token
+disappears, or that has been silent for ``agent_timeout_s`` of wall time
+(``first_answer_timeout_s`` before its first answer, while it starts up), no longer holds the
+clock back; its robot stops and stays in the world as an obstacle until it respawns.
 """
 
 from __future__ import annotations
@@ -43,6 +44,8 @@ class AgentLink:
     ack: float
     last_wall: float
     alive: bool = True
+    answered: bool = False
+    scanned: bool = False
 
 
 class SimServer:
@@ -84,6 +87,7 @@ class SimServer:
             link.ack = max(link.ack, msg.stamp)
             link.last_wall = time.monotonic()
             link.alive = True
+            link.answered = True
             self.core.set_cmd(rid, msg.v, msg.w)
 
     def _on_spawn(self, req: SpawnRequest) -> SpawnReply:
@@ -129,9 +133,11 @@ class SimServer:
         """True when a live agent has not yet answered sensor data within the allowed lag."""
         limit = self.core.t + self.core.dt - self.cfg.sim.max_lag_s
         for rid, link in self.links.items():
-            if not link.alive or rid not in self.core.robots:
+            if not link.alive or not link.scanned or rid not in self.core.robots:
                 continue
-            if now - link.last_wall > self.cfg.sim.agent_timeout_s:
+            sim = self.cfg.sim
+            timeout = sim.agent_timeout_s if link.answered else sim.first_answer_timeout_s
+            if now - link.last_wall > timeout:
                 link.alive = False
                 self.core.set_cmd(rid, 0.0, 0.0)
                 log.warning(
@@ -143,6 +149,10 @@ class SimServer:
             if link.ack < limit - 1e-9:
                 return True
         return False
+
+    def _agents_live(self) -> bool:
+        with self.lock:
+            return any(link.alive and rid in self.core.robots for rid, link in self.links.items())
 
     def run(self) -> None:
         sim = self.cfg.sim
@@ -163,8 +173,9 @@ class SimServer:
                 pace_wall, pace_sim = time.monotonic(), self.core.t
                 continue
             waiting = False
-            if self.speed > 0:
-                ahead = (self.core.t - pace_sim) / self.speed - (now - pace_wall)
+            speed = self.speed if self.speed > 0 or self._agents_live() else 1.0
+            if speed > 0:
+                ahead = (self.core.t - pace_sim) / speed - (now - pace_wall)
                 if ahead > 0:
                     time.sleep(min(ahead, 0.05))
                     continue
@@ -172,6 +183,12 @@ class SimServer:
                     pace_wall, pace_sim = now, self.core.t
             with self.lock:
                 out = self.core.step()
+                for rid, msg in out.scans:
+                    link = self.links.get(rid)
+                    if link is not None and not link.scanned:
+                        # The first scan is the first thing to answer: hold the clock there.
+                        link.scanned = True
+                        link.ack = max(link.ack, msg.stamp - sim.max_lag_s)
                 if self.recorder is not None:
                     self.recorder.record(out.odometry, out.scans, self.core.truth)
                 steps = self.core.steps
