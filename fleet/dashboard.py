@@ -121,6 +121,7 @@ class FleetWatcher:
                 "state",
                 "task",
                 "progress",
+                "skipped",
                 "distance m",
                 "wall hits",
                 "robot hits",
@@ -138,13 +139,14 @@ class FleetWatcher:
                 s = self.robots[rid].status
                 w, r = hits.get(rid, (0, 0))
                 if s is None:
-                    t.add_row(rid, "—", "", "", "", str(w), str(r))
+                    t.add_row(rid, "—", "", "", "", "", str(w), str(r))
                     continue
                 t.add_row(
                     rid,
                     s.state,
                     s.task,
                     f"{100 * s.progress:5.1f} %",
+                    str(s.skipped),
                     f"{s.distance_m:7.1f}",
                     str(w),
                     str(r),
@@ -157,6 +159,7 @@ class FleetWatcher:
             phase = self.fleet.phase if self.fleet else "starting"
             states = ", ".join(
                 f"{rid}={v.status.state}:{100 * v.status.progress:.0f}%"
+                + (f" ({v.status.skipped} skipped)" if v.status.skipped else "")
                 for rid, v in sorted(self.robots.items())
                 if v.status is not None
             )
