@@ -21,6 +21,7 @@ from planners.coverage.lattice import room_lanes
 from planners.coverage.metrics import CoverageMetrics, coverage_metrics, path_time, swath
 from planners.coverage.ordering import split_tour
 from planners.coverage.params import CoverageParams
+from planners.coverage.prune import prune_driven, prune_tasks
 from planners.coverage.rooms import segment_rooms, shared_borders
 from planners.coverage.tasks import SweepTask, cell_tasks, edge_task, spiral_task
 from planners.coverage.tour import TaskEnds, end_points, path_of, plan_tour, task_ends
@@ -173,6 +174,9 @@ def plan_coverage(
             costs,
             params,
         )
+    if params.method == "bcd":
+        hw = params.cleaning_width / 2
+        pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit)
     paths = [
         _drive(s, [path_of(tasks[t], o) for t, o in piece], transit)
         for s, piece in zip(start_xy, pieces, strict=True)
@@ -327,10 +331,11 @@ def _add_fill_in(
     variant its tour chose; a pass goes to the robot of its floor part whose path passes
     closest and is inserted into its tour where it costs least, then the tour is improved
     again — which changes some transits, so the next round looks at what the new tours miss.
-    Each round first drops the tasks whose floor other tasks already clean (``_prune``)."""
+    Each round first drops the tasks whose floor other tasks already clean
+    (``prune.prune_tasks``)."""
     hw = params.cleaning_width / 2
     for _ in range(FILL_IN_ROUNDS):
-        pieces = _prune(grid, tasks, pieces, clean, hw)
+        pieces = prune_tasks(grid, tasks, pieces, clean, hw)
         fixed: list[SweepTask] = []
         initial = []
         driven = []
@@ -368,44 +373,6 @@ def _add_fill_in(
             for r in range(len(start_xy))
         ]
     return tasks, pieces
-
-
-def _prune(grid, tasks, pieces, clean, hw) -> list[list[tuple[int, int]]]:
-    """The robots' tours without the tasks all of whose cleanable cells other kept tasks cover
-    too (longest first): a pass whose floor later lanes sweep anyway, a lane piece that a
-    shoulder lane and its neighbours already cover."""
-    steps = [(r, k) for r, piece in enumerate(pieces) for k in range(len(piece))]
-    paths = [path_of(tasks[t], o) for piece in pieces for t, o in piece]
-    count = np.zeros(grid.shape, dtype=np.int32)
-    own = []
-    for path in paths:
-        window, cells = _footprint(grid, path, hw)
-        cells &= clean[window]
-        count[window] += cells
-        own.append((window, cells))
-    length = [float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in paths]
-    drop = set()
-    for i in np.argsort(length)[::-1]:
-        window, cells = own[i]
-        if not (count[window][cells] < 2).any():
-            count[window] -= cells
-            drop.add(steps[i])
-    return [[s for k, s in enumerate(p) if (r, k) not in drop] for r, p in enumerate(pieces)]
-
-
-def _footprint(
-    grid: GridMap, path: np.ndarray, hw: float
-) -> tuple[tuple[slice, slice], np.ndarray]:
-    """The cells within the capsules of ``path`` (``metrics.swath``), as a window of the grid
-    and the mask inside it."""
-    rc = grid.world_to_cell(path)
-    pad = math.ceil(hw / grid.resolution) + 1
-    r0, c0 = np.maximum(rc.min(axis=0) - pad, 0)
-    r1, c1 = np.minimum(rc.max(axis=0) + pad + 1, grid.shape)
-    origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
-    shape = (int(r1 - r0), int(c1 - c0))
-    window = GridMap(np.zeros(shape, bool), np.zeros(shape, bool), grid.resolution, origin)
-    return (slice(int(r0), int(r1)), slice(int(c0), int(c1))), swath(window, path, hw)[0]
 
 
 def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> np.ndarray:

@@ -1,0 +1,54 @@
+"""Dropping tasks whose floor the rest of the driven path cleans, transits included."""
+
+import numpy as np
+from coverage_maps import boxed, grid_of
+
+from planners.coverage.metrics import swath
+from planners.coverage.prune import prune_driven
+from planners.coverage.tasks import SweepTask
+from planners.coverage.transit import Transit
+from planners.grid import cleanable, clearance, reachable
+
+
+def _task(a, b) -> SweepTask:
+    return SweepTask(0, 1, (np.array([a, b], dtype=float),), 0.0, 0.0)
+
+
+def _setup():
+    g = grid_of(boxed(60, 90))
+    centres = clearance(g) >= 0.17
+    reach = reachable(centres, g.world_to_cell(np.array([[0.5, 1.0]])))
+    return g, reach, cleanable(g, reach, 0.15), Transit(g, reach)
+
+
+def test_a_lane_piece_on_the_way_to_the_next_task_is_dropped_and_no_floor_is_lost():
+    g, _, clean, transit = _setup()
+    start = np.array([[0.5, 1.0]])
+    # the hop from the start to the far lane, once straight, sweeps the short piece's floor
+    # (half a cell off its line) ...
+    on_the_way = _task((1.0, 1.025), (1.5, 1.025))
+    # ... but not over this one, which only it sweeps
+    aside = _task((3.0, 2.0), (3.5, 2.0))
+    far = _task((3.0, 1.0), (3.5, 1.0))
+    tasks = [on_the_way, far, aside]
+    tour = [[(0, 0), (1, 0), (2, 0)]]
+    kept = prune_driven(g, tasks, tour, start, clean, 0.15, transit)
+    assert kept == [[(1, 0), (2, 0)]]
+
+    def driven(steps):
+        pts = [start[0]]
+        for t, _ in steps:
+            pts.extend(tasks[t].variants[0])
+        return np.array(pts)
+
+    before, _ = swath(g, driven(tour[0]), 0.15)
+    after, _ = swath(g, driven(kept[0]), 0.15)
+    assert not (before & ~after & clean).any()
+
+
+def test_the_last_task_stays_when_nothing_else_passes_over_it():
+    g, _, clean, transit = _setup()
+    start = np.array([[0.5, 1.0]])
+    tasks = [_task((1.0, 1.0), (1.5, 1.0)), _task((1.0, 2.0), (1.5, 2.0))]
+    tour = [[(0, 0), (1, 0)]]
+    assert prune_driven(g, tasks, tour, start, clean, 0.15, transit) == tour
