@@ -20,6 +20,7 @@ import math
 import numpy as np
 from scipy import ndimage
 from scipy.sparse.csgraph import dijkstra
+from scipy.spatial.distance import cdist
 
 from planners.coverage.rooms import grid_graph
 from planners.grid import GridMap
@@ -71,7 +72,7 @@ class PathCosts:
         """(N, N) symmetric cost estimates (metres) between world ``points`` (N, 2); pairs in
         different components get a large finite cost."""
         pts = np.asarray(points, dtype=float).reshape(-1, 2)
-        euclid = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+        euclid = cdist(pts, pts)
         if len(pts) == 0 or self._csr.shape[0] == 0:
             return euclid
         shape = np.array(self._index.shape) - 1

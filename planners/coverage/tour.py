@@ -158,8 +158,8 @@ def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
     improved = True
     while improved:
         improved = False
+        src, dst = _points(seq, start, ends)
         for i in range(n):
-            src, dst = _points(seq, start, ends)
             j = np.arange(i, n)
             old = c[src[i], dst[i]] + c[src[j + 1], dst[j + 1]]
             new = c[src[i], src[j + 1]] + c[dst[i], dst[j + 1]]
@@ -168,35 +168,45 @@ def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
             if gain[k] > _EPS:
                 jj = int(j[k])
                 seq = np.concatenate([seq[:i], _reverse(seq[i : jj + 1]), seq[jj + 1 :]])
+                src, dst = _points(seq, start, ends)
                 improved = True
     return seq
 
 
 def _or_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
-    """Move runs of 1–3 consecutive tasks (forwards or reversed) to a cheaper place."""
+    """Move runs of 1–3 consecutive tasks (forwards or reversed) to a cheaper place.
+
+    Hop ``k`` of the tour runs from ``src[k]`` to ``dst[k]``; taking out the run
+    ``seq[i : i + length]`` removes hops ``i .. i + length`` and adds one from ``src[i]`` to
+    ``dst[i + length]``, and the run can go into any hop of what is left."""
     c = ends.cost
     improved = True
     while improved:
         improved = False
         for length in (1, 2, 3):
             i = 0
+            src, dst = _points(seq, start, ends)
+            base = c[src, dst]
             while i + length <= len(seq):
-                src, dst = _points(seq, start, ends)
                 a, b = src[i], dst[i + length]
                 s_in, s_out = dst[i], src[i + length]
                 removed = c[a, s_in] + c[s_out, b] - c[a, b]
-                rest = np.concatenate([seq[:i], seq[i + length :]])
-                pb, pe = _points(rest, start, ends)
-                base = c[pb, pe]
-                fwd = c[pb, s_in] + c[s_out, pe] - base
-                rev = c[pb, s_out] + c[s_in, pe] - base
+                fwd = c[src, s_in] + c[s_out, dst] - base
+                rev = c[src, s_out] + c[s_in, dst] - base
+                fwd[i] = c[a, s_in] + c[s_out, b] - c[a, b]
+                rev[i] = c[a, s_out] + c[s_in, b] - c[a, b]
                 cand = np.minimum(fwd, rev)
-                p = int(np.argmin(cand))
-                if cand[p] < removed - _EPS:
+                cand[i + 1 : i + length + 1] = np.inf
+                k = int(np.argmin(cand))
+                if cand[k] < removed - _EPS:
                     run = seq[i : i + length]
-                    if rev[p] < fwd[p]:
+                    if rev[k] < fwd[k]:
                         run = _reverse(run)
+                    rest = np.concatenate([seq[:i], seq[i + length :]])
+                    p = k if k <= i else k - length
                     seq = np.concatenate([rest[:p], run, rest[p:]])
+                    src, dst = _points(seq, start, ends)
+                    base = c[src, dst]
                     improved = True
                 else:
                     i += 1
