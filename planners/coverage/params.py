@@ -36,7 +36,7 @@ class CoverageParams:
     door_width: float = 1.0
     min_room_area: float = 2.0
     max_task_area: float = 0.0
-    max_lane_length: float = 2.0
+    max_lane_length: float = 1.25
     simplify_tolerance: float = 0.03
 
     def validate(self) -> None:
