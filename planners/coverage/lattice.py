@@ -26,7 +26,7 @@ from scipy import ndimage
 from planners.coverage.bcd import MonotoneCell
 from planners.coverage.sweeps import lane_extent
 
-SHOULDER_CELLS = 12
+SHOULDER_CELLS = 20
 # what a separate task costs beyond its lane, in cells of lane length, when choosing the phase
 TASK_COST_CELLS = 20
 
