@@ -27,6 +27,8 @@ class Transit:
         self.free = free
         _, idx = ndimage.distance_transform_edt(~free, return_indices=True)
         self._nearest = idx
+        # the tour is driven several times (fill-in rounds, pruning), mostly over the same hops
+        self._planned: dict[tuple[float, ...], np.ndarray] = {}
 
     def snap(self, xy: np.ndarray) -> tuple[int, int]:
         """The free cell holding ``xy``, or the nearest free cell to it."""
@@ -48,9 +50,18 @@ class Transit:
         return bool(self.free[rc[:, 0], rc[:, 1]].all())
 
     def path(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """(N, 2) world path from ``a`` to ``b`` through free cells (endpoints included)."""
+        """(N, 2) world path from ``a`` to ``b`` through free cells (endpoints included; a
+        read-only array, shared by later calls for the same ends)."""
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
+        key = (*a.tolist(), *b.tolist())
+        if key not in self._planned:
+            path = self._plan(a, b)
+            path.setflags(write=False)
+            self._planned[key] = path
+        return self._planned[key]
+
+    def _plan(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         if self.clear(a, b):
             return np.array([a, b])
         cells = self.astar(self.snap(a), self.snap(b))
