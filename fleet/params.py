@@ -88,8 +88,8 @@ class SimParams:
     coverage_hz: float = 2.0
     cell_size: float = 0.05
     max_lag_s: float = 0.1
-    agent_timeout_s: float = 3.0
-    first_answer_timeout_s: float = 15.0
+    agent_timeout_s: float = 10.0
+    first_answer_timeout_s: float = 20.0
 
     def validate(self) -> None:
         if self.physics_hz < 20:
