@@ -17,6 +17,10 @@ import typer
 
 from fleet.cli_processes import ConfigOpt, WorldOpt, _fail, _load
 
+TIMED_OUT_EXIT = 3
+# A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
+# answer for the report.
+REPORT_WAIT_S = 30.0
 MAX_ROBOTS = 64
 
 
@@ -34,7 +38,12 @@ def up(
         bool, typer.Option("--until-done", help="Stop once every robot has finished its plan.")
     ] = False,
     timeout: Annotated[
-        float | None, typer.Option("--timeout", help="Stop after this many wall-clock seconds.")
+        float | None,
+        typer.Option(
+            "--timeout",
+            help="Stop after this many wall-clock seconds; with --until-done the exit status is "
+            "then 3 (the floor was not finished).",
+        ),
     ] = None,
     run_dir: Annotated[
         Path | None,
@@ -110,8 +119,12 @@ def up(
         out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
         status = _watch(watcher, launcher, stop, until_done, timeout, headless, t0)
         wall_s = time.monotonic() - t0
-        summary = bus.request(bus.keys.sim_report(), Request("up"), CoverageSummary, timeout=10.0)
-        image = bus.request(bus.keys.coverage_image(), Request("up"), CoverageImage, timeout=10.0)
+        summary = bus.request(
+            bus.keys.sim_report(), Request("up"), CoverageSummary, timeout=REPORT_WAIT_S
+        )
+        image = bus.request(
+            bus.keys.coverage_image(), Request("up"), CoverageImage, timeout=REPORT_WAIT_S
+        )
         makespan = watcher.makespan() if status == "done" else None
         with watcher.lock:
             skipped = {rid: v.status.skipped for rid, v in watcher.robots.items() if v.status}
@@ -143,6 +156,8 @@ def up(
         if bus is not None:
             bus.close()
         launcher.stop_all()
+    if status == "timeout" and until_done:
+        raise typer.Exit(TIMED_OUT_EXIT)
     if status not in ("done", "stopped", "timeout"):
         raise typer.Exit(1 if status != "interrupted" else 130)
 

@@ -36,7 +36,7 @@ def _children_of(pid: int) -> list[int]:
     return out
 
 
-def _fleet_up(run_dir: Path, robots: int) -> dict:
+def _fleet_up(run_dir: Path, robots: int, timeout_s: float = 150.0) -> dict:
     """Run ``fleet up`` headless until done on the small world; collect every process it
     started while it ran, and kill (and report) any left after it exits."""
     cmd = [
@@ -51,7 +51,7 @@ def _fleet_up(run_dir: Path, robots: int) -> dict:
         "--headless",
         "--until-done",
         "--timeout",
-        "150",
+        str(timeout_s),
         "--speed",
         "0",
         "--run-dir",
@@ -126,3 +126,11 @@ def test_one_agent_on_slam_completes_its_path_without_collision(tmp_path: Path) 
     assert robot["skipped_waypoints"] == 0, (one["dir"] / "robot-0.log").read_text()
     assert robot["wall_collisions"] == 0 and robot["robot_collisions"] == 0
     assert report["coverage"] >= 0.95, report
+
+
+def test_until_done_that_times_out_exits_3_with_a_report_and_no_orphans(tmp_path: Path) -> None:
+    short = _fleet_up(tmp_path, 1, timeout_s=5.0)
+    assert short["rc"] == 3, short["output"]
+    assert short["left"] == [], f"orphans: {short['left']}"
+    report = json.loads((short["dir"] / "report.json").read_text())
+    assert report["status"] == "timeout" and report["makespan_s"] is None
