@@ -238,12 +238,15 @@ class Agent:
                     if follow.skipped > self.follow.skipped:
                         skipped_at = self.follow.waypoints[self.follow.index]
                         log.warning(
-                            "%s gave up on waypoint %d at (%.2f, %.2f): no progress for %.1f s",
+                            "%s gave up on waypoint %d at (%.2f, %.2f): no progress for %.1f s, "
+                            "%.3f m short at (%.3f, %.3f, %.2f)",
                             self.rid,
                             self.follow.index,
                             skipped_at[0],
                             skipped_at[1],
                             a.give_up_after_s,
+                            float(np.hypot(pose[0] - skipped_at[0], pose[1] - skipped_at[1])),
+                            *pose,
                         )
                     self.follow = follow
             if result is None:
