@@ -123,7 +123,7 @@ def test_one_agent_on_slam_completes_its_path_without_collision(tmp_path: Path) 
     assert "pose from slam" in (one["dir"] / "robot-0.log").read_text()
     robot = report["robots"]["robot-0"]
     # The path is driven to its end with no contact with anything. At most one waypoint may be
-    # given up: about one run in eight, the robot comes back to the out-and-back stub into the
+    # given up: in about one run in seven, the robot comes back to the out-and-back stub into the
     # pocket between the dock and the wall from the wrong side and skips its tip.
     assert robot["skipped_waypoints"] <= 1, (one["dir"] / "robot-0.log").read_text()
     assert robot["wall_collisions"] == 0 and robot["robot_collisions"] == 0
