@@ -204,7 +204,6 @@ class Agent:
         v = w = 0.0
         obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
         dt = 1.0 / self.cfg.lidar.rate_hz
-        ahead = predict(pose, self.command, self.latency_s)
         if stale:
             state = "stale"
         elif follow is None or follow.done:
@@ -224,7 +223,7 @@ class Agent:
         else:
             follow, result = control_step(
                 follow,
-                ahead,
+                predict(pose, self.command, self.latency_s),
                 velocity,
                 obstacles,
                 self.cfg.dwa,

@@ -131,11 +131,11 @@ class SimServer:
 
     def _held_back(self, now: float) -> bool:
         """True when a live agent has not yet answered sensor data within the allowed lag."""
-        limit = self.core.t + self.core.dt - self.cfg.sim.max_lag_s
+        sim = self.cfg.sim
+        limit = self.core.t + self.core.dt - sim.max_lag_s
         for rid, link in self.links.items():
             if not link.alive or not link.scanned or rid not in self.core.robots:
                 continue
-            sim = self.cfg.sim
             timeout = sim.agent_timeout_s if link.answered else sim.first_answer_timeout_s
             if now - link.last_wall > timeout:
                 link.alive = False
