@@ -150,10 +150,6 @@ class SimServer:
                 return True
         return False
 
-    def _agents_live(self) -> bool:
-        with self.lock:
-            return any(link.alive and rid in self.core.robots for rid, link in self.links.items())
-
     def run(self) -> None:
         sim = self.cfg.sim
         clock_every = max(1, round(sim.physics_hz / sim.clock_hz))
@@ -165,6 +161,7 @@ class SimServer:
             now = time.monotonic()
             with self.lock:
                 held = self._held_back(now)
+                live = any(link.alive and r in self.core.robots for r, link in self.links.items())
             if held:
                 if not waiting:
                     self.bus.publish(self.keys.clock(), Clock(self.core.t, self.speed, True))
@@ -173,7 +170,7 @@ class SimServer:
                 pace_wall, pace_sim = time.monotonic(), self.core.t
                 continue
             waiting = False
-            speed = self.speed if self.speed > 0 or self._agents_live() else 1.0
+            speed = self.speed if self.speed > 0 or live else 1.0
             if speed > 0:
                 ahead = (self.core.t - pace_sim) / speed - (now - pace_wall)
                 if ahead > 0:
