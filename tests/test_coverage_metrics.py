@@ -1,4 +1,5 @@
-"""Coverage metrics against values computed by hand on tiny grids."""
+"""Coverage metrics against values computed by hand on tiny grids, and visit counts against
+entries of the brush counted by sampling the path densely."""
 
 import itertools
 import math
@@ -17,10 +18,10 @@ def _open_grid(rows=7, cols=9):
 def test_one_straight_pass():
     g = _open_grid()
     path = np.array([[2.5, 3.5], [6.5, 3.5]])  # cell centres (row 3, col 2) → (row 3, col 6)
-    covered, passes = swath(g, path, 1.5)
-    # rectangle: cols 2..5 (half-open along the segment) × rows 2..4; capsule: cols 1..7
-    assert passes.sum() == 12 and passes.max() == 1
+    covered, visits = swath(g, path, 1.5)
+    # capsule: rows 2..4 × cols 1..7 (the end cells at √2 < 1.5 from the ends), each entered once
     assert covered.sum() == 21 and covered[2:5, 1:8].all()
+    assert np.array_equal(visits, covered.astype(int))
     m = coverage_metrics(
         g, [path], 1.0, 3.0, max_speed=2.0, turn_cost_s=3.0, cleanable_mask=np.ones((7, 9), bool)
     )
@@ -37,8 +38,9 @@ def test_there_and_back_doubles_the_swept_cells():
     m = coverage_metrics(
         g, [path], 1.0, 3.0, max_speed=2.0, turn_cost_s=3.0, cleanable_mask=np.ones((7, 9), bool)
     )
-    # back pass sweeps cols 6..3: passes 24 over the 15 cells of cols 2..6 → 24 / 15 − 1
-    assert math.isclose(m.total.repetition, 24 / 15 - 1)
+    # the 9 cells within 1.5 of the far end (cols 5..7) stay under the brush while it reverses:
+    # entered once; the 12 cells of cols 1..4 are left and entered again → 33 / 21 − 1
+    assert math.isclose(m.total.repetition, 33 / 21 - 1)
     assert m.total.turns == 1
     assert math.isclose(m.total.est_time_s, 8.0 / 2.0 + 3.0)
 
@@ -77,3 +79,38 @@ def test_cleanable_area_from_the_path_starts_and_unreachable_space():
     m = coverage_metrics(g, [np.array([[0.5, 0.5], [0.6, 0.5]])], 0.17, 0.30)
     assert m.cleanable_area_m2 > 0
     assert m.unreachable_free_m2 >= 19 * 20 * 0.05**2
+
+
+def _entries_by_sampling(g, path, hw, step=0.002):
+    """Per cell, how often its centre comes within ``hw`` of the path point after being
+    farther: the path sampled every ``step`` metres."""
+    pts = [path[:1]]
+    for a, b in itertools.pairwise(path):
+        n = max(1, math.ceil(np.hypot(*(b - a)) / step))
+        pts.append(a + (b - a) * (np.arange(1, n + 1)[:, None] / n))
+    pts = np.vstack(pts)
+    centres = g.cell_to_world(np.argwhere(np.ones(g.shape, bool)))
+    inside = np.linalg.norm(pts[:, None, :] - centres[None], axis=-1) < hw
+    entered = inside[0].astype(int) + (inside[1:] & ~inside[:-1]).sum(axis=0)
+    return entered.reshape(g.shape)
+
+
+def test_visits_equal_the_brush_entries_along_turns_reversals_and_stops():
+    g = grid_of(np.zeros((24, 24), dtype=bool), res=0.1)
+    # a right angle, an acute turn, a reversal along the same line and a point repeated (a stop)
+    path = np.array(
+        [[0.43, 0.37], [1.71, 0.37], [1.71, 1.23], [0.52, 2.01], [1.63, 1.28], [1.63, 1.28]]
+    )
+    covered, visits = swath(g, path, 0.23)
+    expected = _entries_by_sampling(g, path, 0.23)
+    assert np.array_equal(visits, expected)
+    assert np.array_equal(covered, expected > 0)
+    assert visits.max() >= 2  # the reversal and the acute turn re-enter cells
+
+
+def test_a_u_turn_between_lanes_cleans_the_corners_once():
+    g = _open_grid(rows=10, cols=12)
+    # two lanes 3 apart joined at their right ends: no cell is left and entered again
+    path = np.array([[2.5, 2.5], [9.5, 2.5], [9.5, 5.5], [2.5, 5.5]])
+    covered, visits = swath(g, path, 1.5)
+    assert visits.max() == 1 and np.array_equal(visits, covered.astype(int))

@@ -10,10 +10,15 @@ Definitions (cells are judged by their centres, so areas are counted in whole ce
   path (the union of the capsules around its segments: the swath of a brush that is
   ``cleaning_width`` wide, including the disc swept when turning on the spot).
 * **coverage** — covered cleanable cells / cleanable cells.
-* **repetition** — every straight segment sweeps the rectangle of cells whose centre projects
-  into ``[0, length)`` along it and lies within ``cleaning_width / 2`` across it (a brush bar
-  across the direction of travel). Repetition = Σ passes over all cells / cells passed at least
-  once − 1: 0 when no cell is swept twice, 0.1 when on average a tenth is swept again.
+* **repetition** — a cell's visit count is the number of times it *enters* the brush disc
+  (its centre comes strictly within ``cleaning_width / 2`` of the robot centre after being
+  outside), the rule of the simulator's ground truth (``sim_server/cleaning.py``): a cell that
+  stays under the brush while the robot turns is cleaned once, a cell the brush leaves and
+  reaches again twice. Along a polyline that is, per segment, the cells of its capsule not
+  already in the disc at its start (the first segment counts its whole capsule). Repetition =
+  Σ visits / cells visited − 1: 0 when no cell is cleaned twice, 0.1 when on average a tenth
+  is cleaned again. Summed over cells the visits are ≈ length · cleaning_width + π r²
+  whatever the turns, so at a given coverage repetition measures excess path length.
 * **turns** — vertices of the path simplified with tolerance ``simplify_tolerance``
   (Ramer–Douglas–Peucker) where the heading changes by more than ``turn_angle_deg``.
 * **estimated time** — length / ``max_speed`` + turns · ``turn_cost_s``.
@@ -56,25 +61,27 @@ class CoverageMetrics:
 
 
 def swath(grid: GridMap, path: np.ndarray, half_width: float) -> tuple[np.ndarray, np.ndarray]:
-    """(covered, passes): cells within the capsules of ``path``, and per-cell pass counts.
+    """(covered, visits): cells within the capsules of ``path``, and per-cell visit counts.
 
     Long segments are cut into pieces of at most ``_PIECE_CELLS`` cells, which leaves both
-    results unchanged (the half-open rectangles of the pieces tile the segment's rectangle).
+    results unchanged (a cell in the disc at a cut is in both pieces' capsules and enters once).
     """
     covered = np.zeros(grid.shape, dtype=bool)
-    passes = np.zeros(grid.shape, dtype=np.int32)
+    visits = np.zeros(grid.shape, dtype=np.int32)
     pts = _to_cells(grid, path)
     if len(pts) == 0:
-        return covered, passes
+        return covered, visits
     hw = half_width / grid.resolution
     if len(pts) == 1:
-        _stamp(covered, passes, pts[0], pts[0], hw)
-        return covered, passes
+        _stamp(covered, visits, pts[0], pts[0], hw, first=True)
+        return covered, visits
+    first = True
     for a, b in itertools.pairwise(pts):
         n = max(1, math.ceil(math.hypot(*(b - a)) / _PIECE_CELLS))
         for k in range(n):
-            _stamp(covered, passes, a + (b - a) * (k / n), a + (b - a) * ((k + 1) / n), hw)
-    return covered, passes
+            _stamp(covered, visits, a + (b - a) * (k / n), a + (b - a) * ((k + 1) / n), hw, first)
+            first = False
+    return covered, visits
 
 
 def _to_cells(grid: GridMap, path: np.ndarray) -> np.ndarray:
@@ -85,7 +92,10 @@ def _to_cells(grid: GridMap, path: np.ndarray) -> np.ndarray:
     return np.stack([row, col], axis=1)
 
 
-def _stamp(covered: np.ndarray, passes: np.ndarray, a: np.ndarray, b: np.ndarray, hw: float):
+def _stamp(covered, visits, a: np.ndarray, b: np.ndarray, hw: float, first: bool) -> None:
+    """Add the segment a → b (continuous cells): its capsule to ``covered``, and to ``visits``
+    the capsule's cells that enter the brush along it (all of them on the ``first`` segment,
+    else those not already under the brush at ``a``)."""
     rows, cols = covered.shape
     lo = np.floor(np.minimum(a, b) - hw).astype(int)
     hi = np.ceil(np.maximum(a, b) + hw).astype(int) + 1
@@ -95,18 +105,17 @@ def _stamp(covered: np.ndarray, passes: np.ndarray, a: np.ndarray, b: np.ndarray
         return
     rr = np.arange(r0, r1, dtype=float)[:, None] - a[0]
     cc = np.arange(c0, c1, dtype=float)[None, :] - a[1]
+    inner = hw**2 - 1e-9
+    at_start = rr**2 + cc**2 < inner
     d = b - a
     length = math.hypot(d[0], d[1])
     if length < 1e-9:
-        covered[r0:r1, c0:c1] |= rr**2 + cc**2 < hw**2 - 1e-9
-        return
-    t = (rr * d[0] + cc * d[1]) / length
-    perp = np.abs(rr * d[1] - cc * d[0]) / length
-    rect = (t >= -1e-9) & (t < length - 1e-9) & (perp < hw - 1e-9)
-    tc = np.clip(t, 0.0, length)
-    capsule = (rr - tc * d[0] / length) ** 2 + (cc - tc * d[1] / length) ** 2 < hw**2 - 1e-9
+        capsule = at_start
+    else:
+        t = np.clip((rr * d[0] + cc * d[1]) / length, 0.0, length)
+        capsule = (rr - t * d[0] / length) ** 2 + (cc - t * d[1] / length) ** 2 < inner
     covered[r0:r1, c0:c1] |= capsule
-    passes[r0:r1, c0:c1] += rect
+    visits[r0:r1, c0:c1] += capsule if first else capsule & ~at_start
 
 
 def path_time(
@@ -152,18 +161,18 @@ def coverage_metrics(
         cleanable_mask = cleanable(grid, reach, cleaning_width / 2)
     n_clean = int(cleanable_mask.sum())
     all_covered = np.zeros(grid.shape, dtype=bool)
-    all_passes = np.zeros(grid.shape, dtype=np.int32)
+    all_visits = np.zeros(grid.shape, dtype=np.int32)
     rows = []
     for p in paths:
-        covered, passes = swath(grid, p, cleaning_width / 2)
+        covered, visits = swath(grid, p, cleaning_width / 2)
         all_covered |= covered
-        all_passes += passes
+        all_visits += visits
         length, turns, t = path_time(p, max_speed, turn_cost_s, turn_angle_deg, simplify_tolerance)
-        rows.append(_row(covered, passes, cleanable_mask, n_clean, area, length, turns, t))
+        rows.append(_row(covered, visits, cleanable_mask, n_clean, area, length, turns, t))
     makespan = max((r.est_time_s for r in rows), default=0.0)
     total = _row(
         all_covered,
-        all_passes,
+        all_visits,
         cleanable_mask,
         n_clean,
         area,
@@ -175,10 +184,10 @@ def coverage_metrics(
     return CoverageMetrics(tuple(rows), total, makespan, n_clean * area, unreachable)
 
 
-def _row(covered, passes, clean, n_clean, area, length, turns, t) -> PathMetrics:
+def _row(covered, visits, clean, n_clean, area, length, turns, t) -> PathMetrics:
     hit = int((covered & clean).sum())
-    swept = int(np.count_nonzero(passes))
-    repetition = float(passes.sum()) / swept - 1.0 if swept else 0.0
+    swept = int(np.count_nonzero(visits))
+    repetition = float(visits.sum()) / swept - 1.0 if swept else 0.0
     return PathMetrics(
         coverage=hit / n_clean if n_clean else 0.0,
         repetition=repetition,
