@@ -8,6 +8,7 @@ deconfliction replace the split behind the same ``plan`` call.
 from __future__ import annotations
 
 import dataclasses
+import logging
 
 import numpy as np
 
@@ -16,6 +17,8 @@ from fleet.world import World
 from planners.coverage import plan_coverage
 
 PLAN_RESOLUTION = 0.025
+
+log = logging.getLogger("coordinator")
 
 
 class CoveragePlanner:
@@ -37,4 +40,13 @@ class CoveragePlanner:
     def plan(self, starts: dict[str, tuple[float, float]]) -> dict[str, np.ndarray]:
         ids = list(starts)
         result = plan_coverage(self.grid, [starts[r] for r in ids], self.params)
+        m = result.metrics
+        # judged on the plan's own floor: centres kept radius + wall clearance from obstacles
+        log.info(
+            "plan: coverage %.1f %%, repetition %.1f %%, %.1f m, est. makespan %.0f s",
+            100 * m.total.coverage,
+            100 * m.total.repetition,
+            m.total.path_length_m,
+            m.makespan_s,
+        )
         return {rid: np.asarray(result.paths[i], dtype=float) for i, rid in enumerate(ids)}
