@@ -29,6 +29,7 @@ class CoverageParams:
     method: Literal["bcd", "spiral"] = "bcd"
     edge_pass: bool = False
     fill_in: bool = True
+    return_strips: bool = True
     fill_in_target: float = 0.995
     max_speed: float = 0.5
     turn_cost_s: float = 2.0

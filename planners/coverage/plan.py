@@ -23,8 +23,22 @@ from planners.coverage.ordering import split_tour
 from planners.coverage.params import CoverageParams
 from planners.coverage.prune import prune_driven, prune_tasks
 from planners.coverage.rooms import segment_rooms, shared_borders
-from planners.coverage.tasks import SweepTask, cell_tasks, edge_task, spiral_task
-from planners.coverage.tour import TaskEnds, end_points, path_of, plan_tour, task_ends
+from planners.coverage.strips import return_strips
+from planners.coverage.tasks import (
+    SweepTask,
+    cell_tasks,
+    edge_task,
+    spiral_task,
+    strip_task,
+)
+from planners.coverage.tour import (
+    TaskEnds,
+    end_points,
+    path_of,
+    plan_tour,
+    task_ends,
+    tour_cost,
+)
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, cleanable, clearance, reachable
 
@@ -110,8 +124,9 @@ def plan_coverage(
     res = grid.resolution
 
     rooms = segment_rooms(reach, clear, res, params.door_width, params.min_room_area)
+    doors = _dead_end_doors(grid, rooms)
+    costs = PathCosts(grid, reach)
     n_rooms = int(rooms.max())
-    max_area = params.max_task_area
     cell_labels = np.zeros(grid.shape, dtype=np.int32)
     room_img = _extend_labels(rooms, clean)
     step = max(1, math.floor(params.lane_spacing / res + 1e-9))
@@ -130,21 +145,18 @@ def plan_coverage(
             cells, rot, resample(grid, room_img == room, frame), labels, step, hw
         )
         base = len(cell_room)
-        tasks: list[SweepTask] = []
-        for k, cell in enumerate(cells, start=1):
-            cid = base + k
-            cell_room.append(room)
-            if params.edge_pass:
-                tasks.append(edge_task(room, cid, cell, frame, params))
-            if params.method == "spiral":
-                tasks.append(spiral_task(room, cid, cell, frame, params))
-            else:
-                if len(lanes[k - 1]):
-                    tasks.extend(cell_tasks(room, cid, cell, lanes[k - 1], frame, params, max_area))
-                for lane in shoulders[k - 1]:
-                    tasks.extend(
-                        cell_tasks(room, cid, cell, lane[None, :], frame, params, max_area)
+        cell_room.extend([room] * len(cells))
+        options = [_cell_tasks(room, base, cells, lanes, shoulders, None, frame, params)]
+        if room in doors and params.method == "bcd" and params.return_strips:
+            for high in (False, True):
+                clipped, strips = return_strips(lanes, rot, step, high)
+                if any(strips):
+                    options.append(
+                        _cell_tasks(room, base, cells, clipped, shoulders, strips, frame, params)
                     )
+        tasks = options[0]
+        if len(options) > 1:
+            tasks = min(options, key=lambda ts: _closed_tour_cost(ts, doors[room], costs))
         _paint_cells(grid, mask, frame, labels, base, cell_labels)
         room_tasks.append(tasks)
         room_angle.append(angle)
@@ -153,7 +165,6 @@ def plan_coverage(
     cell_img = _extend_labels(cell_labels, clean)
     transit = Transit(grid, reach)
     tasks = [t for ts in room_tasks for t in ts]
-    costs = PathCosts(grid, reach)
     comp, _ = ndimage.label(reach)
     robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
     tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy)
@@ -215,6 +226,55 @@ def plan_coverage(
         plan_time_s=time.perf_counter() - t0,
         params=params,
     )
+
+
+def _cell_tasks(room, base, cells, lanes, shoulders, strips, frame, params) -> list[SweepTask]:
+    """The room's tasks: per cell its edge pass, spiral or lanes, shoulder lanes and strips."""
+    tasks: list[SweepTask] = []
+    for k, cell in enumerate(cells, start=1):
+        cid = base + k
+        if params.edge_pass:
+            tasks.append(edge_task(room, cid, cell, frame, params))
+        if params.method == "spiral":
+            tasks.append(spiral_task(room, cid, cell, frame, params))
+            continue
+        if len(lanes[k - 1]):
+            tasks.extend(
+                cell_tasks(room, cid, cell, lanes[k - 1], frame, params, params.max_task_area)
+            )
+        for lane in shoulders[k - 1]:
+            tasks.extend(
+                cell_tasks(room, cid, cell, lane[None, :], frame, params, params.max_task_area)
+            )
+        for strip in strips[k - 1] if strips else ():
+            tasks.append(strip_task(room, cid, strip, frame, params))
+    return tasks
+
+
+def _dead_end_doors(grid: GridMap, rooms: np.ndarray) -> dict[int, np.ndarray]:
+    """The door (world point: the room's robot-centre cell nearest the middle of its border
+    with the neighbour) of every room with exactly one neighbour."""
+    neighbours: dict[int, list[int]] = {}
+    for a, b in shared_borders(rooms):
+        neighbours.setdefault(a, []).append(b)
+        neighbours.setdefault(b, []).append(a)
+    doors = {}
+    for room, other in neighbours.items():
+        if len(other) != 1:
+            continue
+        rc = np.argwhere((rooms == room) & _touching(rooms == other[0]))
+        mid = rc.mean(axis=0)
+        cell = rc[np.argmin(np.hypot(*(rc - mid).T))]
+        doors[room] = grid.cell_to_world(cell.astype(float))
+    return doors
+
+
+def _closed_tour_cost(tasks: list[SweepTask], door: np.ndarray, costs: PathCosts) -> float:
+    """Length of a tour over ``tasks`` alone from ``door`` and back to it."""
+    pts = end_points(tasks)
+    ends = task_ends(tasks, costs.matrix(np.vstack([pts, door[None, :]])))
+    tour = plan_tour(list(range(len(tasks))), len(pts), ends, closed=True)
+    return tour_cost(tour, len(pts), ends)
 
 
 def _sweep_angle(mask: np.ndarray, res: float) -> float:

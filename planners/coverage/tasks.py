@@ -154,3 +154,16 @@ def _ring(rows: np.ndarray, left: np.ndarray, right: np.ndarray, step: int, shif
 
 def _to_world(frame: RotatedFrame, rc: np.ndarray, params: CoverageParams) -> np.ndarray:
     return simplify(frame.to_world(rc), params.simplify_tolerance)
+
+
+def strip_task(
+    room: int, cell_id: int, strip: np.ndarray, frame: RotatedFrame, params: CoverageParams
+) -> SweepTask:
+    """A return strip ((n, 2) (row, col) polyline, ``strips.return_strips``) as one task:
+    cut into pieces, the tour would use them as connectors between lanes instead of as the
+    way back."""
+    path = _to_world(frame, strip, params)
+    length = float(np.hypot(*np.diff(path, axis=0).T).sum())
+    return SweepTask(
+        room, cell_id, (path,), length * params.lane_spacing, length / params.max_speed
+    )

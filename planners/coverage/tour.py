@@ -104,6 +104,13 @@ def plan_tour(
     return [(int(t), int(k - ends.offset[t])) for t, k in zip(task, seq, strict=True)]
 
 
+def tour_cost(tour: Sequence[tuple[int, int]], start: int, ends: TaskEnds) -> float:
+    """Hops plus driven length of a :func:`plan_tour` result (with its way back to the start
+    when it was planned ``closed``)."""
+    seq = np.array([ends.offset[t] + o for t, o in tour], dtype=np.int64)
+    return _total(seq, start, ends)
+
+
 def _greedy(ids: list[int], start: int, ends: TaskEnds) -> np.ndarray:
     """Sequence of flat option indices: always the nearest entry of a task not yet taken."""
     opts = np.concatenate([np.arange(ends.offset[t], ends.offset[t] + ends.count[t]) for t in ids])
