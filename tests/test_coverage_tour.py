@@ -9,7 +9,7 @@ from planners.coverage import CoverageParams, plan_coverage
 from planners.coverage.geodesic import PathCosts
 from planners.coverage.metrics import swath
 from planners.coverage.tasks import SweepTask
-from planners.coverage.tour import end_points, path_of, plan_tour, task_ends
+from planners.coverage.tour import end_points, insert_run, path_of, plan_tour, task_ends
 from planners.coverage.transit import Transit
 from planners.grid import clearance
 
@@ -134,3 +134,24 @@ def test_fill_in_passes_are_tour_legs_not_out_and_back_stubs():
         plan = plan_coverage(g, open_spots(g, 1), CoverageParams())
         assert plan.metrics.total.coverage >= 0.995
         assert _stubs(plan.paths[0]) == 0
+
+
+def test_a_fill_in_chain_is_driven_without_doubling_back():
+    from planners.coverage.fill_in import _untangle
+
+    pts = np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0], [0.3, 0.0], [0.3, 0.1], [0.3, 0.2]])
+    order = _untangle(pts, np.array([2, 1, 0, 3, 4, 5]))
+    assert sorted(order.tolist()) == list(range(6))
+    length = np.hypot(*np.diff(pts[order], axis=0).T).sum()
+    assert abs(length - 0.5) < 1e-9
+
+
+def test_room_tours_put_in_whole_keep_their_order():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [5.0, 0.0], [6.0, 0.0]])
+    tasks = [SweepTask(0, 0, (np.array([p, p + np.array([0.0, 0.5])]),), 0.1, 1.0) for p in pts]
+    every = np.vstack([end_points(tasks), [[-1.0, 0.0]]])
+    ends = task_ends(tasks, np.hypot(*(every[:, None] - every[None, :]).transpose(2, 0, 1)))
+    tour = [(0, 0), (1, 0), (2, 0)]
+    out = insert_run(tour, [(4, 0), (3, 1)], 10, ends)
+    assert [t for t, _ in out[:3]] == [0, 1, 2]
+    assert out[3:] in ([(4, 0), (3, 1)], [(3, 0), (4, 1)])

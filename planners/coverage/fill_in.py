@@ -77,8 +77,31 @@ def chains(points: np.ndarray, link: float) -> list[np.ndarray]:
             k = min(left, key=lambda j: float(np.hypot(*(pts[j] - last))))
             order.append(k)
             left.remove(k)
-        out.append(ids[order])
+        out.append(ids[_untangle(pts, np.array(order))])
     return out
+
+
+def _untangle(pts: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """``order`` improved by 2-opt on the open path (Croes 1958; either end may move): a
+    nearest-neighbour chain that ran off to one end and has to come back the same way is
+    partly reversed instead."""
+    n = len(pts)
+    d = np.zeros((n + 1, n + 1))
+    d[:n, :n] = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+    # a free node at both ends, at no distance from anything, makes the open path a cycle
+    seq = np.concatenate([[n], order, [n]])
+    improved = True
+    while improved:
+        improved = False
+        for i in range(len(seq) - 3):
+            a, b = seq[i], seq[i + 1]
+            c, e = seq[i + 2 : -1], seq[i + 3 :]
+            gain = d[a, b] + d[c, e] - d[a, c] - d[b, e]
+            k = int(np.argmax(gain))
+            if gain[k] > 1e-9:
+                seq = np.concatenate([seq[: i + 1], seq[i + 1 : i + 3 + k][::-1], seq[i + 3 + k :]])
+                improved = True
+    return seq[1:-1]
 
 
 def fill_in_tasks(

@@ -12,10 +12,11 @@ import networkx as nx
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
 
 from planners.coverage.bcd import decompose
 from planners.coverage.fill_in import fill_in_tasks
-from planners.coverage.frame import dominant_direction, frame_for, resample
+from planners.coverage.frame import RotatedFrame, dominant_direction, frame_for, resample
 from planners.coverage.geodesic import PathCosts
 from planners.coverage.lattice import room_lanes
 from planners.coverage.metrics import CoverageMetrics, coverage_metrics, path_time, swath
@@ -34,6 +35,7 @@ from planners.coverage.tasks import (
 from planners.coverage.tour import (
     TaskEnds,
     end_points,
+    insert_run,
     path_of,
     plan_tour,
     task_ends,
@@ -47,6 +49,9 @@ from planners.grid import GridMap, cleanable, clearance, reachable
 AXIS_SNAP = math.radians(1.0)
 # fill-in passes change the tour and so its transits; this many rounds settle what they miss
 FILL_IN_ROUNDS = 3
+# a dead-end room's lanes turn across the usual axis only when its own tour gets this much
+# shorter (the estimate leaves out the fill-in, which the other axis may need more of)
+AXIS_MARGIN = 0.03
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,7 +95,10 @@ def plan_coverage(
     Steps: robot-centre cells (clearance ≥ robot_radius) 4-connected to a start; rooms by
     distance-transform segmentation; per room the dominant wall direction, a frame rotated to
     it and the boustrophedon decomposition (Choset 2000) of the room in that frame; lanes on
-    one lattice per room (``lattice.room_lanes``); sweep tasks per cell (groups of
+    one lattice per room (``lattice.room_lanes``); in a dead-end room with
+    ``params.return_strips``, lanes along either axis, with a return strip
+    (``strips.return_strips``) on either lane-end side or none, whichever gives the shortest
+    tour of the room alone from its door and back; sweep tasks per cell (groups of
     boustrophedon lanes, or a spiral); one tour over all tasks of a connected part of the floor
     (``tour.plan_tour``: task order, direction and variant by path-cost estimates between task
     ends, ``geodesic.PathCosts``); with ``params.fill_in``, targeted passes for the floor the
@@ -132,34 +140,35 @@ def plan_coverage(
     step = max(1, math.floor(params.lane_spacing / res + 1e-9))
     hw = params.cleaning_width / 2 / res
     room_tasks: list[list[SweepTask]] = []
+    blocks: list[list[tuple[int, int]]] = []
     room_angle: list[float] = []
     cell_room: list[int] = []
     for room in range(1, n_rooms + 1):
         mask = rooms == room
         angle = _sweep_angle(mask, res)
-        frame = frame_for(grid, mask, angle, margin=math.ceil(hw) + 1)
-        rot = resample(grid, mask, frame)
-        # stacked cells always merge: the lattice, clamp lanes and fill-in take their shoulders
-        labels, cells = decompose(rot, max_step=max(rot.shape))
-        lanes, shoulders = room_lanes(
-            cells, rot, resample(grid, room_img == room, frame), labels, step, hw
-        )
         base = len(cell_room)
-        cell_room.extend([room] * len(cells))
-        options = [_cell_tasks(room, base, cells, lanes, shoulders, None, frame, params)]
-        if room in doors and params.method == "bcd" and params.return_strips:
-            for high in (False, True):
-                clipped, strips = return_strips(lanes, rot, step, high)
-                if any(strips):
-                    options.append(
-                        _cell_tasks(room, base, cells, clipped, shoulders, strips, frame, params)
-                    )
-        tasks = options[0]
+        strips = room in doors and params.method == "bcd" and params.return_strips
+        options = []
+        for a in (angle, angle + math.pi / 2) if strips else (angle,):
+            options.extend(
+                _room_options(grid, mask, room_img == room, room, base, a, step, hw, params, strips)
+            )
+        best = 0
         if len(options) > 1:
-            tasks = min(options, key=lambda ts: _closed_tour_cost(ts, doors[room], costs))
-        _paint_cells(grid, mask, frame, labels, base, cell_labels)
-        room_tasks.append(tasks)
-        room_angle.append(angle)
+            guess = np.array([_closed_tour(opt.tasks, doors[room], None)[0] for opt in options])
+            guess[[opt.frame.angle != angle for opt in options]] *= 1 + AXIS_MARGIN
+            best = int(np.argmin(guess))
+        if best > 0:
+            # the global tour's local search rarely finds the strip's order by itself: it
+            # starts from the room's own tour, put in whole
+            first = sum(len(ts) for ts in room_tasks)
+            tour = _closed_tour(options[best].tasks, doors[room], costs)[1]
+            blocks.append([(first + t, o) for t, o in tour])
+        opt = options[best]
+        cell_room.extend([room] * opt.n_cells)
+        _paint_cells(grid, mask, opt.frame, opt.labels, base, cell_labels)
+        room_tasks.append(opt.tasks)
+        room_angle.append(opt.frame.angle)
 
     room_img = _extend_labels(rooms, clean)
     cell_img = _extend_labels(cell_labels, clean)
@@ -167,7 +176,7 @@ def plan_coverage(
     tasks = [t for ts in room_tasks for t in ts]
     comp, _ = ndimage.label(reach)
     robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
-    tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy)
+    tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=blocks)
     pieces = _split(tasks, tours, robot_comp, costs, start_xy, params)
     if params.fill_in:
         tasks, pieces = _add_fill_in(
@@ -228,6 +237,35 @@ def plan_coverage(
     )
 
 
+@dataclass(frozen=True, eq=False)
+class _RoomOption:
+    """One way to sweep a room: its tasks, the frame and cell labels they were made in."""
+
+    tasks: list[SweepTask]
+    frame: RotatedFrame
+    labels: np.ndarray
+    n_cells: int
+
+
+def _room_options(grid, mask, clean_mask, room, base, angle, step, hw, params, strips) -> list:
+    """The room's tasks with lanes at ``angle``: plain, and (with ``strips``) with a return
+    strip along either lane-end side where the lanes allow one."""
+    frame = frame_for(grid, mask, angle, margin=math.ceil(hw) + 1)
+    rot = resample(grid, mask, frame)
+    # stacked cells always merge: the lattice, clamp lanes and fill-in take their shoulders
+    labels, cells = decompose(rot, max_step=max(rot.shape))
+    lanes, shoulders = room_lanes(cells, rot, resample(grid, clean_mask, frame), labels, step, hw)
+    plain = _cell_tasks(room, base, cells, lanes, shoulders, None, frame, params)
+    out = [_RoomOption(plain, frame, labels, len(cells))]
+    if strips:
+        for high in (False, True):
+            clipped, strips = return_strips(lanes, rot, step, high)
+            if any(strips):
+                ts = _cell_tasks(room, base, cells, clipped, shoulders, strips, frame, params)
+                out.append(_RoomOption(ts, frame, labels, len(cells)))
+    return out
+
+
 def _cell_tasks(room, base, cells, lanes, shoulders, strips, frame, params) -> list[SweepTask]:
     """The room's tasks: per cell its edge pass, spiral or lanes, shoulder lanes and strips."""
     tasks: list[SweepTask] = []
@@ -269,12 +307,16 @@ def _dead_end_doors(grid: GridMap, rooms: np.ndarray) -> dict[int, np.ndarray]:
     return doors
 
 
-def _closed_tour_cost(tasks: list[SweepTask], door: np.ndarray, costs: PathCosts) -> float:
-    """Length of a tour over ``tasks`` alone from ``door`` and back to it."""
-    pts = end_points(tasks)
-    ends = task_ends(tasks, costs.matrix(np.vstack([pts, door[None, :]])))
-    tour = plan_tour(list(range(len(tasks))), len(pts), ends, closed=True)
-    return tour_cost(tour, len(pts), ends)
+def _closed_tour(
+    tasks: list[SweepTask], door: np.ndarray, costs: PathCosts | None
+) -> tuple[float, list[tuple[int, int]]]:
+    """Length and (task, option) order of a tour over ``tasks`` alone from ``door`` and back,
+    hops priced by ``costs`` (straight lines when None: inside one room nearly the same, and
+    much cheaper for the options not taken)."""
+    pts = np.vstack([end_points(tasks), door[None, :]])
+    ends = task_ends(tasks, cdist(pts, pts) if costs is None else costs.matrix(pts))
+    tour = plan_tour(list(range(len(tasks))), len(pts) - 1, ends, closed=True)
+    return tour_cost(tour, len(pts) - 1, ends), tour
 
 
 def _sweep_angle(mask: np.ndarray, res: float) -> float:
@@ -320,11 +362,12 @@ def _ends(tasks, costs, start_xy) -> tuple[TaskEnds, int]:
     return task_ends(tasks, costs.matrix(np.vstack([pts, start_xy]))), len(pts)
 
 
-def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, initial=None):
+def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=()):
     """Per connected part of the floor holding a start: one tour over its tasks from its first
-    robot's start (continuing ``initial[c]``, a tour over some of them, when given). Where
-    several robots share the part the tour is priced as a loop back to that start, so that
-    cut into pieces, the first and the last both begin near the starts."""
+    robot's start. Where several robots share the part the tour is priced as a loop back to
+    that start, so that cut into pieces, the first and the last both begin near the starts.
+    ``blocks`` are tours of dead-end rooms from their doors: the tour is first planned without
+    them, each is put in whole where it adds least, then the whole is improved."""
     ends, n_pts = _ends(tasks, costs, start_xy)
     first = grid.world_to_cell(np.array([t.variants[0][0] for t in tasks]).reshape(-1, 2))
     task_comp = comp[first[:, 0], first[:, 1]]
@@ -332,8 +375,13 @@ def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, initial=Non
     for c in np.unique(robot_comp):
         robots = np.flatnonzero(robot_comp == c)
         ids = [int(k) for k in np.flatnonzero(task_comp == c)]
-        start = initial[c] if initial else ()
-        tours[int(c)] = plan_tour(ids, n_pts + int(robots[0]), ends, start, len(robots) > 1)
+        start, closed = n_pts + int(robots[0]), len(robots) > 1
+        mine = [b for b in blocks if b and task_comp[b[0][0]] == c]
+        inside = {t for b in mine for t, _ in b}
+        tour = plan_tour([t for t in ids if t not in inside], start, ends, (), closed)
+        for b in mine:
+            tour = insert_run(tour, b, start, ends, closed)
+        tours[int(c)] = plan_tour(ids, start, ends, tour, closed) if tour else []
     return tours
 
 

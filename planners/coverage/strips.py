@@ -37,43 +37,52 @@ def return_strips(
     out_lanes = []
     out_strips = []
     end = 2 if high else 1
+    # half a column in: a lane end at a cell centre sweeps ``step − 1`` columns across, a line
+    # between two columns exactly ``step``, meeting the shortened lanes' ends
+    inward = -0.5 if high else 0.5
     for ln in lanes:
         ln = ln.copy()
         strips = []
         run: list[int] = []
+        pts: list[tuple[float, float]] = []
         for i in range(len(ln) + 1):
-            ok = i < len(ln) and ln[i, 2] - ln[i, 1] >= 2 * step
-            if ok and run:
-                j = run[-1]
-                ok = (
-                    ln[i, 0] - ln[j, 0] <= step + 1e-9
-                    and abs(ln[i, end] - ln[j, end]) <= step
-                    and _clear(rot, (ln[j, 0], ln[j, end]), (ln[i, 0], ln[i, end]))
-                )
-                if not ok:
-                    strips.append(_cut(ln, run, end, step))
-                    run = []
-                    ok = i < len(ln) and ln[i, 2] - ln[i, 1] >= 2 * step
-            if ok:
+            p = None
+            if i < len(ln) and ln[i, 2] - ln[i, 1] >= 2 * step:
+                p = (float(ln[i, 0]), float(ln[i, end] + inward))
+            link = None
+            if p is not None and run and ln[i, 0] - ln[run[-1], 0] <= step + 1e-9:
+                link = _link(rot, pts[-1], p, step)
+            if run and link is None:
+                strips.append(_cut(ln, run, pts, end, step))
+                run, pts = [], []
+            if p is not None:
                 run.append(i)
-            elif run:
-                strips.append(_cut(ln, run, end, step))
-                run = []
+                pts.extend(link or [p])
         out_lanes.append(ln)
         out_strips.append([s for s in strips if s is not None])
     return out_lanes, out_strips
 
 
-def _cut(ln: np.ndarray, run: list[int], end: int, step: int) -> np.ndarray | None:
+def _link(rot, a, b, step) -> list[tuple[float, float]] | None:
+    """The strip's way from lane end ``a`` to the next lane's end ``b``: straight, or where
+    the wall's staircase is in the way, along the first lane and then across; None if the
+    ends are more than ``step`` apart along the lanes or neither way is clear."""
+    if abs(a[1] - b[1]) > step:
+        return None
+    if _clear(rot, a, b):
+        return [b]
+    corner = (a[0], b[1])
+    if _clear(rot, a, corner) and _clear(rot, corner, b):
+        return [corner, b]
+    return None
+
+
+def _cut(ln: np.ndarray, run: list[int], pts: list, end: int, step: int) -> np.ndarray | None:
     """The strip through the run's lane ends (the lanes shortened in place), or None."""
     if len(run) < MIN_LANES:
         return None
-    pts = ln[run][:, [0, end]].copy()
-    # half a column in: a lane end at a cell centre sweeps ``step − 1`` columns across, a
-    # line between two columns exactly ``step``, meeting the shortened lanes' ends
-    pts[:, 1] += 0.5 if end == 1 else -0.5
     ln[run, end] += step if end == 1 else -step
-    return pts
+    return np.array(pts, dtype=float)
 
 
 def _clear(rot: np.ndarray, a: tuple[float, float], b: tuple[float, float]) -> bool:

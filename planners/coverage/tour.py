@@ -111,6 +111,33 @@ def tour_cost(tour: Sequence[tuple[int, int]], start: int, ends: TaskEnds) -> fl
     return _total(seq, start, ends)
 
 
+def insert_run(
+    tour: Sequence[tuple[int, int]],
+    run: Sequence[tuple[int, int]],
+    start: int,
+    ends: TaskEnds,
+    closed: bool = False,
+) -> list[tuple[int, int]]:
+    """``tour`` with ``run`` (a fixed (task, option) sequence, e.g. a room's own tour) put in
+    whole, forwards or driven backwards, where it adds the least."""
+    ends.cost[:, -1] = ends.cost[:, start] if closed else 0.0
+    c = ends.cost
+    seq = np.array([ends.offset[t] + o for t, o in tour], dtype=np.int64)
+    block = np.array([ends.offset[t] + o for t, o in run], dtype=np.int64)
+    src, dst = _points(seq, start, ends)
+    best = None
+    for b in (block, _reverse(block)):
+        added = c[src, ends.entry[b[0]]] + c[ends.exit[b[-1]], dst] - c[src, dst]
+        k = int(np.argmin(added))
+        if best is None or added[k] < best[0]:
+            best = (float(added[k]), k, b)
+    assert best is not None
+    _, k, b = best
+    out = np.concatenate([seq[:k], b, seq[k:]])
+    task = np.searchsorted(ends.offset, out, side="right") - 1
+    return [(int(t), int(i - ends.offset[t])) for t, i in zip(task, out, strict=True)]
+
+
 def _greedy(ids: list[int], start: int, ends: TaskEnds) -> np.ndarray:
     """Sequence of flat option indices: always the nearest entry of a task not yet taken."""
     opts = np.concatenate([np.arange(ends.offset[t], ends.offset[t] + ends.count[t]) for t in ids])
