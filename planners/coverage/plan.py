@@ -155,15 +155,20 @@ def plan_coverage(
             )
         best = 0
         if len(options) > 1:
-            guess = np.array([_closed_tour(opt.tasks, doors[room], None)[0] for opt in options])
-            guess[[opt.frame.angle != angle for opt in options]] *= 1 + AXIS_MARGIN
-            best = int(np.argmin(guess))
+            # straight-line hops pick a challenger cheaply; path costs judge it against plain
+            rough = [_closed_tour(opt.tasks, doors[room], None)[0] for opt in options]
+            pick = {0, int(np.argmin(rough))}
+            tours = {i: _closed_tour(options[i].tasks, doors[room], costs) for i in pick}
+            guess = {
+                i: c * (1 + AXIS_MARGIN if options[i].frame.angle != angle else 1)
+                for i, (c, _) in tours.items()
+            }
+            best = min(guess, key=guess.get)
         if best > 0:
             # the global tour's local search rarely finds the strip's order by itself: it
             # starts from the room's own tour, put in whole
             first = sum(len(ts) for ts in room_tasks)
-            tour = _closed_tour(options[best].tasks, doors[room], costs)[1]
-            blocks.append([(first + t, o) for t, o in tour])
+            blocks.append([(first + t, o) for t, o in tours[best][1]])
         opt = options[best]
         cell_room.extend([room] * opt.n_cells)
         _paint_cells(grid, mask, opt.frame, opt.labels, base, cell_labels)
