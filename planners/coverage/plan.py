@@ -22,7 +22,7 @@ from planners.coverage.lattice import room_lanes
 from planners.coverage.metrics import CoverageMetrics, coverage_metrics, path_time, swath
 from planners.coverage.ordering import split_tour
 from planners.coverage.params import CoverageParams
-from planners.coverage.prune import prune_driven, prune_tasks
+from planners.coverage.prune import footprint, prune_driven, prune_tasks
 from planners.coverage.rooms import segment_rooms, shared_borders
 from planners.coverage.strips import return_strips
 from planners.coverage.tasks import (
@@ -52,6 +52,7 @@ FILL_IN_ROUNDS = 3
 # a dead-end room's lanes turn across the usual axis only when its own tour gets this much
 # shorter (the estimate leaves out the fill-in, which the other axis may need more of)
 AXIS_MARGIN = 0.03
+MISS_FACTOR = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,20 +156,24 @@ def plan_coverage(
             )
         best = 0
         if len(options) > 1:
-            # straight-line hops pick a challenger cheaply; path costs judge it against plain
-            rough = [_closed_tour(opt.tasks, doors[room], None)[0] for opt in options]
+            # straight-line hops pick a challenger cheaply; path costs judge it against plain,
+            # and floor an option leaves to the fill-in costs it a pass over it, there and back
+            rough = [_closed_tour(o.tasks, doors[room], None)[0] for o in options]
             pick = {0, int(np.argmin(rough))}
-            tours = {i: _closed_tour(options[i].tasks, doors[room], costs) for i in pick}
-            guess = {
-                i: c * (1 + AXIS_MARGIN if options[i].frame.angle != angle else 1)
-                for i, (c, _) in tours.items()
-            }
+            mine = clean & (room_img == room)
+            guess = {}
+            tours = {}
+            for i in pick:
+                cost, tours[i] = _closed_tour(options[i].tasks, doors[room], costs)
+                miss = _missed(grid, options[i].tasks, mine, hw * res) * res**2
+                cost += MISS_FACTOR * miss / params.cleaning_width
+                guess[i] = cost * (1 + AXIS_MARGIN if options[i].frame.angle != angle else 1)
             best = min(guess, key=guess.get)
         if best > 0:
             # the global tour's local search rarely finds the strip's order by itself: it
             # starts from the room's own tour, put in whole
             first = sum(len(ts) for ts in room_tasks)
-            blocks.append([(first + t, o) for t, o in tours[best][1]])
+            blocks.append([(first + t, o) for t, o in tours[best]])
         opt = options[best]
         cell_room.extend([room] * opt.n_cells)
         _paint_cells(grid, mask, opt.frame, opt.labels, base, cell_labels)
@@ -310,6 +315,15 @@ def _dead_end_doors(grid: GridMap, rooms: np.ndarray) -> dict[int, np.ndarray]:
         cell = rc[np.argmin(np.hypot(*(rc - mid).T))]
         doors[room] = grid.cell_to_world(cell.astype(float))
     return doors
+
+
+def _missed(grid: GridMap, tasks: list[SweepTask], mine: np.ndarray, hw: float) -> int:
+    """How many cells of ``mine`` the tasks' swaths (first variant each) leave."""
+    covered = np.zeros(grid.shape, dtype=bool)
+    for t in tasks:
+        window, cells = footprint(grid, t.variants[0], hw)
+        covered[window] |= cells
+    return int((mine & ~covered).sum())
 
 
 def _closed_tour(
