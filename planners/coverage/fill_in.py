@@ -4,11 +4,11 @@ After the sweeps, the cleanable cells no path covers are found with the footprin
 :mod:`planners.coverage.metrics` (the capsules of the path's segments). Each missed cell is
 within the swath of some robot-centre cell — that is what makes it cleanable — so the nearest
 robot-centre cell to it is a point a detour can visit to clean it. Missed cells are taken
-greedily (each chosen point clears every missed cell within its swath); points closer than a
-swath width form one chain, visited in nearest-neighbour order — a contour pass along the wall
-or furniture restricted to where it is needed. Each chain becomes a task of its own: the tour
-(:mod:`planners.coverage.tour`) enters and leaves it wherever that costs least, so it is a leg
-of the tour rather than an out-and-back stub from the nearest path vertex.
+greedily (each chosen point clears every missed cell within its swath); points closer than
+``CHAIN_LINK`` half swath widths form one chain, visited in nearest-neighbour order — a contour
+pass along the wall or furniture restricted to where it is needed. Each chain becomes a task of
+its own: the tour (:mod:`planners.coverage.tour`) enters and leaves it wherever that costs
+least, so it is a leg of the tour rather than an out-and-back stub from the nearest path vertex.
 """
 
 from __future__ import annotations
@@ -23,6 +23,10 @@ from scipy.spatial import cKDTree
 
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, disc
+
+# points closer than this many half swath widths join one chain; wider links (a full swath)
+# merged points whose own best insertions into the tour lie apart, and measured longer paths
+CHAIN_LINK = 1.25
 
 
 def fill_points(
@@ -119,12 +123,13 @@ def fill_in_tasks(
     Each chain of :func:`fill_points` becomes one pass (its points joined by transits, so it
     never crosses blocked cells). Passes are taken in decreasing order of missed cells cleaned
     per metre — the chain's length plus twice its distance from the nearest of ``anchors``
-    (the sweep paths' vertices), the detour it costs — until the covered share of ``clean``
-    reaches ``target`` (1.0: every pass). The tour then places them like any other task.
+    (points along the driven paths, so a chain beside a lane's middle counts as near), the
+    detour it costs — until the covered share of ``clean`` reaches ``target`` (1.0: every
+    pass). The tour then places them like any other task.
     """
     hw = half_width / grid.resolution
     pts, gain = fill_points(clean, covered, reach, hw)
-    groups = chains(pts, 2 * hw)
+    groups = chains(pts, CHAIN_LINK * hw)
     if not groups:
         return []
     tree = cKDTree(anchors) if len(anchors) else None

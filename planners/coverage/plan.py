@@ -474,8 +474,9 @@ def _add_fill_in(
         covered = np.zeros(grid.shape, dtype=bool)
         for path in driven:
             covered |= swath(grid, path, hw)[0]
+        anchors = np.vstack([_densify(path, grid.resolution) for path in driven])
         passes = fill_in_tasks(
-            grid, covered, np.vstack(driven), clean, reach, hw, transit, params.fill_in_target
+            grid, covered, anchors, clean, reach, hw, transit, params.fill_in_target
         )
         if not passes:
             break
@@ -500,6 +501,15 @@ def _add_fill_in(
             for r in range(len(start_xy))
         ]
     return tasks, pieces
+
+
+def _densify(path: np.ndarray, step: float) -> np.ndarray:
+    """The path's vertices and points at most ``step`` apart along each of its segments."""
+    seg = np.diff(path, axis=0)
+    n = np.maximum(1, np.ceil(np.hypot(*seg.T) / step)).astype(int)
+    i = np.repeat(np.arange(len(seg)), n)
+    frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / n[i]
+    return np.vstack([path[i] + frac[:, None] * seg[i], path[-1:]])
 
 
 def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> np.ndarray:
