@@ -125,7 +125,9 @@ def fill_in_tasks(
     per metre — the chain's length plus twice its distance from the nearest of ``anchors``
     (points along the driven paths, so a chain beside a lane's middle counts as near), the
     detour it costs — until the covered share of ``clean`` reaches ``target`` (1.0: every
-    pass). The tour then places them like any other task.
+    pass); once the next pass alone would reach it, the cheapest pass that does is taken
+    instead (the usual repair of greedy covering: the last pass need not be the densest, only
+    enough). The tour then places them like any other task.
     """
     hw = half_width / grid.resolution
     pts, gain = fill_points(clean, covered, reach, hw)
@@ -139,14 +141,21 @@ def fill_in_tasks(
         along = float(np.hypot(*np.diff(chain, axis=0).T).sum())
         dist = float(tree.query(chain[[0, -1]])[0].min()) if tree is not None else 0.0
         g = int(gain[ids].sum())
-        options.append((g / (2 * dist + along + grid.resolution), g, chain))
+        cost = 2 * dist + along + grid.resolution
+        options.append((g / cost, cost, g, chain))
     options.sort(key=lambda o: -o[0])
     missing = int((clean & ~covered).sum())
     allowed = (1.0 - target) * int(clean.sum())
     out = []
-    for _, g, chain in options:
-        if missing <= allowed:
-            break
+    while options and missing > allowed:
+        k = 0
+        if options[0][2] >= missing - allowed:
+            # the last pass needed: the cheapest one that reaches the target by itself
+            k = min(
+                (i for i, o in enumerate(options) if o[2] >= missing - allowed),
+                key=lambda i: options[i][1],
+            )
+        _, _, g, chain = options.pop(k)
         missing -= g
         legs = [chain[:1]] + [transit.path(a, b)[1:] for a, b in itertools.pairwise(chain)]
         out.append((np.vstack(legs), g * grid.resolution**2))
