@@ -122,3 +122,17 @@ def test_fill_in_target_bounds_the_passes():
     tight = plan_coverage(g, [start], CoverageParams(fill_in_target=1.0))
     assert tight.metrics.total.coverage == 1.0
     assert loose.metrics.total.path_length_m <= tight.metrics.total.path_length_m
+
+
+def test_a_wall_strip_beside_a_doorway_is_swept_at_the_coordinators_resolution():
+    # at 2.5 cm the living room's last lattice lane leaves a strip along its top wall that is
+    # one patch with the doorway's floor above it; the lane for it runs below the doorway
+    from pathlib import Path
+
+    from fleet.world import load_world
+
+    w = load_world(Path(__file__).resolve().parents[1] / "configs" / "worlds" / "home.yaml")
+    g = w.grid(0.025)
+    starts = [p[:2] for p in w.start_poses(1, 0.17)]
+    plan = plan_coverage(g, starts, CoverageParams(fill_in=False))
+    assert plan.metrics.total.coverage >= 0.975

@@ -97,9 +97,9 @@ def _lanes_for_phase(
 
 def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
     """Short lanes sweeping the patches of ``mine`` (the cell's missed floor) of at least
-    ``SHOULDER_CELLS`` cells, largest first: each at the row, within two of touching the
-    patch's lower or upper edge, where the cell's lane sweeps most of it, as long as the
-    patch."""
+    ``SHOULDER_CELLS`` cells, largest first: each at the row where the cell's lane sweeps most
+    of it (ties to rows within two of touching the patch's lower or upper edge), as long as
+    the patch."""
     labels, n = ndimage.label(mine, structure=np.ones((3, 3)))
     if n == 0:
         return []
@@ -118,7 +118,10 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
             continue
         rr, cc = rr + box[0].start, cc + box[1].start
         best = None
-        wants = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
+        edges = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
+        # then every row that reaches the patch: a strip along a wall joined to the floor of a
+        # doorway above it is swept from below the doorway, where the lane runs the full length
+        wants = [*edges, *np.arange(rr.min() - reach, rr.max() + reach + 1)]
         for want in wants:
             if cell.rows == 1:
                 y = float(cell.row0)
