@@ -121,17 +121,18 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
         edges = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
         # then every row that reaches the patch: a strip along a wall joined to the floor of a
         # doorway above it is swept from below the doorway, where the lane runs the full length
-        wants = [*edges, *np.arange(rr.min() - reach, rr.max() + reach + 1)]
+        wants = [*edges, *np.arange(rr.min() - reach, rr.max() + reach + 1).tolist()]
+        c_lo, c_hi = int(cc.min()) - 1, int(cc.max()) + 1
         for want in wants:
             if cell.rows == 1:
                 y = float(cell.row0)
             else:
-                y = float(np.clip(want, cell.row0 + 0.5, top - 0.5))
+                y = float(min(max(want, cell.row0 + 0.5), top - 0.5))
             lo, hi = lane_extent(cell, y)
             if lo > hi:
                 continue
-            first = int(np.clip(cc.min() - 1, lo, hi))
-            last = int(np.clip(cc.max() + 1, lo, hi))
+            first = min(max(c_lo, lo), hi)
+            last = min(max(c_hi, lo), hi)
             got = (np.abs(rr - y) < hw - 1e-9) & (cc >= first - 2) & (cc <= last + 2)
             if best is None or got.sum() > best[0]:
                 best = (int(got.sum()), (y, first, last))
