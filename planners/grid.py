@@ -99,3 +99,14 @@ def cleanable(grid: GridMap, reachable_centres: np.ndarray, swath_radius: float)
     centres lie strictly within ``swath_radius`` of a reachable centre), limited to free cells.
     """
     return dilate(reachable_centres, swath_radius, grid.resolution) & grid.free
+
+
+def extend_labels(labels: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """Labels over ``where``: each unlabelled cell takes the label of its nearest labelled
+    cell (Euclidean distance transform); cells outside ``where`` get 0."""
+    if not (labels > 0).any():
+        return np.zeros_like(labels)
+    _, idx = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+    out = labels[idx[0], idx[1]]
+    out[~where] = 0
+    return out

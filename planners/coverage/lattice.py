@@ -25,6 +25,7 @@ from scipy import ndimage
 
 from planners.coverage.bcd import MonotoneCell
 from planners.coverage.sweeps import lane_extent
+from planners.grid import extend_labels
 
 SHOULDER_CELLS = 20
 # what a separate task costs beyond its lane, in cells of lane length, when choosing the phase
@@ -48,7 +49,7 @@ def room_lanes(
     """
     if not cells:
         return [], []
-    owner = _nearest_label(cell_labels_rot, clean_rot)
+    owner = extend_labels(cell_labels_rot, clean_rot)
     rmin = min(c.row0 for c in cells)
     best: tuple[float, tuple[list[np.ndarray], list[np.ndarray]]] | None = None
     for shift in range(step):
@@ -216,12 +217,3 @@ def _band(shape: tuple[int, int], y: float, lo: int, hi: int, hw: float) -> tupl
     if not len(band):
         return slice(0, 0), slice(0, 0)
     return slice(band[0], band[-1] + 1), slice(max(0, lo - n), min(cols, hi + n + 1))
-
-
-def _nearest_label(labels: np.ndarray, where: np.ndarray) -> np.ndarray:
-    if not (labels > 0).any():
-        return np.zeros_like(labels)
-    _, idx = ndimage.distance_transform_edt(labels == 0, return_indices=True)
-    out = labels[idx[0], idx[1]]
-    out[~where] = 0
-    return out

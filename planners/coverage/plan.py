@@ -42,7 +42,7 @@ from planners.coverage.tour import (
     tour_cost,
 )
 from planners.coverage.transit import Transit
-from planners.grid import GridMap, cleanable, clearance, reachable
+from planners.grid import GridMap, cleanable, clearance, extend_labels, reachable
 
 # A wall direction this close to a grid axis is taken as the axis: lanes then lie exactly
 # between rows of cells, and the rasterized walls of an axis-aligned plan measure slightly off.
@@ -137,7 +137,7 @@ def plan_coverage(
     costs = PathCosts(grid, reach)
     n_rooms = int(rooms.max())
     cell_labels = np.zeros(grid.shape, dtype=np.int32)
-    room_img = _extend_labels(rooms, clean)
+    room_img = extend_labels(rooms, clean)
     step = max(1, math.floor(params.lane_spacing / res + 1e-9))
     hw = params.cleaning_width / 2 / res
     room_tasks: list[list[SweepTask]] = []
@@ -180,8 +180,7 @@ def plan_coverage(
         room_tasks.append(opt.tasks)
         room_angle.append(opt.frame.angle)
 
-    room_img = _extend_labels(rooms, clean)
-    cell_img = _extend_labels(cell_labels, clean)
+    cell_img = extend_labels(cell_labels, clean)
     transit = Transit(grid, reach)
     tasks = [t for ts in room_tasks for t in ts]
     comp, _ = ndimage.label(reach)
@@ -362,16 +361,6 @@ def _paint_cells(grid, mask, frame, labels, base, out) -> None:
     lab[ok] = labels[q[ok, 0], q[ok, 1]]
     lab[lab > 0] += base
     out[rc[:, 0], rc[:, 1]] = lab
-
-
-def _extend_labels(labels: np.ndarray, clean: np.ndarray) -> np.ndarray:
-    """Labels over the whole cleanable area: each unlabelled cell takes its nearest label."""
-    if not (labels > 0).any():
-        return np.zeros_like(labels)
-    _, idx = ndimage.distance_transform_edt(labels == 0, return_indices=True)
-    out = labels[idx[0], idx[1]]
-    out[~clean] = 0
-    return out
 
 
 def _ends(tasks, costs, start_xy) -> tuple[TaskEnds, int]:
