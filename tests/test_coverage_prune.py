@@ -52,3 +52,36 @@ def test_the_last_task_stays_when_nothing_else_passes_over_it():
     tasks = [_task((1.0, 1.0), (1.5, 1.0)), _task((1.0, 2.0), (1.5, 2.0))]
     tour = [[(0, 0), (1, 0)]]
     assert prune_driven(g, tasks, tour, start, clean, 0.15, transit) == tour
+
+
+def _driven(transit, start, tasks, steps):
+    pts = [start[0][None, :]]
+    for t, _ in steps:
+        v = tasks[t].variants[0]
+        pts.append(transit.path(pts[-1][-1], v[0])[1:])
+        pts.append(v)
+    return np.vstack(pts)
+
+
+def test_with_a_coverage_floor_the_costliest_cells_go_first_and_the_floor_holds():
+    g, _, clean, transit = _setup()
+    start = np.array([[0.5, 1.0]])
+    # two lanes along the room, and a short piece across its far end, a detour for few cells
+    tasks = [
+        _task((0.5, 1.0), (4.0, 1.0)),
+        _task((4.0, 1.3), (0.5, 1.3)),
+        _task((0.5, 2.6), (0.7, 2.6)),
+    ]
+    tour = [[(0, 0), (1, 0), (2, 0)]]
+    full, _ = swath(g, _driven(transit, start, tasks, tour[0]), 0.15)
+    without, _ = swath(g, _driven(transit, start, tasks, tour[0][:2]), 0.15)
+    n_full, n_without = int((full & clean).sum()), int((without & clean).sum())
+    assert n_without < n_full
+    # the floor allows losing exactly the piece's own cells: it goes, the lanes stay
+    kept = prune_driven(g, tasks, tour, start, clean, 0.15, transit, min_cells=n_without)
+    assert kept == [tour[0][:2]]
+    after, _ = swath(g, _driven(transit, start, tasks, kept[0]), 0.15)
+    assert int((after & clean).sum()) >= n_without
+    # one cell fewer to spare: nothing may go
+    kept = prune_driven(g, tasks, tour, start, clean, 0.15, transit, min_cells=n_without + 1)
+    assert kept == tour

@@ -13,16 +13,17 @@ class CoverageParams:
     ``robot_radius`` and ``cleaning_width`` must equal the ``robot:`` section (0.17 m, 0.30 m).
     Lanes are ``cleaning_width · (1 − overlap)`` apart. With ``fill_in`` the floor the sweeps
     miss is cleaned by targeted passes placed in the tour like any task, the most cells per
-    metre first, until the sweeps and passes cover ``fill_in_target`` of the cleanable area
-    (1.0: every pass; transits only add to it). With ``return_strips`` a dead-end room may
-    get a lane along the wall where its lanes end (and lanes across its usual axis), so the
-    way back to its door is sweeping rather than a transit. Rooms are separated at openings
-    narrower than ``door_width``; a room smaller than ``min_room_area`` joins its largest
-    neighbour. A boustrophedon cell is cut into lane groups of at most ``max_task_area`` (0:
-    every lane is a task of its own, cut into pieces of at most ``max_lane_length``), so the
-    tour can leave a cell part-swept to visit a neighbour and come back, and k robots can
-    balance the work finely. Time estimates use ``max_speed`` plus ``turn_cost_s`` per turn (a
-    heading change over ``turn_angle_deg``).
+    metre first, until the sweeps and passes cover a little more than ``fill_in_target`` of
+    the cleanable area; the final pruning then drops the tasks that cost the most driving per
+    cell while at least ``fill_in_target`` stays covered (1.0: every pass, nothing lost).
+    With ``return_strips`` a dead-end room may get a lane along the wall where its lanes end
+    (and lanes across its usual axis), so the way back to its door is sweeping rather than a
+    transit. Rooms are separated at openings narrower than ``door_width``; a room smaller than
+    ``min_room_area`` joins its largest neighbour. A boustrophedon cell is cut into lane
+    groups of at most ``max_task_area`` (0: every lane is a task of its own, cut into pieces
+    of at most ``max_lane_length``), so the tour can leave a cell part-swept to visit a
+    neighbour and come back, and k robots can balance the work finely. Time estimates use
+    ``max_speed`` plus ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``).
     """
 
     robot_radius: float = 0.17

@@ -53,6 +53,9 @@ FILL_IN_ROUNDS = 3
 # shorter (the estimate leaves out the fill-in, which the other axis may need more of)
 AXIS_MARGIN = 0.03
 MISS_FACTOR = 2.0
+# the fill-in cleans up to this share of the floor it leaves beyond its target; the final
+# pruning then trades that surplus for lane pieces that cost more per cell
+FILL_IN_SURPLUS = 0.8
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,7 +108,10 @@ def plan_coverage(
     ends, ``geodesic.PathCosts``); with ``params.fill_in``, targeted passes for the floor the
     sweeps miss (``fill_in.fill_in_tasks``) inserted into the tour where they cost least; for
     k robots the tour is cut into contiguous pieces balancing estimated time, each re-ordered
-    from its robot's start. Transits are straight when clear, A* on the inflated grid otherwise.
+    from its robot's start; last, the tasks whose floor the rest of the driven path cleans
+    anyway go, and the fill-in's surplus over ``params.fill_in_target`` is traded for the
+    tasks that cost the most driving per cell (``prune.prune_driven``). Transits are straight
+    when clear, A* on the inflated grid otherwise.
     """
     t0 = time.perf_counter()
     params.validate()
@@ -205,7 +211,8 @@ def plan_coverage(
         )
     if params.method == "bcd":
         hw = params.cleaning_width / 2
-        pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit)
+        floor = math.ceil(params.fill_in_target * int(clean.sum())) if params.fill_in else None
+        pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit, floor)
     paths = [
         _drive(s, [path_of(tasks[t], o) for t, o in piece], transit)
         for s, piece in zip(start_xy, pieces, strict=True)
@@ -465,7 +472,7 @@ def _add_fill_in(
             covered |= swath(grid, path, hw)[0]
         anchors = np.vstack([_densify(path, grid.resolution) for path in driven])
         passes = fill_in_tasks(
-            grid, covered, anchors, clean, reach, hw, transit, params.fill_in_target
+            grid, covered, anchors, clean, reach, hw, transit, _fill_in_goal(params.fill_in_target)
         )
         if not passes:
             break
@@ -490,6 +497,11 @@ def _add_fill_in(
             for r in range(len(start_xy))
         ]
     return tasks, pieces
+
+
+def _fill_in_goal(target: float) -> float:
+    """What the fill-in aims at: ``target`` plus ``FILL_IN_SURPLUS`` of what it leaves."""
+    return target + FILL_IN_SURPLUS * (1.0 - target)
 
 
 def _densify(path: np.ndarray, step: float) -> np.ndarray:

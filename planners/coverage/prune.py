@@ -8,10 +8,18 @@ every cleanable cell its swath covers is covered by something else — the other
 the transits of the tour once the task is gone (the hop into it and out of it replaced by one
 hop from the task before to the task after) — and that replacement hop is shorter than the two
 hops and the task together. Tasks are tried longest first, so the most driving is saved first.
+
+Given a coverage floor (``min_cells``), :func:`prune_driven` then spends the cells covered
+beyond it: the fill-in has cleaned a little more than the target at its cheapest, and a lane
+piece that alone sweeps a few cells far off its neighbours costs more per cell than that. Tasks
+go greedily by the fewest cells lost per metre saved (lazy greedy: a task's figures are
+re-checked when it comes up, since its neighbours may have gone), as long as the floor holds —
+the budgeted form of greedy set-cover pruning.
 """
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Sequence
 
@@ -87,10 +95,13 @@ def prune_driven(
     clean: np.ndarray,
     hw: float,
     transit: Transit,
+    min_cells: int | None = None,
 ) -> list[list[tuple[int, int]]]:
     """The robots' tours (``(task, option)`` per step, robot ``r`` starting at
     ``start_xy[r]``) without the tasks whose cleanable floor the rest of its driven path
-    cleans too, transits included (see the module docstring)."""
+    cleans too, transits included, and then (with ``min_cells``) without the tasks that save
+    the most driving per cleanable cell lost while at least ``min_cells`` stay covered (see
+    the module docstring)."""
     hops = _Hops(grid, transit, clean, hw)
     count = np.zeros(grid.shape, dtype=np.int32)
     paths = [[path_of(tasks[t], o) for t, o in piece] for piece in pieces]
@@ -109,7 +120,10 @@ def prune_driven(
     before = {s: s[1] - 1 for s in own}
     after = {s: s[1] + 1 for s in own}
     drop: set[tuple[int, int]] = set()
-    for r, k in sorted(own, key=lambda s: -own[s][2]):
+
+    def removal(r: int, k: int) -> tuple[float, int, list[tuple[Window, np.ndarray, int]]]:
+        """Driving saved, cleanable cells lost and the count changes if step k of robot r
+        went (the hops into and out of it replaced by one)."""
         legs = paths[r]
         path = legs[k]
         window, cells, length = own[r, k]
@@ -120,21 +134,49 @@ def prune_driven(
         if n < len(legs):
             old.append(hops(path[-1], legs[n][0]))
             new.append(hops(a, legs[n][0]))
-        if sum(h[0] for h in new) >= length + sum(h[0] for h in old) - 1e-9:
-            continue
+        saved = length + sum(h[0] for h in old) - sum(h[0] for h in new)
         changes = [(window, cells, -1)]
         changes += [(w, c, -1) for _, w, c in old] + [(w, c, 1) for _, w, c in new]
-        was = [count[w] > 0 for w, _, _ in changes]
+        if saved <= 1e-9:
+            return saved, 0, changes
         _apply(count, changes, 1)
-        lost = (clean[w] & c & (count[w] == 0) for (w, _, _), c in zip(changes, was, strict=True))
-        if any(m.any() for m in lost):
-            _apply(count, changes, -1)
-            continue
+        lost = np.zeros(count.shape, dtype=bool)
+        for w, c, _ in changes:
+            lost[w] |= clean[w] & c & (count[w] == 0)
+        _apply(count, changes, -1)
+        return saved, int(lost.sum()), changes
+
+    def remove(r: int, k: int, changes: list[tuple[Window, np.ndarray, int]]) -> None:
+        _apply(count, changes, 1)
         drop.add((r, k))
+        p, n = before[r, k], after[r, k]
         if p >= 0:
             after[r, p] = n
-        if n < len(legs):
+        if n < len(paths[r]):
             before[r, n] = p
+
+    for r, k in sorted(own, key=lambda s: -own[s][2]):
+        saved, lost, changes = removal(r, k)
+        if saved > 1e-9 and lost == 0:
+            remove(r, k, changes)
+    if min_cells is not None:
+        spare = int(((count > 0) & clean).sum()) - min_cells
+        heap = []
+        for r, k in own:
+            if (r, k) not in drop:
+                saved, lost, _ = removal(r, k)
+                if saved > 1e-9 and lost <= spare:
+                    heapq.heappush(heap, (lost / saved, r, k))
+        while heap and spare > 0:
+            _, r, k = heapq.heappop(heap)
+            saved, lost, changes = removal(r, k)
+            if saved <= 1e-9 or lost > spare:
+                continue
+            if heap and lost / saved > heap[0][0] + 1e-12:
+                heapq.heappush(heap, (lost / saved, r, k))
+                continue
+            remove(r, k, changes)
+            spare -= lost
     return [[s for k, s in enumerate(p) if (r, k) not in drop] for r, p in enumerate(pieces)]
 
 
