@@ -55,7 +55,7 @@ AXIS_MARGIN = 0.03
 MISS_FACTOR = 2.0
 # the fill-in cleans up to this share of the floor it leaves beyond its target; the final
 # pruning then trades that surplus for lane pieces that cost more per cell
-FILL_IN_SURPLUS = 0.8
+FILL_IN_SURPLUS = 0.9
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,7 +193,10 @@ def plan_coverage(
     robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
     tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=blocks)
     pieces = _split(tasks, tours, robot_comp, costs, start_xy, params)
+    # only BCD plans get the final pruning, which trades the fill-in's surplus back
+    pruned = params.method == "bcd"
     if params.fill_in:
+        goal = _fill_in_goal(params.fill_in_target) if pruned else params.fill_in_target
         tasks, pieces = _add_fill_in(
             grid,
             comp,
@@ -208,8 +211,9 @@ def plan_coverage(
             transit,
             costs,
             params,
+            goal,
         )
-    if params.method == "bcd":
+    if pruned:
         hw = params.cleaning_width / 2
         floor = math.ceil(params.fill_in_target * int(clean.sum())) if params.fill_in else None
         pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit, floor)
@@ -448,9 +452,11 @@ def _add_fill_in(
     transit,
     costs,
     params,
+    goal,
 ):
     """Tasks and robot tours with fill-in passes for the floor the driven tours miss
-    (``fill_in.fill_in_tasks``), in up to ``FILL_IN_ROUNDS`` rounds. Each sweep keeps the
+    (``fill_in.fill_in_tasks``) until ``goal`` of the cleanable area is covered, in up to
+    ``FILL_IN_ROUNDS`` rounds. Each sweep keeps the
     variant its tour chose; a pass goes to the robot of its floor part whose path passes
     closest and is inserted into its tour where it costs least, then the tour is improved
     again — which changes some transits, so the next round looks at what the new tours miss.
@@ -471,9 +477,7 @@ def _add_fill_in(
         for path in driven:
             covered |= swath(grid, path, hw)[0]
         anchors = np.vstack([_densify(path, grid.resolution) for path in driven])
-        passes = fill_in_tasks(
-            grid, covered, anchors, clean, reach, hw, transit, _fill_in_goal(params.fill_in_target)
-        )
+        passes = fill_in_tasks(grid, covered, anchors, clean, reach, hw, transit, goal)
         if not passes:
             break
         trees = [cKDTree(p) for p in driven]

@@ -140,9 +140,17 @@ def prune_driven(
         if saved <= 1e-9:
             return saved, 0, changes
         _apply(count, changes, 1)
-        lost = np.zeros(count.shape, dtype=bool)
+        r0 = min(w[0].start for w, _, _ in changes)
+        c0 = min(w[1].start for w, _, _ in changes)
+        r1 = max(w[0].stop for w, _, _ in changes)
+        c1 = max(w[1].stop for w, _, _ in changes)
+        lost = np.zeros((r1 - r0, c1 - c0), dtype=bool)
         for w, c, _ in changes:
-            lost[w] |= clean[w] & c & (count[w] == 0)
+            rows, cols = (
+                slice(w[0].start - r0, w[0].stop - r0),
+                slice(w[1].start - c0, w[1].stop - c0),
+            )
+            lost[rows, cols] |= clean[w] & c & (count[w] == 0)
         _apply(count, changes, -1)
         return saved, int(lost.sum()), changes
 
