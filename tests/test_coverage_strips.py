@@ -75,4 +75,7 @@ def test_strips_shorten_the_path_through_a_dead_end_room_at_the_same_coverage():
     }
     with_strips, without = plans[True].metrics.total, plans[False].metrics.total
     assert with_strips.coverage >= 0.995 and without.coverage >= 0.995
-    assert with_strips.path_length_m < without.path_length_m - 2.0
+    # the final pruning cuts back the plain plan's lane ends on the way out too (73.2 m before
+    # it, 70.4 m with it), so strips gain less here than on the bench maps, but still gain
+    assert with_strips.path_length_m < without.path_length_m
+    assert with_strips.repetition < without.repetition

@@ -68,7 +68,7 @@ def swath(grid: GridMap, path: np.ndarray, half_width: float) -> tuple[np.ndarra
     """
     covered = np.zeros(grid.shape, dtype=bool)
     visits = np.zeros(grid.shape, dtype=np.int32)
-    pts = _to_cells(grid, path)
+    pts = to_cells(grid, path)
     if len(pts) == 0:
         return covered, visits
     hw = half_width / grid.resolution
@@ -84,7 +84,7 @@ def swath(grid: GridMap, path: np.ndarray, half_width: float) -> tuple[np.ndarra
     return covered, visits
 
 
-def _to_cells(grid: GridMap, path: np.ndarray) -> np.ndarray:
+def to_cells(grid: GridMap, path: np.ndarray) -> np.ndarray:
     """World points → continuous (row, col) with cell centres at integers."""
     p = np.asarray(path, dtype=float).reshape(-1, 2)
     col = (p[:, 0] - grid.origin[0]) / grid.resolution - 0.5
@@ -96,13 +96,27 @@ def _stamp(covered, visits, a: np.ndarray, b: np.ndarray, hw: float, first: bool
     """Add the segment a → b (continuous cells): its capsule to ``covered``, and to ``visits``
     the capsule's cells that enter the brush along it (all of them on the ``first`` segment,
     else those not already under the brush at ``a``)."""
-    rows, cols = covered.shape
+    at = capsule(a, b, hw, covered.shape)
+    if at is None:
+        return
+    window, cells, at_start = at
+    covered[window] |= cells
+    visits[window] += cells if first else cells & ~at_start
+
+
+def capsule(
+    a: np.ndarray, b: np.ndarray, hw: float, shape: tuple[int, int]
+) -> tuple[tuple[slice, slice], np.ndarray, np.ndarray] | None:
+    """The cells (continuous cell coordinates, centres at integers) strictly within ``hw`` of
+    the segment a → b, and those within ``hw`` of ``a``, as masks over a window of a grid of
+    ``shape`` (None when the window is empty)."""
+    rows, cols = shape
     lo = np.floor(np.minimum(a, b) - hw).astype(int)
     hi = np.ceil(np.maximum(a, b) + hw).astype(int) + 1
     r0, c0 = max(lo[0], 0), max(lo[1], 0)
     r1, c1 = min(hi[0], rows), min(hi[1], cols)
     if r0 >= r1 or c0 >= c1:
-        return
+        return None
     rr = np.arange(r0, r1, dtype=float)[:, None] - a[0]
     cc = np.arange(c0, c1, dtype=float)[None, :] - a[1]
     inner = hw**2 - 1e-9
@@ -110,12 +124,11 @@ def _stamp(covered, visits, a: np.ndarray, b: np.ndarray, hw: float, first: bool
     d = b - a
     length = math.hypot(d[0], d[1])
     if length < 1e-9:
-        capsule = at_start
+        cells = at_start
     else:
         t = np.clip((rr * d[0] + cc * d[1]) / length, 0.0, length)
-        capsule = (rr - t * d[0] / length) ** 2 + (cc - t * d[1] / length) ** 2 < inner
-    covered[r0:r1, c0:c1] |= capsule
-    visits[r0:r1, c0:c1] += capsule if first else capsule & ~at_start
+        cells = (rr - t * d[0] / length) ** 2 + (cc - t * d[1] / length) ** 2 < inner
+    return (slice(r0, r1), slice(c0, c1)), cells, at_start
 
 
 def path_time(

@@ -216,7 +216,7 @@ def plan_coverage(
     if pruned:
         hw = params.cleaning_width / 2
         floor = math.ceil(params.fill_in_target * int(clean.sum())) if params.fill_in else None
-        pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit, floor)
+        tasks, pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit, floor)
     paths = [
         _drive(s, [path_of(tasks[t], o) for t, o in piece], transit)
         for s, piece in zip(start_xy, pieces, strict=True)

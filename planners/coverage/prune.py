@@ -7,44 +7,57 @@ a shoulder lane or a fill-in pass sweeps that floor as well as the task does. A 
 every cleanable cell its swath covers is covered by something else — the other kept tasks, or
 the transits of the tour once the task is gone (the hop into it and out of it replaced by one
 hop from the task before to the task after) — and that replacement hop is shorter than the two
-hops and the task together. Tasks are tried longest first, so the most driving is saved first.
+hops and the task together. Tasks are tried longest first, so the most driving is saved first;
+a straight piece that must stay may still be cut back at either end by up to ``max(TRIMS)``
+where the floor there is swept by something else (a lane running into a wall pass, a fill-in
+pass or the next lane's turn), its hops moved with it.
 
 Given a coverage floor (``min_cells``), :func:`prune_driven` then spends the cells covered
 beyond it: the fill-in has cleaned a little more than the target at its cheapest, and a lane
-piece that alone sweeps a few cells far off its neighbours costs more per cell than that. Tasks
-go greedily by the fewest cells lost per metre saved (lazy greedy: a task's figures are
-re-checked when it comes up, since its neighbours may have gone), as long as the floor holds —
-the budgeted form of greedy set-cover pruning.
+piece that alone sweeps a few cells far off its neighbours costs more per cell than that. Drops
+and cuts are made greedily by the fewest cells lost per metre saved (lazy greedy: an edit's
+figures are re-checked when it comes up, since its neighbours may have changed), as long as the
+floor holds — the budgeted form of greedy set-cover pruning.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
-import math
+import itertools
 from collections.abc import Sequence
 
 import numpy as np
 
-from planners.coverage.metrics import swath
+from planners.coverage.metrics import capsule, to_cells
 from planners.coverage.tasks import SweepTask
 from planners.coverage.tour import path_of
 from planners.coverage.transit import Transit
 from planners.grid import GridMap
 
 Window = tuple[slice, slice]
+Step = tuple[int, int]  # (robot, index in its tour)
+Change = list[tuple[Window, np.ndarray, int]]  # footprints and how each changes the counts
+# a straight piece may lose this much (metres) at either end, and keeps at least MIN_PIECE
+TRIMS = (0.1, 0.2, 0.3)
+MIN_PIECE = 0.05
 
 
 def footprint(grid: GridMap, path: np.ndarray, hw: float) -> tuple[Window, np.ndarray]:
-    """The cells within the capsules of ``path`` (``metrics.swath``), as a window of the grid
-    and the mask inside it."""
-    rc = grid.world_to_cell(path)
-    pad = math.ceil(hw / grid.resolution) + 1
-    r0, c0 = np.maximum(rc.min(axis=0) - pad, 0)
-    r1, c1 = np.minimum(rc.max(axis=0) + pad + 1, grid.shape)
-    origin = (grid.origin[0] + c0 * grid.resolution, grid.origin[1] + r0 * grid.resolution)
-    shape = (int(r1 - r0), int(c1 - c0))
-    window = GridMap(np.zeros(shape, bool), np.zeros(shape, bool), grid.resolution, origin)
-    return (slice(int(r0), int(r1)), slice(int(c0), int(c1))), swath(window, path, hw)[0]
+    """The cells within the capsules of ``path`` (as ``metrics.swath`` covers them), as a
+    window of the grid and the mask inside it."""
+    pts = to_cells(grid, path)
+    h = hw / grid.resolution
+    lo = np.maximum(np.floor(pts.min(axis=0) - h).astype(int), 0)
+    hi = np.minimum(np.ceil(pts.max(axis=0) + h).astype(int) + 1, grid.shape)
+    shape = (max(int(hi[0] - lo[0]), 0), max(int(hi[1] - lo[1]), 0))
+    mask = np.zeros(shape, dtype=bool)
+    local = pts - lo
+    for a, b in itertools.pairwise(local) if len(local) > 1 else [(local[0], local[0])]:
+        at = capsule(a, b, h, shape)
+        if at is not None:
+            mask[at[0]] |= at[1]
+    return (slice(int(lo[0]), int(hi[0])), slice(int(lo[1]), int(hi[1]))), mask
 
 
 def prune_tasks(grid, tasks, pieces, clean, hw) -> list[list[tuple[int, int]]]:
@@ -71,20 +84,30 @@ def prune_tasks(grid, tasks, pieces, clean, hw) -> list[list[tuple[int, int]]]:
 
 
 class _Hops:
-    """Transits between points, with their length and footprint, planned once each."""
+    """Transits between points, planned once each: their length, and their footprint when
+    asked for."""
 
     def __init__(self, grid: GridMap, transit: Transit, clean: np.ndarray, hw: float) -> None:
         self.grid, self.transit, self.clean, self.hw = grid, transit, clean, hw
-        self._kept: dict[tuple[float, ...], tuple[float, Window, np.ndarray]] = {}
+        self._paths: dict[tuple[float, ...], tuple[float, np.ndarray]] = {}
+        self._cells: dict[tuple[float, ...], tuple[Window, np.ndarray]] = {}
 
-    def __call__(self, a: np.ndarray, b: np.ndarray) -> tuple[float, Window, np.ndarray]:
+    def length(self, a: np.ndarray, b: np.ndarray) -> float:
+        return self._path(a, b)[0]
+
+    def cells(self, a: np.ndarray, b: np.ndarray) -> tuple[Window, np.ndarray]:
         key = (*a.tolist(), *b.tolist())
-        if key not in self._kept:
+        if key not in self._cells:
+            window, cells = footprint(self.grid, self._path(a, b)[1], self.hw)
+            self._cells[key] = (window, cells & self.clean[window])
+        return self._cells[key]
+
+    def _path(self, a: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray]:
+        key = (*a.tolist(), *b.tolist())
+        if key not in self._paths:
             path = self.transit.path(a, b)
-            window, cells = footprint(self.grid, path, self.hw)
-            length = float(np.hypot(*np.diff(path, axis=0).T).sum())
-            self._kept[key] = (length, window, cells & self.clean[window])
-        return self._kept[key]
+            self._paths[key] = (_length(path), path)
+        return self._paths[key]
 
 
 def prune_driven(
@@ -96,98 +119,204 @@ def prune_driven(
     hw: float,
     transit: Transit,
     min_cells: int | None = None,
-) -> list[list[tuple[int, int]]]:
-    """The robots' tours (``(task, option)`` per step, robot ``r`` starting at
-    ``start_xy[r]``) without the tasks whose cleanable floor the rest of its driven path
-    cleans too, transits included, and then (with ``min_cells``) without the tasks that save
-    the most driving per cleanable cell lost while at least ``min_cells`` stay covered (see
-    the module docstring)."""
-    hops = _Hops(grid, transit, clean, hw)
-    count = np.zeros(grid.shape, dtype=np.int32)
-    paths = [[path_of(tasks[t], o) for t, o in piece] for piece in pieces]
-    own = {}
-    for r, legs in enumerate(paths):
-        prev = start_xy[r]
-        for k, path in enumerate(legs):
-            window, cells = footprint(grid, path, hw)
-            cells &= clean[window]
-            own[r, k] = (window, cells, float(np.hypot(*np.diff(path, axis=0).T).sum()))
-            _, hop_window, hop_cells = hops(prev, path[0])
-            count[window] += cells
-            count[hop_window] += hop_cells
-            prev = path[-1]
-    # the kept steps of each tour as a doubly linked list (-1: the start, len: the end)
-    before = {s: s[1] - 1 for s in own}
-    after = {s: s[1] + 1 for s in own}
-    drop: set[tuple[int, int]] = set()
+) -> tuple[list[SweepTask], list[list[tuple[int, int]]]]:
+    """The tasks and the robots' tours (``(task, option)`` per step, robot ``r`` starting at
+    ``start_xy[r]``) without the tasks whose cleanable floor the rest of the driven path
+    cleans too, transits included, and with straight pieces shortened at an end where that
+    loses no cell; then (with ``min_cells``) without the drops and cuts that save the most
+    driving per cleanable cell lost while at least ``min_cells`` stay covered (see the module
+    docstring). A shortened piece is a new task, appended to the list."""
+    tours = _Tours(grid, tasks, pieces, start_xy, clean, hw, transit)
+    for step in sorted(tours.paths, key=lambda s: -tours.own[s][2]):
+        if _first_lossless(tours, step, [(-1, 0.0)]):
+            continue
+        for end in (0, 1):
+            _first_lossless(tours, step, [(end, cut) for cut in sorted(TRIMS, reverse=True)])
+    if min_cells is not None:
+        spare = int(((tours.count > 0) & clean).sum()) - min_cells
+        edits = [(-1, 0.0)] + [(end, cut) for end in (0, 1) for cut in TRIMS]
+        heap = []
+        for step in list(tours.paths):
+            for end, cut in edits:
+                ok, path = tours.edit(step, end, cut)
+                if ok:
+                    saved, lost, _ = tours.change(step, path)
+                    if saved > 1e-9 and lost <= spare:
+                        heapq.heappush(heap, (lost / saved, *step, end, cut))
+        while heap and spare > 0:
+            _, r, k, end, cut = heapq.heappop(heap)
+            if (r, k) not in tours.paths:
+                continue
+            ok, path = tours.edit((r, k), end, cut)
+            if not ok:
+                continue
+            saved, lost, change = tours.change((r, k), path)
+            if saved <= 1e-9 or lost > spare:
+                continue
+            if heap and lost / saved > heap[0][0] + 1e-12:
+                heapq.heappush(heap, (lost / saved, r, k, end, cut))
+                continue
+            tours.commit((r, k), path, change)
+            spare -= lost
+    return tours.result(tasks, pieces)
 
-    def removal(r: int, k: int) -> tuple[float, int, list[tuple[Window, np.ndarray, int]]]:
-        """Driving saved, cleanable cells lost and the count changes if step k of robot r
-        went (the hops into and out of it replaced by one)."""
-        legs = paths[r]
-        path = legs[k]
-        window, cells, length = own[r, k]
-        p, n = before[r, k], after[r, k]
-        a = legs[p][-1] if p >= 0 else start_xy[r]
-        old = [hops(a, path[0])]
-        new = []
-        if n < len(legs):
-            old.append(hops(path[-1], legs[n][0]))
-            new.append(hops(a, legs[n][0]))
-        saved = length + sum(h[0] for h in old) - sum(h[0] for h in new)
-        changes = [(window, cells, -1)]
-        changes += [(w, c, -1) for _, w, c in old] + [(w, c, 1) for _, w, c in new]
+
+class _Tours:
+    """The robots' driven tours as linked steps, and how often the tasks and transits sweep
+    each cell."""
+
+    def __init__(self, grid, tasks, pieces, start_xy, clean, hw, transit) -> None:
+        self.grid, self.clean, self.hw, self.start_xy = grid, clean, hw, start_xy
+        self.hops = _Hops(grid, transit, clean, hw)
+        self.count = np.zeros(grid.shape, dtype=np.int32)
+        self.paths: dict[Step, np.ndarray] = {}
+        self.own: dict[Step, tuple[Window, np.ndarray, float]] = {}
+        self.cut: set[Step] = set()
+        for r, piece in enumerate(pieces):
+            prev = start_xy[r]
+            for k, (t, o) in enumerate(piece):
+                path = path_of(tasks[t], o)
+                self.paths[r, k] = path
+                self.own[r, k] = self._footprint(path)
+                hop_window, hop_cells = self.hops.cells(prev, path[0])
+                self.count[self.own[r, k][0]] += self.own[r, k][1]
+                self.count[hop_window] += hop_cells
+                prev = path[-1]
+        # kept steps as a doubly linked list per robot (-1: its start, len: its end)
+        self.before = {s: s[1] - 1 for s in self.paths}
+        self.after = {s: s[1] + 1 for s in self.paths}
+        self.n_steps = [len(p) for p in pieces]
+
+    def _footprint(self, path: np.ndarray) -> tuple[Window, np.ndarray, float]:
+        window, cells = footprint(self.grid, path, self.hw)
+        return window, cells & self.clean[window], _length(path)
+
+    def edit(self, step: Step, end: int, cut: float) -> tuple[bool, np.ndarray | None]:
+        """The step's path after an edit: None when dropped (``end`` −1), else its straight
+        piece ``cut`` metres shorter at its start (0) or end (1); False first when the piece
+        is not straight or not that long."""
+        if end < 0:
+            return True, None
+        path = self.paths[step]
+        if len(path) != 2:
+            return False, None
+        d = path[1] - path[0]
+        length = float(np.hypot(*d))
+        if length < cut + MIN_PIECE:
+            return False, None
+        out = path.copy()
+        out[end] = path[end] + (1 - 2 * end) * d * (cut / length)
+        return True, out
+
+    def change(self, step: Step, path: np.ndarray | None) -> tuple[float, int, tuple]:
+        """Driving saved, cleanable cells lost, and what :meth:`commit` needs, if ``step``
+        were driven as ``path`` (None: dropped, the hops into and out of it become one).
+        Footprints are only looked at when something is saved."""
+        r = step[0]
+        old_path = self.paths[step]
+        window, cells, length = self.own[step]
+        p, n = self.before[step], self.after[step]
+        a = self.paths[r, p][-1] if p >= 0 else self.start_xy[r]
+        nxt = self.paths[r, n][0] if n < self.n_steps[r] else None
+        old = [(a, old_path[0])]
+        if nxt is not None:
+            old.append((old_path[-1], nxt))
+        if path is None:
+            new = [(a, nxt)] if nxt is not None else []
+            new_length = 0.0
+        else:
+            new = [(a, path[0])]
+            if nxt is not None:
+                new.append((path[-1], nxt))
+            new_length = _length(path)
+        hop = self.hops.length
+        saved = length - new_length + sum(hop(*h) for h in old) - sum(hop(*h) for h in new)
         if saved <= 1e-9:
-            return saved, 0, changes
-        _apply(count, changes, 1)
+            return saved, 0, ()
+        changes: Change = [(window, cells, -1)]
+        mine = None
+        if path is not None:
+            mine = self._footprint(path)
+            changes.append((mine[0], mine[1], 1))
+        changes += [(*self.hops.cells(*h), -1) for h in old]
+        changes += [(*self.hops.cells(*h), 1) for h in new]
+        return saved, self._lost(changes), (changes, mine)
+
+    def _lost(self, changes: Change) -> int:
+        """How many cleanable cells no pass would sweep any more after ``changes``."""
+        _apply(self.count, changes, 1)
         r0 = min(w[0].start for w, _, _ in changes)
         c0 = min(w[1].start for w, _, _ in changes)
         r1 = max(w[0].stop for w, _, _ in changes)
         c1 = max(w[1].stop for w, _, _ in changes)
         lost = np.zeros((r1 - r0, c1 - c0), dtype=bool)
         for w, c, _ in changes:
-            rows, cols = (
-                slice(w[0].start - r0, w[0].stop - r0),
-                slice(w[1].start - c0, w[1].stop - c0),
-            )
-            lost[rows, cols] |= clean[w] & c & (count[w] == 0)
-        _apply(count, changes, -1)
-        return saved, int(lost.sum()), changes
+            at = (slice(w[0].start - r0, w[0].stop - r0), slice(w[1].start - c0, w[1].stop - c0))
+            lost[at] |= self.clean[w] & c & (self.count[w] == 0)
+        _apply(self.count, changes, -1)
+        return int(lost.sum())
 
-    def remove(r: int, k: int, changes: list[tuple[Window, np.ndarray, int]]) -> None:
-        _apply(count, changes, 1)
-        drop.add((r, k))
-        p, n = before[r, k], after[r, k]
+    def commit(self, step: Step, path: np.ndarray | None, change: tuple) -> None:
+        changes, mine = change
+        _apply(self.count, changes, 1)
+        if path is not None:
+            self.paths[step] = path
+            self.own[step] = mine
+            self.cut.add(step)
+            return
+        r, _ = step
+        p, n = self.before.pop(step), self.after.pop(step)
+        del self.paths[step], self.own[step]
+        self.cut.discard(step)
         if p >= 0:
-            after[r, p] = n
-        if n < len(paths[r]):
-            before[r, n] = p
+            self.after[r, p] = n
+        if n < self.n_steps[r]:
+            self.before[r, n] = p
 
-    for r, k in sorted(own, key=lambda s: -own[s][2]):
-        saved, lost, changes = removal(r, k)
+    def result(self, tasks, pieces) -> tuple[list[SweepTask], list[list[tuple[int, int]]]]:
+        out = list(tasks)
+        kept = []
+        for r, piece in enumerate(pieces):
+            steps = []
+            for k, (t, o) in enumerate(piece):
+                if (r, k) not in self.paths:
+                    continue
+                if (r, k) in self.cut:
+                    # a straight piece: its area and time scale with its length
+                    share = self.own[r, k][2] / max(_length(path_of(tasks[t], o)), 1e-9)
+                    out.append(
+                        dataclasses.replace(
+                            tasks[t],
+                            variants=(self.paths[r, k],),
+                            area_m2=tasks[t].area_m2 * share,
+                            time_s=tasks[t].time_s * share,
+                        )
+                    )
+                    steps.append((len(out) - 1, 0))
+                else:
+                    steps.append((t, o))
+            kept.append(steps)
+        return out, kept
+
+
+def _first_lossless(tours: _Tours, step: Step, edits: list[tuple[int, float]]) -> bool:
+    """Make the first of ``edits`` (see :meth:`_Tours.edit`) that saves driving and loses
+    no cell; whether there was one."""
+    for end, cut in edits:
+        ok, path = tours.edit(step, end, cut)
+        if not ok:
+            continue
+        saved, lost, change = tours.change(step, path)
         if saved > 1e-9 and lost == 0:
-            remove(r, k, changes)
-    if min_cells is not None:
-        spare = int(((count > 0) & clean).sum()) - min_cells
-        heap = []
-        for r, k in own:
-            if (r, k) not in drop:
-                saved, lost, _ = removal(r, k)
-                if saved > 1e-9 and lost <= spare:
-                    heapq.heappush(heap, (lost / saved, r, k))
-        while heap and spare > 0:
-            _, r, k = heapq.heappop(heap)
-            saved, lost, changes = removal(r, k)
-            if saved <= 1e-9 or lost > spare:
-                continue
-            if heap and lost / saved > heap[0][0] + 1e-12:
-                heapq.heappush(heap, (lost / saved, r, k))
-                continue
-            remove(r, k, changes)
-            spare -= lost
-    return [[s for k, s in enumerate(p) if (r, k) not in drop] for r, p in enumerate(pieces)]
+            tours.commit(step, path, change)
+            return True
+    return False
 
 
-def _apply(count: np.ndarray, changes: list[tuple[Window, np.ndarray, int]], sign: int) -> None:
+def _length(path: np.ndarray) -> float:
+    return float(np.hypot(*np.diff(path, axis=0).T).sum())
+
+
+def _apply(count: np.ndarray, changes: Change, sign: int) -> None:
     for window, cells, s in changes:
         count[window] += sign * s * cells
