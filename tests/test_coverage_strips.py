@@ -61,8 +61,8 @@ def test_no_strip_across_an_obstacle_or_over_too_few_lanes():
 
 
 def _hall_and_dead_end_room():
-    """A 3 m × 3.5 m hall and a 3 m × 3.5 m room behind a 0.7 m door."""
-    occ = boxed(70, 122)
+    """A 3 m × 5 m hall and a 3 m × 5 m room behind a 0.7 m door."""
+    occ = boxed(100, 122)
     occ[:, 61] = True
     occ[5:19, 61] = False
     return grid_of(occ)
@@ -75,7 +75,7 @@ def test_strips_shorten_the_path_through_a_dead_end_room_at_the_same_coverage():
     }
     with_strips, without = plans[True].metrics.total, plans[False].metrics.total
     assert with_strips.coverage >= 0.995 and without.coverage >= 0.995
-    # the final pruning cuts back the plain plan's lane ends on the way out too (73.2 m before
-    # it, 70.4 m with it), so strips gain less here than on the bench maps, but still gain
-    assert with_strips.path_length_m < without.path_length_m
+    # the final pruning also cuts back the plain plan's lane ends, so strips gain less than
+    # they did before it (3.5 m in a 3.5 m deep room then, 2 m in this 5 m deep one now)
+    assert with_strips.path_length_m < without.path_length_m - 1.0
     assert with_strips.repetition < without.repetition

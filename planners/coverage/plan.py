@@ -55,7 +55,7 @@ AXIS_MARGIN = 0.03
 MISS_FACTOR = 2.0
 # the fill-in cleans up to this share of the floor it leaves beyond its target; the final
 # pruning then trades that surplus for lane pieces that cost more per cell
-FILL_IN_SURPLUS = 0.9
+FILL_IN_SURPLUS = 0.6
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,9 +8,9 @@ every cleanable cell its swath covers is covered by something else — the other
 the transits of the tour once the task is gone (the hop into it and out of it replaced by one
 hop from the task before to the task after) — and that replacement hop is shorter than the two
 hops and the task together. Tasks are tried longest first, so the most driving is saved first;
-a straight piece that must stay may still be cut back at either end by up to ``max(TRIMS)``
-where the floor there is swept by something else (a lane running into a wall pass, a fill-in
-pass or the next lane's turn), its hops moved with it.
+a task that must stay may still be cut back at either end by up to ``max(TRIMS)`` along its
+path where the floor there is swept by something else (a lane running into a wall pass, a
+fill-in pass along a lane, the next lane's turn), its hops moved with it.
 
 Given a coverage floor (``min_cells``), :func:`prune_driven` then spends the cells covered
 beyond it: the fill-in has cleaned a little more than the target at its cheapest, and a lane
@@ -38,7 +38,7 @@ from planners.grid import GridMap
 Window = tuple[slice, slice]
 Step = tuple[int, int]  # (robot, index in its tour)
 Change = list[tuple[Window, np.ndarray, int]]  # footprints and how each changes the counts
-# a straight piece may lose this much (metres) at either end, and keeps at least MIN_PIECE
+# a task's path may lose this much (metres) at either end, and keeps at least MIN_PIECE
 TRIMS = (0.1, 0.2, 0.3)
 MIN_PIECE = 0.05
 
@@ -122,8 +122,8 @@ def prune_driven(
 ) -> tuple[list[SweepTask], list[list[tuple[int, int]]]]:
     """The tasks and the robots' tours (``(task, option)`` per step, robot ``r`` starting at
     ``start_xy[r]``) without the tasks whose cleanable floor the rest of the driven path
-    cleans too, transits included, and with straight pieces shortened at an end where that
-    loses no cell; then (with ``min_cells``) without the drops and cuts that save the most
+    cleans too, transits included, and with paths shortened at an end where that loses no
+    cell; then (with ``min_cells``) without the drops and cuts that save the most
     driving per cleanable cell lost while at least ``min_cells`` stay covered (see the module
     docstring). A shortened piece is a new task, appended to the list."""
     tours = _Tours(grid, tasks, pieces, start_xy, clean, hw, transit)
@@ -192,21 +192,16 @@ class _Tours:
         return window, cells & self.clean[window], _length(path)
 
     def edit(self, step: Step, end: int, cut: float) -> tuple[bool, np.ndarray | None]:
-        """The step's path after an edit: None when dropped (``end`` −1), else its straight
-        piece ``cut`` metres shorter at its start (0) or end (1); False first when the piece
-        is not straight or not that long."""
+        """The step's path after an edit: None when dropped (``end`` −1), else ``cut`` metres
+        shorter at its start (0) or end (1); False first when it is not that long."""
         if end < 0:
             return True, None
         path = self.paths[step]
-        if len(path) != 2:
+        if _length(path) < cut + MIN_PIECE:
             return False, None
-        d = path[1] - path[0]
-        length = float(np.hypot(*d))
-        if length < cut + MIN_PIECE:
-            return False, None
-        out = path.copy()
-        out[end] = path[end] + (1 - 2 * end) * d * (cut / length)
-        return True, out
+        if end == 1:
+            return True, _cut_start(path[::-1], cut)[::-1]
+        return True, _cut_start(path, cut)
 
     def change(self, step: Step, path: np.ndarray | None) -> tuple[float, int, tuple]:
         """Driving saved, cleanable cells lost, and what :meth:`commit` needs, if ``step``
@@ -230,7 +225,12 @@ class _Tours:
                 new.append((path[-1], nxt))
             new_length = _length(path)
         hop = self.hops.length
-        saved = length - new_length + sum(hop(*h) for h in old) - sum(hop(*h) for h in new)
+        kept = length - new_length + sum(hop(*h) for h in old)
+        # a transit is never shorter than the straight line: most edits fail that cheap test
+        # before their new transits are planned
+        if kept - sum(float(np.hypot(*(b - a))) for a, b in new) <= 1e-9:
+            return 0.0, 0, ()
+        saved = kept - sum(hop(*h) for h in new)
         if saved <= 1e-9:
             return saved, 0, ()
         changes: Change = [(window, cells, -1)]
@@ -282,7 +282,7 @@ class _Tours:
                 if (r, k) not in self.paths:
                     continue
                 if (r, k) in self.cut:
-                    # a straight piece: its area and time scale with its length
+                    # its area and time taken in proportion to its length
                     share = self.own[r, k][2] / max(_length(path_of(tasks[t], o)), 1e-9)
                     out.append(
                         dataclasses.replace(
@@ -311,6 +311,16 @@ def _first_lossless(tours: _Tours, step: Step, edits: list[tuple[int, float]]) -
             tours.commit(step, path, change)
             return True
     return False
+
+
+def _cut_start(path: np.ndarray, cut: float) -> np.ndarray:
+    """``path`` without its first ``cut`` metres."""
+    seg = np.hypot(*np.diff(path, axis=0).T)
+    ends = np.cumsum(seg)
+    i = int(np.searchsorted(ends, cut, side="right"))
+    before = ends[i] - seg[i]
+    start = path[i] + (path[i + 1] - path[i]) * ((cut - before) / seg[i])
+    return np.vstack([start, path[i + 1 :]])
 
 
 def _length(path: np.ndarray) -> float:

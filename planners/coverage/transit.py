@@ -40,14 +40,19 @@ class Transit:
 
     def clear(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Whether every cell the segment a–b passes through (sampled at ⅓ cell) is free."""
-        a = np.asarray(a, dtype=float)
-        b = np.asarray(b, dtype=float)
-        n = max(2, math.ceil(3 * np.hypot(*(b - a)) / self.grid.resolution) + 1)
-        pts = a + (b - a) * np.linspace(0.0, 1.0, n)[:, None]
-        rc = self.grid.world_to_cell(pts)
-        if not self.grid.in_bounds(rc).all():
+        res = self.grid.resolution
+        ox, oy = self.grid.origin
+        n = math.ceil(3 * math.hypot(b[0] - a[0], b[1] - a[1]) / res) + 1
+        t = np.linspace(0.0, 1.0, max(2, n))
+        col = np.floor((a[0] + (b[0] - a[0]) * t - ox) / res).astype(np.intp)
+        row = np.floor((a[1] + (b[1] - a[1]) * t - oy) / res).astype(np.intp)
+        rows, cols = self.free.shape
+        # samples along a segment are monotone in row and column: its ends bound them
+        if min(row[0], row[-1]) < 0 or min(col[0], col[-1]) < 0:
             return False
-        return bool(self.free[rc[:, 0], rc[:, 1]].all())
+        if max(row[0], row[-1]) >= rows or max(col[0], col[-1]) >= cols:
+            return False
+        return bool(self.free[row, col].all())
 
     def path(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(N, 2) world path from ``a`` to ``b`` through free cells (endpoints included; a
