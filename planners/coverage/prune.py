@@ -127,37 +127,34 @@ def prune_driven(
     driving per cleanable cell lost while at least ``min_cells`` stay covered (see the module
     docstring). A shortened piece is a new task, appended to the list."""
     tours = _Tours(grid, tasks, pieces, start_xy, clean, hw, transit)
+    lossy: list[tuple[float, int, int, int, float, int]] = []
     for step in sorted(tours.paths, key=lambda s: -tours.own[s][2]):
-        if _first_lossless(tours, step, [(-1, 0.0)]):
+        if _first_lossless(tours, step, [(-1, 0.0)], lossy):
             continue
         for end in (0, 1):
-            _first_lossless(tours, step, [(end, cut) for cut in sorted(TRIMS, reverse=True)])
-    if min_cells is not None:
-        spare = int(((tours.count > 0) & clean).sum()) - min_cells
-        edits = [(-1, 0.0)] + [(end, cut) for end in (0, 1) for cut in TRIMS]
-        heap = []
-        for step in list(tours.paths):
-            for end, cut in edits:
-                ok, path = tours.edit(step, end, cut)
-                if ok:
-                    saved, lost, _ = tours.change(step, path)
-                    if saved > 1e-9 and lost <= spare:
-                        heapq.heappush(heap, (lost / saved, *step, end, cut))
-        while heap and spare > 0:
-            _, r, k, end, cut = heapq.heappop(heap)
-            if (r, k) not in tours.paths:
-                continue
-            ok, path = tours.edit((r, k), end, cut)
-            if not ok:
-                continue
-            saved, lost, change = tours.change((r, k), path)
-            if saved <= 1e-9 or lost > spare:
-                continue
-            if heap and lost / saved > heap[0][0] + 1e-12:
-                heapq.heappush(heap, (lost / saved, r, k, end, cut))
-                continue
-            tours.commit((r, k), path, change)
-            spare -= lost
+            cuts = [(end, cut) for cut in sorted(TRIMS, reverse=True)]
+            _first_lossless(tours, step, cuts, lossy)
+    if min_cells is None:
+        return tours.result(tasks, pieces)
+    spare = int(((tours.count > 0) & clean).sum()) - min_cells
+    # lazy greedy, seeded with the figures found above: they are re-checked when they come up
+    heap = [(rate, r, k, end, cut) for rate, r, k, end, cut, lost in lossy if lost <= spare]
+    heapq.heapify(heap)
+    while heap and spare > 0:
+        _, r, k, end, cut = heapq.heappop(heap)
+        if (r, k) not in tours.paths:
+            continue
+        ok, path = tours.edit((r, k), end, cut)
+        if not ok:
+            continue
+        saved, lost, change = tours.change((r, k), path)
+        if saved <= 1e-9 or lost > spare:
+            continue
+        if heap and lost / saved > heap[0][0] + 1e-12:
+            heapq.heappush(heap, (lost / saved, r, k, end, cut))
+            continue
+        tours.commit((r, k), path, change)
+        spare -= lost
     return tours.result(tasks, pieces)
 
 
@@ -244,17 +241,16 @@ class _Tours:
 
     def _lost(self, changes: Change) -> int:
         """How many cleanable cells no pass would sweep any more after ``changes``."""
-        _apply(self.count, changes, 1)
         r0 = min(w[0].start for w, _, _ in changes)
         c0 = min(w[1].start for w, _, _ in changes)
         r1 = max(w[0].stop for w, _, _ in changes)
         c1 = max(w[1].stop for w, _, _ in changes)
-        lost = np.zeros((r1 - r0, c1 - c0), dtype=bool)
-        for w, c, _ in changes:
+        delta = np.zeros((r1 - r0, c1 - c0), dtype=np.int32)
+        for w, c, sign in changes:
             at = (slice(w[0].start - r0, w[0].stop - r0), slice(w[1].start - c0, w[1].stop - c0))
-            lost[at] |= self.clean[w] & c & (self.count[w] == 0)
-        _apply(self.count, changes, -1)
-        return int(lost.sum())
+            delta[at] += sign * c
+        count = self.count[r0:r1, c0:c1]
+        return int(((count > 0) & (count + delta <= 0) & self.clean[r0:r1, c0:c1]).sum())
 
     def commit(self, step: Step, path: np.ndarray | None, change: tuple) -> None:
         changes, mine = change
@@ -299,17 +295,21 @@ class _Tours:
         return out, kept
 
 
-def _first_lossless(tours: _Tours, step: Step, edits: list[tuple[int, float]]) -> bool:
+def _first_lossless(tours: _Tours, step: Step, edits: list[tuple[int, float]], lossy: list) -> bool:
     """Make the first of ``edits`` (see :meth:`_Tours.edit`) that saves driving and loses
-    no cell; whether there was one."""
+    no cell; whether there was one. The edits tried that save driving but lose cells go to
+    ``lossy`` as (cells lost per metre saved, robot, step, end, cut, cells lost)."""
     for end, cut in edits:
         ok, path = tours.edit(step, end, cut)
         if not ok:
             continue
         saved, lost, change = tours.change(step, path)
-        if saved > 1e-9 and lost == 0:
+        if saved <= 1e-9:
+            continue
+        if lost == 0:
             tours.commit(step, path, change)
             return True
+        lossy.append((lost / saved, *step, end, cut, lost))
     return False
 
 
