@@ -53,8 +53,8 @@ FILL_IN_ROUNDS = 3
 # shorter (the estimate leaves out the fill-in, which the other axis may need more of)
 AXIS_MARGIN = 0.03
 MISS_FACTOR = 2.0
-# the fill-in cleans up to this share of the floor it leaves beyond its target; the final
-# pruning then trades that surplus for lane pieces that cost more per cell
+# the fill-in goes on to clean this share of the floor fill_in_target leaves; the final
+# pruning then trades that surplus back for the tasks that cost more driving per cell
 FILL_IN_SURPLUS = 0.6
 
 
@@ -456,12 +456,11 @@ def _add_fill_in(
 ):
     """Tasks and robot tours with fill-in passes for the floor the driven tours miss
     (``fill_in.fill_in_tasks``) until ``goal`` of the cleanable area is covered, in up to
-    ``FILL_IN_ROUNDS`` rounds. Each sweep keeps the
-    variant its tour chose; a pass goes to the robot of its floor part whose path passes
-    closest and is inserted into its tour where it costs least, then the tour is improved
-    again — which changes some transits, so the next round looks at what the new tours miss.
-    Each round first drops the tasks whose floor other tasks already clean
-    (``prune.prune_tasks``)."""
+    ``FILL_IN_ROUNDS`` rounds. Each sweep keeps the variant its tour chose; a pass goes to the
+    robot of its floor part whose path passes closest and is inserted into its tour where it
+    costs least, then the tour is improved again — which changes some transits, so the next
+    round looks at what the new tours miss. Each round first drops the tasks whose floor other
+    tasks already clean (``prune.prune_tasks``)."""
     hw = params.cleaning_width / 2
     for _ in range(FILL_IN_ROUNDS):
         pieces = prune_tasks(grid, tasks, pieces, clean, hw)
