@@ -15,9 +15,10 @@ fill-in pass along a lane, the next lane's turn), its hops moved with it.
 Given a coverage floor (``min_cells``), :func:`prune_driven` then spends the cells covered
 beyond it: the fill-in has cleaned a little more than the target at its cheapest, and a lane
 piece that alone sweeps a few cells far off its neighbours costs more per cell than that. Drops
-and cuts are made greedily by the fewest cells lost per metre saved (lazy greedy: an edit's
-figures are re-checked when it comes up, since its neighbours may have changed), as long as the
-floor holds — the budgeted form of greedy set-cover pruning.
+and cuts are made greedily by the fewest cells lost per metre saved, as long as the floor
+holds — the budgeted form of greedy set-cover pruning. The greedy is lazy: it starts from the
+figures the first pass found for the edits it could not make, and re-checks an edit's figures
+when it comes up, since its neighbours may have changed.
 """
 
 from __future__ import annotations
@@ -123,9 +124,9 @@ def prune_driven(
     """The tasks and the robots' tours (``(task, option)`` per step, robot ``r`` starting at
     ``start_xy[r]``) without the tasks whose cleanable floor the rest of the driven path
     cleans too, transits included, and with paths shortened at an end where that loses no
-    cell; then (with ``min_cells``) without the drops and cuts that save the most
-    driving per cleanable cell lost while at least ``min_cells`` stay covered (see the module
-    docstring). A shortened piece is a new task, appended to the list."""
+    cell; then (with ``min_cells``) without the drops and cuts that save the most driving per
+    cleanable cell lost while at least ``min_cells`` stay covered (see the module docstring).
+    A shortened path is a new task, appended to the list."""
     tours = _Tours(grid, tasks, pieces, start_xy, clean, hw, transit)
     lossy: list[tuple[float, int, int, int, float, int]] = []
     for step in sorted(tours.paths, key=lambda s: -tours.own[s][2]):
