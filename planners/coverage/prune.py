@@ -18,7 +18,8 @@ piece that alone sweeps a few cells far off its neighbours costs more per cell t
 and cuts are made greedily by the fewest cells lost per metre saved, as long as the floor
 holds — the budgeted form of greedy set-cover pruning. The greedy is lazy: it starts from the
 figures the first pass found for the edits it could not make, and re-checks an edit's figures
-when it comes up, since its neighbours may have changed.
+when it comes up, since its neighbours may have changed. The transits its edits move sweep
+floor anew, so the tasks under them get one more lossless pass.
 """
 
 from __future__ import annotations
@@ -125,19 +126,16 @@ def prune_driven(
     ``start_xy[r]``) without the tasks whose cleanable floor the rest of the driven path
     cleans too, transits included, and with paths shortened at an end where that loses no
     cell; then (with ``min_cells``) without the drops and cuts that save the most driving per
-    cleanable cell lost while at least ``min_cells`` stay covered (see the module docstring).
-    A shortened path is a new task, appended to the list."""
+    cleanable cell lost while at least ``min_cells`` stay covered, and once more without the
+    lossless ones those edits made possible (see the module docstring). A shortened path is a
+    new task, appended to the list."""
     tours = _Tours(grid, tasks, pieces, start_xy, clean, hw, transit)
     lossy: list[tuple[float, int, int, int, float, int]] = []
-    for step in sorted(tours.paths, key=lambda s: -tours.own[s][2]):
-        if _first_lossless(tours, step, [(-1, 0.0)], lossy):
-            continue
-        for end in (0, 1):
-            cuts = [(end, cut) for cut in sorted(TRIMS, reverse=True)]
-            _first_lossless(tours, step, cuts, lossy)
+    _lossless_pass(tours, list(tours.paths), lossy)
     if min_cells is None:
         return tours.result(tasks, pieces)
     spare = int(((tours.count > 0) & clean).sum()) - min_cells
+    tours.touched[:] = False
     # lazy greedy, seeded with the figures found above: they are re-checked when they come up
     heap = [(rate, r, k, end, cut) for rate, r, k, end, cut, lost in lossy if lost <= spare]
     heapq.heapify(heap)
@@ -156,6 +154,9 @@ def prune_driven(
             continue
         tours.commit((r, k), path, change)
         spare -= lost
+    # the transits those edits moved sweep floor anew: the tasks under them may now go free
+    again = [s for s, (w, cells, _) in tours.own.items() if (tours.touched[w] & cells).any()]
+    _lossless_pass(tours, again, [])
     return tours.result(tasks, pieces)
 
 
@@ -167,6 +168,8 @@ class _Tours:
         self.grid, self.clean, self.hw, self.start_xy = grid, clean, hw, start_xy
         self.hops = _Hops(grid, transit, clean, hw)
         self.count = np.zeros(grid.shape, dtype=np.int32)
+        # cells the passes and transits of committed edits newly sweep
+        self.touched = np.zeros(grid.shape, dtype=bool)
         self.paths: dict[Step, np.ndarray] = {}
         self.own: dict[Step, tuple[Window, np.ndarray, float]] = {}
         self.cut: set[Step] = set()
@@ -256,6 +259,9 @@ class _Tours:
     def commit(self, step: Step, path: np.ndarray | None, change: tuple) -> None:
         changes, mine = change
         _apply(self.count, changes, 1)
+        for w, c, sign in changes:
+            if sign > 0:
+                self.touched[w] |= c
         if path is not None:
             self.paths[step] = path
             self.own[step] = mine
@@ -294,6 +300,17 @@ class _Tours:
                     steps.append((t, o))
             kept.append(steps)
         return out, kept
+
+
+def _lossless_pass(tours: _Tours, steps: list[Step], lossy: list) -> None:
+    """Drop each of ``steps`` (longest first), or else cut it back at either end, where that
+    saves driving and loses no cell (see :func:`_first_lossless`)."""
+    for step in sorted(steps, key=lambda s: -tours.own[s][2]):
+        if step not in tours.paths or _first_lossless(tours, step, [(-1, 0.0)], lossy):
+            continue
+        for end in (0, 1):
+            cuts = [(end, cut) for cut in sorted(TRIMS, reverse=True)]
+            _first_lossless(tours, step, cuts, lossy)
 
 
 def _first_lossless(tours: _Tours, step: Step, edits: list[tuple[int, float]], lossy: list) -> bool:
