@@ -19,7 +19,8 @@ and cuts are made greedily by the fewest cells lost per metre saved, as long as 
 holds — the budgeted form of greedy set-cover pruning. The greedy is lazy: it starts from the
 figures the first pass found for the edits it could not make, and re-checks an edit's figures
 when it comes up, since its neighbours may have changed. The transits its edits move sweep
-floor anew, so the tasks under them get one more lossless pass.
+floor anew (some of it floor nothing swept before, which adds to the budget), so the tasks under
+them get one more lossless pass and the budget left one more greedy pass.
 """
 
 from __future__ import annotations
@@ -126,37 +127,22 @@ def prune_driven(
     ``start_xy[r]``) without the tasks whose cleanable floor the rest of the driven path
     cleans too, transits included, and with paths shortened at an end where that loses no
     cell; then (with ``min_cells``) without the drops and cuts that save the most driving per
-    cleanable cell lost while at least ``min_cells`` stay covered, and once more without the
-    lossless ones those edits made possible (see the module docstring). A shortened path is a
-    new task, appended to the list."""
+    cleanable cell lost while at least ``min_cells`` stay covered, and once more for what
+    those edits made possible (see the module docstring). A shortened path is a new task,
+    appended to the list."""
     tours = _Tours(grid, tasks, pieces, start_xy, clean, hw, transit)
     lossy: list[tuple[float, int, int, int, float, int]] = []
     _lossless_pass(tours, list(tours.paths), lossy)
     if min_cells is None:
         return tours.result(tasks, pieces)
-    spare = int(((tours.count > 0) & clean).sum()) - min_cells
     tours.touched[:] = False
-    # lazy greedy, seeded with the figures found above: they are re-checked when they come up
-    heap = [(rate, r, k, end, cut) for rate, r, k, end, cut, lost in lossy if lost <= spare]
-    heapq.heapify(heap)
-    while heap and spare > 0:
-        _, r, k, end, cut = heapq.heappop(heap)
-        if (r, k) not in tours.paths:
-            continue
-        ok, path = tours.edit((r, k), end, cut)
-        if not ok:
-            continue
-        saved, lost, change = tours.change((r, k), path)
-        if saved <= 1e-9 or lost > spare:
-            continue
-        if heap and lost / saved > heap[0][0] + 1e-12:
-            heapq.heappush(heap, (lost / saved, r, k, end, cut))
-            continue
-        tours.commit((r, k), path, change)
-        spare -= lost
-    # the transits those edits moved sweep floor anew: the tasks under them may now go free
+    _budget_pass(tours, lossy, min_cells)
+    # the transits those edits moved sweep floor anew: the tasks under them may now go free,
+    # and what that frees of the budget is spent too
     again = [s for s, (w, cells, _) in tours.own.items() if (tours.touched[w] & cells).any()]
-    _lossless_pass(tours, again, [])
+    lossy = []
+    _lossless_pass(tours, again, lossy)
+    _budget_pass(tours, lossy, min_cells)
     return tours.result(tasks, pieces)
 
 
@@ -187,6 +173,9 @@ class _Tours:
         self.before = {s: s[1] - 1 for s in self.paths}
         self.after = {s: s[1] + 1 for s in self.paths}
         self.n_steps = [len(p) for p in pieces]
+
+    def covered(self) -> int:
+        return int(((self.count > 0) & self.clean).sum())
 
     def _footprint(self, path: np.ndarray) -> tuple[Window, np.ndarray, float]:
         window, cells = footprint(self.grid, path, self.hw)
@@ -300,6 +289,30 @@ class _Tours:
                     steps.append((t, o))
             kept.append(steps)
         return out, kept
+
+
+def _budget_pass(tours: _Tours, lossy: list, min_cells: int) -> None:
+    """Make the edits of ``lossy`` (see :func:`_first_lossless`) that lose the fewest cells per
+    metre saved, re-checking each as it comes up, while ``min_cells`` stay covered."""
+    spare = tours.covered() - min_cells
+    heap = [(rate, r, k, end, cut) for rate, r, k, end, cut, lost in lossy if lost <= spare]
+    heapq.heapify(heap)
+    while heap and spare > 0:
+        _, r, k, end, cut = heapq.heappop(heap)
+        if (r, k) not in tours.paths:
+            continue
+        ok, path = tours.edit((r, k), end, cut)
+        if not ok:
+            continue
+        saved, lost, change = tours.change((r, k), path)
+        if saved <= 1e-9 or lost > spare:
+            continue
+        if heap and lost / saved > heap[0][0] + 1e-12:
+            heapq.heappush(heap, (lost / saved, r, k, end, cut))
+            continue
+        tours.commit((r, k), path, change)
+        # a moved transit may also sweep floor nothing swept before
+        spare = tours.covered() - min_cells
 
 
 def _lossless_pass(tours: _Tours, steps: list[Step], lossy: list) -> None:
