@@ -23,6 +23,7 @@ from scipy.spatial import cKDTree
 
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, disc
+from planners.polyline import path_length
 
 # points closer than this many half swath widths join one chain; wider links (a full swath)
 # merged points whose own best insertions into the tour lie apart, and measured longer paths
@@ -138,7 +139,7 @@ def fill_in_tasks(
     options = []
     for ids in groups:
         chain = grid.cell_to_world(pts[ids])
-        along = float(np.hypot(*np.diff(chain, axis=0).T).sum())
+        along = path_length(chain)
         dist = float(tree.query(chain[[0, -1]])[0].min()) if tree is not None else 0.0
         g = int(gain[ids].sum())
         cost = 2 * dist + along + grid.resolution

@@ -37,6 +37,7 @@ from planners.coverage.tasks import SweepTask
 from planners.coverage.tour import path_of
 from planners.coverage.transit import Transit
 from planners.grid import GridMap
+from planners.polyline import path_length
 
 Window = tuple[slice, slice]
 Step = tuple[int, int]  # (robot, index in its tour)
@@ -76,7 +77,7 @@ def prune_tasks(grid, tasks, pieces, clean, hw) -> list[list[tuple[int, int]]]:
         cells &= clean[window]
         count[window] += cells
         own.append((window, cells))
-    length = [float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in paths]
+    length = [path_length(p) for p in paths]
     drop = set()
     for i in np.argsort(length)[::-1]:
         window, cells = own[i]
@@ -87,30 +88,26 @@ def prune_tasks(grid, tasks, pieces, clean, hw) -> list[list[tuple[int, int]]]:
 
 
 class _Hops:
-    """Transits between points, planned once each: their length, and their footprint when
-    asked for."""
+    """Transits between points (planned once each by ``Transit.path``, which keeps them):
+    their length, and their footprint when asked for."""
 
     def __init__(self, grid: GridMap, transit: Transit, clean: np.ndarray, hw: float) -> None:
         self.grid, self.transit, self.clean, self.hw = grid, transit, clean, hw
-        self._paths: dict[tuple[float, ...], tuple[float, np.ndarray]] = {}
+        self._lengths: dict[tuple[float, ...], float] = {}
         self._cells: dict[tuple[float, ...], tuple[Window, np.ndarray]] = {}
 
     def length(self, a: np.ndarray, b: np.ndarray) -> float:
-        return self._path(a, b)[0]
+        key = (*a.tolist(), *b.tolist())
+        if key not in self._lengths:
+            self._lengths[key] = path_length(self.transit.path(a, b))
+        return self._lengths[key]
 
     def cells(self, a: np.ndarray, b: np.ndarray) -> tuple[Window, np.ndarray]:
         key = (*a.tolist(), *b.tolist())
         if key not in self._cells:
-            window, cells = footprint(self.grid, self._path(a, b)[1], self.hw)
+            window, cells = footprint(self.grid, self.transit.path(a, b), self.hw)
             self._cells[key] = (window, cells & self.clean[window])
         return self._cells[key]
-
-    def _path(self, a: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray]:
-        key = (*a.tolist(), *b.tolist())
-        if key not in self._paths:
-            path = self.transit.path(a, b)
-            self._paths[key] = (_length(path), path)
-        return self._paths[key]
 
 
 def prune_driven(
@@ -179,7 +176,7 @@ class _Tours:
 
     def _footprint(self, path: np.ndarray) -> tuple[Window, np.ndarray, float]:
         window, cells = footprint(self.grid, path, self.hw)
-        return window, cells & self.clean[window], _length(path)
+        return window, cells & self.clean[window], path_length(path)
 
     def edit(self, step: Step, end: int, cut: float) -> tuple[bool, np.ndarray | None]:
         """The step's path after an edit: None when dropped (``end`` −1), else ``cut`` metres
@@ -187,7 +184,7 @@ class _Tours:
         if end < 0:
             return True, None
         path = self.paths[step]
-        if _length(path) < cut + MIN_PIECE:
+        if path_length(path) < cut + MIN_PIECE:
             return False, None
         if end == 1:
             return True, _cut_start(path[::-1], cut)[::-1]
@@ -213,7 +210,7 @@ class _Tours:
             new = [(a, path[0])]
             if nxt is not None:
                 new.append((path[-1], nxt))
-            new_length = _length(path)
+            new_length = path_length(path)
         hop = self.hops.length
         kept = length - new_length + sum(hop(*h) for h in old)
         # a transit is never shorter than the straight line: most edits fail that cheap test
@@ -275,7 +272,7 @@ class _Tours:
                     continue
                 if (r, k) in self.cut:
                     # its area and time taken in proportion to its length
-                    share = self.own[r, k][2] / max(_length(path_of(tasks[t], o)), 1e-9)
+                    share = self.own[r, k][2] / max(path_length(path_of(tasks[t], o)), 1e-9)
                     out.append(
                         dataclasses.replace(
                             tasks[t],
@@ -352,10 +349,6 @@ def _cut_start(path: np.ndarray, cut: float) -> np.ndarray:
     before = ends[i] - seg[i]
     start = path[i] + (path[i + 1] - path[i]) * ((cut - before) / seg[i])
     return np.vstack([start, path[i + 1 :]])
-
-
-def _length(path: np.ndarray) -> float:
-    return float(np.hypot(*np.diff(path, axis=0).T).sum())
 
 
 def _apply(count: np.ndarray, changes: Change, sign: int) -> None:

@@ -19,7 +19,7 @@ from planners.coverage.frame import RotatedFrame
 from planners.coverage.metrics import path_time
 from planners.coverage.params import CoverageParams
 from planners.coverage.sweeps import boustrophedon, eroded_sides, lane_rows, lanes_of
-from planners.polyline import simplify
+from planners.polyline import path_length, simplify
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,7 +163,7 @@ def strip_task(
     cut into pieces, the tour would use them as connectors between lanes instead of as the
     way back."""
     path = _to_world(frame, strip, params)
-    length = float(np.hypot(*np.diff(path, axis=0).T).sum())
+    length = path_length(path)
     return SweepTask(
         room, cell_id, (path,), length * params.lane_spacing, length / params.max_speed
     )
