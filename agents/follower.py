@@ -189,15 +189,28 @@ def _held(pose: tuple[float, float, float], v: float, w: float, params: DWAParam
 
 def gaps(
     points: np.ndarray, obstacles: np.ndarray, peers: np.ndarray, robot_radius: float
-) -> np.ndarray:
-    """Clearance of a robot centred at each of ``points`` (P, 2): the distance to the nearest
-    obstacle point or, for the discs of other robots centred at ``peers``, to their rim."""
-    out = np.full(len(points), np.inf)
+) -> tuple[np.ndarray, np.ndarray]:
+    """Clearance of a robot centred at each of ``points`` (P, 2), from the obstacle points and,
+    apart, from the discs of other robots centred at ``peers`` (to their rims): two (P,)
+    arrays, inf where there is nothing of that kind."""
+    walls = np.full(len(points), np.inf)
+    robots = np.full(len(points), np.inf)
     if len(obstacles):
-        out = np.minimum(out, cKDTree(obstacles).query(points)[0])
+        walls = cKDTree(obstacles).query(points)[0]
     if len(peers):
-        out = np.minimum(out, cKDTree(peers).query(points)[0] - robot_radius)
-    return out
+        robots = cKDTree(peers).query(points)[0] - robot_radius
+    return walls, robots
+
+
+def _kept_clear(
+    walls: np.ndarray, robots: np.ndarray, now: tuple[np.ndarray, np.ndarray], margin: float
+) -> np.ndarray:
+    """Whether each row of clearances (see :func:`gaps`) stays at least min(``margin``, the
+    clearance now) from the walls and, judged apart, from the peers: a peer's disc that
+    overlaps the robot must not license a move into a wall."""
+    return (walls.min(axis=-1) >= np.minimum(margin, now[0])) & (
+        robots.min(axis=-1) >= np.minimum(margin, now[1])
+    )
 
 
 def escape_heading(
@@ -212,12 +225,12 @@ def escape_heading(
 
     Of ``ESCAPE_HEADINGS`` directions, the free ones are those along which a straight move of
     ``distance`` keeps every point at least min(robot_radius + ESCAPE_MARGIN_M, the gap now)
-    clear (see :func:`gaps`) and ends farther out than the robot is now (or clear of that
-    margin); the one closest to the direction of ``aim`` wins, or without an aim the one that
-    ends clearest. A disc robot can always turn in place, so any free direction can be taken:
-    this is Nav2's Spin-then-DriveOnHeading recovery with the heading chosen from the scan
-    instead of fixed, and it frees a robot from the pockets where DWA's forward arcs are all
-    blocked and the way straight back is too."""
+    clear of the obstacles and, judged apart, of the peers (see :func:`gaps`), and ends farther
+    out than the robot is now (or clear of that margin); the one closest to the direction of
+    ``aim`` wins, or without an aim the one that ends clearest. A disc robot can always turn in
+    place, so any free direction can be taken: this is Nav2's Spin-then-DriveOnHeading recovery
+    with the heading chosen from the scan instead of fixed, and it frees a robot from the
+    pockets where DWA's forward arcs are all blocked and the way straight back is too."""
     xy = np.asarray(pose[:2], dtype=float)
     phi = np.linspace(-math.pi, math.pi, ESCAPE_HEADINGS, endpoint=False)
     if aim is not None:
@@ -225,14 +238,18 @@ def escape_heading(
         off = np.abs(np.remainder(phi - toward + math.pi, 2 * math.pi) - math.pi)
     if len(obstacles) == 0 and len(peers) == 0:
         return float(phi[np.argmin(off)]) if aim is not None else None
-    gap_now = float(gaps(xy[None, :], obstacles, peers, robot_radius)[0])
+    now = gaps(xy[None, :], obstacles, peers, robot_radius)
+    gap_now = float(min(now[0][0], now[1][0]))
     steps = np.linspace(0.02, distance, 6)
     dirs = np.column_stack([np.cos(phi), np.sin(phi)])
     points = xy[None, None, :] + steps[None, :, None] * dirs[:, None, :]
-    along = gaps(points.reshape(-1, 2), obstacles, peers, robot_radius)
-    along = along.reshape(len(phi), len(steps))
+    walls, robots = (
+        g.reshape(len(phi), len(steps))
+        for g in gaps(points.reshape(-1, 2), obstacles, peers, robot_radius)
+    )
+    along = np.minimum(walls, robots)
     margin = robot_radius + ESCAPE_MARGIN_M
-    free = (along.min(axis=1) >= min(margin, gap_now)) & (
+    free = _kept_clear(walls, robots, now, margin) & (
         (along[:, -1] > gap_now) | (along[:, -1] >= margin)
     )
     if not free.any():
@@ -280,16 +297,19 @@ def escape_step(
 ) -> tuple[FollowState, DWAResult] | None:
     """One step of the escape move: turn in place onto ``state.escape_heading``, then drive
     straight (in reverse when ``escape_sign`` is −1) at ``escape_speed`` while ``escape_m`` is
-    left and the way is clear — no point of it nearer an obstacle than the robot radius or than
-    the robot is now; None when the move is over or its way has closed."""
+    left and the way is clear — no point of it nearer the obstacles, or the peers (judged apart),
+    than the robot radius or than the robot is now; None when the move is over or its way has
+    closed."""
     error = math.remainder(state.escape_heading - pose[2], 2 * math.pi)
     if abs(error) > ESCAPE_HEADING_TOLERANCE:
         return state, _held(pose, *rotate_in_place(error, velocity, params, dt), params)
     sign = state.escape_sign
     way = sign * np.array([math.cos(pose[2]), math.sin(pose[2])])
     ahead = np.asarray(pose[:2]) + np.linspace(0.02, state.escape_m, 5)[:, None] * way
-    clear = gaps(np.vstack([np.asarray(pose[:2])[None, :], ahead]), obstacles, peers, robot_radius)
-    if clear[1:].min() < min(robot_radius, clear[0]):
+    walls, robots = gaps(
+        np.vstack([np.asarray(pose[:2])[None, :], ahead]), obstacles, peers, robot_radius
+    )
+    if not _kept_clear(walls[1:], robots[1:], (walls[0], robots[0]), robot_radius):
         return None
     v0 = velocity[0]
     v = min(max(sign * agent.escape_speed, v0 - params.acc_lim_x * dt), v0 + params.acc_lim_x * dt)

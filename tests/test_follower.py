@@ -4,11 +4,13 @@ corners, and tracking a boustrophedon path closely on a kinematic robot."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from agents.follower import (
+    ESCAPE_MARGIN_M,
     FollowState,
     advance,
     control_step,
@@ -104,6 +106,33 @@ def test_escape_heading_leaves_a_pocket_toward_the_aim_and_is_none_when_enclosed
     assert gaps.min() >= 0.17 and gaps[-1] > gaps[0]
     ring = np.array([[0.19 * math.cos(a), 0.19 * math.sin(a)] for a in np.linspace(0, 6.28, 90)])
     assert escape_heading((0.0, 0.0, 0.0), np.array([1.0, 0.0]), ring, ring[:0], 0.17, 0.15) is None
+
+
+def test_a_peer_overlapping_the_robot_does_not_license_an_escape_into_a_wall() -> None:
+    # Seen in a fleet run of the small world: a robot beside a table corner, a peer's intent
+    # along the lane just north of it. The peer's disc overlaps the robot, so every move is
+    # closer to the peer than the robot's radius; that must not open the way into the table.
+    table = np.vstack(
+        [
+            [[x, 1.3] for x in np.linspace(2.0, 2.8, 81)],
+            [[2.0, y] for y in np.linspace(1.3, 1.9, 61)],
+        ]
+    )
+    peers = np.array([[x, 1.42] for x in np.linspace(0.93, 1.85, 24)])
+    pose, aim = (1.807, 1.228, 1.49), np.array([1.79, 1.97])
+    heading = escape_heading(pose, aim, table, peers, 0.17, 0.15)
+    if heading is not None:
+        way = np.array([math.cos(heading), math.sin(heading)])
+        moved = np.array(pose[:2]) + np.linspace(0.0, 0.15, 16)[:, None] * way
+        walls = np.hypot(*(moved[:, None, :] - table[None]).transpose(2, 0, 1)).min(axis=1)
+        assert walls.min() >= 0.17 + ESCAPE_MARGIN_M
+    # under way, a move that would close on the table ends, whatever the peers
+    east = FollowState(np.array([[1.2, 1.97], [1.79, 1.97]]), index=1, escape_m=0.15)
+    east = replace(east, escape_heading=math.pi, escape_sign=-1)
+    moving = escape_step(
+        east, (1.85, 1.2, math.pi), (-0.1, 0.0), table, peers, DWA, 0.17, DT, AGENT
+    )
+    assert moving is None
 
 
 def test_escape_turns_first_then_drives_in_the_cheaper_sense() -> None:
