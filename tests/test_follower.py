@@ -109,23 +109,23 @@ def test_escape_heading_leaves_a_pocket_toward_the_aim_and_is_none_when_enclosed
 
 
 def test_a_peer_overlapping_the_robot_does_not_license_an_escape_into_a_wall() -> None:
-    # Seen in a fleet run of the small world: a robot beside a table corner, a peer's intent
-    # along the lane just north of it. The peer's disc overlaps the robot, so every move is
-    # closer to the peer than the robot's radius; that must not open the way into the table.
+    # Seen in a fleet run of the small world: a robot beside a table corner, on a peer's lane
+    # (the peer's intent runs through it), its aim a lane end beyond the table. Every move is
+    # then closer to the peer than the robot's radius; that must not open the way into the table.
     table = np.vstack(
         [
             [[x, 1.3] for x in np.linspace(2.0, 2.8, 81)],
             [[2.0, y] for y in np.linspace(1.3, 1.9, 61)],
         ]
     )
-    peers = np.array([[x, 1.42] for x in np.linspace(0.93, 1.85, 24)])
-    pose, aim = (1.807, 1.228, 1.49), np.array([1.79, 1.97])
+    peers = np.array([[x, 1.22] for x in np.linspace(1.0, 1.79, 20)])
+    pose, aim = (1.807, 1.228, 1.49), np.array([2.51, 2.09])
     heading = escape_heading(pose, aim, table, peers, 0.17, 0.15)
-    if heading is not None:
-        way = np.array([math.cos(heading), math.sin(heading)])
-        moved = np.array(pose[:2]) + np.linspace(0.0, 0.15, 16)[:, None] * way
-        walls = np.hypot(*(moved[:, None, :] - table[None]).transpose(2, 0, 1)).min(axis=1)
-        assert walls.min() >= 0.17 + ESCAPE_MARGIN_M
+    assert heading is not None
+    way = np.array([math.cos(heading), math.sin(heading)])
+    moved = np.array(pose[:2]) + np.linspace(0.0, 0.15, 16)[:, None] * way
+    walls = np.hypot(*(moved[:, None, :] - table[None]).transpose(2, 0, 1)).min(axis=1)
+    assert walls.min() >= 0.17 + ESCAPE_MARGIN_M
     # under way, a move that would close on the table ends, whatever the peers
     east = FollowState(np.array([[1.2, 1.97], [1.79, 1.97]]), index=1, escape_m=0.15)
     east = replace(east, escape_heading=math.pi, escape_sign=-1)
