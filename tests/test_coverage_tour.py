@@ -155,3 +155,42 @@ def test_room_tours_put_in_whole_keep_their_order():
     out = insert_run(tour, [(4, 0), (3, 1)], 10, ends)
     assert [t for t, _ in out[:3]] == [0, 1, 2]
     assert out[3:] in ([(4, 0), (3, 1)], [(3, 0), (4, 1)])
+
+
+def test_batched_local_search_makes_the_moves_of_the_one_at_a_time_scan(monkeypatch):
+    # 2-opt and Or-opt price _CHUNK consecutive moves at once; with one per batch they are the
+    # plain scan (first improving i, best place for it). Both must give the same tour.
+    from planners.coverage import tour
+
+    rng = np.random.default_rng(7)
+    for trial in range(6):
+        n = int(rng.integers(20, 90))
+        tasks = [
+            SweepTask(1, 1, (rng.uniform(0, 8, (2, 2)), rng.uniform(0, 8, (2, 2))), 0.0, 0.0)
+            for _ in range(n)
+        ]
+        pts = np.vstack([end_points(tasks), [[4.0, 4.0]]])
+        cost = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+        detour = rng.uniform(1.0, 1.5, cost.shape)  # like ways round walls, the same both ways
+        cost *= (detour + detour.T) / 2
+        tours = []
+        for chunk in (1, 5, 32):
+            monkeypatch.setattr(tour, "_CHUNK", chunk)
+            ends = task_ends(tasks, cost)
+            tours.append(plan_tour(list(range(n)), len(pts) - 1, ends, closed=trial % 2 == 1))
+        assert tours[0] == tours[1] == tours[2]
+        assert len({t for t, _ in tours[0]}) == n
+        # and the tour is a local optimum: no reversal and no moved run of 1-3 tasks is cheaper
+        seq = [int(ends.offset[t] + o) for t, o in tours[0]]
+        best = tour._total(np.array(seq), len(pts) - 1, ends)
+        flip = [k ^ 1 for k in seq]
+        for i, j in itertools.combinations_with_replacement(range(n), 2):
+            other = seq[:i] + flip[i : j + 1][::-1] + seq[j + 1 :]
+            assert tour._total(np.array(other), len(pts) - 1, ends) > best - 1e-9
+        for length in (1, 2, 3):
+            for i in range(n - length + 1):
+                run, rest = seq[i : i + length], seq[:i] + seq[i + length :]
+                for r in (run, [k ^ 1 for k in run][::-1]):
+                    for p in range(len(rest) + 1):
+                        other = np.array(rest[:p] + r + rest[p:])
+                        assert tour._total(other, len(pts) - 1, ends) > best - 1e-9

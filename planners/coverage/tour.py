@@ -23,6 +23,8 @@ from planners.coverage.tasks import SweepTask
 
 _EPS = 1e-9
 _MAX_ROUNDS = 50
+# local-search moves priced at once, as rows of one array
+_CHUNK = 32
 
 
 @dataclass(frozen=True)
@@ -186,24 +188,33 @@ def _reverse(run: np.ndarray) -> np.ndarray:
 
 
 def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
-    """Reverse stretches ``seq[i..j]`` (each task driven backwards) while that shortens hops."""
+    """Reverse stretches ``seq[i..j]`` (each task driven backwards) while that shortens hops.
+
+    Scans i upwards and takes, for the first i with a gain, the j that gains most (first
+    improvement in i, best in j); the gains of ``_CHUNK`` consecutive i are computed at once.
+    """
     c = ends.cost
     n = len(seq)
     improved = True
     while improved:
         improved = False
         src, dst = _points(seq, start, ends)
-        for i in range(n):
-            j = np.arange(i, n)
-            old = c[src[i], dst[i]] + c[src[j + 1], dst[j + 1]]
-            new = c[src[i], src[j + 1]] + c[dst[i], dst[j + 1]]
-            gain = old - new
-            k = int(np.argmax(gain))
-            if gain[k] > _EPS:
-                jj = int(j[k])
-                seq = np.concatenate([seq[:i], _reverse(seq[i : jj + 1]), seq[jj + 1 :]])
-                src, dst = _points(seq, start, ends)
-                improved = True
+        i0 = 0
+        while i0 < n:
+            i = np.arange(i0, min(i0 + _CHUNK, n))
+            old = c[src[i], dst[i]][:, None] + c[src[1:], dst[1:]][None, :]
+            new = c[src[i][:, None], src[None, 1:]] + c[dst[i][:, None], dst[None, 1:]]
+            gain = np.where(np.arange(n)[None, :] >= i[:, None], old - new, -np.inf)
+            j = np.argmax(gain, axis=1)
+            hit = np.flatnonzero(gain[np.arange(len(i)), j] > _EPS)
+            if not len(hit):
+                i0 = int(i[-1]) + 1
+                continue
+            ii, jj = int(i[hit[0]]), int(j[hit[0]])
+            seq = np.concatenate([seq[:ii], _reverse(seq[ii : jj + 1]), seq[jj + 1 :]])
+            src, dst = _points(seq, start, ends)
+            improved = True
+            i0 = ii + 1
     return seq
 
 
@@ -212,38 +223,47 @@ def _or_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
 
     Hop ``k`` of the tour runs from ``src[k]`` to ``dst[k]``; taking out the run
     ``seq[i : i + length]`` removes hops ``i .. i + length`` and adds one from ``src[i]`` to
-    ``dst[i + length]``, and the run can go into any hop of what is left."""
+    ``dst[i + length]``, and the run can go into any hop of what is left. Scans i upwards and
+    moves the first run that gains to its best place (its cheapest hop), then goes on from the
+    same i; the moves of ``_CHUNK`` consecutive runs are priced at once."""
     c = ends.cost
     improved = True
     while improved:
         improved = False
         for length in (1, 2, 3):
-            i = 0
             src, dst = _points(seq, start, ends)
             base = c[src, dst]
-            while i + length <= len(seq):
+            i0 = 0
+            while i0 + length <= len(seq):
+                i = np.arange(i0, min(i0 + _CHUNK, len(seq) - length + 1))
+                rows = np.arange(len(i))
                 a, b = src[i], dst[i + length]
                 s_in, s_out = dst[i], src[i + length]
                 removed = c[a, s_in] + c[s_out, b] - c[a, b]
-                fwd = c[src, s_in] + c[s_out, dst] - base
-                rev = c[src, s_out] + c[s_in, dst] - base
-                fwd[i] = c[a, s_in] + c[s_out, b] - c[a, b]
-                rev[i] = c[a, s_out] + c[s_in, b] - c[a, b]
+                fwd = c[src[None, :], s_in[:, None]] + c[s_out[:, None], dst[None, :]] - base
+                rev = c[src[None, :], s_out[:, None]] + c[s_in[:, None], dst[None, :]] - base
+                fwd[rows, i] = removed
+                rev[rows, i] = c[a, s_out] + c[s_in, b] - c[a, b]
                 cand = np.minimum(fwd, rev)
-                cand[i + 1 : i + length + 1] = np.inf
-                k = int(np.argmin(cand))
-                if cand[k] < removed - _EPS:
-                    run = seq[i : i + length]
-                    if rev[k] < fwd[k]:
-                        run = _reverse(run)
-                    rest = np.concatenate([seq[:i], seq[i + length :]])
-                    p = k if k <= i else k - length
-                    seq = np.concatenate([rest[:p], run, rest[p:]])
-                    src, dst = _points(seq, start, ends)
-                    base = c[src, dst]
-                    improved = True
-                else:
-                    i += 1
+                for d in range(1, length + 1):
+                    cand[rows, i + d] = np.inf
+                k = np.argmin(cand, axis=1)
+                hit = np.flatnonzero(cand[rows, k] < removed - _EPS)
+                if not len(hit):
+                    i0 = int(i[-1]) + 1
+                    continue
+                h = int(hit[0])
+                ii, kk = int(i[h]), int(k[h])
+                run = seq[ii : ii + length]
+                if rev[h, kk] < fwd[h, kk]:
+                    run = _reverse(run)
+                rest = np.concatenate([seq[:ii], seq[ii + length :]])
+                p = kk if kk <= ii else kk - length
+                seq = np.concatenate([rest[:p], run, rest[p:]])
+                src, dst = _points(seq, start, ends)
+                base = c[src, dst]
+                improved = True
+                i0 = ii
     return seq
 
 
