@@ -97,7 +97,10 @@ class PathCosts:
         for k in range(0, len(new), _CHUNK):
             near = dijkstra(self._csr, indices=new[k : k + _CHUNK], limit=limit)[:, nodes]
             if len(lm_new) and not np.isfinite(near).all():
-                via = (lm_new[:, k : k + _CHUNK, None] + lm_all[:, None, :]).min(axis=0)
+                # one landmark at a time: the (landmarks, chunk, nodes) sum would not fit a cache
+                via = np.full(near.shape, np.inf)
+                for from_new, from_all in zip(lm_new[:, k : k + _CHUNK], lm_all, strict=True):
+                    np.minimum(via, from_new[:, None] + from_all[None, :], out=via)
                 near = np.where(np.isfinite(near), near, via)
             rows[k : k + _CHUNK] = near
         scale = self.f * self.grid.resolution / _OCTILE_BIAS
