@@ -235,9 +235,9 @@ def bench_coverage(
             min=1,
             help="Plan every case this many times and report the fastest planning time (the "
             "plans are the same each time; on a shared machine the fastest run is the least "
-            "disturbed one).",
+            "disturbed one; single runs vary by up to 1.6x there). 1 for a quick look.",
         ),
-    ] = 1,
+    ] = 3,
 ) -> None:
     """Coverage quality and planning time on the built-in home and the real apartment map.
 
