@@ -199,10 +199,11 @@ def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
     while improved:
         improved = False
         src, dst = _points(seq, start, ends)
+        after = c[src[1:], dst[1:]]
         i0 = 0
         while i0 < n:
             i = np.arange(i0, min(i0 + _CHUNK, n))
-            old = c[src[i], dst[i]][:, None] + c[src[1:], dst[1:]][None, :]
+            old = c[src[i], dst[i]][:, None] + after[None, :]
             new = c[src[i][:, None], src[None, 1:]] + c[dst[i][:, None], dst[None, 1:]]
             gain = np.where(np.arange(n)[None, :] >= i[:, None], old - new, -np.inf)
             j = np.argmax(gain, axis=1)
@@ -213,6 +214,7 @@ def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
             ii, jj = int(i[hit[0]]), int(j[hit[0]])
             seq = np.concatenate([seq[:ii], _reverse(seq[ii : jj + 1]), seq[jj + 1 :]])
             src, dst = _points(seq, start, ends)
+            after = c[src[1:], dst[1:]]
             improved = True
             i0 = ii + 1
     return seq
