@@ -68,3 +68,22 @@ def path_length(points: np.ndarray) -> float:
         return 0.0
     d = np.diff(pts, axis=0)
     return float(np.hypot(d[:, 0], d[:, 1]).sum())
+
+
+def densify(path: np.ndarray, step: float) -> np.ndarray:
+    """The path's vertices and points at most ``step`` apart along each of its segments."""
+    seg = np.diff(path, axis=0)
+    n = np.maximum(1, np.ceil(np.hypot(*seg.T) / step)).astype(int)
+    i = np.repeat(np.arange(len(seg)), n)
+    frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / n[i]
+    return np.vstack([path[i] + frac[:, None] * seg[i], path[-1:]])
+
+
+def cut_start(path: np.ndarray, cut: float) -> np.ndarray:
+    """``path`` without its first ``cut`` metres."""
+    seg = np.hypot(*np.diff(path, axis=0).T)
+    ends = np.cumsum(seg)
+    i = int(np.searchsorted(ends, cut, side="right"))
+    before = ends[i] - seg[i]
+    start = path[i] + (path[i + 1] - path[i]) * ((cut - before) / seg[i])
+    return np.vstack([start, path[i + 1 :]])

@@ -107,9 +107,9 @@ def test_a_lane_end_another_lane_sweeps_is_cut_back_and_no_floor_is_lost():
 
 
 def test_a_path_is_cut_back_along_its_segments():
-    from planners.coverage.prune import _cut_start
+    from planners.polyline import cut_start
 
     bent = np.array([[0.0, 0.0], [0.2, 0.0], [0.2, 1.0]])
-    assert np.allclose(_cut_start(bent, 0.3), [[0.2, 0.1], [0.2, 1.0]])
-    assert np.allclose(_cut_start(bent, 0.1), [[0.1, 0.0], [0.2, 0.0], [0.2, 1.0]])
-    assert np.allclose(_cut_start(bent[::-1], 0.5)[::-1], [[0.0, 0.0], [0.2, 0.0], [0.2, 0.5]])
+    assert np.allclose(cut_start(bent, 0.3), [[0.2, 0.1], [0.2, 1.0]])
+    assert np.allclose(cut_start(bent, 0.1), [[0.1, 0.0], [0.2, 0.0], [0.2, 1.0]])
+    assert np.allclose(cut_start(bent[::-1], 0.5)[::-1], [[0.0, 0.0], [0.2, 0.0], [0.2, 0.5]])

@@ -43,6 +43,7 @@ from planners.coverage.tour import (
 )
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, cleanable, clearance, extend_labels, reachable
+from planners.polyline import densify
 
 # A wall direction this close to a grid axis is taken as the axis: lanes then lie exactly
 # between rows of cells, and the rasterized walls of an axis-aligned plan measure slightly off.
@@ -475,7 +476,7 @@ def _add_fill_in(
         covered = np.zeros(grid.shape, dtype=bool)
         for path in driven:
             covered |= swath(grid, path, hw)[0]
-        anchors = np.vstack([_densify(path, grid.resolution) for path in driven])
+        anchors = np.vstack([densify(path, grid.resolution) for path in driven])
         passes = fill_in_tasks(grid, covered, anchors, clean, reach, hw, transit, goal)
         if not passes:
             break
@@ -505,15 +506,6 @@ def _add_fill_in(
 def _fill_in_goal(target: float) -> float:
     """What the fill-in aims at: ``target`` plus ``FILL_IN_SURPLUS`` of what it leaves."""
     return target + FILL_IN_SURPLUS * (1.0 - target)
-
-
-def _densify(path: np.ndarray, step: float) -> np.ndarray:
-    """The path's vertices and points at most ``step`` apart along each of its segments."""
-    seg = np.diff(path, axis=0)
-    n = np.maximum(1, np.ceil(np.hypot(*seg.T) / step)).astype(int)
-    i = np.repeat(np.arange(len(seg)), n)
-    frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / n[i]
-    return np.vstack([path[i] + frac[:, None] * seg[i], path[-1:]])
 
 
 def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> np.ndarray:

@@ -37,7 +37,7 @@ from planners.coverage.tasks import SweepTask
 from planners.coverage.tour import path_of
 from planners.coverage.transit import Transit
 from planners.grid import GridMap
-from planners.polyline import path_length
+from planners.polyline import cut_start, path_length
 
 Window = tuple[slice, slice]
 Step = tuple[int, int]  # (robot, index in its tour)
@@ -187,8 +187,8 @@ class _Tours:
         if path_length(path) < cut + MIN_PIECE:
             return False, None
         if end == 1:
-            return True, _cut_start(path[::-1], cut)[::-1]
-        return True, _cut_start(path, cut)
+            return True, cut_start(path[::-1], cut)[::-1]
+        return True, cut_start(path, cut)
 
     def change(self, step: Step, path: np.ndarray | None) -> tuple[float, int, tuple]:
         """Driving saved, cleanable cells lost, and what :meth:`commit` needs, if ``step``
@@ -339,16 +339,6 @@ def _first_lossless(tours: _Tours, step: Step, edits: list[tuple[int, float]], l
             return True
         lossy.append((lost / saved, *step, end, cut, lost))
     return False
-
-
-def _cut_start(path: np.ndarray, cut: float) -> np.ndarray:
-    """``path`` without its first ``cut`` metres."""
-    seg = np.hypot(*np.diff(path, axis=0).T)
-    ends = np.cumsum(seg)
-    i = int(np.searchsorted(ends, cut, side="right"))
-    before = ends[i] - seg[i]
-    start = path[i] + (path[i + 1] - path[i]) * ((cut - before) / seg[i])
-    return np.vstack([start, path[i + 1 :]])
 
 
 def _apply(count: np.ndarray, changes: Change, sign: int) -> None:
