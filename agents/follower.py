@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 from agents.peers import rim_points
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, DWAResult, dwa_control, rollout
+from planners.polyline import densify
 
 LOCAL_PATH_M = 3.0
 PROGRESS_M = 0.02
@@ -48,6 +49,7 @@ class FollowState:
     escape_heading: float = 0.0
     escape_sign: int = 1
     skipped: int = 0
+    yielded_s: float = 0.0
 
     @property
     def done(self) -> bool:
@@ -121,6 +123,28 @@ def scan_points(
     ok = np.isfinite(r)
     a = pose[2] + angle_min + angle_increment * np.nonzero(ok)[0]
     return np.column_stack([pose[0] + r[ok] * np.cos(a), pose[1] + r[ok] * np.sin(a)])
+
+
+def peer_in_the_way(
+    state: FollowState, xy: np.ndarray, peers: np.ndarray, robot_radius: float, reach: float
+) -> bool:
+    """Whether a peer will cover (``peers``: the centres of its intent's discs) a spot within
+    two robot radii and ``ESCAPE_MARGIN_M`` of the robot or of its path over the next ``reach``
+    metres: a robot that makes no progress then waits for the peer, it is not stuck."""
+    if not len(peers):
+        return False
+    pts = [xy]
+    length = 0.0
+    for waypoint in state.waypoints[state.index :]:
+        length += math.dist(pts[-1], waypoint)
+        pts.append(waypoint)
+        if length >= reach:
+            break
+    ahead = densify(np.array(pts, dtype=float), robot_radius / 4)
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ahead, axis=0).T))])
+    ahead = ahead[along <= reach]
+    d = np.hypot(*(ahead[:, None, :] - np.asarray(peers)[None, :, :]).transpose(2, 0, 1))
+    return bool(d.min() < 2 * robot_radius + ESCAPE_MARGIN_M)
 
 
 def carrot(state: FollowState, xy: np.ndarray, lookahead: float) -> np.ndarray:
@@ -375,7 +399,10 @@ def control_step(
     holds the watchdog's clock (only coming closer resets it, so a robot that turns, drives off
     and turns back again is still given up on), and so does the escape move, which starts after
     ``escape_after_s`` without progress under DWA — boxed in, or caught in a minimum of its
-    costs (see :func:`escape_heading`).
+    costs (see :func:`escape_heading`). Time without progress while a peer is in the way
+    (:func:`peer_in_the_way` within DWA's reach, max_vel_x·sim_time) does not count, up to
+    ``give_way_max_s`` of it in a row: a robot that gives way to one crossing its path waits
+    for it instead of giving up the lane it was about to sweep.
     """
     xy = np.array(pose[:2])
     state = advance(state, xy, agent)
@@ -422,7 +449,11 @@ def control_step(
     if progressed and state.aligning:
         return replace(state, best_error=abs(error)), result
     if progressed:
-        return replace(state, stalled_s=0.0, best_dist=dist), result
+        return replace(state, stalled_s=0.0, yielded_s=0.0, best_dist=dist), result
+    if state.yielded_s + dt <= agent.give_way_max_s and peer_in_the_way(
+        state, xy, peers, robot_radius, params.max_vel_x * params.sim_time
+    ):
+        return replace(state, yielded_s=state.yielded_s + dt), result
     if state.stalled_s + dt >= agent.give_up_after_s:
         return FollowState(state.waypoints, state.index + 1, skipped=state.skipped + 1), result
     return replace(state, stalled_s=state.stalled_s + dt), result

@@ -110,6 +110,7 @@ class AgentParams:
     along_tolerance: float = 0.03
     goal_tolerance: float = 0.05
     give_up_after_s: float = 3.0
+    give_way_max_s: float = 20.0
     align_enter: float = 0.6
     align_exit: float = 0.1
     align_lookahead: float = 0.3
@@ -125,6 +126,7 @@ class AgentParams:
             "status_hz",
             "stale_after_s",
             "give_up_after_s",
+            "give_way_max_s",
             "align_exit",
             "escape_after_s",
             "escape_distance",

@@ -16,6 +16,7 @@ from agents.follower import (
     control_step,
     escape_heading,
     escape_step,
+    peer_in_the_way,
     rotate_in_place,
     start_escape,
     stop_speed,
@@ -176,3 +177,50 @@ def test_a_robot_wedged_against_a_wall_escapes_and_then_drives_on() -> None:
         xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([DT]))
         pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))
     assert pose[0] < -0.02 and pose[1] > 0.3  # it got off the wall and on toward the goal
+
+
+def test_a_peer_counts_as_in_the_way_only_near_the_path_within_reach() -> None:
+    state = FollowState(np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 2.0]]), index=1)
+    xy = np.array([0.0, 0.0])
+
+    def in_the_way(*peer: float) -> bool:
+        return peer_in_the_way(state, xy, np.array([peer]), 0.17, 0.75)
+
+    assert in_the_way(0.5, 0.2)  # on the path, round the corner
+    assert in_the_way(0.2, 0.3)  # beside the path, its disc overlapping the robot's there
+    assert not in_the_way(0.1, 0.4)  # beside the path, clear of it
+    assert not in_the_way(0.5, 1.0)  # on the path but beyond reach
+    assert not peer_in_the_way(state, xy, np.zeros((0, 2)), 0.17, 0.75)
+
+
+def _stall(peers: np.ndarray, obstacles: np.ndarray, agent: AgentParams) -> float | None:
+    """Seconds until a robot that drives a 2 m lane from a standstill on an ideal unicycle,
+    with ``peers`` and ``obstacles`` fixed, gives its end up (None: not within 40 s)."""
+    state = FollowState(np.array([[0.0, 0.0], [2.0, 0.0]]), index=1)
+    pose, velocity = (0.0, 0.0, 0.0), (0.0, 0.0)
+    for k in range(400):
+        state, result = control_step(state, pose, velocity, obstacles, DWA, 0.17, DT, agent, peers)
+        if state.skipped:
+            return k * DT
+        assert result is not None
+        velocity = (result.v, result.w)
+        xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([DT]))
+        pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))
+    return None
+
+
+def test_waiting_for_a_peer_in_the_way_holds_the_give_up_clock_up_to_a_cap() -> None:
+    across = np.array([[0.5, y] for y in np.linspace(-1.0, 1.0, 21)])
+    none = np.zeros((0, 2))
+    still = replace(AGENT, escape_after_s=100.0)  # no escape move: the watchdog alone
+    no_wait = replace(still, give_way_max_s=0.0)
+    # a wall across the lane: given up after give_up_after_s without progress, wait or not
+    walled = _stall(none, across, still)
+    assert walled is not None and walled > still.give_up_after_s
+    assert _stall(none, across, no_wait) == walled
+    # a peer across it: the wait comes first, up to give_way_max_s
+    base = _stall(across, none, no_wait)
+    assert base is not None
+    for cap in (5.0, still.give_way_max_s):
+        waited = _stall(across, none, replace(still, give_way_max_s=cap))
+        assert waited == pytest.approx(base + cap, abs=2 * DT)
