@@ -13,6 +13,7 @@ aside from anyone's (see :mod:`agents.peers`).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import queue
 import threading
@@ -21,7 +22,14 @@ import time
 import numpy as np
 
 from agents.follower import FollowState, control_step, keep_clear, predict, scan_points
-from agents.peers import gives_way, intent_centres, intent_points, path_intent
+from agents.peers import (
+    gives_way,
+    intent_centres,
+    intent_points,
+    path_intent,
+    peer_discs,
+    without_peers,
+)
 from agents.pose_source import OdometryPose, PoseSource, SlamPose
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
 from fleet.bus import Bus
@@ -190,7 +198,26 @@ class Agent:
         with self.lock:
             src = self.pose_source
             assert src is not None
-            src.on_scan(scan)
+            centres, radii = peer_discs(
+                self.peers.values(),
+                scan.stamp,
+                a.stale_after_s,
+                self.cfg.robot.radius,
+                self.cfg.dwa.max_vel_x,
+            )
+            src.on_scan(
+                dataclasses.replace(
+                    scan,
+                    ranges=without_peers(
+                        src.pose(),
+                        scan.ranges,
+                        scan.angle_min,
+                        scan.angle_increment,
+                        centres,
+                        radii,
+                    ),
+                )
+            )
             pose = src.pose()
             velocity = self.velocity
             stale = scan.stamp - self.odom_stamp > a.stale_after_s

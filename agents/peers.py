@@ -10,6 +10,10 @@ aside when one of them comes at it. The robot with the right of way sees the oth
 scan. A fixed priority order is the simplest rule under which two robots never both yield to
 each other (prioritized planning, Erdmann and Lozano-Pérez 1987, applied to the robots'
 short-term trajectories). A robot without work gives way to everyone.
+
+The intents also say where the peers are (:func:`peer_discs`), which the agent cuts out of the
+scan it gives SLAM (:func:`without_peers`): a robot that drives past one standing still is a
+moving wall to its scan matcher, which then slides the standing robot's pose along with it.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 from planners.dwa import rollout
 
 RIM_POINTS = 12
+PEER_MASK_MARGIN_M = 0.05
 
 
 def intent_points(
@@ -76,3 +81,44 @@ def rim_points(centres: np.ndarray, robot_radius: float) -> np.ndarray:
     angles = np.linspace(0.0, 2 * np.pi, RIM_POINTS, endpoint=False)
     rim = robot_radius * np.column_stack([np.cos(angles), np.sin(angles)])
     return (np.asarray(centres)[:, None, :] + rim[None, :, :]).reshape(-1, 2)
+
+
+def peer_discs(
+    intents: Iterable[np.ndarray],
+    now: float,
+    max_age_s: float,
+    robot_radius: float,
+    max_speed: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Discs that hold the peers' bodies at ``now``: centres (M, 2) at the first sample of each
+    intent not older than ``max_age_s`` (where the peer was when it sent it) and radii (M,)
+    of ``robot_radius`` + ``PEER_MASK_MARGIN_M`` + the way it can have driven since."""
+    firsts = [pts[0] for pts in intents if len(pts) and abs(now - pts[0, 0]) <= max_age_s]
+    if not firsts:
+        return np.zeros((0, 2)), np.zeros(0)
+    rows = np.array(firsts)
+    return rows[:, 1:], robot_radius + PEER_MASK_MARGIN_M + max_speed * np.abs(now - rows[:, 0])
+
+
+def without_peers(
+    pose: tuple[float, float, float],
+    ranges: np.ndarray,
+    angle_min: float,
+    angle_increment: float,
+    centres: np.ndarray,
+    radii: np.ndarray,
+) -> np.ndarray:
+    """``ranges`` of a scan taken at ``pose`` with every return that ends inside one of the
+    discs (see :func:`peer_discs`) set to inf, "no return", which SLAM skips: neither a match
+    nor free space is taken from a beam that hit a robot."""
+    r = np.array(ranges, dtype=float)
+    if not len(centres):
+        return r
+    a = pose[2] + angle_min + angle_increment * np.arange(len(r))
+    with np.errstate(invalid="ignore"):
+        ends = np.column_stack([pose[0] + r * np.cos(a), pose[1] + r * np.sin(a)])
+    inside = (np.hypot(*(ends[:, None, :] - centres[None, :, :]).transpose(2, 0, 1)) < radii).any(
+        axis=1
+    )
+    r[inside] = np.inf
+    return r
