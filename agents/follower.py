@@ -83,17 +83,22 @@ def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowSta
     return FollowState(wps, i, skipped=state.skipped) if i != state.index else state
 
 
-def local_path(state: FollowState, xy: np.ndarray, horizon_m: float = LOCAL_PATH_M) -> np.ndarray:
-    """The path ahead: the segment the robot is on and the waypoints up to ``horizon_m``."""
-    wps, i = state.waypoints, state.index
-    pts = [wps[i - 1]] if i > 0 else [xy]
+def _ahead(start: np.ndarray, waypoints: np.ndarray, horizon_m: float) -> np.ndarray:
+    """``start`` and the ``waypoints`` after it up to the first at least ``horizon_m`` along."""
+    pts = [start]
     length = 0.0
-    for j in range(i, len(wps)):
-        length += math.dist(pts[-1], wps[j])
-        pts.append(wps[j])
+    for waypoint in waypoints:
+        length += math.dist(pts[-1], waypoint)
+        pts.append(waypoint)
         if length >= horizon_m:
             break
     return np.array(pts, dtype=float)
+
+
+def local_path(state: FollowState, xy: np.ndarray, horizon_m: float = LOCAL_PATH_M) -> np.ndarray:
+    """The path ahead: the segment the robot is on and the waypoints up to ``horizon_m``."""
+    wps, i = state.waypoints, state.index
+    return _ahead(wps[i - 1] if i > 0 else xy, wps[i:], horizon_m)
 
 
 def predict(
@@ -133,14 +138,7 @@ def peer_in_the_way(
     metres: a robot that makes no progress then waits for the peer, it is not stuck."""
     if not len(peers):
         return False
-    pts = [xy]
-    length = 0.0
-    for waypoint in state.waypoints[state.index :]:
-        length += math.dist(pts[-1], waypoint)
-        pts.append(waypoint)
-        if length >= reach:
-            break
-    ahead = densify(np.array(pts, dtype=float), robot_radius / 4)
+    ahead = densify(_ahead(xy, state.waypoints[state.index :], reach), robot_radius / 4)
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ahead, axis=0).T))])
     ahead = ahead[along <= reach]
     d = np.hypot(*(ahead[:, None, :] - np.asarray(peers)[None, :, :]).transpose(2, 0, 1))

@@ -126,7 +126,6 @@ class AgentParams:
             "status_hz",
             "stale_after_s",
             "give_up_after_s",
-            "give_way_max_s",
             "align_exit",
             "escape_after_s",
             "escape_distance",
@@ -136,6 +135,8 @@ class AgentParams:
                 raise ValueError(f"{name} must be > 0")
         if not self.align_exit <= self.align_enter <= math.pi:
             raise ValueError("need 0 < align_exit <= align_enter <= pi")
+        if self.give_way_max_s < 0:
+            raise ValueError("give_way_max_s must be >= 0 (0: waiting for a peer counts too)")
 
 
 @dataclass(frozen=True)
