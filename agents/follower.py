@@ -141,8 +141,8 @@ def peer_in_the_way(
     ahead = densify(_ahead(xy, state.waypoints[state.index :], reach), robot_radius / 4)
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ahead, axis=0).T))])
     ahead = ahead[along <= reach]
-    d = np.hypot(*(ahead[:, None, :] - np.asarray(peers)[None, :, :]).transpose(2, 0, 1))
-    return bool(d.min() < 2 * robot_radius + ESCAPE_MARGIN_M)
+    _, robots = gaps(ahead, np.zeros((0, 2)), np.asarray(peers), robot_radius)
+    return bool(robots.min() < robot_radius + ESCAPE_MARGIN_M)
 
 
 def carrot(state: FollowState, xy: np.ndarray, lookahead: float) -> np.ndarray:
