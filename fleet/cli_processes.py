@@ -227,8 +227,12 @@ def coordinator(
         _fail("--robots must be >= 1")
     _setup_logging("coordinator")
     cfg, w = _load(config, world)
+    try:
+        planner = CoveragePlanner(w, cfg, robots)
+    except ValueError as e:
+        _fail(str(e))
     bus = _bus("coordinator", "coordinator", connect, fleet)
-    c = Coordinator(bus, CoveragePlanner(w, cfg), robots, cfg.coordinator.expected_robots_grace_s)
+    c = Coordinator(bus, planner, robots, cfg.coordinator.expected_robots_grace_s)
     _stop_on_signals(c.stop)
     try:
         c.run()
