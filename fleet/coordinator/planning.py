@@ -61,7 +61,7 @@ class CoveragePlanner:
     def snapped(self, xy: tuple[float, float]) -> tuple[float, float]:
         """The world's start pose within ``SNAP_M`` of ``xy`` (the nearest), else ``xy``."""
         d = np.hypot(*(self.spawns - np.asarray(xy, dtype=float)).T)
-        if len(d) == 0 or d.min() > SNAP_M:
+        if d.min() > SNAP_M:
             return xy
         x, y = self.spawns[int(np.argmin(d))]
         return float(x), float(y)
