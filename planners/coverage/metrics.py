@@ -87,9 +87,7 @@ def swath(grid: GridMap, path: np.ndarray, half_width: float) -> tuple[np.ndarra
 def to_cells(grid: GridMap, path: np.ndarray) -> np.ndarray:
     """World points → continuous (row, col) with cell centres at integers."""
     p = np.asarray(path, dtype=float).reshape(-1, 2)
-    col = (p[:, 0] - grid.origin[0]) / grid.resolution - 0.5
-    row = (p[:, 1] - grid.origin[1]) / grid.resolution - 0.5
-    return np.stack([row, col], axis=1)
+    return (p[:, ::-1] - (grid.origin[1], grid.origin[0])) / grid.resolution - 0.5
 
 
 def _stamp(covered, visits, a: np.ndarray, b: np.ndarray, hw: float, first: bool) -> None:
@@ -111,23 +109,26 @@ def capsule(
     the segment a → b, and those within ``hw`` of ``a``, as masks over a window of a grid of
     ``shape`` (None when the window is empty)."""
     rows, cols = shape
-    lo = np.floor(np.minimum(a, b) - hw).astype(int)
-    hi = np.ceil(np.maximum(a, b) + hw).astype(int) + 1
-    r0, c0 = max(lo[0], 0), max(lo[1], 0)
-    r1, c1 = min(hi[0], rows), min(hi[1], cols)
+    # scalar bounds in plain floats: this runs thousands of times per plan on small windows
+    a0, a1, b0, b1 = float(a[0]), float(a[1]), float(b[0]), float(b[1])
+    r0 = max(math.floor(min(a0, b0) - hw), 0)
+    c0 = max(math.floor(min(a1, b1) - hw), 0)
+    r1 = min(math.ceil(max(a0, b0) + hw) + 1, rows)
+    c1 = min(math.ceil(max(a1, b1) + hw) + 1, cols)
     if r0 >= r1 or c0 >= c1:
         return None
-    rr = np.arange(r0, r1, dtype=float)[:, None] - a[0]
-    cc = np.arange(c0, c1, dtype=float)[None, :] - a[1]
+    rr = np.arange(r0, r1, dtype=float)[:, None] - a0
+    cc = np.arange(c0, c1, dtype=float)[None, :] - a1
     inner = hw**2 - 1e-9
     at_start = rr**2 + cc**2 < inner
-    d = b - a
-    length = math.hypot(d[0], d[1])
+    d0, d1 = b0 - a0, b1 - a1
+    length = math.hypot(d0, d1)
     if length < 1e-9:
         cells = at_start
     else:
-        t = np.clip((rr * d[0] + cc * d[1]) / length, 0.0, length)
-        cells = (rr - t * d[0] / length) ** 2 + (cc - t * d[1] / length) ** 2 < inner
+        t = (rr * d0 + cc * d1) / length
+        np.clip(t, 0.0, length, out=t)
+        cells = (rr - t * d0 / length) ** 2 + (cc - t * d1 / length) ** 2 < inner
     return (slice(r0, r1), slice(c0, c1)), cells, at_start
 
 

@@ -27,6 +27,8 @@ class Transit:
         self.free = free
         _, idx = ndimage.distance_transform_edt(~free, return_indices=True)
         self._nearest = idx
+        # A* reads single cells: Python lists are several times faster at that than numpy
+        self._free_rows = free.tolist()
         # the tour is driven several times (fill-in rounds, pruning), mostly over the same hops
         self._planned: dict[tuple[float, ...], np.ndarray] = {}
 
@@ -76,8 +78,8 @@ class Transit:
         return self._pull(pts)
 
     def astar(self, s: tuple[int, int], g: tuple[int, int]) -> list[tuple[int, int]] | None:
-        free = self.free
-        rows, cols = free.shape
+        free = self._free_rows
+        rows, cols = self.free.shape
 
         def h(r: int, c: int) -> float:
             dr, dc = abs(r - g[0]), abs(c - g[1])
@@ -100,9 +102,9 @@ class Transit:
             r, c = cur
             for dr, dc in _MOVES:
                 nr, nc = r + dr, c + dc
-                if not (0 <= nr < rows and 0 <= nc < cols) or not free[nr, nc]:
+                if not (0 <= nr < rows and 0 <= nc < cols) or not free[nr][nc]:
                     continue
-                if dr and dc and not (free[r, nc] and free[nr, c]):
+                if dr and dc and not (free[r][nc] and free[nr][c]):
                     continue
                 nxt = (nr, nc)
                 step = _SQRT2 if dr and dc else 1.0
