@@ -26,6 +26,14 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+def _status(text: str) -> Any:
+    """A spinner with ``text`` on stderr while long work runs (shown on a terminal only, so
+    stdout stays the table or the JSON)."""
+    from rich.console import Console
+
+    return Console(stderr=True).status(text)
+
+
 def _parse_start(text: str) -> tuple[float, float]:
     parts = text.replace(" ", "").split(",")
     try:
@@ -125,7 +133,8 @@ def plan_coverage_cmd(
         except ConfigError as err:
             _fail(str(err))
     try:
-        plan = plan_coverage(grid, starts, params)
+        with _status(f"planning coverage of {path.name} for {robots} robot(s)"):
+            plan = plan_coverage(grid, starts, params)
     except PlanningError as err:
         _fail(f"{path}: {err}")
     out.mkdir(parents=True, exist_ok=True)
@@ -250,9 +259,6 @@ def bench_coverage(
     """
     from fleet.config import configs_dir
     from fleet.params import load_fleet_config
-    from fleet.world import load_world
-    from planners.coverage import coverage_metrics, plan_coverage
-    from planners.lanes import LaneParams, plan_lanes
 
     cfg = load_fleet_config()
     params = dataclasses.replace(
@@ -263,64 +269,9 @@ def bench_coverage(
     if apt.exists():
         maps.append(("apartment", apt))
     rows: list[dict[str, Any]] = []
-    for name, path in maps:
-        world = load_world(path, params.robot_radius)
-        grid = world.grid(0.05)
-        s1 = [p[:2] for p in world.start_poses(1, params.robot_radius)]
-        s3 = [p[:2] for p in world.start_poses(3, params.robot_radius)]
-        single = None
-        for label, starts, p in (
-            ("bcd k=1", s1, params),
-            ("bcd k=3", s3, params),
-            ("spiral k=1", s1, dataclasses.replace(params, method="spiral")),
-        ):
-            plan = plan_coverage(grid, starts, p)
-            fastest = min(
-                [plan.plan_time_s] + [_plan_time(grid, starts, p) for _ in range(1, repeat)]
-            )
-            row = {
-                "map": name,
-                "planner": label,
-                **_summary(plan),
-                "plan_time_s": round(fastest, 4),
-            }
-            row.pop("robots")
-            row["free_m2"] = round(float(grid.free.sum()) * grid.resolution**2, 2)
-            if label == "bcd k=1":
-                single = plan
-            if label == "bcd k=3" and single is not None:
-                row["makespan_ratio_vs_k1"] = round(
-                    plan.metrics.makespan_s / single.metrics.makespan_s, 3
-                )
-            rows.append(row)
-        lane_params = LaneParams(params.robot_radius, params.cleaning_width, params.overlap)
-        for label, starts in (("baseline lanes k=1", s1), ("baseline lanes k=3", s3)):
-            dt = math.inf
-            for _ in range(repeat):
-                t0 = time.perf_counter()
-                paths = plan_lanes(grid, starts, lane_params)
-                dt = min(dt, time.perf_counter() - t0)
-            m = coverage_metrics(
-                grid,
-                paths,
-                params.robot_radius,
-                params.cleaning_width,
-                max_speed=params.max_speed,
-                turn_cost_s=params.turn_cost_s,
-                cleanable_mask=single.cleanable if single is not None else None,
-            )
-            rows.append(
-                {
-                    "map": name,
-                    "planner": label,
-                    "coverage": round(m.total.coverage, 5),
-                    "repetition": round(m.total.repetition, 5),
-                    "path_length_m": round(m.total.path_length_m, 3),
-                    "turns": m.total.turns,
-                    "makespan_s": round(m.makespan_s, 2),
-                    "plan_time_s": round(dt, 4),
-                }
-            )
+    with _status("fleet bench coverage") as status:
+        for name, path in maps:
+            _bench_map(name, path, params, repeat, rows, status)
     if as_json:
         print(json.dumps({"results": rows}))
         return
@@ -357,3 +308,73 @@ def bench_coverage(
     if console.width < 120:
         console = Console(width=120)
     console.print(table)
+
+
+def _bench_map(
+    name: str, path: Path, params: Any, repeat: int, rows: list[dict[str, Any]], status: Any
+) -> None:
+    """Append the bench rows of one map to ``rows``, telling ``status`` which case runs."""
+    from fleet.world import load_world
+    from planners.coverage import coverage_metrics, plan_coverage
+    from planners.lanes import LaneParams, plan_lanes
+
+    world = load_world(path, params.robot_radius)
+    grid = world.grid(0.05)
+    s1 = [p[:2] for p in world.start_poses(1, params.robot_radius)]
+    s3 = [p[:2] for p in world.start_poses(3, params.robot_radius)]
+    single = None
+    for label, starts, p in (
+        ("bcd k=1", s1, params),
+        ("bcd k=3", s3, params),
+        ("spiral k=1", s1, dataclasses.replace(params, method="spiral")),
+    ):
+        status.update(f"fleet bench coverage: {name}, {label}, run 1 of {repeat}")
+        plan = plan_coverage(grid, starts, p)
+        fastest = plan.plan_time_s
+        for run in range(2, repeat + 1):
+            status.update(f"fleet bench coverage: {name}, {label}, run {run} of {repeat}")
+            fastest = min(fastest, _plan_time(grid, starts, p))
+        row = {
+            "map": name,
+            "planner": label,
+            **_summary(plan),
+            "plan_time_s": round(fastest, 4),
+        }
+        row.pop("robots")
+        row["free_m2"] = round(float(grid.free.sum()) * grid.resolution**2, 2)
+        if label == "bcd k=1":
+            single = plan
+        if label == "bcd k=3" and single is not None:
+            row["makespan_ratio_vs_k1"] = round(
+                plan.metrics.makespan_s / single.metrics.makespan_s, 3
+            )
+        rows.append(row)
+    lane_params = LaneParams(params.robot_radius, params.cleaning_width, params.overlap)
+    for label, starts in (("baseline lanes k=1", s1), ("baseline lanes k=3", s3)):
+        status.update(f"fleet bench coverage: {name}, {label}")
+        dt = math.inf
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            paths = plan_lanes(grid, starts, lane_params)
+            dt = min(dt, time.perf_counter() - t0)
+        m = coverage_metrics(
+            grid,
+            paths,
+            params.robot_radius,
+            params.cleaning_width,
+            max_speed=params.max_speed,
+            turn_cost_s=params.turn_cost_s,
+            cleanable_mask=single.cleanable if single is not None else None,
+        )
+        rows.append(
+            {
+                "map": name,
+                "planner": label,
+                "coverage": round(m.total.coverage, 5),
+                "repetition": round(m.total.repetition, 5),
+                "path_length_m": round(m.total.path_length_m, 3),
+                "turns": m.total.turns,
+                "makespan_s": round(m.makespan_s, 2),
+                "plan_time_s": round(dt, 4),
+            }
+        )
