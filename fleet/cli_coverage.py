@@ -7,9 +7,14 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
+
+if TYPE_CHECKING:
+    from rich.status import Status
+
+    from planners.coverage import CoverageParams
 
 APARTMENT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
 
@@ -26,7 +31,7 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
-def _status(text: str) -> Any:
+def _status(text: str) -> Status:
     """A spinner with ``text`` on stderr while long work runs (shown on a terminal only, so
     stdout stays the table or the JSON)."""
     from rich.console import Console
@@ -311,7 +316,12 @@ def bench_coverage(
 
 
 def _bench_map(
-    name: str, path: Path, params: Any, repeat: int, rows: list[dict[str, Any]], status: Any
+    name: str,
+    path: Path,
+    params: CoverageParams,
+    repeat: int,
+    rows: list[dict[str, Any]],
+    status: Status,
 ) -> None:
     """Append the bench rows of one map to ``rows``, telling ``status`` which case runs."""
     from fleet.world import load_world
