@@ -374,6 +374,8 @@ def _bench_map(
             params.cleaning_width,
             max_speed=params.max_speed,
             turn_cost_s=params.turn_cost_s,
+            turn_angle_deg=params.turn_angle_deg,
+            simplify_tolerance=params.simplify_tolerance,
             cleanable_mask=single.cleanable if single is not None else None,
         )
         rows.append(
