@@ -40,6 +40,23 @@ def simplify(points: np.ndarray, tolerance: float) -> np.ndarray:
     return pts[keep]
 
 
+def without_straight_vertices(points: np.ndarray, tolerance_rad: float = 1e-6) -> np.ndarray:
+    """The polyline without repeated points and without the interior vertices where it goes
+    straight on (heading change at most ``tolerance_rad``): the same path in fewer points. A
+    vertex where the path turns back on itself is kept, unlike in a simplification that
+    measures distance to the line through the neighbours."""
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 2:
+        return pts.copy()
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    pts = pts[np.concatenate([[True], step > 1e-9])]
+    if len(pts) < 3:
+        return pts
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:-1] = heading_changes(pts) > tolerance_rad
+    return pts[keep]
+
+
 def heading_changes(points: np.ndarray) -> np.ndarray:
     """Absolute heading change (rad, in [0, π]) at each interior vertex of a polyline.
 

@@ -43,7 +43,7 @@ from planners.coverage.tour import (
 )
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, cleanable, clearance, extend_labels, reachable
-from planners.polyline import densify
+from planners.polyline import densify, without_straight_vertices
 
 # A wall direction this close to a grid axis is taken as the axis: lanes then lie exactly
 # between rows of cells, and the rasterized walls of an axis-aligned plan measure slightly off.
@@ -218,8 +218,9 @@ def plan_coverage(
         hw = params.cleaning_width / 2
         floor = math.ceil(params.fill_in_target * int(clean.sum())) if params.fill_in else None
         tasks, pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit, floor)
+    # straight runs as one segment each: a follower takes each waypoint as a target
     paths = [
-        _drive(s, [path_of(tasks[t], o) for t, o in piece], transit)
+        without_straight_vertices(_drive(s, [path_of(tasks[t], o) for t, o in piece], transit))
         for s, piece in zip(start_xy, pieces, strict=True)
     ]
     robot_tasks = [tuple(tasks[t] for t, _ in piece) for piece in pieces]
