@@ -4,8 +4,7 @@ The agent keeps an index of the next waypoint; a waypoint counts as reached when
 level with it along the segment into it, near that segment (see :func:`advance`). DWA is given
 the local path from the previous waypoint on, a few metres long, so its path-distance cost
 keeps the robot on the lane, not merely near the next point. On the approach to a sharp corner
-the speed follows the braking profile of :func:`stop_speed`, and DWA's rollouts end at the
-corner, so a lane that ends near a wall is driven to its end instead of crept up to.
+the speed follows the braking profile of :func:`stop_speed`.
 
 DWA scores where a rollout goes, not the way a robot turns onto a lane: a robot that faces far
 off its next segment takes an arc that bulges a quarter metre off the path — on a coverage path
@@ -163,19 +162,16 @@ def carrot(state: FollowState, xy: np.ndarray, lookahead: float) -> np.ndarray:
 
 
 def stop_speed(
-    state: FollowState, xy: np.ndarray, params: DWAParams, along_tolerance: float, dt: float
+    state: FollowState, xy: np.ndarray, params: DWAParams, along_tolerance: float
 ) -> float | None:
     """The speed for the approach to a stop, or None when the next waypoint is no stop or is
     farther than the braking distance from full speed.
 
     A stop is the last waypoint or one where the path turns by more than ``corner_angle``. The
-    speed is the largest from which the robot can still brake to rest on it, given that a
-    command holds for one control period ``dt`` before the next can brake:
-    v·dt + v²/(2·acc_lim_x) = d, with d the distance left along the segment less half of
-    ``along_tolerance`` (Fox et al. 1997's admissible velocity, applied to the stop as to an
-    obstacle, with the reaction time of a discrete controller; without it the robot ran up to
-    2 cm past lane ends that lie 3 cm from a wall). DWA alone would aim its rollouts' end
-    points at the stop and approach it at v ≈ d/sim_time, ever more slowly.
+    speed is the largest from which the robot can still brake to rest on it,
+    v = √(2·acc_lim_x·d) with d the distance left along the segment (Fox et al. 1997's
+    admissible velocity, applied to the stop as to an obstacle). DWA alone would aim its
+    rollouts' end points at the stop and approach it at v ≈ d/sim_time, ever more slowly.
     """
     wps, i = state.waypoints, state.index
     if 0 < i < len(wps) - 1:
@@ -183,23 +179,14 @@ def stop_speed(
         turn = abs(math.remainder(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]), 2 * math.pi))
         if turn <= params.corner_angle:
             return None
-    left = left_along(state, xy)
-    acc, v_max = params.acc_lim_x, params.max_vel_x
-    if left > v_max * dt + v_max**2 / (2 * acc) + along_tolerance:
-        return None
-    d = max(left - along_tolerance / 2, 0.0)
-    return acc * (math.sqrt(dt * dt + 2 * d / acc) - dt)
-
-
-def left_along(state: FollowState, xy: np.ndarray) -> float:
-    """How far ``xy`` is short of the next waypoint along the segment into it."""
-    wps, i = state.waypoints, state.index
     start = wps[i - 1] if i > 0 else xy
     seg = wps[i] - start
     length = float(np.hypot(*seg))
-    if length < 1e-9:
-        return math.dist(xy, wps[i])
-    return length - float((xy - start) @ seg) / length
+    left = math.dist(xy, wps[i]) if length < 1e-9 else length - float((xy - start) @ seg) / length
+    braking = params.max_vel_x**2 / (2 * params.acc_lim_x)
+    if left > braking + along_tolerance:
+        return None
+    return math.sqrt(2 * params.acc_lim_x * max(left - along_tolerance / 2, 0.0))
 
 
 def rotate_in_place(
@@ -442,20 +429,11 @@ def control_step(
         state = replace(state, aligning=False)
         path = local_path(state, xy)
         result = None
-        speed = stop_speed(state, xy, params, agent.along_tolerance, dt)
+        speed = stop_speed(state, xy, params, agent.along_tolerance)
         if speed is not None:
             v_now = velocity[0]
             speed = min(max(speed, v_now - params.acc_lim_x * dt), v_now + params.acc_lim_x * dt)
-            # rollouts that end at the stop: held for the whole sim_time they would run on into
-            # the wall a lane ends at, and DWA would creep toward it at gap / sim_time
-            reach_s = left_along(state, xy) / max(speed, 1e-3)
-            fixed = replace(
-                params,
-                min_vel_x=speed,
-                max_vel_x=speed,
-                vx_samples=1,
-                sim_time=min(params.sim_time, max(dt, reach_s)),
-            )
+            fixed = replace(params, min_vel_x=speed, max_vel_x=speed, vx_samples=1)
             result = dwa_control(pose, velocity, path, seen, fixed, robot_radius, dt)
             if not (result.admissible and math.isfinite(result.cost)):
                 result = None
