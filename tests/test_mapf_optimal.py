@@ -91,12 +91,14 @@ def test_cbs_soc_equals_brute_force_optimum(instance: MapfInstance) -> None:
         assume(False)
     optimum = brute_force_soc(instance)
     assume(optimum is not None)
+    # the limit only guards against a hang: plain CBS needs 6 s on some tiny instances (an
+    # agent parked on its goal in the only way through), and a busy machine doubles that
     for solver in ("cbs", "cbs-plain"):
-        result = solve(instance, solver, time_limit_s=10)
+        result = solve(instance, solver, time_limit_s=120)
         assert result.status == "success", (solver, result.message)
         assert validate(instance, result.solution.paths).valid
         assert result.soc == optimum, solver
-    ecbs = solve(instance, "ecbs", w=1.5, time_limit_s=10)
+    ecbs = solve(instance, "ecbs", w=1.5, time_limit_s=120)
     assert ecbs.status == "success"
     assert validate(instance, ecbs.solution.paths).valid
     assert ecbs.lower_bound <= optimum <= ecbs.soc <= 1.5 * optimum
