@@ -325,7 +325,7 @@ def _bench_map(
 ) -> None:
     """Append the bench rows of one map to ``rows``, telling ``status`` which case runs."""
     from fleet.world import load_world
-    from planners.coverage import coverage_metrics, plan_coverage
+    from planners.coverage import plan_coverage, plan_metrics
     from planners.lanes import LaneParams, plan_lanes
 
     world = load_world(path, params.robot_radius)
@@ -367,17 +367,7 @@ def _bench_map(
             t0 = time.perf_counter()
             paths = plan_lanes(grid, starts, lane_params)
             dt = min(dt, time.perf_counter() - t0)
-        m = coverage_metrics(
-            grid,
-            paths,
-            params.robot_radius,
-            params.cleaning_width,
-            max_speed=params.max_speed,
-            turn_cost_s=params.turn_cost_s,
-            turn_angle_deg=params.turn_angle_deg,
-            simplify_tolerance=params.simplify_tolerance,
-            cleanable_mask=single.cleanable if single is not None else None,
-        )
+        m = plan_metrics(grid, paths, params, single.cleanable if single is not None else None)
         rows.append(
             {
                 "map": name,

@@ -6,6 +6,7 @@ Public API::
         -> CoveragePlan
     coverage_metrics(grid, paths, robot_radius, cleaning_width, *, max_speed, turn_cost_s, ...)
         -> CoverageMetrics
+    plan_metrics(grid, paths, params: CoverageParams, cleanable_mask=None) -> CoverageMetrics
 
 ``CoveragePlan`` holds per robot the (N, 2) waypoint path in world metres, the room and cell
 label images, their networkx adjacency graphs, the cell → robot assignment, the metrics, and the
@@ -13,7 +14,12 @@ free space no robot can clean (``unreachable``, ``unreachable_area_m2``). Every 
 metrics use is in :mod:`planners.coverage.metrics`.
 """
 
-from planners.coverage.metrics import CoverageMetrics, PathMetrics, coverage_metrics
+from planners.coverage.metrics import (
+    CoverageMetrics,
+    PathMetrics,
+    coverage_metrics,
+    plan_metrics,
+)
 from planners.coverage.params import CoverageParams
 from planners.coverage.plan import CoveragePlan, PlanningError, plan_coverage
 
@@ -25,4 +31,5 @@ __all__ = [
     "PlanningError",
     "coverage_metrics",
     "plan_coverage",
+    "plan_metrics",
 ]

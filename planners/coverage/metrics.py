@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from planners.coverage.params import CoverageParams
 from planners.grid import GridMap, cleanable, inflate, reachable
 from planners.polyline import count_turns, path_length, simplify
 
@@ -196,6 +197,27 @@ def coverage_metrics(
     )
     unreachable = float((grid.free & ~cleanable_mask).sum() * area)
     return CoverageMetrics(tuple(rows), total, makespan, n_clean * area, unreachable)
+
+
+def plan_metrics(
+    grid: GridMap,
+    paths: Sequence[np.ndarray],
+    params: CoverageParams,
+    cleanable_mask: np.ndarray | None = None,
+) -> CoverageMetrics:
+    """:func:`coverage_metrics` with the robot, speed, turn and simplification figures of
+    ``params``: how a plan and anything compared with it are judged."""
+    return coverage_metrics(
+        grid,
+        paths,
+        params.robot_radius,
+        params.cleaning_width,
+        max_speed=params.max_speed,
+        turn_cost_s=params.turn_cost_s,
+        turn_angle_deg=params.turn_angle_deg,
+        simplify_tolerance=params.simplify_tolerance,
+        cleanable_mask=cleanable_mask,
+    )
 
 
 def _row(covered, visits, clean, n_clean, area, length, turns, t) -> PathMetrics:

@@ -19,7 +19,7 @@ from planners.coverage.fill_in import fill_in_tasks
 from planners.coverage.frame import RotatedFrame, dominant_direction, frame_for, resample
 from planners.coverage.geodesic import PathCosts
 from planners.coverage.lattice import room_lanes
-from planners.coverage.metrics import CoverageMetrics, coverage_metrics, path_time, swath
+from planners.coverage.metrics import CoverageMetrics, path_time, plan_metrics, swath
 from planners.coverage.ordering import split_tour
 from planners.coverage.params import CoverageParams
 from planners.coverage.prune import footprint, prune_driven, prune_tasks
@@ -225,17 +225,7 @@ def plan_coverage(
     ]
     robot_tasks = [tuple(tasks[t] for t, _ in piece) for piece in pieces]
 
-    metrics = coverage_metrics(
-        grid,
-        paths,
-        params.robot_radius,
-        params.cleaning_width,
-        max_speed=params.max_speed,
-        turn_cost_s=params.turn_cost_s,
-        turn_angle_deg=params.turn_angle_deg,
-        simplify_tolerance=params.simplify_tolerance,
-        cleanable_mask=clean,
-    )
+    metrics = plan_metrics(grid, paths, params, clean)
     room_graph = _room_graph(grid, room_img, room_angle, transit)
     cell_graph = _cell_graph(grid, cell_img, cell_room, robot_tasks)
     assignment = {
