@@ -45,15 +45,19 @@ def without_straight_vertices(points: np.ndarray, tolerance_rad: float = 1e-6) -
     straight on (heading change at most ``tolerance_rad``): the same path in fewer points. A
     vertex where the path turns back on itself is kept, unlike in a simplification that
     measures distance to the line through the neighbours."""
-    pts = np.asarray(points, dtype=float)
-    if len(pts) < 2:
-        return pts.copy()
-    step = np.hypot(*np.diff(pts, axis=0).T)
-    pts = pts[np.concatenate([[True], step > 1e-9])]
+    pts = without_repeats(points)
     if len(pts) < 3:
         return pts
     keep = np.ones(len(pts), dtype=bool)
     keep[1:-1] = heading_changes(pts) > tolerance_rad
+    return pts[keep]
+
+
+def without_repeats(points: np.ndarray) -> np.ndarray:
+    """The polyline without repeated consecutive points (a copy)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-9
     return pts[keep]
 
 

@@ -43,7 +43,7 @@ from planners.coverage.tour import (
 )
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, cleanable, clearance, extend_labels, reachable
-from planners.polyline import densify, without_straight_vertices
+from planners.polyline import densify, without_repeats, without_straight_vertices
 
 # A wall direction this close to a grid axis is taken as the axis: lanes then lie exactly
 # between rows of cells, and the rasterized walls of an axis-aligned plan measure slightly off.
@@ -507,14 +507,7 @@ def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> n
         parts.append(transit.path(p, v[0])[1:])
         parts.append(v[1:])
         p = v[-1]
-    return _dedupe(np.vstack(parts))
-
-
-def _dedupe(path: np.ndarray) -> np.ndarray:
-    """The path without repeated consecutive points."""
-    keep = np.ones(len(path), dtype=bool)
-    keep[1:] = np.hypot(*np.diff(path, axis=0).T) > 1e-9
-    return path[keep]
+    return without_repeats(np.vstack(parts))
 
 
 def _room_graph(grid, room_img, angles, transit) -> nx.Graph:
