@@ -79,6 +79,17 @@ def plan_coverage_cmd(
         bool | None,
         typer.Option("--edge-pass/--no-edge-pass", help="Also drive once around every cell."),
     ] = None,
+    coverage_target: Annotated[
+        float | None,
+        typer.Option(
+            min=0.0,
+            max=1.0,
+            help="Share of the cleanable floor to cover, 0-1: the fill-in passes stop there "
+            "and the pruning drops what costs the most driving per cell above it, so a lower "
+            "target gives a shorter path (1.0: every pass, nothing left). Default: "
+            "coverage.fill_in_target in configs/fleet.yaml.",
+        ),
+    ] = None,
     resolution: Annotated[float, typer.Option(min=0.01, help="Grid cell size (m).")] = 0.05,
     out: Annotated[
         Path, typer.Option(help="Directory for paths.json and plan.png (created if missing).")
@@ -104,6 +115,8 @@ def plan_coverage_cmd(
       fleet plan coverage ../shared/data/maps/cob_ipa_apartment.yaml --method spiral --json
 
       fleet plan coverage configs/worlds/small.yaml --start 0.6,0.85 --out /tmp/small
+
+      fleet plan coverage home --coverage-target 0.98
     """
     from fleet.config import ConfigError, resolve_world
     from fleet.params import load_fleet_config
@@ -127,6 +140,8 @@ def plan_coverage_cmd(
         params = dataclasses.replace(params, method=method)
     if edge_pass is not None:
         params = dataclasses.replace(params, edge_pass=edge_pass)
+    if coverage_target is not None:
+        params = dataclasses.replace(params, fill_in_target=coverage_target)
     if start:
         starts = [_parse_start(s) for s in start]
         if robots not in (1, len(starts)):

@@ -82,3 +82,14 @@ def test_start_inside_an_obstacle_is_an_error(tmp_path):
 def test_starts_must_match_robots(tmp_path):
     res = _plan("small", "--robots", "3", "--start", "0.6,0.85", "--out", tmp_path)
     assert res.exit_code == 2 and "one start per robot" in res.output
+
+
+def test_a_lower_coverage_target_gives_a_shorter_path(tmp_path):
+    full = json.loads(_plan("small", "--out", tmp_path / "a", "--json").stdout)
+    res = _plan("small", "--coverage-target", "0.95", "--out", tmp_path / "b", "--json")
+    assert res.exit_code == 0, res.output
+    less = json.loads(res.stdout)
+    assert 0.95 <= less["coverage"] < full["coverage"]
+    assert less["path_length_m"] < full["path_length_m"]
+    res = _plan("small", "--coverage-target", "1.5", "--out", tmp_path / "c")
+    assert res.exit_code == 2 and "coverage-target" in res.output
