@@ -84,10 +84,10 @@ def plan_coverage_cmd(
         typer.Option(
             min=0.0,
             max=1.0,
-            help="Share of the cleanable floor to cover, 0-1: the fill-in passes stop there "
-            "and the pruning drops what costs the most driving per cell above it, so a lower "
-            "target gives a shorter path (1.0: every pass, nothing left). Default: "
-            "coverage.fill_in_target in configs/fleet.yaml.",
+            help="Share of the cleanable floor to cover, 0-1 (with coverage.fill_in, the "
+            "default): the fill-in passes stop there and a bcd plan drops what costs the most "
+            "driving per cell above it, so a lower target gives a shorter path (1.0: every "
+            "pass, nothing left). Default: coverage.fill_in_target in configs/fleet.yaml.",
         ),
     ] = None,
     resolution: Annotated[float, typer.Option(min=0.01, help="Grid cell size (m).")] = 0.05,
