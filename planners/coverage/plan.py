@@ -22,7 +22,7 @@ from planners.coverage.lattice import room_lanes
 from planners.coverage.metrics import CoverageMetrics, path_time, plan_metrics, swath
 from planners.coverage.ordering import split_tour
 from planners.coverage.params import CoverageParams
-from planners.coverage.prune import footprint, prune_driven, prune_tasks
+from planners.coverage.prune import Footprints, footprint, prune_driven, prune_tasks
 from planners.coverage.rooms import segment_rooms, shared_borders
 from planners.coverage.strips import return_strips
 from planners.coverage.tasks import (
@@ -196,6 +196,7 @@ def plan_coverage(
     pieces = _split(tasks, tours, robot_comp, costs, start_xy, params)
     # only BCD plans get the final pruning, which trades the fill-in's surplus back
     pruned = params.method == "bcd"
+    prints = Footprints(grid, clean, params.cleaning_width / 2)
     if params.fill_in:
         goal = _fill_in_goal(params.fill_in_target) if pruned else params.fill_in_target
         tasks, pieces = _add_fill_in(
@@ -205,7 +206,7 @@ def plan_coverage(
             tasks,
             pieces,
             start_xy,
-            clean,
+            prints,
             reach,
             room_img,
             cell_img,
@@ -215,9 +216,10 @@ def plan_coverage(
             goal,
         )
     if pruned:
-        hw = params.cleaning_width / 2
         floor = math.ceil(params.fill_in_target * int(clean.sum())) if params.fill_in else None
-        tasks, pieces = prune_driven(grid, tasks, pieces, start_xy, clean, hw, transit, floor)
+        tasks, pieces = prune_driven(
+            grid, tasks, pieces, start_xy, clean, prints.hw, transit, floor, prints
+        )
     # straight runs as one segment each: a follower takes each waypoint as a target
     paths = [
         without_straight_vertices(_drive(s, [path_of(tasks[t], o) for t, o in piece], transit))
@@ -437,7 +439,7 @@ def _add_fill_in(
     tasks,
     pieces,
     start_xy,
-    clean,
+    prints,
     reach,
     room_img,
     cell_img,
@@ -452,10 +454,11 @@ def _add_fill_in(
     robot of its floor part whose path passes closest and is inserted into its tour where it
     costs least, then the tour is improved again — which changes some transits, so the next
     round looks at what the new tours miss. Each round first drops the tasks whose floor other
-    tasks already clean (``prune.prune_tasks``)."""
+    tasks already clean (``prune.prune_tasks``). ``prints`` keeps the tasks' footprints on the
+    cleanable floor (``prints.clean``) for these prunings and the final one."""
     hw = params.cleaning_width / 2
     for _ in range(FILL_IN_ROUNDS):
-        pieces = prune_tasks(grid, tasks, pieces, clean, hw)
+        pieces = prune_tasks(tasks, pieces, prints)
         fixed: list[SweepTask] = []
         initial = []
         driven = []
@@ -468,7 +471,7 @@ def _add_fill_in(
         for path in driven:
             covered |= swath(grid, path, hw)[0]
         anchors = np.vstack([densify(path, grid.resolution) for path in driven])
-        passes = fill_in_tasks(grid, covered, anchors, clean, reach, hw, transit, goal)
+        passes = fill_in_tasks(grid, covered, anchors, prints.clean, reach, hw, transit, goal)
         if not passes:
             break
         trees = [cKDTree(p) for p in driven]

@@ -64,17 +64,35 @@ def footprint(grid: GridMap, path: np.ndarray, hw: float) -> tuple[Window, np.nd
     return (slice(int(lo[0]), int(hi[0])), slice(int(lo[1]), int(hi[1]))), mask
 
 
-def prune_tasks(grid, tasks, pieces, clean, hw) -> list[list[tuple[int, int]]]:
+class Footprints:
+    """The cleanable cells within the capsules of paths (:func:`footprint` masked by the
+    cleanable floor), kept by each path's exact points: every fill-in round and the final
+    pruning look at mostly the same task paths again. The masks are read-only."""
+
+    def __init__(self, grid: GridMap, clean: np.ndarray, hw: float) -> None:
+        self.grid, self.clean, self.hw = grid, clean, hw
+        self._seen: dict[bytes, tuple[Window, np.ndarray]] = {}
+
+    def __call__(self, path: np.ndarray) -> tuple[Window, np.ndarray]:
+        key = np.ascontiguousarray(path, dtype=float).tobytes()
+        if key not in self._seen:
+            window, cells = footprint(self.grid, path, self.hw)
+            cells &= self.clean[window]
+            cells.flags.writeable = False
+            self._seen[key] = (window, cells)
+        return self._seen[key]
+
+
+def prune_tasks(tasks, pieces, footprints: Footprints) -> list[list[tuple[int, int]]]:
     """The robots' tours without the tasks all of whose cleanable cells other kept tasks cover
     too (longest first): a pass whose floor later lanes sweep anyway, a lane piece that a
     shoulder lane and its neighbours already cover."""
     steps = [(r, k) for r, piece in enumerate(pieces) for k in range(len(piece))]
     paths = [path_of(tasks[t], o) for piece in pieces for t, o in piece]
-    count = np.zeros(grid.shape, dtype=np.int32)
+    count = np.zeros(footprints.grid.shape, dtype=np.int32)
     own = []
     for path in paths:
-        window, cells = footprint(grid, path, hw)
-        cells &= clean[window]
+        window, cells = footprints(path)
         count[window] += cells
         own.append((window, cells))
     length = [path_length(p) for p in paths]
@@ -119,6 +137,7 @@ def prune_driven(
     hw: float,
     transit: Transit,
     min_cells: int | None = None,
+    footprints: Footprints | None = None,
 ) -> tuple[list[SweepTask], list[list[tuple[int, int]]]]:
     """The tasks and the robots' tours (``(task, option)`` per step, robot ``r`` starting at
     ``start_xy[r]``) without the tasks whose cleanable floor the rest of the driven path
@@ -126,8 +145,9 @@ def prune_driven(
     cell; then (with ``min_cells``) without the drops and cuts that save the most driving per
     cleanable cell lost while at least ``min_cells`` stay covered, and once more for what
     those edits made possible (see the module docstring). A shortened path is a new task,
-    appended to the list."""
-    tours = _Tours(grid, tasks, pieces, start_xy, clean, hw, transit)
+    appended to the list. ``footprints`` may hold the footprints of earlier prunings."""
+    footprints = footprints or Footprints(grid, clean, hw)
+    tours = _Tours(grid, tasks, pieces, start_xy, footprints, transit)
     lossy: list[tuple[float, int, int, int, float, int]] = []
     _lossless_pass(tours, list(tours.paths), lossy)
     if min_cells is None:
@@ -147,9 +167,10 @@ class _Tours:
     """The robots' driven tours as linked steps, and how often the tasks and transits sweep
     each cell."""
 
-    def __init__(self, grid, tasks, pieces, start_xy, clean, hw, transit) -> None:
-        self.grid, self.clean, self.hw, self.start_xy = grid, clean, hw, start_xy
-        self.hops = _Hops(grid, transit, clean, hw)
+    def __init__(self, grid, tasks, pieces, start_xy, footprints, transit) -> None:
+        self.grid, self.clean, self.start_xy = grid, footprints.clean, start_xy
+        self.footprints = footprints
+        self.hops = _Hops(grid, transit, footprints.clean, footprints.hw)
         self.count = np.zeros(grid.shape, dtype=np.int32)
         # cells the passes and transits of committed edits newly sweep
         self.touched = np.zeros(grid.shape, dtype=bool)
@@ -175,8 +196,7 @@ class _Tours:
         return int(((self.count > 0) & self.clean).sum())
 
     def _footprint(self, path: np.ndarray) -> tuple[Window, np.ndarray, float]:
-        window, cells = footprint(self.grid, path, self.hw)
-        return window, cells & self.clean[window], path_length(path)
+        return (*self.footprints(path), path_length(path))
 
     def edit(self, step: Step, end: int, cut: float) -> tuple[bool, np.ndarray | None]:
         """The step's path after an edit: None when dropped (``end`` −1), else ``cut`` metres
