@@ -4,7 +4,7 @@ import numpy as np
 from coverage_maps import boxed, grid_of
 
 from planners.coverage.metrics import swath
-from planners.coverage.prune import prune_driven
+from planners.coverage.prune import Footprints, prune_driven
 from planners.coverage.tasks import SweepTask
 from planners.coverage.transit import Transit
 from planners.grid import cleanable, clearance, reachable
@@ -32,7 +32,7 @@ def test_a_lane_piece_on_the_way_to_the_next_task_is_dropped_and_no_floor_is_los
     far = _task((3.0, 1.0), (3.5, 1.0))
     tasks = [on_the_way, far, aside]
     tour = [[(0, 0), (1, 0), (2, 0)]]
-    _, kept = prune_driven(g, tasks, tour, start, clean, 0.15, transit)
+    _, kept = prune_driven(tasks, tour, start, Footprints(g, clean, 0.15), transit)
     assert kept == [[(1, 0), (2, 0)]]
 
     def driven(steps):
@@ -51,7 +51,7 @@ def test_the_last_task_stays_when_nothing_else_passes_over_it():
     start = np.array([[0.5, 1.0]])
     tasks = [_task((1.0, 1.0), (1.5, 1.0)), _task((1.0, 2.0), (1.5, 2.0))]
     tour = [[(0, 0), (1, 0)]]
-    assert prune_driven(g, tasks, tour, start, clean, 0.15, transit)[1] == tour
+    assert prune_driven(tasks, tour, start, Footprints(g, clean, 0.15), transit)[1] == tour
 
 
 def _driven(transit, start, tasks, steps):
@@ -77,14 +77,15 @@ def test_with_a_coverage_floor_the_costliest_cells_go_first_and_the_floor_holds(
     without, _ = swath(g, _driven(transit, start, tasks, tour[0][:2]), 0.15)
     n_full, n_without = int((full & clean).sum()), int((without & clean).sum())
     assert n_without < n_full
+    prints = Footprints(g, clean, 0.15)
     # the floor allows losing exactly the piece's own cells: it goes, the lanes stay (their
     # ends may be shortened where that loses nothing)
-    out, kept = prune_driven(g, tasks, tour, start, clean, 0.15, transit, min_cells=n_without)
+    out, kept = prune_driven(tasks, tour, start, prints, transit, min_cells=n_without)
     assert sorted(out[t].variants[0][0][1] for t, _ in kept[0]) == [1.0, 1.3]
     after, _ = swath(g, _driven(transit, start, out, kept[0]), 0.15)
     assert int((after & clean).sum()) >= n_without
     # with every cell to keep, no task may go
-    out, kept = prune_driven(g, tasks, tour, start, clean, 0.15, transit, min_cells=n_full)
+    out, kept = prune_driven(tasks, tour, start, prints, transit, min_cells=n_full)
     assert len(kept[0]) == 3
     after, _ = swath(g, _driven(transit, start, out, kept[0]), 0.15)
     assert int((after & clean).sum()) >= n_full
@@ -96,7 +97,7 @@ def test_a_lane_end_another_lane_sweeps_is_cut_back_and_no_floor_is_lost():
     # the first lane runs into the second one, which crosses its end
     tasks = [_task((0.5, 1.0), (4.0, 1.0)), _task((4.0, 0.5), (4.0, 2.5))]
     tour = [[(0, 0), (1, 0)]]
-    out, kept = prune_driven(g, tasks, tour, start, clean, 0.15, transit)
+    out, kept = prune_driven(tasks, tour, start, Footprints(g, clean, 0.15), transit)
     (first, _), (second, _) = kept[0]
     assert first == 2 and second == 1
     lane = out[first].variants[0]

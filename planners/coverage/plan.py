@@ -217,9 +217,7 @@ def plan_coverage(
         )
     if pruned:
         floor = math.ceil(params.fill_in_target * int(clean.sum())) if params.fill_in else None
-        tasks, pieces = prune_driven(
-            grid, tasks, pieces, start_xy, clean, prints.hw, transit, floor, prints
-        )
+        tasks, pieces = prune_driven(tasks, pieces, start_xy, prints, transit, floor)
     # straight runs as one segment each: a follower takes each waypoint as a target
     paths = [
         without_straight_vertices(_drive(s, [path_of(tasks[t], o) for t, o in piece], transit))

@@ -129,15 +129,12 @@ class _Hops:
 
 
 def prune_driven(
-    grid: GridMap,
     tasks: Sequence[SweepTask],
     pieces: Sequence[Sequence[tuple[int, int]]],
     start_xy: np.ndarray,
-    clean: np.ndarray,
-    hw: float,
+    footprints: Footprints,
     transit: Transit,
     min_cells: int | None = None,
-    footprints: Footprints | None = None,
 ) -> tuple[list[SweepTask], list[list[tuple[int, int]]]]:
     """The tasks and the robots' tours (``(task, option)`` per step, robot ``r`` starting at
     ``start_xy[r]``) without the tasks whose cleanable floor the rest of the driven path
@@ -145,9 +142,9 @@ def prune_driven(
     cell; then (with ``min_cells``) without the drops and cuts that save the most driving per
     cleanable cell lost while at least ``min_cells`` stay covered, and once more for what
     those edits made possible (see the module docstring). A shortened path is a new task,
-    appended to the list. ``footprints`` may hold the footprints of earlier prunings."""
-    footprints = footprints or Footprints(grid, clean, hw)
-    tours = _Tours(grid, tasks, pieces, start_xy, footprints, transit)
+    appended to the list. ``footprints`` gives the grid, the cleanable floor and the swath
+    (and keeps the footprints of earlier prunings)."""
+    tours = _Tours(tasks, pieces, start_xy, footprints, transit)
     lossy: list[tuple[float, int, int, int, float, int]] = []
     _lossless_pass(tours, list(tours.paths), lossy)
     if min_cells is None:
@@ -167,7 +164,8 @@ class _Tours:
     """The robots' driven tours as linked steps, and how often the tasks and transits sweep
     each cell."""
 
-    def __init__(self, grid, tasks, pieces, start_xy, footprints, transit) -> None:
+    def __init__(self, tasks, pieces, start_xy, footprints, transit) -> None:
+        grid = footprints.grid
         self.grid, self.clean, self.start_xy = grid, footprints.clean, start_xy
         self.footprints = footprints
         self.hops = _Hops(grid, transit, footprints.clean, footprints.hw)
