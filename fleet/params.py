@@ -119,11 +119,15 @@ class AgentParams:
     escape_speed: float = 0.1
     intent_horizon_s: float = 2.0
     status_hz: float = 2.0
+    heartbeat_hz: float = 5.0
+    state_save_s: float = 2.0
 
     def validate(self) -> None:
         for name in (
             "map_hz",
             "status_hz",
+            "heartbeat_hz",
+            "state_save_s",
             "stale_after_s",
             "give_up_after_s",
             "align_exit",
@@ -144,6 +148,15 @@ class CoordinatorParams:
     wall_clearance: float = 0.015
     lane_overlap: float = 0.1
     expected_robots_grace_s: float = 20.0
+    task_target_s: float = 40.0
+    heartbeat_timeout_s: float = 1.0
+    bid_timeout_s: float = 0.5
+    objective: Literal["minimax", "minisum"] = "minimax"
+
+    def validate(self) -> None:
+        for name in ("task_target_s", "heartbeat_timeout_s", "bid_timeout_s"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0")
 
 
 @dataclass(frozen=True)

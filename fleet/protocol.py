@@ -90,6 +90,27 @@ class Keys:
     def coord_state(self) -> str:
         return f"{self.root}/coord/state"
 
+    def task(self, task: str) -> str:
+        return f"{self.root}/coord/task/{task}"
+
+    def bid(self, task: str, robot: str) -> str:
+        return f"{self.root}/coord/bid/{task}/{robot}"
+
+    def all_bids(self) -> str:
+        return f"{self.root}/coord/bid/*/*"
+
+    def award(self, robot: str) -> str:
+        return f"{self.root}/coord/award/{robot}"
+
+    def ack(self, robot: str) -> str:
+        return f"{self.root}/coord/ack/{robot}"
+
+    def events(self) -> str:
+        return f"{self.root}/coord/events"
+
+    def ops(self, verb: str) -> str:
+        return f"{self.root}/ops/{verb}"
+
     def alive(self, role: str, ident: str) -> str:
         return f"{self.root}/alive/{role}/{ident}"
 
@@ -101,9 +122,14 @@ class Keys:
 
     @staticmethod
     def robot_of(key: str) -> str:
-        """The robot id in ``fleet/<f>/robot/<id>/<topic>``."""
+        """The robot id in ``fleet/<f>/robot/<id>/<topic>``, ``.../coord/bid/<task>/<id>``,
+        ``.../coord/award/<id>`` or ``.../coord/ack/<id>``."""
         parts = str(key).split("/")
-        return parts[3] if len(parts) > 3 and parts[2] == "robot" else ""
+        if len(parts) > 3 and parts[2] == "robot":
+            return parts[3]
+        if len(parts) > 4 and parts[2] == "coord" and parts[3] in ("bid", "award", "ack"):
+            return parts[-1]
+        return ""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -214,7 +240,9 @@ class Intent(Message):
 @dataclass(frozen=True, eq=False)
 class RobotStatus(Message):
     """What an agent is doing: state, task, progress along its path, and how many waypoints of
-    it were given up as unreachable (``skipped``)."""
+    it were given up as unreachable (``skipped``). ``plan_id`` is the plan it drives and
+    ``swept`` (one 0/1 per piece of that plan's task, see :class:`Plan`) the pieces it has swept
+    by its own pose estimate, so the coordinator knows the exact remainder of the task."""
 
     TYPE: ClassVar[str] = "status"
     stamp: float
@@ -226,28 +254,146 @@ class RobotStatus(Message):
     distance_m: float
     decode_errors: int = 0
     skipped: int = 0
+    plan_id: int = -1
+    swept: Annotated[np.ndarray, Arr("|u1")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.uint8)
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Heartbeat(Message):
+    """Sent on wall time by a live agent's own thread, whatever the sim clock does: silence
+    for ``coordinator.heartbeat_timeout_s`` means a hung agent. ``ready`` is false while the
+    agent cannot take work (it has not localized)."""
+
+    TYPE: ClassVar[str] = "heartbeat"
+    stamp: float
+    seq: int
+    ready: bool
 
 
 @dataclass(frozen=True, eq=False)
 class Plan(Message):
-    """A waypoint path (nav_msgs/Path in 2D) for one robot; ``task`` names the job it serves."""
+    """A waypoint path (nav_msgs/Path in 2D) for one robot; ``task`` names the job it serves.
+
+    ``sweep_from`` is the index of the waypoint where the task's sweep begins (before it: the
+    transit to it); the segments from there on are the task's pieces, in the direction driven."""
 
     TYPE: ClassVar[str] = "plan"
     stamp: float
     plan_id: int
     task: str
     waypoints: Annotated[np.ndarray, Arr("<f8", (2,))]
+    sweep_from: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class TaskCall(Message):
+    """An auction call for one task (``coord/task/<task>``) in auction round ``round``: its
+    two ends, its estimated cleaning time and area. Agents answer with a :class:`Bid`."""
+
+    TYPE: ClassVar[str] = "task_call"
+    stamp: float
+    round: int
+    task: str
+    entry_x: float
+    entry_y: float
+    exit_x: float
+    exit_y: float
+    time_s: float
+    area_m2: float
+
+
+@dataclass(frozen=True, eq=False)
+class Bid(Message):
+    """A robot's price for a called task (``coord/bid/<task>/<robot>``): the marginal seconds
+    of adding it to what the robot has won, its whole committed time with it, and which end it
+    would enter by (``reverse``: the task's exit)."""
+
+    TYPE: ClassVar[str] = "bid"
+    stamp: float
+    round: int
+    task: str
+    robot: str
+    marginal_s: float
+    total_s: float
+    reverse: bool
+
+
+@dataclass(frozen=True, eq=False)
+class Award(Message):
+    """A robot's whole queue of won tasks (``coord/award/<robot>``), in driving order, each
+    with its ends as it will drive them and its time; ``seq`` grows with every change. A task
+    missing from a newer award has gone elsewhere; an empty queue means no work."""
+
+    TYPE: ClassVar[str] = "award"
+    stamp: float
+    seq: int
+    robot: str
+    tasks: list[str]
+    entries: Annotated[np.ndarray, Arr("<f8", (2,))]
+    exits: Annotated[np.ndarray, Arr("<f8", (2,))]
+    times_s: Annotated[np.ndarray, Arr("<f8")]
+
+
+@dataclass(frozen=True, eq=False)
+class AwardAck(Message):
+    """The agent has taken award ``seq`` (``coord/ack/<robot>``)."""
+
+    TYPE: ClassVar[str] = "award_ack"
+    stamp: float
+    seq: int
+    robot: str
+
+
+@dataclass(frozen=True, eq=False)
+class FleetEvent(Message):
+    """A change of the job for views and reports (``coord/events``): ``kind`` is one of
+    joined, lost, rejoined, awarded, reassigned, withdrawn, done, planned; ``wall`` is Unix
+    time."""
+
+    TYPE: ClassVar[str] = "event"
+    stamp: float
+    wall: float
+    kind: str
+    robot: str
+    task: str
+    detail: str
+
+
+@dataclass(frozen=True, eq=False)
+class OpsRequest(Message):
+    """An operator's request to the process that launched the fleet (``ops/<verb>``), e.g.
+    respawn of ``name``."""
+
+    TYPE: ClassVar[str] = "ops_request"
+    sender: str
+    verb: str
+    name: str
+
+
+@dataclass(frozen=True, eq=False)
+class OpsReply(Message):
+    TYPE: ClassVar[str] = "ops_reply"
+    ok: bool
+    error: str
 
 
 @dataclass(frozen=True, eq=False)
 class FleetState(Message):
-    """The coordinator's view of the job: its phase and which robots hold or finished work."""
+    """The coordinator's view of the job: its phase (gathering, auction, cleaning, done), the
+    robots it plans for, those with no work left, those lost, and how many tasks are open
+    (not held by a live robot), assigned and done."""
 
     TYPE: ClassVar[str] = "fleet_state"
     stamp: float
     phase: str
     robots: list[str]
     done: list[str]
+    lost: list[str] = field(default_factory=list)
+    tasks_open: int = 0
+    tasks_assigned: int = 0
+    tasks_done: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,16 +436,22 @@ class Request(Message):
 
 @dataclass(frozen=True, eq=False)
 class SpawnRequest(Message):
+    """Place robot ``robot`` at (x, y, theta); with ``rejoin`` a respawned agent takes over the
+    body its robot left in the world instead (the pose is then not used)."""
+
     TYPE: ClassVar[str] = "spawn"
     robot: str
     x: float
     y: float
     theta: float
+    rejoin: bool = False
 
 
 @dataclass(frozen=True, eq=False)
 class SpawnReply(Message):
-    """``ok`` false with ``error`` set when the pose is not free; x, y, theta the pose granted."""
+    """``ok`` false with ``error`` set when the pose is not free (or, on a rejoin, there is no
+    body to rejoin); x, y, theta the pose granted (on a rejoin: the request's, never the body's
+    true pose, which a robot cannot know)."""
 
     TYPE: ClassVar[str] = "spawn_reply"
     ok: bool
@@ -415,6 +567,14 @@ MESSAGES: dict[str, type[Message]] = {
         SpawnReply,
         CoverageImage,
         MapPatches,
+        Heartbeat,
+        TaskCall,
+        Bid,
+        Award,
+        AwardAck,
+        FleetEvent,
+        OpsRequest,
+        OpsReply,
     )
 }
 
@@ -564,6 +724,12 @@ def _check_shapes(msg: Message) -> None:
             raise DecodeError(f"coverage_image: arrays do not hold rows × cols = {cells} cells")
     elif isinstance(msg, MapPatches):
         _check_map_patches(msg)
+    elif isinstance(msg, Award):
+        n = len(msg.tasks)
+        if len(msg.entries) != n or len(msg.exits) != n or len(msg.times_s) != n:
+            raise DecodeError(f"award: entries, exits and times_s must each have {n} rows")
+    elif isinstance(msg, Plan) and not 0 <= msg.sweep_from <= max(len(msg.waypoints) - 1, 0):
+        raise DecodeError(f"plan.sweep_from: {msg.sweep_from} is not a waypoint index")
 
 
 MAX_MAP_TILE = 1024

@@ -24,6 +24,7 @@ from fleet.protocol import (
     Clock,
     CoverageImage,
     CoverageSummary,
+    FleetEvent,
     Request,
     SpawnReply,
     SpawnRequest,
@@ -75,6 +76,7 @@ class SimServer:
         bus.serve(self.keys.sim_report(), Request, lambda _req: self.summary())
         bus.serve(self.keys.coverage_image(), Request, lambda _req: self.coverage_image())
         bus.watch_alive("agent", lambda _rid: None, self._on_agent_left)
+        bus.subscribe(self.keys.events(), FleetEvent, self._on_event)
 
     # ---- bus callbacks (zenoh threads) --------------------------------------------------
 
@@ -92,6 +94,24 @@ class SimServer:
 
     def _on_spawn(self, req: SpawnRequest) -> SpawnReply:
         with self.lock:
+            present = req.robot in self.core.robots
+            link = self.links.get(req.robot)
+            if req.rejoin or present:
+                why = ""
+                if not present:
+                    why = f"there is no {req.robot} in the world to rejoin"
+                elif not req.rejoin:
+                    why = (
+                        f"{req.robot} is already in the world; an agent that takes over its body "
+                        "starts with --respawn"
+                    )
+                elif link is not None and link.alive:
+                    why = f"the agent of {req.robot} is still live"
+                if why:
+                    return SpawnReply(False, why, req.x, req.y, req.theta)
+                self.links[req.robot] = AgentLink(self.core.t, time.monotonic())
+                log.info("a new agent took over robot %s where it stood", req.robot)
+                return SpawnReply(True, "", req.x, req.y, req.theta)
             try:
                 x, y, th = self.core.add_robot(req.robot, (req.x, req.y, req.theta))
             except ValueError as e:
@@ -101,12 +121,21 @@ class SimServer:
             return SpawnReply(True, "", x, y, th)
 
     def _on_agent_left(self, rid: str) -> None:
+        self._release(rid, "left")
+
+    def _on_event(self, _key: str, msg: FleetEvent) -> None:
+        # The coordinator's heartbeat watch notices a hung agent long before agent_timeout_s.
+        if msg.kind == "lost":
+            self._release(msg.robot, "was lost to the coordinator")
+
+    def _release(self, rid: str, why: str) -> None:
+        """Stop waiting for ``rid``'s agent; its robot stops and stays where it is."""
         with self.lock:
             link = self.links.get(rid)
-            if link is not None:
+            if link is not None and link.alive:
                 link.alive = False
                 self.core.set_cmd(rid, 0.0, 0.0)
-                log.info("agent %s left; its robot stops where it is", rid)
+                log.info("agent %s %s; its robot stops where it is", rid, why)
 
     # ---- main loop ----------------------------------------------------------------------
 

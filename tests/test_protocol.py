@@ -27,6 +27,7 @@ from fleet.protocol import (
     MESSAGES,
     SCHEMA_VERSION,
     Arr,
+    Award,
     CoverageImage,
     CoverageSummary,
     DecodeError,
@@ -34,6 +35,7 @@ from fleet.protocol import (
     MapPatches,
     Message,
     Num,
+    Plan,
     PoseEstimate,
     Twist,
     decode,
@@ -111,6 +113,11 @@ def messages(draw: st.DrawFn, cls: type[Message]) -> Message:
         )
     elif cls is PoseEstimate:
         lengths["covariance"] = 9
+    elif cls is Award:
+        fixed["tasks"] = draw(st.lists(TEXT, max_size=5))
+        lengths = dict.fromkeys(("entries", "exits", "times_s"), len(fixed["tasks"]))
+    elif cls is Plan:
+        fixed["sweep_from"] = 0
     elif cls is CoverageImage:
         fixed["rows"] = draw(st.integers(0, 6))
         fixed["cols"] = draw(st.integers(0, 6))
@@ -299,6 +306,8 @@ def _example(cls: type[Message]) -> Message:
             kwargs[name] = np.ones((n, *meta.tail), dtype=meta.dtype)
         elif tp == list[str]:
             kwargs[name] = ["r0", "r1"]
+        elif name == "sweep_from":
+            kwargs[name] = 1
         elif name == "rows":
             kwargs[name] = 2
         elif name == "cols":
