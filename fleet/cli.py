@@ -47,6 +47,9 @@ def _register_all() -> None:
     from fleet import cli_coverage
 
     cli_coverage.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_ops
+
+    cli_ops.register(app, plan_app, bench_app, slam_app)
 
 
 _register_all()

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -22,6 +24,14 @@ TIMED_OUT_EXIT = 3
 # answer for the report.
 REPORT_WAIT_S = 30.0
 MAX_ROBOTS = 64
+# The fleet cannot go on without these; every other process can be started again by
+# `fleet respawn NAME`.
+FATAL_PROCESSES = ("router", "sim")
+
+if TYPE_CHECKING:
+    from fleet.launcher import Launcher
+    from fleet.protocol import OpsReply, OpsRequest
+    from fleet.rundir import ProcessRecord
 
 
 def up(
@@ -62,8 +72,9 @@ def up(
     from fleet.config import resolve_world
     from fleet.dashboard import FleetWatcher
     from fleet.launcher import Launcher, free_port, wait_for_port
-    from fleet.protocol import CoverageImage, CoverageSummary, Request
+    from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
     from fleet.report import build_report, render_png, write_json
+    from fleet.rundir import RunTable, cmdline, write_table
 
     if not 1 <= robots <= MAX_ROBOTS:
         _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
@@ -86,7 +97,13 @@ def up(
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     common = ["--connect", endpoint] + (["--config", str(config)] if config else [])
-    launcher = Launcher(run_dir)
+    up_cmdline = cmdline(os.getpid()) or []
+
+    def save_table(records: dict[str, ProcessRecord]) -> None:
+        table = RunTable(DEFAULT_FLEET, endpoint, os.getpid(), world_path, records, up_cmdline)
+        write_table(run_dir, table)
+
+    launcher = Launcher(run_dir, on_change=save_table)
     stop = threading.Event()
     interrupted = []
 
@@ -108,13 +125,17 @@ def up(
             "sim",
             ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed), *common],
         )
+        state = ["--state", str(run_dir / "coordinator.sqlite")]
         launcher.start(
-            "coordinator", ["coordinator", "--robots", str(robots), "--world", world_path, *common]
+            "coordinator",
+            ["coordinator", "--robots", str(robots), "--world", world_path, *common, *state],
         )
         for i, (x, y, th) in enumerate(starts):
             rid = f"robot-{i}"
-            launcher.start(rid, ["agent", "--id", rid, "--start", f"{x},{y},{th}", *common])
+            state = ["--state-dir", str(run_dir / rid)]
+            launcher.start(rid, ["agent", "--id", rid, "--start", f"{x},{y},{th}", *common, *state])
         bus = Bus("dashboard", "up", [endpoint])
+        bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher))
         watcher = FleetWatcher(bus)
         out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
         status = _watch(watcher, launcher, stop, until_done, timeout, headless, t0)
@@ -162,8 +183,37 @@ def up(
         raise typer.Exit(1 if status != "interrupted" else 130)
 
 
+def _respawner(launcher: Launcher) -> Callable[[OpsRequest], OpsReply]:
+    """The answer to `fleet respawn NAME`: start NAME again with the arguments it had (plus
+    ``--respawn`` for an agent, which then reloads its map and pose from its --state-dir; the
+    coordinator resumes from its --state file)."""
+    from fleet.protocol import OpsReply
+
+    def respawn(req: OpsRequest) -> OpsReply:
+        if req.verb != "respawn":
+            return OpsReply(False, f"unknown verb {req.verb!r}; this key answers respawn")
+        if req.name in FATAL_PROCESSES:
+            return OpsReply(False, f"{req.name} cannot be respawned: the fleet stops without it")
+        record = launcher.records.get(req.name)
+        if record is None:
+            names = ", ".join(n for n in launcher.records if n not in FATAL_PROCESSES)
+            return OpsReply(False, f"no process {req.name!r} in this fleet; there are: {names}")
+        args = list(record.argv)
+        if args[:1] == ["agent"] and "--respawn" not in args:
+            args.append("--respawn")
+        try:
+            proc = launcher.restart(req.name, args)
+        except (ValueError, RuntimeError, OSError) as e:
+            return OpsReply(False, str(e))
+        print(f"respawned {req.name} for {req.sender} (pid {proc.pid})", file=sys.stderr)
+        return OpsReply(True, "")
+
+    return respawn
+
+
 def _watch(watcher, launcher, stop, until_done, timeout, headless, t0) -> str:
-    """Show progress until done, timeout, a signal or a dead process; returns why it stopped."""
+    """Show progress until done, timeout, a signal or a dead router or simulator; returns why
+    it stopped. Another process that dies is reported once, and the run goes on."""
     from rich.console import Console
     from rich.live import Live
 
@@ -172,6 +222,7 @@ def _watch(watcher, launcher, stop, until_done, timeout, headless, t0) -> str:
         None if headless or not console.is_terminal else Live(console=console, auto_refresh=False)
     )
     last_line = -1e9
+    reported: dict[str, int] = {}
     try:
         if live is not None:
             live.start()
@@ -182,15 +233,22 @@ def _watch(watcher, launcher, stop, until_done, timeout, headless, t0) -> str:
             elif wall - last_line >= 5.0:
                 print(watcher.line(wall), file=sys.stderr, flush=True)
                 last_line = wall
-            dead = {
-                n: c for n, c in launcher.dead().items() if n in ("router", "sim", "coordinator")
-            }
-            if dead:
-                name, code = next(iter(dead.items()))
+            dead = launcher.dead()
+            fatal = {n: c for n, c in dead.items() if n in FATAL_PROCESSES}
+            if fatal:
+                name, code = next(iter(fatal.items()))
                 console.print(
                     f"[red]{name} exited with code {code}; see {launcher.run_dir / (name + '.log')}"
                 )
                 return "error"
+            for name, code in dead.items():
+                restarts = launcher.records[name].restarts
+                if reported.get(name) != restarts:
+                    reported[name] = restarts
+                    console.print(
+                        f"[yellow]{name} exited with code {code}; `fleet respawn {name}` starts "
+                        "it again"
+                    )
             if until_done and watcher.done:
                 return "done"
             if timeout is not None and wall > timeout:

@@ -1,0 +1,398 @@
+"""Operator verbs on a running fleet, from another terminal: `fleet kill`, `fleet respawn`,
+`fleet status`, `fleet down`.
+
+Each reads the run dir's process table (``processes.json``, written by `fleet up`, see
+:mod:`fleet.rundir`); `fleet status` also reads the coordinator's state file
+(``coordinator.sqlite``) read-only. By default they act on the newest run under ``runs/``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import os
+import signal
+import sqlite3
+import time
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from fleet.cli_processes import _fail
+from fleet.rundir import (
+    RunDirError,
+    RunTable,
+    is_alive,
+    newest_run_dir,
+    process_state,
+    read_table,
+)
+
+COORDINATOR = "coordinator"
+STATE_FILE = "coordinator.sqlite"
+REPORT_FILE = "report.json"
+DOWN_POLL_S = 0.2
+DOWN_PROGRESS_S = 5.0
+SQLITE_BUSY_S = 2.0
+TASK_STATES = ("open", "assigned", "done")
+
+RunDirOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--run-dir",
+        "-d",
+        help="The run dir `fleet up` writes to (default: the newest one under runs/ that has a "
+        "processes.json).",
+    ),
+]
+NameArg = Annotated[
+    str, typer.Argument(help="A robot id (e.g. robot-1) or 'coordinator'.", show_default=False)
+]
+
+
+class Sig(str, Enum):
+    KILL = "KILL"
+    TERM = "TERM"
+    STOP = "STOP"
+    CONT = "CONT"
+
+
+def _table(run_dir: Path | None) -> tuple[Path, RunTable]:
+    try:
+        run_dir = run_dir if run_dir is not None else newest_run_dir()
+        table = read_table(run_dir)
+    except RunDirError as e:
+        _fail(str(e))
+    return run_dir, table
+
+
+def _target(run_dir: Path, table: RunTable, name: str) -> tuple[int, list[str]]:
+    """The pid and argv of robot or coordinator ``name``; a clear error for any other name."""
+    record = table.processes.get(name)
+    if record is None or (name != COORDINATOR and name not in table.robots()):
+        robots = ", ".join(table.robots()) or "none"
+        _fail(f"no robot {name!r} in {run_dir}; robots: {robots}; or {COORDINATOR!r}")
+    return record.pid, record.argv
+
+
+def _up_state(table: RunTable) -> str:
+    return process_state(table.up_pid, table.up_cmdline)
+
+
+def kill(
+    name: NameArg,
+    sig: Annotated[
+        Sig,
+        typer.Option("--signal", "-s", case_sensitive=False, help="The signal to send."),
+    ] = Sig.TERM,
+    run_dir: RunDirOpt = None,
+) -> None:
+    """Send a signal to a robot's agent process or to the coordinator, as a fault would.
+
+    TERM stops it cleanly, KILL stops it dead (no goodbye on the bus: its liveliness token
+    lapses), STOP freezes it (a hung process: its heartbeats stop), CONT thaws a frozen one.
+    The pid comes from the run's processes.json and is checked against /proc first, so a pid
+    that now belongs to another program is never signalled.
+
+    Examples: `fleet kill robot-1 --signal KILL`; `fleet kill coordinator`;
+    `fleet kill robot-0 -s STOP`, later `fleet kill robot-0 -s CONT`.
+    """
+    run_dir, table = _table(run_dir)
+    pid, argv = _target(run_dir, table, name)
+    state = process_state(pid, argv)
+    if not is_alive(state):
+        _fail(f"{name} (pid {pid}) has already exited; `fleet respawn {name}` starts it again")
+    signum = signal.Signals[f"SIG{sig.value}"]
+    try:
+        os.kill(pid, signum)
+    except ProcessLookupError:
+        _fail(f"{name} (pid {pid}) has already exited")
+    except PermissionError:
+        _fail(f"not allowed to signal {name} (pid {pid}): it belongs to another user")
+    typer.echo(f"sent SIG{sig.value} to {name} (pid {pid}, was {state})")
+
+
+def respawn(
+    name: NameArg,
+    timeout: Annotated[
+        float, typer.Option("--timeout", help="Seconds to wait for `fleet up` to answer.")
+    ] = 10.0,
+    run_dir: RunDirOpt = None,
+) -> None:
+    """Start a robot's agent or the coordinator again, after it died or was killed.
+
+    `fleet up` restarts it with the arguments it had: an agent gets --respawn and reloads its
+    map and last pose from its --state-dir (its robot is still in the world where it stopped);
+    the coordinator resumes the job from its --state file. Refused while the process is still
+    alive (running or stopped): kill it first. The log is appended to, not replaced.
+
+    Example: `fleet kill robot-1 --signal KILL`, then `fleet respawn robot-1`.
+    """
+    from fleet.protocol import Keys, OpsReply, OpsRequest
+
+    if timeout <= 0:
+        _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    run_dir, table = _table(run_dir)
+    pid, argv = _target(run_dir, table, name)
+    if is_alive(process_state(pid, argv)):
+        _fail(f"{name} is alive (pid {pid}); kill it first: `fleet kill {name}`")
+    if not is_alive(_up_state(table)):
+        _fail(f"is fleet up still running? its pid {table.up_pid} is gone")
+    key = Keys(table.fleet).ops("respawn")
+    request = OpsRequest(sender="cli", verb="respawn", name=name)
+    reply = _ask(table, key, request, OpsReply, timeout)
+    if not reply.ok:
+        _fail(f"fleet up refused: {reply.error}")
+    record = read_table(run_dir).processes[name]
+    typer.echo(
+        f"respawned {name}: pid {record.pid}, restart {record.restarts}; log {run_dir / record.log}"
+    )
+
+
+def _ask(table: RunTable, key: str, request: Any, reply_cls: type, timeout: float) -> Any:
+    from fleet.bus import Bus
+
+    try:
+        bus = Bus("cli", f"ops-{os.getpid()}", [table.endpoint], fleet=table.fleet)
+    except Exception as e:  # zenoh raises ZError when the router cannot be reached
+        _fail(f"cannot reach the fleet's router at {table.endpoint}: {e}")
+    try:
+        return bus.request(key, request, reply_cls, timeout=timeout)
+    except TimeoutError:
+        _fail(
+            f"fleet up (pid {table.up_pid}) did not answer on {key} within {timeout} s; "
+            "is fleet up still running?"
+        )
+    except RuntimeError as e:
+        _fail(f"fleet up could not answer: {e}")
+    finally:
+        bus.close()
+
+
+def down(
+    timeout: Annotated[
+        float, typer.Option("--timeout", help="Seconds to wait for `fleet up` to finish.")
+    ] = 60.0,
+    run_dir: RunDirOpt = None,
+) -> None:
+    """Stop the whole fleet: send `fleet up` SIGTERM and wait while it collects the report
+    (report.json, report.png) and stops every process, as Ctrl-C in its terminal would.
+
+    Example: `fleet down`, or `fleet down --run-dir runs/20250101-120000 --timeout 120`.
+    """
+    if timeout <= 0:
+        _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    run_dir, table = _table(run_dir)
+    pid = table.up_pid
+    if not is_alive(_up_state(table)):
+        _fail(f"fleet up (pid {pid}) is not running; nothing to stop in {run_dir}")
+    try:
+        os.kill(pid, signal.SIGTERM)
+        if _up_state(table) == "stopped":
+            os.kill(pid, signal.SIGCONT)
+    except ProcessLookupError:
+        _fail(f"fleet up (pid {pid}) exited before it could be stopped")
+    sent = time.time()
+    typer.echo(f"sent SIGTERM to fleet up (pid {pid}); waiting up to {timeout:g} s")
+    t0 = time.monotonic()
+    last = t0
+    while is_alive(_up_state(table)):
+        now = time.monotonic()
+        if now - t0 > timeout:
+            _fail(
+                f"fleet up (pid {pid}) has not stopped after {timeout:g} s; its log lines are on "
+                f"its terminal, the processes' logs in {run_dir}/"
+            )
+        if now - last >= DOWN_PROGRESS_S:
+            typer.echo(f"  still stopping after {now - t0:.0f} s (collecting the report)")
+            last = now
+        time.sleep(DOWN_POLL_S)
+    report = run_dir / REPORT_FILE
+    if not report.is_file() or report.stat().st_mtime < sent - 1.0:
+        _fail(f"fleet up stopped without writing {report}; see the logs in {run_dir}/")
+    typer.echo(f"fleet stopped after {time.monotonic() - t0:.1f} s; report: {report}")
+
+
+def status(
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help="Print one JSON object: run_dir, fleet, endpoint; up {pid, state}; processes "
+            "{name: {pid, state, restarts, started, log}}; coordinator (null until its state "
+            "file exists) {phase, expected_robots, tasks {open, assigned, done}, robots {id: "
+            "{liveness, state, task, progress, heartbeat_age_s, restarts}}}; coordinator_note "
+            "(why coordinator is null, else empty). States: running, stopped, zombie, gone.",
+        ),
+    ] = False,
+    run_dir: RunDirOpt = None,
+) -> None:
+    """Show every process of the fleet (running, stopped or gone, and how often it was
+    respawned) and the coordinator's view of the job: its phase, each robot's liveness, state,
+    task, progress and heartbeat age, and how many tasks are open, assigned and done.
+
+    Examples: `fleet status`; `fleet status --json | jq .coordinator.tasks`.
+    """
+    run_dir, table = _table(run_dir)
+    result = collect_status(run_dir, table)
+    if as_json:
+        print(json.dumps(result))
+        return
+    from rich.console import Console
+
+    console = Console()
+    if console.is_terminal:
+        _print_rich(console, result)
+    else:
+        print(_plain(result))
+
+
+def collect_status(run_dir: Path, table: RunTable) -> dict[str, Any]:
+    """What `fleet status --json` prints."""
+    processes = {
+        name: {
+            "pid": p.pid,
+            "state": process_state(p.pid, p.argv),
+            "restarts": p.restarts,
+            "started": p.started,
+            "log": str(run_dir / p.log),
+        }
+        for name, p in table.processes.items()
+    }
+    coordinator, note = _coordinator_state(run_dir / STATE_FILE)
+    return {
+        "run_dir": str(run_dir),
+        "fleet": table.fleet,
+        "endpoint": table.endpoint,
+        "up": {"pid": table.up_pid, "state": _up_state(table)},
+        "processes": processes,
+        "coordinator": coordinator,
+        "coordinator_note": note,
+    }
+
+
+def _coordinator_state(path: Path) -> tuple[dict[str, Any] | None, str]:
+    """The coordinator's state file, read-only, in one read transaction; or None and why."""
+    if not path.is_file():
+        return None, "not written yet"
+    try:
+        con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=SQLITE_BUSY_S)
+    except sqlite3.Error as e:
+        return None, f"cannot open {path}: {e}"
+    try:
+        con.isolation_level = None
+        con.execute("BEGIN")
+        meta = dict(con.execute("SELECT key, value FROM meta").fetchall())
+        counts = dict(con.execute("SELECT state, COUNT(*) FROM tasks GROUP BY state").fetchall())
+        rows = con.execute(
+            "SELECT id, liveness, state, task, progress, heartbeat_wall, restarts FROM robots "
+            "ORDER BY id"
+        ).fetchall()
+        con.execute("COMMIT")
+    except sqlite3.Error as e:
+        return None, f"cannot read {path}: {e}"
+    finally:
+        con.close()
+    now = time.time()
+    robots = {
+        rid: {
+            "liveness": liveness,
+            "state": state,
+            "task": task,
+            "progress": progress,
+            "heartbeat_age_s": None if beat is None else round(now - beat, 1),
+            "restarts": restarts,
+        }
+        for rid, liveness, state, task, progress, beat, restarts in rows
+    }
+    expected = meta.get("expected_robots")
+    return {
+        "phase": meta.get("phase"),
+        "expected_robots": int(expected) if expected is not None and expected.isdigit() else None,
+        "tasks": {s: counts.get(s, 0) for s in TASK_STATES},
+        "robots": robots,
+    }, ""
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.2f}"
+    return str(value)
+
+
+PROCESS_COLUMNS = ("process", "pid", "state", "restarts")
+ROBOT_COLUMNS = ("robot", "liveness", "state", "task", "progress", "heartbeat s", "restarts")
+ROBOT_FIELDS = ("liveness", "state", "task", "progress", "heartbeat_age_s", "restarts")
+
+
+def _rows(result: dict[str, Any]) -> tuple[list[list[str]], list[list[str]]]:
+    procs = [
+        [name, str(p["pid"]), p["state"], str(p["restarts"])]
+        for name, p in result["processes"].items()
+    ]
+    coord = result["coordinator"] or {"robots": {}}
+    robots = [[rid, *(_cell(r[k]) for k in ROBOT_FIELDS)] for rid, r in coord["robots"].items()]
+    return procs, robots
+
+
+def _headline(result: dict[str, Any]) -> tuple[str, str]:
+    up = result["up"]
+    head = f"fleet {result['fleet']} in {result['run_dir']}: fleet up pid {up['pid']} {up['state']}"
+    coord = result["coordinator"]
+    if coord is None:
+        return head, f"coordinator state: {result['coordinator_note']}"
+    t = coord["tasks"]
+    return head, (
+        f"coordinator: phase {coord['phase']}; tasks open {t['open']}, assigned "
+        f"{t['assigned']}, done {t['done']}"
+    )
+
+
+def _plain(result: dict[str, Any]) -> str:
+    head, coord_line = _headline(result)
+    procs, robots = _rows(result)
+    lines = [head, *_columns([list(PROCESS_COLUMNS), *procs]), coord_line]
+    if robots:
+        lines += _columns([list(ROBOT_COLUMNS), *robots])
+    return "\n".join(lines)
+
+
+def _columns(rows: list[list[str]]) -> list[str]:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
+
+
+def _print_rich(console: Any, result: dict[str, Any]) -> None:
+    from rich.table import Table
+
+    head, coord_line = _headline(result)
+    procs, robots = _rows(result)
+    console.print(head)
+    console.print(_rich_table(Table, PROCESS_COLUMNS, procs))
+    console.print(coord_line)
+    if robots:
+        console.print(_rich_table(Table, ROBOT_COLUMNS, robots))
+
+
+def _rich_table(table_cls: type, columns: tuple[str, ...], rows: list[list[str]]) -> Any:
+    table = table_cls(*columns)
+    for row in rows:
+        table.add_row(*row)
+    return table
+
+
+def register(
+    app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
+) -> None:
+    for name, command in (("kill", kill), ("respawn", respawn), ("status", status), ("down", down)):
+        app.command(name, help=_reflow(command.__doc__ or ""))(command)
+
+
+def _reflow(doc: str) -> str:
+    """A docstring as help: each paragraph on one line, so the terminal wraps it."""
+    paragraphs = inspect.cleandoc(doc).split("\n\n")
+    return "\n\n".join(" ".join(p.split("\n")) for p in paragraphs)
