@@ -9,7 +9,10 @@ from typing import Protocol
 import numpy as np
 
 from agents.slam.geometry import compose, relative
+from agents.slam.matcher import LikelihoodField
 from agents.slam.params import SlamParams
+from agents.slam.persistence import SavedState
+from agents.slam.relocalize import map_field, relocalize
 from agents.slam.slam import Slam
 from agents.slam.slam_map import SlamMap
 from fleet.protocol import LaserScan, Odometry
@@ -122,3 +125,131 @@ class SlamPose:
 
     def occupancy(self) -> SlamMap | None:
         return self._slam.occupancy()
+
+
+class RelocalizingSlamPose:
+    """SLAM for a restarted agent: first find the robot in its saved map, then track as usual.
+
+    Until localized, each scan (paired with odometry; at most one attempt per scan) is matched
+    against the saved map around the saved pose (``agents.slam.relocalize``); after
+    ``reloc_max_scans`` failed attempts the source is ``failed`` with the last reason and stays
+    so. Meanwhile ``pose()`` is the saved pose with the search window as its covariance, and the
+    agent must not drive. Once a scan matches, a fresh ``SlamPose`` starts at the found pose and
+    is given the recent odometry and that scan, so its pose is tied to the odometry at the scan's
+    stamp and later odometry increments apply from there.
+
+    ``occupancy()`` is the saved map, and once localized the new SLAM's map laid over it (a cell
+    the new SLAM has observed replaces the saved one), so the map saved next still holds what was
+    known before the restart.
+    """
+
+    name = "slam"
+
+    def __init__(
+        self, params: SlamParams, saved: SavedState, range_min: float, range_max: float
+    ) -> None:
+        self._params = params
+        self._saved = saved
+        self._range_min = range_min
+        self._range_max = range_max
+        self._field: LikelihoodField | None = None
+        self._history: deque[Odometry] = deque(maxlen=ODOM_HISTORY)
+        self._slam: SlamPose | None = None
+        self._attempts = 0
+        self._failed = False
+        self._reason = "no scan with odometry yet"
+
+    @property
+    def localized(self) -> bool:
+        return self._slam is not None
+
+    @property
+    def failed(self) -> bool:
+        return self._failed
+
+    @property
+    def reason(self) -> str:
+        """Why the source is not localized (the last attempt's reason); "" once it is."""
+        return self._reason
+
+    def on_odometry(self, msg: Odometry) -> None:
+        if self._slam is not None:
+            self._slam.on_odometry(msg)
+        elif not self._history or msg.stamp > self._history[-1].stamp:
+            self._history.append(msg)
+
+    def on_scan(self, msg: LaserScan) -> None:
+        if self._slam is not None:
+            self._slam.on_scan(msg)
+            return
+        if self._failed or not self._history:
+            return
+        p = self._params
+        if self._field is None:
+            self._field = map_field(self._saved.occupancy, p)
+        self._attempts += 1
+        result = relocalize(
+            self._saved.occupancy,
+            p,
+            msg.ranges.astype(np.float64),
+            msg.angle_min,
+            msg.angle_increment,
+            self._saved.pose,
+            p.reloc_window_xy,
+            p.reloc_window_theta,
+            self._range_min,
+            self._range_max,
+            field=self._field,
+        )
+        if not result.ok:
+            self._reason = f"scan {self._attempts}: {result.reason}"
+            self._failed = self._attempts >= p.reloc_max_scans
+            return
+        slam = SlamPose(p, result.pose, self._range_min, self._range_max)
+        for odom in self._history:
+            slam.on_odometry(odom)
+        slam.on_scan(msg)
+        self._slam = slam
+        self._field = None
+        self._reason = ""
+
+    def pose(self) -> Pose:
+        return self._saved.pose if self._slam is None else self._slam.pose()
+
+    def covariance(self) -> np.ndarray:
+        if self._slam is not None:
+            return self._slam.covariance()
+        p = self._params
+        return np.diag(
+            [p.reloc_window_xy**2, p.reloc_window_xy**2, p.reloc_window_theta**2]
+        ).reshape(9)
+
+    def occupancy(self) -> SlamMap | None:
+        saved = self._saved.occupancy
+        if self._slam is None:
+            return saved
+        fresh = self._slam.occupancy()
+        return overlay(saved, fresh) if fresh is not None else saved
+
+
+def overlay(base: SlamMap, top: SlamMap) -> SlamMap:
+    """``top`` laid over ``base`` on the union of their extents: cells ``top`` observed (non-zero
+    log-odds) take its value, the others keep ``base``'s. Both must share resolution and cell
+    lattice (maps of ``Slam`` do, and their tile-snapped bounds stay tile-snapped); otherwise the
+    result is ``top`` alone."""
+    res = top.resolution
+    shift = (np.asarray(base.origin) - np.asarray(top.origin)) / res
+    cells = np.rint(shift)
+    if base.resolution != res or np.abs(shift - cells).max() > 1e-3:
+        return top
+    b_r, b_c = int(cells[1]), int(cells[0])  # base's first cell in top's cell indices
+    r0, c0 = min(0, b_r), min(0, b_c)
+    r1 = max(top.shape[0], b_r + base.shape[0])
+    c1 = max(top.shape[1], b_c + base.shape[1])
+    out = np.zeros((r1 - r0, c1 - c0), dtype=np.float32)
+    out[b_r - r0 : b_r - r0 + base.shape[0], b_c - c0 : b_c - c0 + base.shape[1]] = base.log_odds
+    block = out[-r0 : -r0 + top.shape[0], -c0 : -c0 + top.shape[1]]
+    seen = top.log_odds != 0
+    block[seen] = top.log_odds[seen]
+    origin = (top.origin[0] + c0 * res, top.origin[1] + r0 * res)
+    return SlamMap(out, res, origin)

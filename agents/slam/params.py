@@ -68,6 +68,20 @@ class SlamParams:
     huber_scale: float = 3.0  # in standard deviations: a wrong loop closure is down-weighted
     optimize_every_nodes: int = 20  # optimize at most this often, and only after new closures
 
+    # Relocalization of a restarted agent in its saved map (agents/slam/relocalize.py)
+    reloc_window_xy: float = 1.0  # search ± this around the saved pose: the body may have coasted
+    reloc_window_theta: float = math.pi  # ± this; π searches every heading
+    reloc_angular_step: float = 0.02  # rotation step of the wide search (then refined finer)
+    reloc_coarse_factor: int = 8  # low-resolution level of the wide search's branch and bound
+    reloc_search_points: int = 90  # the wide search scores this many evenly spaced points
+    reloc_sectors: int = 8  # the heading window is searched in this many sectors, each's best kept
+    reloc_min_points: int = 30  # fewer returns than this: do not try
+    reloc_min_score: float = 0.6  # accept only a mean likelihood of at least this ...
+    reloc_ambiguity_margin: float = 0.1  # ... and every distinct candidate this much lower
+    reloc_distinct_xy: float = 0.3  # a candidate this far from the best (m) ...
+    reloc_distinct_theta: float = 0.3  # ... or turned this much (rad) is a distinct hypothesis
+    reloc_max_scans: int = 20  # a restarted agent gives up after this many scans without a match
+
     def validate(self) -> None:
         positive = (
             "resolution",
@@ -88,6 +102,12 @@ class SlamParams:
             "loop_sigma_xy",
             "loop_sigma_theta",
             "huber_scale",
+            "reloc_window_xy",
+            "reloc_window_theta",
+            "reloc_angular_step",
+            "reloc_ambiguity_margin",
+            "reloc_distinct_xy",
+            "reloc_distinct_theta",
         )
         for name in positive:
             if getattr(self, name) <= 0:
@@ -100,7 +120,7 @@ class SlamParams:
             raise ValueError("patch_tolerance must be within 0..100")
         if self.submap_nodes < 2:
             raise ValueError("submap_nodes must be >= 2")
-        for name in ("coarse_factor", "loop_coarse_factor"):
+        for name in ("coarse_factor", "loop_coarse_factor", "reloc_coarse_factor"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
         for name in (
@@ -109,6 +129,10 @@ class SlamParams:
             "field_refresh_nodes",
             "loop_every_nodes",
             "optimize_every_nodes",
+            "reloc_search_points",
+            "reloc_sectors",
+            "reloc_min_points",
+            "reloc_max_scans",
         ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1")
@@ -116,3 +140,9 @@ class SlamParams:
             raise ValueError("angular search windows must be <= pi")
         if not 0 < self.min_match_score < 1 or not 0 < self.loop_min_score < 1:
             raise ValueError("min_match_score and loop_min_score must be within (0, 1)")
+        if self.reloc_window_theta > math.pi:
+            raise ValueError("reloc_window_theta must be <= pi")
+        if not 0 < self.reloc_min_score < 1:
+            raise ValueError("reloc_min_score must be within (0, 1)")
+        if self.reloc_ambiguity_margin >= self.reloc_min_score:
+            raise ValueError("reloc_ambiguity_margin must be < reloc_min_score")
