@@ -284,7 +284,7 @@ def _coordinator_state(path: Path) -> tuple[dict[str, Any] | None, str]:
     try:
         con.isolation_level = None
         con.execute("BEGIN")
-        meta = dict(con.execute("SELECT key, value FROM meta").fetchall())
+        meta = {k: _meta_value(v) for k, v in con.execute("SELECT key, value FROM meta")}
         counts = dict(con.execute("SELECT state, COUNT(*) FROM tasks GROUP BY state").fetchall())
         rows = con.execute(
             "SELECT id, liveness, state, task, progress, heartbeat_wall, restarts FROM robots "
@@ -310,10 +310,20 @@ def _coordinator_state(path: Path) -> tuple[dict[str, Any] | None, str]:
     expected = meta.get("expected_robots")
     return {
         "phase": meta.get("phase"),
-        "expected_robots": int(expected) if expected is not None and expected.isdigit() else None,
+        "expected_robots": expected if isinstance(expected, int) else None,
         "tasks": {s: counts.get(s, 0) for s in TASK_STATES},
         "robots": robots,
     }, ""
+
+
+def _meta_value(text: str | None) -> Any:
+    """A meta value: the coordinator stores JSON (``"cleaning"``, ``3``); plain text is kept."""
+    if text is None:
+        return None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
 
 
 def _cell(value: Any) -> str:
@@ -347,7 +357,7 @@ def _headline(result: dict[str, Any]) -> tuple[str, str]:
         return head, f"coordinator state: {result['coordinator_note']}"
     t = coord["tasks"]
     return head, (
-        f"coordinator: phase {coord['phase']}; tasks open {t['open']}, assigned "
+        f"coordinator: phase {_cell(coord['phase'])}; tasks open {t['open']}, assigned "
         f"{t['assigned']}, done {t['done']}"
     )
 
