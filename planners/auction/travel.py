@@ -7,7 +7,8 @@ blocked corner) with edges as long as the steps, and Dijkstra's algorithm
 (``scipy.sparse.csgraph.dijkstra``) gives the distance from the start to every block. Grid
 paths run along 16 headings only, so they are up to 2.7 % longer than the straight line (8 %
 with 8 neighbours); a target in line of sight of the start (every block along the segment
-free) gets the straight-line distance instead.
+free; an end in a blocked block is moved to the centre of its nearest free one) gets the
+straight-line distance instead.
 
 A start outside the grid or in a blocked block is moved to the nearest free block (Euclidean
 distance transform with ``return_indices``); so is a target within ``TARGET_SNAP_M`` of a free
@@ -79,16 +80,20 @@ class TravelGrid:
         if not self.free.any() or len(targets) == 0:
             return far
         cols = self.free.shape[1]
-        src = self._snapped(self._cell_of(start[None, :]))[0]
-        dist = self._distances(int(src[0] * cols + src[1]))
+        start_rc = self._cell_of(start[None, :])
+        src = self._snapped(start_rc)
+        dist = self._distances(int(src[0, 0] * cols + src[0, 1]))
         rc = self._cell_of(targets)
         snapped = self._snapped(rc)
-        moved = np.hypot(*(snapped - rc).T) * self.cell
+        near = np.hypot(*(snapped - rc).T) * self.cell <= TARGET_SNAP_M
         geo = dist[snapped[:, 0] * cols + snapped[:, 1]] * self.cell
-        ok = np.isfinite(geo) & (moved <= TARGET_SNAP_M)
-        seen = self._in_sight(start, targets)
+        # sight lines run between free points: an end in a blocked block moves to its free one
+        seen = self._in_sight(
+            self._free_point(start[None, :], start_rc, src)[0],
+            self._free_point(targets, rc, snapped),
+        )
         metres = np.where(seen, straight, geo)
-        return np.where(ok | seen, metres / self.speed, far)
+        return np.where(near & (seen | np.isfinite(geo)), metres / self.speed, far)
 
     def _cell_of(self, xy: np.ndarray) -> np.ndarray:
         col = np.floor((xy[:, 0] - self.origin[0]) / self.cell).astype(np.int64)
@@ -110,10 +115,14 @@ class TravelGrid:
             self._cache[node] = dijkstra(self._graph, directed=False, indices=node)
         return self._cache[node]
 
+    def _free_point(self, xy: np.ndarray, rc: np.ndarray, snapped: np.ndarray) -> np.ndarray:
+        """Each point, or the centre of its snapped block where that is another block."""
+        centres = (snapped[:, ::-1] + 0.5) * self.cell + self.origin
+        return np.where((rc == snapped).all(axis=1)[:, None], xy, centres)
+
     def _in_sight(self, start: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        """Whether every block along the segment from ``start`` to each target is free
-        (sampled every half block), but for the blocks holding its two ends: a robot beside a
-        wall stands in a block the inflation closed, and sees along the wall all the same."""
+        """Whether every block along the segment from ``start`` (2,) to each of ``targets``
+        (K, 2) is free (sampled every half block)."""
         length = np.hypot(*(targets - start).T)
         n = max(2, math.ceil(float(length.max(initial=0.0)) / (self.cell / 2)) + 1)
         frac = np.linspace(0.0, 1.0, n)
@@ -123,10 +132,7 @@ class TravelGrid:
         inside = (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)
         ok = np.zeros(len(rc), dtype=bool)
         ok[inside] = self.free[rc[inside, 0], rc[inside, 1]]
-        ends = self._cell_of(np.vstack([start[None, :], targets]))
-        rc = rc.reshape(len(targets), n, 2)
-        at_end = (rc == ends[0]).all(axis=2) | (rc == ends[1:, None, :]).all(axis=2)
-        return (ok.reshape(len(targets), n) | at_end).all(axis=1)
+        return ok.reshape(len(targets), n).all(axis=1)
 
 
 def travel_times(
