@@ -241,6 +241,41 @@ def test_process_state_matches_a_whole_command_line(children: Children) -> None:
     assert process_state(proc.pid, ["up", "--robots", "2"]) == "gone"  # no fleet.cli in it
 
 
+# ---- the launcher ------------------------------------------------------------------------------
+
+
+def test_launcher_records_restarts_and_appends_to_the_log(tmp_path: Path) -> None:
+    from fleet.launcher import Launcher, free_port
+
+    tables: list[dict[str, ProcessRecord]] = []
+    launcher = Launcher(tmp_path, on_change=tables.append)
+    try:
+        first = launcher.start("x", ["--help"])
+        assert first.wait(30) == 0
+        assert tables[-1]["x"] == ProcessRecord(
+            first.pid, ["--help"], tables[-1]["x"].started, 0, "x.log"
+        )
+        with pytest.raises(ValueError, match="x was started already"):
+            launcher.start("x", ["--help"])
+        with pytest.raises(ValueError, match="no process 'y'"):
+            launcher.restart("y", ["--help"])
+        router = launcher.start("r", ["router", "--listen", f"tcp/127.0.0.1:{free_port()}"])
+        with pytest.raises(RuntimeError, match=rf"r is alive \(pid {router.pid}\); kill it first"):
+            launcher.restart("r", ["--help"])
+        size = (tmp_path / "x.log").stat().st_size
+        assert size > 0
+        again = launcher.restart("x", ["--version-is-no-option"])
+        assert again.wait(30) == 2
+        assert tables[-1]["x"].pid == again.pid and tables[-1]["x"].restarts == 1
+        assert tables[-1]["x"].argv == ["--version-is-no-option"]
+        log = (tmp_path / "x.log").read_bytes()
+        assert b"Usage" in log[:size] and b"No such option" in log[size:]  # both runs kept
+    finally:
+        launcher.stop_all()
+    with pytest.raises(RuntimeError, match="stopping"):
+        launcher.restart("x", ["--help"])
+
+
 # ---- fleet kill ---------------------------------------------------------------------------------
 
 
