@@ -7,6 +7,7 @@ starts at the spawn pose, so its map frame is the world frame.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -278,7 +279,7 @@ def test_relocalizing_pose_source_fails_after_max_scans_with_the_last_reason(
     cfg: FleetConfig, home_run: tuple[SavedState, Pose]
 ) -> None:
     saved, _ = home_run
-    params = SlamParams(**{**cfg.slam.__dict__, "reloc_max_scans": 3})
+    params = dataclasses.replace(cfg.slam, reloc_max_scans=3)
     core = _core(cfg, "home", (9.0, 4.6, 0.3), seed=22)
     source = RelocalizingSlamPose(params, saved, cfg.lidar.range_min, cfg.lidar.range_max)
     _drive(core, source, [(0.25, 0.0, 0.0)])
