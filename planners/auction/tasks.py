@@ -5,8 +5,8 @@ tour: its *new area* is the cleanable cells (``cell_labels > 0``) strictly withi
 ``cleaning_width / 2`` of it that no earlier segment reached (the brush capsule of
 :mod:`planners.coverage.metrics`), and its *hop* is the length it drives without sweeping new
 floor, ``length − new area / cleaning_width`` (≈ 0 along a lane, ≈ the length on a transit
-over swept floor). Cutting there costs nothing: whoever wins the next task travels to it
-anyway, so a task boundary at a hop adds no sweeping detour.
+over swept floor). A boundary there splits no run of sweeping lanes, and the robot that wins
+the next task may reach it by its own way instead of the hop.
 
 The cut rule (sequential, from the start): with the elapsed estimated time ``T0`` at the last
 cut and ``target_s`` the target, the path's rest becomes the last task once it is at most
