@@ -1,13 +1,25 @@
-"""Conflict-Based Search (Sharon et al., AIJ 2015) with the ICBS improvements, optimal for SOC.
+"""Conflict-Based Search (Sharon et al., AIJ 2015) with the ICBS improvements, target reasoning and
+meta-agents, optimal for SOC.
 
 - Conflict prioritization (Boyarski et al., IJCAI 2015): conflicts are classified with MDDs as
   cardinal (splitting raises both children's cost), semi-cardinal (one child) or non-cardinal;
   the high level splits cardinal conflicts first, then semi-cardinal, then the earliest.
-- Bypass (Boyarski et al., SoCS 2015): when a child found a path of the same cost with fewer
-  conflicts, the parent takes that path and is expanded again instead of branching.
+- Bypass (Boyarski et al., SoCS 2015): when a child found paths of the same cost with fewer
+  conflicts, the parent takes them and is expanded again instead of branching.
 - CG heuristic (Felner et al., ICAPS 2018): each cardinal conflict forces one of its two agents
   to cost one more, so the minimum vertex cover of the graph of cardinally conflicting agents is
   an admissible high-level heuristic; the high level orders nodes by ``SOC + h``.
+- Target reasoning (Li et al., AIJ 2021): a conflict with an agent parked at its goal splits on
+  that agent's path length (``constraints``); for the parked agent it is always cardinal.
+- Meta-agents (MA-CBS, Sharon et al., SoCS 2012): when two groups of agents have conflicted
+  more than ``MERGE_THRESHOLD`` times in the search (MA-CBS's conflict matrix), they are merged
+  into one meta-agent of at most ``MAX_GROUP`` agents, planned by an optimal joint A* with
+  operator decomposition (``joint``) under its members' constraints, and the search restarts
+  from a new root with the merged group (merge & restart, Boyarski et al., IJCAI 2015). Every
+  run is a complete CBS over a partition of the agents, so optimality is kept; agents that
+  block each other in a dead end are solved jointly in milliseconds instead of being split
+  forever. A merge whose first joint search exceeds ``JOINT_BUDGET`` expansions is given up,
+  and that pair is split as before.
 - The low level is space-time A* that breaks ties toward fewer collisions with the other agents'
   paths (a conflict-avoidance table), and the high level toward fewer conflicts.
 
@@ -23,8 +35,24 @@ from heapq import heappop, heappush
 import numpy as np
 
 from planners.mapf.conflicts import Conflict, all_conflicts, conflicts_of, positions
+from planners.mapf.constraints import (
+    JOINT_BUDGET,
+    LENGTH_LE,
+    MAX_GROUP,
+    MERGE_THRESHOLD,
+    TARGET,
+    Constraint,
+    as_target,
+    groups_of,
+    members,
+    merged,
+    split,
+    table_for,
+    violators,
+)
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
+from planners.mapf.joint import JointSearchLimit, joint_astar
 from planners.mapf.low_level import SearchStats, space_time_astar
 from planners.mapf.mdd import mdd_singletons
 from planners.mapf.model import InfeasibleInstanceError, path_cost
@@ -33,45 +61,56 @@ from planners.mapf.vertex_cover import min_vertex_cover
 
 CARDINAL, SEMI_CARDINAL, NON_CARDINAL = 0, 1, 2
 
-# A constraint forbids its agent (u, -1, t): being in u at t; (u, v, t): moving u → v arriving t.
-Constraint = tuple[int, int, int]
-# (class, t, a, b, u, v): a conflict with its cardinality class first, so min() picks the best.
+# (class, t, a, b, u, v): a conflict with its cardinality class first, so min() picks the best;
+# v is -1 for a vertex conflict, TARGET for a target conflict (a in b's goal u, b parked there)
 Classified = tuple[int, int, int, int, int, int]
 
 
 @dataclass(frozen=True)
 class CbsOptions:
-    """Which ICBS improvements to use; all off gives the plain CBS of Sharon et al. (baseline)."""
+    """Which improvements to use; all off gives the plain CBS of Sharon et al. (baseline).
+
+    ``merge_threshold`` is MA-CBS's B (0: never merge).
+    """
 
     cardinal: bool = True
     bypass: bool = True
     heuristic: str = "cg"
     avoidance_table: bool = True
+    target: bool = True
+    merge_threshold: int = MERGE_THRESHOLD
 
     def __post_init__(self) -> None:
         if self.heuristic not in ("none", "cg"):
             raise ValueError(f"heuristic must be 'none' or 'cg', got {self.heuristic!r}")
         if self.heuristic == "cg" and not self.cardinal:
             raise ValueError("the CG heuristic needs cardinal conflict classification")
+        if self.merge_threshold < 0:
+            raise ValueError(f"merge_threshold must be ≥ 0, got {self.merge_threshold}")
 
 
-PLAIN_CBS = CbsOptions(cardinal=False, bypass=False, heuristic="none", avoidance_table=False)
+PLAIN_CBS = CbsOptions(
+    cardinal=False,
+    bypass=False,
+    heuristic="none",
+    avoidance_table=False,
+    target=False,
+    merge_threshold=0,
+)
 
 
 class _Node:
-    __slots__ = ("agent", "conflicts", "constraint", "costs", "h", "mdds", "parent", "paths", "soc")
+    __slots__ = ("conflicts", "constraint", "costs", "h", "mdds", "parent", "paths", "soc")
 
     def __init__(
         self,
         parent: _Node | None,
-        agent: int,
         constraint: Constraint | None,
         paths: list[list[int]],
         costs: list[int],
         mdds: dict[int, tuple[int, ...]],
     ) -> None:
         self.parent = parent
-        self.agent = agent
         self.constraint = constraint
         self.paths = paths
         self.costs = costs
@@ -79,6 +118,10 @@ class _Node:
         self.mdds = mdds
         self.conflicts: list[Classified] = []
         self.h = 0
+
+
+class _Restart(Exception):
+    """Two groups were merged: the search starts again from a new root (ICBS's merge & restart)."""
 
 
 class ConflictBasedSearch:
@@ -100,27 +143,40 @@ class ConflictBasedSearch:
         self.deadline = deadline
         self.stats = stats
         self.k = len(self.starts)
+        self.group: tuple[int, ...] = tuple(range(self.k))
         self._counter = 0
+        self._conflict_counts: dict[tuple[frozenset[int], frozenset[int]], int] = {}
+        self._too_big: set[frozenset[int]] = set()
+        self._joint_plans: dict[frozenset[int], list[list[int]]] = {}
         graph.precompute(self.goals)
 
     def run(self) -> tuple[list[list[int]], int]:
         """Optimal paths and the root lower bound (SOC of the individually optimal paths)."""
-        root = self._root()
-        if root is None:
-            raise RuntimeError("an agent has no path although its goal is reachable")
+        first_bound: int | None = None
+        while True:
+            root = self._root()
+            if first_bound is None:
+                first_bound = root.soc
+            try:
+                return self._search(root), first_bound
+            except _Restart:
+                continue
+
+    def _search(self, root: _Node) -> list[list[int]]:
         open_list: list[tuple[int, int, int, _Node]] = []
         self._push(open_list, root)
         while open_list:
             self.deadline.check()
             node = heappop(open_list)[3]
             if not node.conflicts:
-                return node.paths, root.soc
+                return node.paths
             self.stats.high += 1
             conflict = min(node.conflicts)
+            self._count(node, conflict[2], conflict[3])
             pos = positions(node.paths)
             children = []
-            for agent, constraint in self._split(conflict):
-                child = self._child(node, agent, constraint, pos)
+            for constraint in split(conflict[1:]):
+                child = self._child(node, constraint, pos)
                 if child is None:
                     continue
                 if (
@@ -129,7 +185,7 @@ class ConflictBasedSearch:
                     and child.soc == node.soc
                     and len(child.conflicts) < len(node.conflicts)
                 ):
-                    self._adopt(node, agent, child.paths[agent], pos)
+                    self._adopt(node, child, pos)
                     children = [node]
                     break
                 children.append(child)
@@ -141,99 +197,185 @@ class ConflictBasedSearch:
         self._counter += 1
         heappush(open_list, (node.soc + node.h, len(node.conflicts), self._counter, node))
 
-    def _root(self) -> _Node | None:
+    def _count(self, node: _Node, a: int, b: int) -> None:
+        """Count a conflict between the groups of a and b; past ``merge_threshold``, merge them
+        and restart (raises _Restart) unless the merged group is too large or too hard."""
+        threshold = self.options.merge_threshold
+        if not threshold:
+            return
+        ga = frozenset(members(self.group, self.group[a]))
+        gb = frozenset(members(self.group, self.group[b]))
+        key = (ga, gb) if min(ga) < min(gb) else (gb, ga)
+        count = self._conflict_counts.get(key, 0) + 1
+        self._conflict_counts[key] = count
+        both = ga | gb
+        if count <= threshold or len(both) > MAX_GROUP or both in self._too_big:
+            return
         n = self.graph.num_cells
-        paths: list[list[int]] = []
-        for i in range(self.k):
-            cat = (
-                ConflictAvoidanceTable.from_paths(n, paths)
-                if self.options.avoidance_table
-                else None
-            )
-            path = space_time_astar(
+        lengths = [len(p) for p in node.paths]
+        cat = (
+            ConflictAvoidanceTable.from_positions(n, positions(node.paths), lengths, sorted(both))
+            if self.options.avoidance_table
+            else None
+        )
+        agents = sorted(both)
+        try:
+            paths = joint_astar(
                 self.graph,
-                self.starts[i],
-                self.goals[i],
-                ConstraintTable(n),
+                [self.starts[i] for i in agents],
+                [self.goals[i] for i in agents],
+                [ConstraintTable(n) for _ in agents],
                 cat,
                 self.deadline,
                 self.stats,
+                JOINT_BUDGET,
             )
-            if path is None:
-                return None
-            paths.append(path)
-        root = _Node(None, -1, None, paths, [path_cost(p) for p in paths], {})
+        except JointSearchLimit:
+            self._too_big.add(both)
+            return
+        if paths is None:
+            raise InfeasibleInstanceError(
+                f"no solution: agents {agents} have no joint plan even on their own"
+            )
+        self._joint_plans[both] = paths
+        self.group = merged(self.group, a, b)
+        raise _Restart
+
+    def _root(self) -> _Node:
+        n = self.graph.num_cells
+        paths: list[list[int]] = [[] for _ in range(self.k)]
+        planned: list[int] = []
+        for gid in sorted(set(self.group)):
+            agents = members(self.group, gid)
+            if len(agents) > 1:
+                found = self._joint_plans[frozenset(agents)]
+            else:
+                cat = (
+                    ConflictAvoidanceTable.from_paths(n, [paths[i] for i in planned])
+                    if self.options.avoidance_table
+                    else None
+                )
+                path = space_time_astar(
+                    self.graph,
+                    self.starts[gid],
+                    self.goals[gid],
+                    ConstraintTable(n),
+                    cat,
+                    self.deadline,
+                    self.stats,
+                )
+                if path is None:
+                    raise RuntimeError("an agent has no path although its goal is reachable")
+                found = [path]
+            for i, path in zip(agents, found, strict=True):
+                paths[i] = path
+                planned.append(i)
+        root = _Node(None, None, paths, [path_cost(p) for p in paths], {})
         root.conflicts = [self._classify(root, c) for c in all_conflicts(paths)]
         root.h = self._heuristic(root)
         return root
 
     @staticmethod
-    def _split(conflict: Classified) -> list[tuple[int, Constraint]]:
-        _, t, a, b, u, v = conflict
-        if v == -1:
-            return [(a, (u, -1, t)), (b, (u, -1, t))]
-        return [(a, (u, v, t)), (b, (v, u, t))]
+    def _constraints(node: _Node) -> list[Constraint]:
+        out = []
+        while node.parent is not None:
+            if node.constraint is not None:
+                out.append(node.constraint)
+            node = node.parent
+        return out
 
     def _table(self, node: _Node, agent: int) -> ConstraintTable:
-        table = ConstraintTable(self.graph.num_cells)
-        while node.parent is not None:
-            if node.agent == agent:
-                u, v, t = node.constraint  # type: ignore[misc]
-                if v == -1:
-                    table.add_vertex(u, t)
-                else:
-                    table.add_edge(u, v, t)
-            node = node.parent
-        return table
+        return table_for(self.graph.num_cells, self._constraints(node), agent)
 
-    def _child(
-        self, node: _Node, agent: int, constraint: Constraint, pos: np.ndarray
-    ) -> _Node | None:
-        child = _Node(node, agent, constraint, list(node.paths), list(node.costs), dict(node.mdds))
-        child.mdds.pop(agent, None)
-        cat = (
-            ConflictAvoidanceTable.from_positions(
-                self.graph.num_cells, pos, [len(p) for p in node.paths], agent
-            )
-            if self.options.avoidance_table
-            else None
-        )
-        path = space_time_astar(
-            self.graph,
-            self.starts[agent],
-            self.goals[agent],
-            self._table(child, agent),
-            cat,
-            self.deadline,
-            self.stats,
-        )
-        if path is None:
+    def _child(self, node: _Node, constraint: Constraint, pos: np.ndarray) -> _Node | None:
+        child = _Node(node, constraint, list(node.paths), list(node.costs), dict(node.mdds))
+        agents = violators(constraint, pos) if constraint[0] == LENGTH_LE else [constraint[1]]
+        changed = self._replan(child, agents, pos)
+        if changed is None:
             return None
-        child.paths[agent] = path
-        child.costs[agent] = path_cost(path)
-        child.soc = sum(child.costs)
-        self._update_conflicts(child, node.conflicts, agent, path, pos)
+        self._update_conflicts(child, node.conflicts, changed, pos if len(changed) == 1 else None)
         return child
 
-    def _adopt(self, node: _Node, agent: int, path: list[int], pos: np.ndarray) -> None:
-        """Bypass: the node keeps its constraints and cost but takes the better path."""
+    def _replan(self, node: _Node, agents: Sequence[int], pos: np.ndarray) -> list[int] | None:
+        """Replan the groups of ``agents`` in ``node``; the agents replanned, or None if one of
+        those groups has no plan. Single agents use space-time A*, groups the joint search."""
+        n = self.graph.num_cells
+        lengths = [len(p) for p in node.paths]
+        constraints = self._constraints(node)
+        changed: list[int] = []
+        for group in groups_of(self.group, agents):
+            cat = (
+                ConflictAvoidanceTable.from_positions(n, pos, lengths, group)
+                if self.options.avoidance_table
+                else None
+            )
+            tables = [table_for(n, constraints, i) for i in group]
+            if len(group) == 1:
+                path = space_time_astar(
+                    self.graph,
+                    self.starts[group[0]],
+                    self.goals[group[0]],
+                    tables[0],
+                    cat,
+                    self.deadline,
+                    self.stats,
+                )
+                paths = None if path is None else [path]
+            else:
+                paths = joint_astar(
+                    self.graph,
+                    [self.starts[i] for i in group],
+                    [self.goals[i] for i in group],
+                    tables,
+                    cat,
+                    self.deadline,
+                    self.stats,
+                )
+            if paths is None:
+                return None
+            for i, path in zip(group, paths, strict=True):
+                node.paths[i] = path
+                node.costs[i] = path_cost(path)
+                node.mdds.pop(i, None)
+                changed.append(i)
+        node.soc = sum(node.costs)
+        return changed
+
+    def _adopt(self, node: _Node, child: _Node, pos: np.ndarray) -> None:
+        """Bypass: the node keeps its constraints and cost but takes the child's better paths."""
         old = list(node.conflicts)
+        changed = [i for i in range(self.k) if child.paths[i] is not node.paths[i]]
         node.paths = list(node.paths)
-        node.paths[agent] = path
-        self._update_conflicts(node, old, agent, path, pos)
+        node.costs = list(node.costs)
+        for i in changed:
+            node.paths[i] = child.paths[i]
+            node.costs[i] = child.costs[i]
+            node.mdds.pop(i, None)
+        self._update_conflicts(node, old, changed, pos if len(changed) == 1 else None)
 
     def _update_conflicts(
         self,
         node: _Node,
         inherited: list[Classified],
-        agent: int,
-        path: list[int],
-        pos: np.ndarray,
+        changed: list[int],
+        pos: np.ndarray | None,
     ) -> None:
-        kept = [c for c in inherited if c[2] != agent and c[3] != agent]
-        new = [self._classify(node, c) for c in conflicts_of(agent, path, pos)]
-        node.conflicts = kept + new
+        """Keep the conflicts not involving ``changed`` agents and find theirs anew (``pos``: the
+        parent's positions, usable when only one agent changed)."""
+        moved = set(changed)
+        kept = [c for c in inherited if c[2] not in moved and c[3] not in moved]
+        if pos is None:
+            pos = positions(node.paths)
+        done: set[int] = set()
+        new: list[Conflict] = []
+        for agent in changed:
+            new.extend(c for c in conflicts_of(agent, node.paths[agent], pos) if c[2] not in done)
+            done.add(agent)
+        node.conflicts = kept + [self._classify(node, c) for c in new]
         node.h = self._heuristic(node)
+
+    def _single(self, agent: int) -> bool:
+        return self.group.count(self.group[agent]) == 1
 
     def _mdd(self, node: _Node, agent: int) -> tuple[int, ...]:
         singles = node.mdds.get(agent)
@@ -249,6 +391,10 @@ class ConflictBasedSearch:
         return singles
 
     def _cardinal_for(self, node: _Node, agent: int, t: int, frm: int, to: int) -> bool:
+        """Whether forbidding the agent's part of the conflict raises its cost (a member of a
+        meta-agent: never claimed, the group may trade cost between its members)."""
+        if not self._single(agent):
+            return False
         cost = node.costs[agent]
         if to == -1:
             return t >= cost or self._mdd(node, agent)[t] == frm
@@ -256,15 +402,22 @@ class ConflictBasedSearch:
         return t <= cost and singles[t - 1] == frm and singles[t] == to
 
     def _classify(self, node: _Node, conflict: Conflict) -> Classified:
+        if self.options.target:
+            conflict = as_target(conflict, self.goals, node.costs)
         t, a, b, u, v = conflict
         if not self.options.cardinal:
             return (NON_CARDINAL, t, a, b, u, v)
-        ca = self._cardinal_for(node, a, t, u, v)
-        cb = (
-            self._cardinal_for(node, b, t, u, -1)
-            if v == -1
-            else self._cardinal_for(node, b, t, v, u)
-        )
+        if v == TARGET:
+            # l_b > t raises the parked agent's cost; l_b ≤ t bars the mover from u from t on
+            ca = t <= node.costs[a] and self._cardinal_for(node, a, t, u, -1)
+            cb = self._single(b)
+        else:
+            ca = self._cardinal_for(node, a, t, u, v)
+            cb = (
+                self._cardinal_for(node, b, t, u, -1)
+                if v == -1
+                else self._cardinal_for(node, b, t, v, u)
+            )
         return (2 - ca - cb, t, a, b, u, v)
 
     def _heuristic(self, node: _Node) -> int:

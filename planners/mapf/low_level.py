@@ -1,7 +1,9 @@
 """Single-agent space-time search under constraints: A* and focal A* (the CBS / ECBS low levels).
 
 States are ``(cell, t)`` with unit-cost moves and waits and the cached BFS distance as heuristic,
-raised to ``earliest_finish - t`` when the goal is constrained later on (both consistent). Beyond
+raised to ``earliest_finish - t`` when the goal is constrained later on (both consistent). A
+``max_finish`` bound (target reasoning's ``l ≤ t``) prunes states that cannot reach the goal in
+time. Beyond
 the last time any constraint or avoidance entry mentions, ``(cell, t)`` and ``(cell, t + 1)`` have
 the same future, so states are merged there ("time collapse"): the state space is finite and a
 search with no solution ends instead of waiting forever.
@@ -60,6 +62,9 @@ def space_time_astar(
     dist = graph.distances(goal)
     if dist[start] >= UNREACHABLE:
         return None
+    latest = UNREACHABLE if table.max_finish is None else table.max_finish
+    if dist[start] > latest:
+        return None
     succ = graph.successors
     vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
     horizon = max(table.horizon, earliest) + 1
@@ -101,6 +106,8 @@ def space_time_astar(
                 if nc != cell and (tn + cell) * n + nc in edge:
                     continue
                 h = dist[nc]
+                if nt + h > latest:
+                    continue
                 if earliest - nt > h:
                     h = earliest - nt
                 nkey = nc * span + (nt if nt < horizon else horizon)
@@ -147,6 +154,9 @@ def focal_astar(
     n = graph.num_cells
     dist = graph.distances(goal)
     if dist[start] >= UNREACHABLE:
+        return None
+    latest = UNREACHABLE if table.max_finish is None else table.max_finish
+    if dist[start] > latest:
         return None
     succ = graph.successors
     vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
@@ -207,6 +217,8 @@ def focal_astar(
                 if nc != cell and (tn + cell) * n + nc in edge:
                     continue
                 h = dist[nc]
+                if nt + h > latest:
+                    continue
                 if earliest - nt > h:
                     h = earliest - nt
                 c = conf + cat_v.get(tn + nc, 0)

@@ -1,10 +1,10 @@
 """Multi-valued decision diagrams (Sharon et al. 2013), reduced to what ICBS needs.
 
 The MDD of an agent with cost C under its constraints holds every ``(cell, t)`` on some path of
-cost exactly C. A conflict is cardinal for an agent when the MDD has width one at the conflict
-(every optimal path goes through it), so the constraint that forbids it raises the agent's cost
-(Boyarski et al., "ICBS", IJCAI 2015). We keep only ``singletons[t]``: the cell when the level has
-width one, else -1.
+cost exactly C (one that arrives at its goal at C, from another cell). A conflict is cardinal for
+an agent when the MDD has width one at the conflict (every optimal path goes through it), so the
+constraint that forbids it raises the agent's cost (Boyarski et al., "ICBS", IJCAI 2015). We keep
+only ``singletons[t]``: the cell when the level has width one, else -1.
 """
 
 from __future__ import annotations
@@ -43,6 +43,9 @@ def mdd_singletons(
         levels.append(layer)
     singles = [-1] * (cost + 1)
     alive = {goal} if goal in levels[cost] else set()
+    if cost and alive:
+        # a path of cost exactly ``cost`` arrives at the goal then, it was not already there
+        levels[cost][goal] = [p for p in levels[cost][goal] if p != goal]
     for t in range(cost, -1, -1):
         if len(alive) == 1:
             singles[t] = next(iter(alive))

@@ -14,14 +14,25 @@ from planners.mapf.conflicts import positions
 
 
 class ConstraintTable:
-    """Forbidden vertices, forbidden moves, and cells blocked forever from some time on.
+    """Forbidden vertices, forbidden moves, cells blocked forever from some time on, and bounds on
+    the time the agent reaches its goal for the last time (its cost).
 
     CBS fills it from a node's constraints; prioritized planning fills it with the paths of the
     higher-priority agents (a reservation table, Silver 2005), whose parked goals become
-    ``blocked_from`` entries.
+    ``blocked_from`` entries. The cost bounds are the length constraints of target reasoning
+    (Li et al., AIJ 2021): ``min_finish`` (cost ≥ it) and ``max_finish`` (cost ≤ it, or None).
     """
 
-    __slots__ = ("blocked_from", "edge", "horizon", "n", "vertex", "vertex_times")
+    __slots__ = (
+        "blocked_from",
+        "edge",
+        "horizon",
+        "max_finish",
+        "min_finish",
+        "n",
+        "vertex",
+        "vertex_times",
+    )
 
     def __init__(self, n: int) -> None:
         self.n = n
@@ -29,6 +40,8 @@ class ConstraintTable:
         self.vertex_times: dict[int, list[int]] = {}
         self.edge: set[int] = set()
         self.blocked_from: dict[int, int] = {}
+        self.min_finish = 0
+        self.max_finish: int | None = None
         self.horizon = 0
 
     def add_vertex(self, cell: int, t: int) -> None:
@@ -46,6 +59,16 @@ class ConstraintTable:
         self.blocked_from[cell] = min(t, self.blocked_from.get(cell, t))
         self.horizon = max(self.horizon, t)
 
+    def add_min_finish(self, t: int) -> None:
+        """The agent's cost must be at least ``t``: it may not stay at its goal for good before."""
+        self.min_finish = max(self.min_finish, t)
+        self.horizon = max(self.horizon, t)
+
+    def add_max_finish(self, t: int) -> None:
+        """The agent's cost must be at most ``t``: it is at its goal for good from ``t`` on."""
+        self.max_finish = t if self.max_finish is None else min(self.max_finish, t)
+        self.horizon = max(self.horizon, t)
+
     def reserve_path(self, path: Sequence[int]) -> None:
         """Reserve a higher-priority agent's path: cells, moves (against swaps), parked goal."""
         n = self.n
@@ -60,7 +83,10 @@ class ConstraintTable:
         if goal in self.blocked_from:
             return None
         times = self.vertex_times.get(goal)
-        return max(times) + 1 if times else 0
+        earliest = max(max(times) + 1 if times else 0, self.min_finish)
+        if self.max_finish is not None and earliest > self.max_finish:
+            return None
+        return earliest
 
 
 class ConflictAvoidanceTable:
@@ -94,16 +120,17 @@ class ConflictAvoidanceTable:
 
     @classmethod
     def from_positions(
-        cls, n: int, pos: np.ndarray, lengths: Sequence[int], exclude: int
+        cls, n: int, pos: np.ndarray, lengths: Sequence[int], exclude: int | Sequence[int]
     ) -> ConflictAvoidanceTable:
-        """The table of every row of ``pos`` (paths padded with their last cell) but ``exclude``.
+        """The table of every row of ``pos`` (paths padded with their last cell) but ``exclude``
+        (one row, or several: the members of a meta-agent).
 
         A path of length L occupies ``(pos[t], t)`` for t < L - 1 and is parked at its last cell
         from ``L - 1`` on; its moves are recorded under the key of the reverse move (a swap).
         """
         k, horizon = pos.shape
         last = np.asarray(lengths, dtype=np.int64) - 1
-        keep = np.arange(k) != exclude
+        keep = ~np.isin(np.arange(k), exclude)
         t = np.arange(horizon, dtype=np.int64)[None, :]
         moving = t < last[:, None]
         v_mask = moving & keep[:, None]
