@@ -1,7 +1,14 @@
 """The robot process: sensors in, DWA path following, cmd_vel, pose, intent and status out.
 
 It knows only what a real robot knows: its scans, its odometry, the sim clock and what the
-coordinator sends. Each scan triggers one control step; the cmd_vel it publishes carries that
+coordinator sends. It takes part in the market (:mod:`agents.market`): it bids on called tasks
+from its own pose and commitments, acknowledges the queue it is awarded, drives only plans for
+tasks it holds, and reports the pieces of its task it has swept. A thread of its own sends a
+heartbeat on wall time, so a hung agent falls silent. With a state directory it saves its SLAM
+map and pose every ``agent.state_save_s``; started with ``respawn`` it takes over its robot's
+body where it stands, finds itself in the saved map, and bids only once it has.
+
+Each scan triggers one control step; the cmd_vel it publishes carries that
 scan's stamp, which is how the simulator knows the agent has kept up. When its odometry is
 older than ``stale_after_s`` (sim time) it commands a stop. Paths are followed from the pose
 predicted for when the command will take effect (:func:`agents.follower.predict`), by the
@@ -18,10 +25,12 @@ import logging
 import queue
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
 from agents.follower import FollowState, control_step, keep_clear, predict, scan_points
+from agents.market import MarketClient, swept_pieces
 from agents.peers import (
     gives_way,
     intent_centres,
@@ -30,12 +39,16 @@ from agents.peers import (
     peer_discs,
     without_peers,
 )
-from agents.pose_source import OdometryPose, PoseSource, SlamPose
+from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
+from agents.slam.persistence import load_state, save_state
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
 from fleet.bus import Bus
 from fleet.params import FleetConfig
 from fleet.protocol import (
+    Award,
+    AwardAck,
     Clock,
+    Heartbeat,
     Intent,
     LaserScan,
     MapPatches,
@@ -46,6 +59,7 @@ from fleet.protocol import (
     RobotStatus,
     SpawnReply,
     SpawnRequest,
+    TaskCall,
     Twist,
 )
 
@@ -58,11 +72,14 @@ INTENT_WAYPOINTS = 30
 LATENCY_GAIN = 0.2
 ODOM_WAIT_S = 0.02
 MAX_LATENCY_S = 0.5
+# task calls of one auction round arrive together: bid on them in one go
+BID_GATHER_S = 0.003
 
 
 class Agent:
-    def __init__(self, bus: Bus, rid: str, cfg: FleetConfig) -> None:
+    def __init__(self, bus: Bus, rid: str, cfg: FleetConfig, state_dir: Path | None = None) -> None:
         self.bus = bus
+        self.state_dir = state_dir
         self.rid = rid
         self.cfg = cfg
         self.keys = bus.keys
@@ -88,21 +105,45 @@ class Agent:
         self._map_seq = 0
         self._map_snapshot: SlamMap | None = None
         self._patches = PatchTracker(cfg.slam.map_tile, cfg.slam.patch_tolerance)
+        self.sweep_from = 0
+        self.market = MarketClient(
+            rid,
+            cfg.robot.max_vel_x,
+            cfg.robot.radius,
+            cfg.slam.occupied_threshold,
+            cfg.slam.free_threshold,
+        )
+        self._calls: list[TaskCall] = []
+        self._calls_ready = threading.Condition()
+        self._last_save = -1e9
+        self._unlocalized_logged = False
 
-    def spawn(self, start: tuple[float, float, float], timeout: float = 30.0) -> None:
-        """Ask the simulator to place the robot; retry until it answers or ``timeout`` passes.
+    def spawn(
+        self, start: tuple[float, float, float], respawn: bool = False, timeout: float = 30.0
+    ) -> None:
+        """Ask the simulator to place the robot (with ``respawn``: to hand over the body the
+        robot left in the world, and load the saved map and pose from the state directory);
+        retry until it answers or ``timeout`` passes.
 
         The subscriptions come first: the simulator sends the first scan right after placing
         the robot and then holds its clock until that scan is answered."""
+        saved = None
+        if respawn:
+            if self.state_dir is None:
+                raise ValueError("a respawn needs the state directory the robot saved to")
+            saved = load_state(self.state_dir)
+            start = saved.pose
         k = self.keys
         self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
         self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
         self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
         self.bus.subscribe(k.all_robots("intent"), Intent, self._on_intent)
+        self.bus.subscribe(k.task("*"), TaskCall, self._on_call)
+        self.bus.subscribe(k.award(self.rid), Award, self._on_award)
         self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
         deadline = time.monotonic() + timeout
-        req = SpawnRequest(self.rid, *start)
+        req = SpawnRequest(self.rid, *start, rejoin=respawn)
         while True:
             try:
                 reply = self.bus.request(self.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
@@ -113,15 +154,29 @@ class Agent:
                 time.sleep(0.2)
         if not reply.ok:
             raise ValueError(f"spawn refused: {reply.error}")
-        self.pose_source = self._make_pose_source((reply.x, reply.y, reply.theta))
-        log.info(
-            "%s spawned at (%.2f, %.2f, %.2f), pose from %s",
-            self.rid,
-            reply.x,
-            reply.y,
-            reply.theta,
-            self.pose_source.name,
-        )
+        with self.lock:
+            if saved is not None:
+                lidar = self.cfg.lidar
+                self.pose_source = RelocalizingSlamPose(
+                    self.cfg.slam, saved, lidar.range_min, lidar.range_max
+                )
+            else:
+                self.pose_source = self._make_pose_source((reply.x, reply.y, reply.theta))
+        if saved is not None:
+            log.info(
+                "%s took over its body; finding itself in its saved map near (%.2f, %.2f, %.2f)",
+                self.rid,
+                *saved.pose,
+            )
+        else:
+            log.info(
+                "%s spawned at (%.2f, %.2f, %.2f), pose from %s",
+                self.rid,
+                reply.x,
+                reply.y,
+                reply.theta,
+                self.pose_source.name,
+            )
 
     def _make_pose_source(self, start: tuple[float, float, float]) -> PoseSource:
         if self.cfg.agent.pose_source == "odometry":
@@ -163,10 +218,11 @@ class Agent:
 
     def _on_plan(self, _key: str, msg: Plan) -> None:
         with self.lock:
-            if msg.plan_id == self.plan_id:
+            if msg.plan_id == self.plan_id or not self.market.holds(msg.task):
                 return
             self.plan_id = msg.plan_id
             self.task = msg.task
+            self.sweep_from = msg.sweep_from
             self.follow = FollowState(msg.waypoints) if len(msg.waypoints) else None
             self.state = "driving" if self.follow is not None else "done"
         log.info(
@@ -176,6 +232,64 @@ class Agent:
             msg.task,
             len(msg.waypoints),
         )
+
+    def _on_award(self, _key: str, msg: Award) -> None:
+        with self.lock:
+            taken = self.market.on_award(msg)
+            driving = self.follow is not None and not self.follow.done
+            dropped = taken and driving and not self.market.holds(self.task)
+            if dropped:
+                self.follow = None
+                self.task = ""
+            seq = self.market.seq
+        self.bus.publish(self.keys.ack(self.rid), AwardAck(self.clock, seq, self.rid), True)
+        if taken:
+            log.info("%s: award %d, queue %s", self.rid, seq, " ".join(msg.tasks) or "empty")
+        if dropped:
+            log.warning("%s: its task went to another robot; stopping it", self.rid)
+
+    def _on_call(self, _key: str, msg: TaskCall) -> None:
+        with self._calls_ready:
+            self._calls.append(msg)
+            self._calls_ready.notify()
+
+    @property
+    def ready(self) -> bool:
+        """Whether the robot may take work: it knows where it is."""
+        src = self.pose_source
+        return src is not None and getattr(src, "localized", True)
+
+    def bid_loop(self) -> None:
+        """Answer the task calls of each auction round, all of a round's calls in one go."""
+        while not self.stop.is_set():
+            with self._calls_ready:
+                if not self._calls:
+                    self._calls_ready.wait(0.1)
+                    continue
+            time.sleep(BID_GATHER_S)
+            with self._calls_ready:
+                calls, self._calls = self._calls, []
+            if not self.ready:
+                continue
+            latest = max(c.round for c in calls)
+            calls = [c for c in calls if c.round == latest]
+            with self.lock:
+                assert self.pose_source is not None
+                self.market.use_map(self._map_snapshot)
+                commitment = self.market.commitment(self.pose_source.pose(), self.follow, self.task)
+                bids = self.market.bids(calls, commitment)
+            for b in bids:
+                self.bus.publish(self.keys.bid(b.task, self.rid), b, control=True)
+
+    def heartbeat_loop(self) -> None:
+        """A heartbeat every 1 / ``agent.heartbeat_hz`` wall seconds, whatever sim time does."""
+        period = 1.0 / self.cfg.agent.heartbeat_hz
+        seq = 0
+        while not self.stop.wait(period):
+            seq += 1
+            self.bus.publish(
+                self.keys.robot(self.rid, "heartbeat"), Heartbeat(self.clock, seq, self.ready)
+            )
 
     def _on_map_request(self, _req: Request) -> MapPatches:
         """The whole current map, for whoever joins late or noticed a gap in ``seq``."""
@@ -222,7 +336,10 @@ class Agent:
             velocity = self.velocity
             stale = scan.stamp - self.odom_stamp > a.stale_after_s
             follow = self.follow
-            planned = self.plan_id >= 0
+            plan_id, task, sweep_from = self.plan_id, self.task, self.sweep_from
+            planned = plan_id >= 0
+            localized = getattr(src, "localized", True)
+            failed = getattr(src, "failed", False)
         if self._last_xy is not None:
             self.distance_m += float(
                 np.hypot(pose[0] - self._last_xy[0], pose[1] - self._last_xy[1])
@@ -233,6 +350,15 @@ class Agent:
         dt = 1.0 / self.cfg.lidar.rate_hz
         if stale:
             state = "stale"
+        elif not localized:
+            state = "unlocalized" if failed else "localizing"
+            if failed and not self._unlocalized_logged:
+                self._unlocalized_logged = True
+                log.error(
+                    "%s cannot find itself in its saved map (%s); it stays out of the market",
+                    self.rid,
+                    getattr(src, "reason", ""),
+                )
         elif follow is None or follow.done:
             state = "done" if planned else "waiting"
             self.idle, result = keep_clear(
@@ -284,7 +410,7 @@ class Agent:
         self.command = (v, w)
         lag = min(max(self.clock - scan.stamp, 0.0), MAX_LATENCY_S)
         self.latency_s += LATENCY_GAIN * (lag - self.latency_s)
-        self._publish(scan.stamp, pose, v, w, follow)
+        self._publish(scan.stamp, pose, v, w, follow, plan_id, task, sweep_from)
         return Twist(scan.stamp, v, w)
 
     def _peer_centres(self, now: float, everyone: bool) -> np.ndarray:
@@ -320,7 +446,13 @@ class Agent:
         v: float,
         w: float,
         follow: FollowState | None,
+        plan_id: int,
+        task: str,
+        sweep_from: int,
     ) -> None:
+        """Command, pose, intent and (at ``agent.status_hz``) status; ``follow``, ``plan_id``,
+        ``task`` and ``sweep_from`` as the control step saw them, so a plan arriving meanwhile
+        is never reported with the state of the one before."""
         k, a = self.keys, self.cfg.agent
         self.bus.publish(k.robot(self.rid, "cmd_vel"), Twist(stamp, v, w), control=True)
         assert self.pose_source is not None
@@ -341,13 +473,15 @@ class Agent:
                 RobotStatus(
                     stamp,
                     self.state,
-                    self.task,
+                    task,
                     idx / n if n else (1.0 if self.state == "done" else 0.0),
                     idx,
                     n,
                     self.distance_m,
                     sum(self.bus.decode_errors.values()),
                     follow.skipped if follow is not None else 0,
+                    plan_id,
+                    swept_pieces(follow, sweep_from),
                 ),
                 control=True,
             )
@@ -362,6 +496,9 @@ class Agent:
             return
         self._last_map = stamp
         self._map_snapshot = snapshot
+        if self.state_dir is not None and stamp - self._last_save >= self.cfg.agent.state_save_s:
+            self._last_save = stamp
+            save_state(self.state_dir, snapshot, self.pose_source.pose(), stamp)
         update = self._patches.update(snapshot)
         if update.full or update.patches:
             self._map_seq += 1
@@ -369,6 +506,8 @@ class Agent:
             self.bus.publish(self.keys.robot(self.rid, "map"), msg)
 
     def run(self) -> None:
+        for loop in (self.heartbeat_loop, self.bid_loop):
+            threading.Thread(target=loop, name=loop.__name__, daemon=True).start()
         self.fetch_plan()
         while not self.stop.is_set():
             try:

@@ -180,13 +180,31 @@ def agent(
     connect: ConnectOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,
     config: ConfigOpt = None,
+    state_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--state-dir",
+            help="Where the robot keeps what a real robot keeps on disk (its SLAM map and last "
+            "pose), saved every agent.state_save_s; default: nothing is kept.",
+        ),
+    ] = None,
+    respawn: Annotated[
+        bool,
+        typer.Option(
+            "--respawn",
+            help="Rejoin with the robot body already in the world: load the map and pose from "
+            "--state-dir and re-localize on the map before taking work.",
+        ),
+    ] = False,
 ) -> None:
-    """Run one robot agent: follows its plan with DWA on its own pose estimate."""
+    """Run one robot agent: SLAM on its own sensors, bids for tasks, drives them with DWA."""
     from agents.agent import Agent
 
     _setup_logging(robot_id)
     if not robot_id or "/" in robot_id or "*" in robot_id:
         _fail(f"--id {robot_id!r}: a robot id must be non-empty without '/' or '*'")
+    if respawn and state_dir is None:
+        _fail("--respawn needs --state-dir: the directory the robot saved its map and pose to")
     if start is not None:
         try:
             pose = tuple(float(v) for v in start.split(","))
@@ -199,10 +217,10 @@ def agent(
         cfg, w = _load(config, world)
         pose = w.start_poses(1, cfg.robot.radius)[0]
     bus = _bus("agent", robot_id, connect, fleet)
-    a = Agent(bus, robot_id, cfg)
+    a = Agent(bus, robot_id, cfg, state_dir)
     _stop_on_signals(a.stop)
     try:
-        a.spawn(pose)  # type: ignore[arg-type]
+        a.spawn(pose, respawn=respawn)  # type: ignore[arg-type]
         a.run()
     except (TimeoutError, ValueError) as e:
         _fail(f"{robot_id}: {e}")
@@ -218,26 +236,44 @@ def coordinator(
     connect: ConnectOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,
     config: ConfigOpt = None,
+    state: Annotated[
+        Path | None,
+        typer.Option(
+            "--state",
+            help="SQLite file that keeps the job (tasks, owners, swept parts, events) as it "
+            "changes; a coordinator started on an existing file resumes it.",
+        ),
+    ] = None,
 ) -> None:
-    """Run the coordinator: splits the floor among the robots and sends each its path."""
-    from fleet.coordinator.planning import CoveragePlanner
+    """Run the coordinator: cuts the floor into tasks, auctions them to the live robots,
+    re-auctions the work of a robot that is lost, and sends each robot its plans."""
+    import sqlite3
+
+    from fleet.coordinator.planning import TaskPlanner
     from fleet.coordinator.service import Coordinator
+    from fleet.coordinator.store import JobStore
 
     if robots < 1:
         _fail("--robots must be >= 1")
     _setup_logging("coordinator")
     cfg, w = _load(config, world)
     try:
-        planner = CoveragePlanner(w, cfg, robots)
+        planner = TaskPlanner(w, cfg)
     except ValueError as e:
         _fail(str(e))
+    try:
+        store = JobStore(state) if state is not None else None
+    except (sqlite3.Error, OSError) as e:
+        _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet)
-    c = Coordinator(bus, planner, robots, cfg.coordinator.expected_robots_grace_s)
+    c = Coordinator(bus, planner, robots, cfg.coordinator, store)
     _stop_on_signals(c.stop)
     try:
-        c.run()
+        c.run(cfg.coordinator.expected_robots_grace_s)
     finally:
         bus.close()
+        if store is not None:
+            store.close()
 
 
 def register(

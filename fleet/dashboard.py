@@ -27,7 +27,6 @@ TRACK_STEP_M = 0.05
 @dataclass
 class RobotView:
     status: RobotStatus | None = None
-    done_at: float | None = None
     track: list[tuple[float, float]] = field(default_factory=list)
 
 
@@ -41,6 +40,7 @@ class FleetWatcher:
         self.robots: dict[str, RobotView] = {}
         self.collisions: list[Collision] = []
         self.started_at: float | None = None
+        self.finished_at: float | None = None
         k = self.keys
         bus.subscribe(k.clock(), Clock, self._on_clock)
         bus.subscribe(k.coverage(), CoverageSummary, self._on_coverage)
@@ -64,16 +64,12 @@ class FleetWatcher:
     def _on_fleet(self, _k: str, m: FleetState) -> None:
         with self.lock:
             self.fleet = m
+            if m.phase == "done" and self.finished_at is None:
+                self.finished_at = m.stamp
 
     def _on_status(self, key: str, m: RobotStatus) -> None:
         with self.lock:
-            r = self._robot(key)
-            if r.status is None or r.status.task != m.task:
-                r.done_at = None
-            r.status = m
-            # The first "done" of a task counts: a finished robot may report "stale" later.
-            if m.state == "done" and m.task and r.done_at is None:
-                r.done_at = m.stamp
+            self._robot(key).status = m
 
     def _on_truth(self, key: str, m: TruthPose) -> None:
         with self.lock:
@@ -96,14 +92,11 @@ class FleetWatcher:
             return self.fleet is not None and self.fleet.phase == "done"
 
     def makespan(self) -> float | None:
-        """Sim seconds from the first plan given to the last robot done; None until all are."""
+        """Sim seconds from the first plan given to the job done; None until it is."""
         with self.lock:
-            views = [r for r in self.robots.values() if r.status and r.status.task]
-            started = self.started_at or 0.0
-        done = [r.done_at for r in views if r.done_at is not None]
-        if not views or len(done) < len(views):
-            return None
-        return max(done) - started
+            if self.finished_at is None:
+                return None
+            return self.finished_at - (self.started_at or 0.0)
 
     def table(self, wall_s: float) -> Table:
         with self.lock:

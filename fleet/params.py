@@ -148,7 +148,7 @@ class CoordinatorParams:
     wall_clearance: float = 0.015
     lane_overlap: float = 0.1
     expected_robots_grace_s: float = 20.0
-    task_target_s: float = 40.0
+    task_target_s: float = 20.0
     heartbeat_timeout_s: float = 1.0
     bid_timeout_s: float = 0.5
     objective: Literal["minimax", "minisum"] = "minimax"

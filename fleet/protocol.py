@@ -349,8 +349,10 @@ class AwardAck(Message):
 @dataclass(frozen=True, eq=False)
 class FleetEvent(Message):
     """A change of the job for views and reports (``coord/events``): ``kind`` is one of
-    joined, lost, rejoined, awarded, reassigned, withdrawn, done, planned; ``wall`` is Unix
-    time."""
+    planned (tasks made), joined, lost, reopened (a lost robot's task back in the market),
+    rejoined, awarded, reassigned (a reopened task won again), withdrawn (an unstarted task
+    taken back to balance the fleet), done (a task), finished (the job), resumed (a restarted
+    coordinator); ``wall`` is Unix time."""
 
     TYPE: ClassVar[str] = "event"
     stamp: float

@@ -1,56 +1,64 @@
-"""The coordinator's coverage planner: the same world and fleet size give the same plan."""
+"""The coordinator's tasks and plans: one tour cut into tasks, and a won task driven."""
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 import pytest
 
 from fleet.config import resolve_world
-from fleet.coordinator.planning import SNAP_M, CoveragePlanner
+from fleet.coordinator.planning import TaskPlanner
 from fleet.params import load_fleet_config
 from fleet.world import load_world
-from planners.coverage import plan_coverage
+from planners.polyline import path_length
 
 
 @pytest.fixture(scope="module")
 def small():
     cfg = load_fleet_config()
     world = load_world(resolve_world("small"), cfg.robot.radius)
-    planner = CoveragePlanner(world, cfg, 3)
-    spawns = {f"robot-{i}": (float(p[0]), float(p[1])) for i, p in enumerate(planner.spawns)}
-    return planner, spawns
+    planner = TaskPlanner(world, cfg)
+    return planner, planner.tasks()
 
 
-def _jittered(starts, seed):
-    rng = np.random.default_rng(seed)
-    return {r: (x + rng.normal(0, 0.002), y + rng.normal(0, 0.002)) for r, (x, y) in starts.items()}
+def test_the_tasks_chain_into_one_tour_of_about_the_target_time(small):
+    planner, tasks = small
+    assert len(tasks) >= 4
+    for a, b in itertools.pairwise(tasks):
+        assert np.allclose(a.exit, b.entry)
+    # the tour starts at the dock; every task but the last is near the target
+    assert np.allclose(tasks[0].entry, planner.dock)
+    times = np.array([t.time_s for t in tasks[:-1]])
+    assert np.all(times > 0.5 * planner.target_s)
+    assert np.all(times < 1.5 * planner.target_s)
+    assert len({t.id for t in tasks}) == len(tasks)
 
 
-def _same(a: dict, b: dict) -> bool:
-    return a.keys() == b.keys() and all(
-        a[r].shape == b[r].shape and np.array_equal(a[r], b[r]) for r in a
-    )
+def test_the_same_world_gives_the_same_tasks(small):
+    planner, tasks = small
+    again = planner.tasks()
+    assert [t.id for t in again] == [t.id for t in tasks]
+    assert all(np.array_equal(a.path, b.path) for a, b in zip(again, tasks, strict=True))
 
 
-def test_millimetres_off_the_spawn_poses_give_the_plan_of_the_spawn_poses(small):
-    planner, spawns = small
-    # the planner alone is that sensitive: without the snap, 2 mm change the split
-    raw = [
-        plan_coverage(planner.grid, list(_jittered(spawns, s).values()), planner.params).paths
-        for s in range(3)
-    ]
-    exact = plan_coverage(planner.grid, list(spawns.values()), planner.params).paths
-    assert any(len(p) != len(q) for run in raw for p, q in zip(run, exact, strict=True))
+@pytest.mark.parametrize("reverse", [False, True])
+def test_a_plan_is_a_transit_to_the_task_then_its_sweep(small, reverse):
+    planner, tasks = small
+    task = tasks[2]
+    start = (float(planner.dock[0]), float(planner.dock[1]))
+    waypoints, sweep_from = planner.drive(start, task, reverse)
+    sweep = task.path[::-1] if reverse else task.path
+    assert np.allclose(waypoints[0], start)
+    assert np.array_equal(waypoints[sweep_from:], sweep)
+    # the transit keeps off the furniture: it is no shorter than the straight line
+    transit = waypoints[: sweep_from + 1]
+    assert path_length(transit) >= np.hypot(*(sweep[0] - np.array(start))) - 1e-9
 
-    base = planner.plan(spawns)
-    for seed in range(3):
-        assert _same(planner.plan(_jittered(spawns, seed)), base)
 
-
-def test_a_start_off_every_spawn_pose_is_planned_from_where_it_is(small):
-    planner, spawns = small
-    x, y = spawns["robot-0"]
-    assert planner.snapped((x + 0.8 * SNAP_M, y)) == (x, y)
-    assert planner.snapped((x + 1.2 * SNAP_M, y)) == (x + 1.2 * SNAP_M, y)
-    moved = dict(spawns, **{"robot-0": (x + 0.2, y)})
-    assert np.allclose(planner.plan(moved)["robot-0"][0], (x + 0.2, y))
+def test_a_robot_at_the_task_entry_starts_sweeping_at_once(small):
+    planner, tasks = small
+    task = tasks[1]
+    waypoints, sweep_from = planner.drive(tuple(task.entry), task, False)
+    assert sweep_from == 0
+    assert np.array_equal(waypoints, task.path)

@@ -1,13 +1,14 @@
-"""How the coordinator turns the floor plan and the robots' start positions into paths.
+"""How the coordinator turns the floor plan into tasks, and a won task into a robot's plan.
 
-One coverage plan (``planners.coverage.plan_coverage``: rooms, boustrophedon cells, ordered
-sweeps, a makespan-balanced split) gives each robot its path. Auctions and space-time
-deconfliction replace the split behind the same ``plan`` call.
+Tasks: one coverage tour of the whole floor for one robot from the dock
+(``planners.coverage.plan_coverage``: rooms, boustrophedon cells, ordered sweeps), cut into
+consecutive pieces of about ``coordinator.task_target_s`` of cleaning
+(``planners.auction.split_tour``). The tour does not depend on how many robots come, or where
+they are, so a restarted coordinator or a changed fleet prices the same tasks.
 
-The plan is sensitive to where the robots start: 2 mm of difference can change the split (and
-the first pose a robot reports is off its spawn pose by that much). A robot that reports within
-``SNAP_M`` of a start pose the world gives for the expected fleet is planned from that pose, so
-the same world and fleet size give the same plan run after run.
+Plans: the transit from where the robot reports itself to the end of the task it enters by (A*
+on the floor plan inflated by the robot, ``planners.coverage.transit``), then the task's sweep
+in the direction it won it.
 """
 
 from __future__ import annotations
@@ -19,20 +20,24 @@ import numpy as np
 
 from fleet.params import FleetConfig
 from fleet.world import World
+from planners.auction import Task, split_tour
 from planners.coverage import plan_coverage
+from planners.coverage.transit import Transit
+from planners.grid import clearance, reachable
+from planners.polyline import without_straight_vertices
 
 PLAN_RESOLUTION = 0.025
-SNAP_M = 0.05
 
 log = logging.getLogger("coordinator")
 
 
-class CoveragePlanner:
-    """Plans coverage paths on the known floor plan for the robots present."""
+class TaskPlanner:
+    """Tasks of the known floor plan, and plans that drive them."""
 
-    def __init__(self, world: World, cfg: FleetConfig, expected: int) -> None:
+    def __init__(self, world: World, cfg: FleetConfig) -> None:
         self.grid = world.grid(PLAN_RESOLUTION)
-        self.spawns = np.array([p[:2] for p in world.start_poses(expected, cfg.robot.radius)])
+        self.dock = tuple(float(v) for v in world.start_poses(1, cfg.robot.radius)[0][:2])
+        self.target_s = cfg.coordinator.task_target_s
         # Paths keep wall_clearance more than the robot radius from obstacles: the DWA needs
         # clearance above the radius plus the noise of a median-filtered scan. Lanes overlap by
         # lane_overlap, as a real robot tracks its lane only to a few centimetres.
@@ -43,25 +48,40 @@ class CoveragePlanner:
             cleaning_width=cfg.robot.cleaning_width,
             max_speed=cfg.robot.max_vel_x,
         )
+        centres = clearance(self.grid) >= self.params.robot_radius
+        start = self.grid.world_to_cell(np.array([self.dock]))
+        self.transit = Transit(self.grid, reachable(centres, start))
 
-    def plan(self, starts: dict[str, tuple[float, float]]) -> dict[str, np.ndarray]:
-        ids = list(starts)
-        result = plan_coverage(self.grid, [self.snapped(starts[r]) for r in ids], self.params)
+    def tasks(self) -> tuple[Task, ...]:
+        result = plan_coverage(self.grid, [self.dock], self.params)
         m = result.metrics
+        tasks = split_tour(
+            result.paths[0], result.cell_labels, self.grid, self.target_s, self.params
+        )
         # judged on the plan's own floor: centres kept radius + wall clearance from obstacles
         log.info(
-            "plan: coverage %.1f %%, repetition %.1f %%, %.1f m, est. makespan %.0f s",
+            "tour: coverage %.1f %%, repetition %.1f %%, %.1f m, %.0f s for one robot, "
+            "cut into %d tasks of about %.0f s",
             100 * m.total.coverage,
             100 * m.total.repetition,
             m.total.path_length_m,
             m.makespan_s,
+            len(tasks),
+            self.target_s,
         )
-        return {rid: np.asarray(result.paths[i], dtype=float) for i, rid in enumerate(ids)}
+        return tasks
 
-    def snapped(self, xy: tuple[float, float]) -> tuple[float, float]:
-        """The world's start pose within ``SNAP_M`` of ``xy`` (the nearest), else ``xy``."""
-        d = np.hypot(*(self.spawns - np.asarray(xy, dtype=float)).T)
-        if d.min() > SNAP_M:
-            return xy
-        x, y = self.spawns[int(np.argmin(d))]
-        return float(x), float(y)
+    def drive(
+        self, from_xy: tuple[float, float], task: Task, reverse: bool
+    ) -> tuple[np.ndarray, int]:
+        """(waypoints, index where the sweep begins): transit to the task, then its sweep."""
+        sweep = task.path[::-1] if reverse else task.path
+        start = np.asarray(from_xy, dtype=float)
+        try:
+            leg = self.transit.path(start, sweep[0])
+        except ValueError:
+            log.warning("no transit from %s to task %s on the floor plan", from_xy, task.id)
+            leg = np.array([start, sweep[0]])
+        leg = without_straight_vertices(np.asarray(leg, dtype=float))
+        waypoints = np.vstack([leg[:-1], sweep])
+        return waypoints, len(leg) - 1

@@ -1,0 +1,139 @@
+"""The robot's side of the market: what it has won, what it bids, and what it has swept.
+
+A robot prices a called task from what it knows — its own pose estimate, the plan it is
+driving, the tasks it has won (its last :class:`~fleet.protocol.Award`) and its own SLAM map —
+as the marginal cost of appending the task to its commitments (``planners.auction.make_bid``,
+Koenig et al. 2006). Travel is estimated on its map with unknown cells counted as free and
+obstacles grown by its radius (``planners.auction.TravelGrid``); before it has a map, by the
+straight line.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from agents.follower import FollowState
+from agents.slam.slam_map import SlamMap
+from fleet.protocol import Award, Bid, TaskCall
+from planners import auction
+from planners.grid import dilate
+
+
+@dataclass(frozen=True)
+class Won:
+    """One task of the robot's queue, with its ends in the direction it will drive it."""
+
+    id: str
+    entry: tuple[float, float]
+    exit: tuple[float, float]
+    time_s: float
+
+
+class MarketClient:
+    """The robot's queue and its pricing; not thread-safe (the agent holds its lock)."""
+
+    def __init__(
+        self,
+        robot: str,
+        speed: float,
+        radius: float,
+        occupied_threshold: float,
+        free_threshold: float,
+    ) -> None:
+        self.robot = robot
+        self.speed = speed
+        self.radius = radius
+        self.thresholds = (occupied_threshold, free_threshold)
+        self.seq = 0
+        self.queue: tuple[Won, ...] = ()
+        self._travel: auction.Travel = self._straight
+        self._travel_map: SlamMap | None = None
+
+    def on_award(self, msg: Award) -> bool:
+        """Take a newer award (True); an older or repeated one changes nothing."""
+        if msg.robot != self.robot or msg.seq <= self.seq:
+            return False
+        self.seq = msg.seq
+        self.queue = tuple(
+            Won(t, (float(e[0]), float(e[1])), (float(x[0]), float(x[1])), float(s))
+            for t, e, x, s in zip(msg.tasks, msg.entries, msg.exits, msg.times_s, strict=True)
+        )
+        return True
+
+    def holds(self, task: str) -> bool:
+        return any(w.id == task for w in self.queue)
+
+    def use_map(self, occupancy: SlamMap | None) -> None:
+        """Price travel on this map from now on (rebuilt only when it is a new snapshot)."""
+        if occupancy is None or occupancy is self._travel_map:
+            return
+        grid = occupancy.to_gridmap(*self.thresholds)
+        blocked = dilate(grid.occupied, self.radius, grid.resolution)
+        self._travel = auction.TravelGrid(~blocked, grid.resolution, grid.origin, self.speed)
+        self._travel_map = occupancy
+
+    def commitment(
+        self, pose: tuple[float, float, float], follow: FollowState | None, task: str
+    ) -> auction.Commitment:
+        """What the robot has won, priced from ``pose``: the rest of the plan it drives for
+        ``task`` (scaled from the task's time by the length left), then its queued tasks with
+        the travel to each."""
+        xy = (float(pose[0]), float(pose[1]))
+        items = list(self.queue)
+        current = auction.Commitment(xy)
+        if items and follow is not None and not follow.done and items[0].id == task:
+            wps = follow.waypoints
+            left = math.dist(xy, wps[follow.index]) + _length(wps[follow.index :])
+            total = max(_length(wps), 1e-9)
+            end = (float(wps[-1][0]), float(wps[-1][1]))
+            current = auction.Commitment(xy, items[0].time_s * min(left / total, 1.0), end)
+            items = items[1:]
+        for w in items:
+            travel = float(self._travel(np.array(current.end), np.array([w.entry]))[0])
+            current = current.with_task(w.entry, w.exit, w.time_s, travel)
+        return current
+
+    def bids(self, calls: Sequence[TaskCall], commitment: auction.Commitment) -> list[Bid]:
+        """This robot's bids on ``calls`` (tasks it already holds are not bid on)."""
+        out = []
+        for c in calls:
+            if self.holds(c.task):
+                continue
+            b = auction.make_bid(
+                self.robot,
+                c.task,
+                np.array([c.entry_x, c.entry_y]),
+                np.array([c.exit_x, c.exit_y]),
+                c.time_s,
+                commitment,
+                self._travel,
+            )
+            out.append(
+                Bid(c.stamp, c.round, c.task, self.robot, b.marginal_s, b.total_s, b.reverse)
+            )
+        return out
+
+    def _straight(self, start: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        return np.hypot(*(np.asarray(targets) - start).T) / self.speed
+
+
+def swept_pieces(follow: FollowState | None, sweep_from: int) -> np.ndarray:
+    """0/1 per piece of the task a plan sweeps (segment ``sweep_from + j`` → ``+ j + 1`` of the
+    plan): swept once the robot has reached the piece's far waypoint."""
+    if follow is None:
+        return np.zeros(0, dtype=np.uint8)
+    n = len(follow.waypoints) - 1 - sweep_from
+    if n <= 0:
+        return np.zeros(0, dtype=np.uint8)
+    far = sweep_from + 1 + np.arange(n)
+    return (far < follow.index).astype(np.uint8)
+
+
+def _length(points: np.ndarray) -> float:
+    if len(points) < 2:
+        return 0.0
+    return float(np.hypot(*np.diff(points, axis=0).T).sum())

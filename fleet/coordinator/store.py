@@ -1,0 +1,210 @@
+"""The coordinator's job state on disk (SQLite), written as it changes, read back on restart.
+
+Tables: ``meta`` (phase, counters), ``tasks`` (path, cells, state, owner, queue position,
+direction, swept pieces), ``robots`` (liveness, last report, heartbeat, restarts, award
+sequence numbers), ``plans`` (the plan each robot drives, so a restarted coordinator serves the
+same plan id and the robot keeps driving), ``events`` and ``bids`` (the auction log). WAL
+journal, so ``fleet status`` reads while the coordinator writes.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fleet.coordinator.job import Job, RobotRecord, TaskRecord
+from fleet.protocol import Plan
+from planners.auction import Task
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
+CREATE TABLE IF NOT EXISTS tasks (
+    id TEXT PRIMARY KEY, parent TEXT, area_m2 REAL, time_s REAL, path BLOB, cells TEXT,
+    state TEXT, owner TEXT, position INTEGER, reverse INTEGER, swept BLOB,
+    created_wall REAL, done_wall REAL);
+CREATE TABLE IF NOT EXISTS robots (
+    id TEXT PRIMARY KEY, liveness TEXT, state TEXT, task TEXT, progress REAL,
+    heartbeat_wall REAL, restarts INTEGER, award_seq INTEGER, acked_seq INTEGER, x REAL, y REAL);
+CREATE TABLE IF NOT EXISTS plans (
+    robot TEXT PRIMARY KEY, plan_id INTEGER, task TEXT, waypoints BLOB, sweep_from INTEGER,
+    stamp REAL);
+CREATE TABLE IF NOT EXISTS events (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT, wall REAL, sim REAL, kind TEXT, robot TEXT,
+    task TEXT, detail TEXT);
+CREATE TABLE IF NOT EXISTS bids (
+    round INTEGER, task TEXT, robot TEXT, marginal_s REAL, total_s REAL, reverse INTEGER,
+    won INTEGER, wall REAL);
+"""
+
+
+class JobStore:
+    """One SQLite file; every ``save_*`` commits, so a SIGKILL loses at most the change in
+    flight."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
+        self.db.execute("PRAGMA journal_mode=WAL")
+        self.db.execute("PRAGMA synchronous=NORMAL")
+        self.db.executescript(SCHEMA)
+
+    def close(self) -> None:
+        self.db.close()
+
+    # ---- writing ------------------------------------------------------------------------
+
+    def set_meta(self, **values: object) -> None:
+        with self.db:
+            self.db.executemany(
+                "INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                [(k, json.dumps(v)) for k, v in values.items()],
+            )
+
+    def save_tasks(self, records: list[TaskRecord]) -> None:
+        now = time.time()
+        rows = [
+            (
+                r.task.id,
+                r.parent,
+                r.task.area_m2,
+                r.task.time_s,
+                np.ascontiguousarray(r.task.path, dtype="<f8").tobytes(),
+                json.dumps(list(r.task.cells)),
+                r.state,
+                r.owner,
+                r.position,
+                int(r.reverse),
+                np.asarray(r.swept, dtype=np.uint8).tobytes(),
+                now,
+                now if r.state == "done" else None,
+            )
+            for r in records
+        ]
+        with self.db:
+            self.db.executemany(
+                "INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?) ON CONFLICT(id) DO UPDATE "
+                "SET state=excluded.state, owner=excluded.owner, position=excluded.position, "
+                "reverse=excluded.reverse, swept=excluded.swept, "
+                "done_wall=COALESCE(tasks.done_wall, excluded.done_wall)",
+                rows,
+            )
+
+    def save_robots(self, records: list[RobotRecord]) -> None:
+        rows = [
+            (
+                r.id,
+                r.liveness,
+                r.state,
+                r.task,
+                r.progress,
+                r.heartbeat_wall,
+                r.restarts,
+                r.award_seq,
+                r.acked_seq,
+                r.xy[0] if r.xy else None,
+                r.xy[1] if r.xy else None,
+            )
+            for r in records
+        ]
+        with self.db:
+            self.db.executemany(
+                "INSERT OR REPLACE INTO robots VALUES (?,?,?,?,?,?,?,?,?,?,?)", rows
+            )
+
+    def save_plan(self, robot: str, plan: Plan) -> None:
+        with self.db:
+            self.db.execute(
+                "INSERT OR REPLACE INTO plans VALUES (?,?,?,?,?,?)",
+                (
+                    robot,
+                    plan.plan_id,
+                    plan.task,
+                    np.ascontiguousarray(plan.waypoints, dtype="<f8").tobytes(),
+                    plan.sweep_from,
+                    plan.stamp,
+                ),
+            )
+
+    def add_event(self, wall: float, sim: float, kind: str, robot: str, task: str, detail: str):
+        with self.db:
+            self.db.execute(
+                "INSERT INTO events (wall, sim, kind, robot, task, detail) VALUES (?,?,?,?,?,?)",
+                (wall, sim, kind, robot, task, detail),
+            )
+
+    def add_bids(self, rows: list[tuple]) -> None:
+        """(round, task, robot, marginal_s, total_s, reverse, won) rows of one auction round."""
+        now = time.time()
+        with self.db:
+            self.db.executemany(
+                "INSERT INTO bids VALUES (?,?,?,?,?,?,?,?)", [(*r, now) for r in rows]
+            )
+
+    # ---- reading ------------------------------------------------------------------------
+
+    def meta(self) -> dict[str, object]:
+        return {k: json.loads(v) for k, v in self.db.execute("SELECT key, value FROM meta")}
+
+    def load_job(self, job: Job) -> None:
+        """Fill ``job`` with the stored tasks and robots (robots come back ``lost`` until they
+        are heard from again)."""
+        for row in self.db.execute(
+            "SELECT id, parent, area_m2, time_s, path, cells, state, owner, position, reverse, "
+            "swept FROM tasks ORDER BY rowid"
+        ):
+            tid, parent, area, t_s, path, cells, state, owner, pos, rev, swept = row
+            task = Task(
+                tid,
+                np.frombuffer(path, dtype="<f8").reshape(-1, 2).copy(),
+                float(area),
+                float(t_s),
+                tuple(json.loads(cells)),
+            )
+            job.tasks[tid] = TaskRecord(
+                task,
+                state,
+                owner,
+                int(pos),
+                bool(rev),
+                parent,
+                np.frombuffer(swept, dtype=np.uint8).astype(bool),
+            )
+        for row in self.db.execute(
+            "SELECT id, liveness, state, task, progress, heartbeat_wall, restarts, award_seq, "
+            "acked_seq, x, y FROM robots"
+        ):
+            rid, live, state, task, prog, hb, restarts, aseq, ack, x, y = row
+            job.robots[rid] = RobotRecord(
+                rid,
+                live,
+                False,
+                state or "",
+                task or "",
+                float(prog or 0.0),
+                float(hb or 0.0),
+                int(restarts or 0),
+                int(aseq or 0),
+                int(ack or 0),
+                (float(x), float(y)) if x is not None else None,
+            )
+
+    def plans(self) -> dict[str, Plan]:
+        out = {}
+        for robot, pid, task, wps, sweep_from, stamp in self.db.execute(
+            "SELECT robot, plan_id, task, waypoints, sweep_from, stamp FROM plans"
+        ):
+            wp = np.frombuffer(wps, dtype="<f8").reshape(-1, 2).copy()
+            out[robot] = Plan(float(stamp), int(pid), task, wp, int(sweep_from))
+        return out
+
+    def events(self) -> list[dict[str, object]]:
+        cols = ("seq", "wall", "sim", "kind", "robot", "task", "detail")
+        return [
+            dict(zip(cols, row, strict=True))
+            for row in self.db.execute(f"SELECT {', '.join(cols)} FROM events ORDER BY seq")
+        ]

@@ -1,0 +1,137 @@
+"""The job's rules without a bus: awards, swept pieces, losing a robot, rebalancing, and the
+job on disk."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, Job
+from fleet.coordinator.store import JobStore
+from fleet.protocol import Plan
+from planners.auction import Task
+from planners.coverage.params import CoverageParams
+
+
+def _task(tid: str, x0: float, pieces: int = 4) -> Task:
+    path = np.column_stack([x0 + np.arange(pieces + 1, dtype=float), np.zeros(pieces + 1)])
+    return Task(tid, path, float(pieces), 2.0 * pieces, (1,))
+
+
+@pytest.fixture
+def job() -> Job:
+    j = Job(CoverageParams())
+    j.add_tasks(tuple(_task(f"t{i:02d}", 10.0 * i) for i in range(4)))
+    for rid in ("robot-0", "robot-1"):
+        r = j.robot(rid)
+        r.ready, r.xy = True, (0.0, 0.0)
+    return j
+
+
+def test_awards_build_each_robots_queue_in_order(job: Job):
+    job.award("t00", "robot-0", False)
+    job.award("t02", "robot-0", True)
+    job.award("t01", "robot-1", False)
+    assert [r.task.id for r in job.queue("robot-0")] == ["t00", "t02"]
+    assert job.current("robot-1").task.id == "t01"
+    assert job.counts() == {OPEN: 1, ASSIGNED: 3, DONE: 0}
+    with pytest.raises(ValueError, match="not open"):
+        job.award("t00", "robot-1", False)
+
+
+def test_swept_pieces_of_a_reversed_task_map_back_to_its_own_order(job: Job):
+    job.award("t00", "robot-0", True)
+    # driven backwards: the first piece driven is the task's last
+    assert job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
+    assert job.tasks["t00"].swept.tolist() == [False, False, True, True]
+    assert not job.progress("robot-0", "t00", np.array([1, 0, 0, 0], dtype=np.uint8))
+    # reports from a robot that does not hold the task, or of the wrong length, change nothing
+    assert not job.progress("robot-1", "t00", np.ones(4, dtype=np.uint8))
+    assert not job.progress("robot-0", "t00", np.ones(3, dtype=np.uint8))
+
+
+def test_a_lost_robot_leaves_the_unswept_remainder_and_its_unstarted_tasks(job: Job):
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-0", False)
+    job.award("t02", "robot-1", False)
+    job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
+    reopened, made = job.lose("robot-0")
+    assert made == ["t00.1"]
+    assert sorted(reopened) == ["t00.1", "t01"]
+    assert job.tasks["t00"].state == REPLACED
+    rest = job.tasks["t00.1"]
+    assert rest.state == OPEN and rest.parent == "t00"
+    assert np.allclose(rest.task.path[0], [2.0, 0.0]) and np.allclose(rest.task.path[-1], [4, 0])
+    assert job.tasks["t01"].state == OPEN and job.tasks["t01"].owner is None
+    assert job.robots["robot-0"].liveness == LOST
+    assert job.queue("robot-0") == []
+    assert job.market() == ["robot-1"]
+    # the other robot's work is untouched, and no task is in two queues
+    assert [r.task.id for r in job.queue("robot-1")] == ["t02"]
+    # a second loss of the remainder's owner numbers the next remainder on
+    job.award("t00.1", "robot-1", False)
+    job.progress("robot-1", "t00.1", np.array([1, 0], dtype=np.uint8))
+    job.lose("robot-1")
+    assert "t00.2" in job.tasks
+
+
+def test_a_robot_lost_before_sweeping_anything_gives_back_whole_tasks(job: Job):
+    job.award("t00", "robot-0", True)
+    reopened, made = job.lose("robot-0")
+    assert reopened == ["t00"] and made == []
+    assert job.tasks["t00"].state == OPEN and not job.tasks["t00"].reverse
+
+
+def test_withdrawing_takes_back_only_the_unstarted_queued_tasks(job: Job):
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-0", False)
+    job.award("t02", "robot-0", False)
+    job.award("t03", "robot-1", False)
+    assert job.withdraw_unstarted() == ["t01", "t02"]
+    assert [r.task.id for r in job.queue("robot-0")] == ["t00"]
+    assert [r.task.id for r in job.queue("robot-1")] == ["t03"]
+
+
+def test_the_job_is_finished_when_every_task_is_done_or_replaced(job: Job):
+    for tid in ("t00", "t01", "t02", "t03"):
+        job.award(tid, "robot-0", False)
+    job.progress("robot-0", "t00", np.array([1, 0, 0, 0], dtype=np.uint8))
+    job.lose("robot-0")
+    robot = job.robots["robot-1"]
+    for rec in job.open_tasks():
+        job.award(rec.task.id, robot.id, False)
+    for rec in job.queue(robot.id):
+        assert not job.finished
+        assert job.finish(robot.id, rec.task.id)
+    assert job.finished
+    assert not job.finish(robot.id, "t01")
+
+
+def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
+    job.award("t00", "robot-0", True)
+    job.progress("robot-0", "t00", np.array([1, 0, 0, 0], dtype=np.uint8))
+    job.award("t01", "robot-1", False)
+    job.robots["robot-1"].award_seq = 3
+    store = JobStore(tmp_path / "job.sqlite")
+    store.save_tasks(list(job.tasks.values()))
+    store.save_robots(list(job.robots.values()))
+    plan = Plan(12.5, 7, "t00", np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 0.0]]), 1)
+    store.save_plan("robot-0", plan)
+    store.set_meta(phase="cleaning", plan_seq=7)
+    store.add_event(1.0, 2.0, "awarded", "robot-0", "t00", "")
+    store.close()
+
+    again = Job(CoverageParams())
+    store = JobStore(tmp_path / "job.sqlite")
+    store.load_job(again)
+    assert set(again.tasks) == set(job.tasks)
+    t00 = again.tasks["t00"]
+    assert t00.owner == "robot-0" and t00.reverse and t00.state == ASSIGNED
+    assert t00.swept.tolist() == job.tasks["t00"].swept.tolist()
+    assert np.array_equal(t00.task.path, job.tasks["t00"].task.path)
+    assert again.robots["robot-1"].award_seq == 3
+    assert not again.robots["robot-1"].ready
+    assert store.plans()["robot-0"] == plan
+    assert store.meta() == {"phase": "cleaning", "plan_seq": 7}
+    assert [e["kind"] for e in store.events()] == ["awarded"]
+    store.close()
