@@ -65,7 +65,9 @@ def plan_mapf(
     """Solve a MAPF instance and print status, SOC, makespan, runtime and nodes expanded.
 
     The solution is checked by the independent validator (bounds, obstacles, unit moves,
-    vertex/swap conflicts, goals) before anything is printed or written.
+    vertex/swap conflicts, goals) before anything is printed or written. Exit status: 0 solved,
+    1 no solution (infeasible, timeout, or PP failed; the reason and what to try go to stderr),
+    2 bad input, 3 invalid solution.
 
     Examples:
 
@@ -128,17 +130,47 @@ def plan_mapf(
         Console().print(table)
         if out is not None and result.solution is not None:
             Console().print(f"schedule written to {out}")
-    if result.status == "infeasible":
-        raise typer.Exit(1)
     if report is not None and not report.valid:
         _fail("invalid solution: " + "; ".join(report.errors), code=3)
+    if result.status != "success":
+        typer.echo(f"{solver}: {result.status}: {result.message}", err=True)
+        hint = _hint(solver, result.status)
+        if hint:
+            typer.echo(hint, err=True)
+        raise typer.Exit(1)
+
+
+def _hint(solver: str, status: str) -> str:
+    """What to try after a solver found no solution."""
+    if status == "failed" or (status == "timeout" and solver in ("pp", "sipp-pp")):
+        return (
+            "prioritized planning is incomplete: the complete solvers may still find a "
+            "solution, try --solver cbs (optimal) or --solver ecbs (bounded suboptimal)"
+        )
+    if status == "timeout" and solver == "ecbs":
+        return "try a larger --w, a longer --time-limit, or --solver cbs"
+    if status == "timeout":
+        return "try a longer --time-limit, or --solver ecbs (bounded suboptimal, faster)"
+    return ""
 
 
 def bench_mapf(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    tiny: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Instead of the 32 x 32 maps: N random tiny instances (up to 5 x 5, up to 4 "
+            "agents), every solver checked against a brute-force optimum.",
+        ),
+    ] = None,
     time_limit: Annotated[
-        float, typer.Option(min=0.1, help="Seconds per instance before it counts as unsolved.")
-    ] = 5.0,
+        float | None,
+        typer.Option(
+            min=0.01,
+            help="Seconds per instance before it counts as unsolved (default 5; 1 with --tiny).",
+        ),
+    ] = None,
     solvers: Annotated[
         list[str] | None,
         typer.Option("--solver", help="Solvers to run (repeatable; default: all). " + SOLVER_HELP),
@@ -153,8 +185,13 @@ def bench_mapf(
     ] = None,
     k_step: Annotated[int, typer.Option(min=1, help="Agents added per step.")] = 10,
     k_max: Annotated[int, typer.Option(min=1, help="Most agents tried.")] = 200,
-    w: Annotated[float, typer.Option("--w", min=1.0, help="ECBS suboptimality bound.")] = 1.2,
-    seed: Annotated[int, typer.Option(help="Seed of maps and scenarios.")] = 0,
+    w: Annotated[
+        float | None,
+        typer.Option(
+            "--w", min=1.0, help="ECBS suboptimality bound (default 1.2; 1.5 with --tiny)."
+        ),
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Seed of maps and scenarios (or tiny instances).")] = 0,
     scenarios: Annotated[
         int, typer.Option(min=1, help="Scenarios (random start/goal sets) per map and k.")
     ] = 1,
@@ -174,15 +211,29 @@ def bench_mapf(
     Default (about 3-5 minutes on 2 cores): --time-limit 5 --k-step 10 --k-max 200.
     The CBS target run: fleet bench mapf --map random-32-32-10 --solver cbs --solver cbs-plain
     --time-limit 60 --k-step 5 --scenarios 3
+
+    With --tiny N: N seeded random instances of at most 5 x 5 cells and 4 agents, each solver
+    checked against the brute-force optimum (cbs, cbs-plain: optimal; ecbs: within its bound;
+    pp, sipp-pp: valid). Prints per solver the solved and correct shares, p50 / p99 / max
+    runtime and the slowest instance, as Python that rebuilds it. Example:
+    fleet bench mapf --tiny 2000 --seed 1
     """
     from planners.mapf import SOLVERS
-    from planners.mapf.bench import optimal_soc_mismatches, run_suite, summarize, write_suite
-    from planners.mapf.generate import benchmark_maps
 
     chosen = list(solvers or SOLVERS)
     for name in chosen:
         if name not in SOLVERS:
             _fail(f"--solver must be among {', '.join(SOLVERS)}, got {name!r}")
+    if tiny is not None:
+        _bench_tiny(
+            tiny, seed, chosen, 1.0 if time_limit is None else time_limit, w or 1.5, as_json
+        )
+        return
+    time_limit = 5.0 if time_limit is None else time_limit
+    w = 1.2 if w is None else w
+    from planners.mapf.bench import optimal_soc_mismatches, run_suite, summarize, write_suite
+    from planners.mapf.generate import benchmark_maps
+
     known = list(benchmark_maps(seed))
     for name in maps or []:
         if name not in known:
@@ -253,3 +304,67 @@ def bench_mapf(
     out = Console()
     out.print(table)
     out.print(f"CBS variants with different SOC at the same k: {mismatches or 'none'}")
+
+
+def _bench_tiny(
+    count: int, seed: int, solvers: list[str], time_limit: float, w: float, as_json: bool
+) -> None:
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from planners.mapf.tiny import run_tiny, summarize_tiny
+
+    with Progress(
+        "tiny instances",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        task = bar.add_task("tiny", total=count)
+        cases, runs = run_tiny(count, seed, solvers, time_limit, w, lambda _i: bar.advance(task))
+    rows = summarize_tiny(cases, runs, solvers)
+    config = {
+        "instances": count,
+        "seed": seed,
+        "time_limit_s": time_limit,
+        "w": w,
+        "redrawn": sum(c.redrawn for c in cases),
+    }
+    if as_json:
+        print(json.dumps({"config": config, "summary": rows}))
+        return
+    from rich.table import Table
+
+    table = Table(
+        title=f"MAPF on {count} tiny instances (seed {seed}, {time_limit:g} s each, w = {w:g})"
+    )
+    for col in ("solver", "solved", "correct", "p50 ms", "p99 ms", "max ms", "slowest"):
+        table.add_column(col, justify="right")
+    for row in rows:
+        table.add_row(
+            str(row["solver"]),
+            f"{row['solved']:.2%}",
+            f"{row['correct']:.2%}",
+            f"{1000 * row['p50_s']:.1f}",  # type: ignore[operator]
+            f"{1000 * row['p99_s']:.1f}",  # type: ignore[operator]
+            f"{1000 * row['max_s']:.1f}",  # type: ignore[operator]
+            f"#{row['slowest']['index']}",  # type: ignore[index]
+        )
+    out = Console()
+    out.print(table)
+    out.print(
+        "correct: cbs, cbs-plain optimal; ecbs lower bound ≤ optimum ≤ SOC ≤ w · optimum; "
+        f"pp, sipp-pp valid. {config['redrawn']} draws without a solution were redrawn."
+    )
+    for row in rows:
+        slowest = row["slowest"]
+        out.print(
+            f"slowest for {row['solver']}: #{slowest['index']} "  # type: ignore[index]
+            f"(tiny_case({seed}, {slowest['index']}), optimum {slowest['optimum']}, "  # type: ignore[index]
+            f"{slowest['status']}): {slowest['instance']}",  # type: ignore[index]
+            soft_wrap=True,
+        )
+        if row["failures"]:
+            out.print(f"  {row['solver']} incorrect on #{row['failures']}")

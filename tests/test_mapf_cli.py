@@ -111,3 +111,47 @@ def test_bench_smoke(tmp_path: Path) -> None:
     assert rows["cbs"]["all_valid"] is True
     assert (tmp_path / "random-32-32-10.map").exists()
     assert (tmp_path / "random-32-32-10-0.scen").exists()
+
+
+def test_plan_without_a_solution_exits_non_zero_and_suggests_cbs(tmp_path: Path) -> None:
+    # a swap through a side pocket: PP fails in both orders, CBS solves it
+    (tmp_path / "pocket.yaml").write_text(
+        "map: {dimensions: [5, 2], obstacles: [[0, 1], [1, 1], [3, 1], [4, 1]]}\n"
+        "agents: [{name: a, start: [0, 0], goal: [4, 0]}, {name: b, start: [4, 0], goal: [0, 0]}]\n"
+    )
+    path = str(tmp_path / "pocket.yaml")
+    for solver in ("pp", "sipp-pp"):
+        result = runner.invoke(app, ["plan", "mapf", path, "--solver", solver, "--json"])
+        assert result.exit_code == 1, result.output
+        assert json.loads(result.stdout)["status"] == "failed"
+        assert "--solver cbs" in result.stderr
+    result = runner.invoke(app, ["plan", "mapf", path, "--solver", "cbs", "--json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["soc"] == 11
+
+
+def test_plan_timeout_exits_non_zero(tmp_path: Path) -> None:
+    map_path, scen_path, _ = _files(tmp_path)
+    args = ["plan", "mapf", str(map_path), str(scen_path), "--time-limit", "0", "--json"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 1, result.output
+    assert json.loads(result.stdout)["status"] == "timeout"
+    assert "--time-limit" in result.stderr
+
+
+def test_bench_tiny_checks_solvers_against_the_brute_force() -> None:
+    args = ["bench", "mapf", "--tiny", "15", "--seed", "2", "--json"]
+    result = runner.invoke(app, [*args, "--solver", "cbs", "--solver", "ecbs", "--solver", "pp"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["config"]["instances"] == 15
+    assert report["config"]["w"] == 1.5
+    rows = {row["solver"]: row for row in report["summary"]}
+    assert set(rows) == {"cbs", "ecbs", "pp"}
+    for solver in ("cbs", "ecbs"):
+        assert rows[solver]["solved"] == rows[solver]["correct"] == 1.0
+        assert rows[solver]["p50_s"] <= rows[solver]["p99_s"] <= rows[solver]["max_s"]
+        assert "MapfInstance(np.array(" in rows[solver]["slowest"]["instance"]
+    result = runner.invoke(app, ["bench", "mapf", "--tiny", "3", "--solver", "cbs"])
+    assert result.exit_code == 0, result.output
+    assert "slowest for cbs" in result.stdout

@@ -1,72 +1,30 @@
-"""CBS against a brute-force joint-state optimum on random tiny instances (hypothesis).
-
-The brute force is Dijkstra over joint configurations. To charge the model's cost (an agent pays
-until it reaches its goal for the last time) it remembers, per agent, how long it has been
-sitting at its goal: leaving the goal pays those waits back.
-"""
+"""CBS and ECBS against the brute-force joint-state optimum on random tiny instances (hypothesis),
+and on fixed instances where agents block each other in a dead end (issue 18)."""
 
 from __future__ import annotations
 
-import heapq
-from itertools import product
-
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from planners.mapf import MapfInstance, solve, validate
+from planners.mapf.brute_force import brute_force_soc
 from planners.mapf.model import InfeasibleInstanceError, check_instance
 
-MAX_SOC = 40
+# a slow solve is a failure of the solver: tiny instances take milliseconds
+TIME_LIMIT_S = 10.0
+# plain CBS keeps its textbook weakness (it splits target conflicts one timestep at a time), so it
+# is only held to instances it finishes quickly
+PLAIN_TIME_LIMIT_S = 0.5
 
-
-def brute_force_soc(instance: MapfInstance) -> int | None:
-    rows, cols = instance.shape
-    free = instance.free
-
-    def moves(cell):
-        r, c = cell
-        out = [cell]
-        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            nr, nc = r + dr, c + dc
-            if 0 <= nr < rows and 0 <= nc < cols and free[nr, nc]:
-                out.append((nr, nc))
-        return out
-
-    goals = instance.goals
-    start = (instance.starts, (0,) * instance.num_agents)
-    best = {start: 0}
-    heap = [(0, start)]
-    while heap:
-        cost, state = heapq.heappop(heap)
-        if cost > best.get(state, MAX_SOC + 1) or cost > MAX_SOC:
-            continue
-        pos, waits = state
-        if pos == goals:
-            return cost
-        for nxt in product(*(moves(p) for p in pos)):
-            if len(set(nxt)) < len(nxt):
-                continue
-            if any(
-                nxt[i] == pos[j] and nxt[j] == pos[i]
-                for i in range(len(pos))
-                for j in range(i + 1, len(pos))
-                if nxt[i] != pos[i]
-            ):
-                continue
-            step = 0
-            new_waits = []
-            for i, (p, q) in enumerate(zip(pos, nxt, strict=True)):
-                if q == goals[i] and p == goals[i]:
-                    new_waits.append(waits[i] + 1)
-                else:
-                    step += 1 + waits[i]
-                    new_waits.append(0)
-            key = (nxt, tuple(new_waits))
-            if cost + step < best.get(key, MAX_SOC + 1):
-                best[key] = cost + step
-                heapq.heappush(heap, (cost + step, key))
-    return None
+# goals in a dead-end corridor: one agent must leave its goal and come back
+DEAD_END = np.array([[1, 1, 1, 1], [1, 1, 0, 1], [1, 0, 1, 1], [0, 1, 1, 0]], dtype=bool)
+DEAD_END_GOALS = ((3, 2), (1, 3), (2, 2))
+DEAD_ENDS = [
+    MapfInstance(DEAD_END, starts=((0, 1), (0, 0), (2, 3)), goals=DEAD_END_GOALS),
+    MapfInstance(DEAD_END, starts=((0, 0), (1, 1), (2, 3)), goals=DEAD_END_GOALS),
+]
 
 
 @st.composite
@@ -91,20 +49,46 @@ def test_cbs_soc_equals_brute_force_optimum(instance: MapfInstance) -> None:
         assume(False)
     optimum = brute_force_soc(instance)
     assume(optimum is not None)
-    # the limit only guards against a hang: plain CBS needs 6 s on some tiny instances (an
-    # agent parked on its goal in the only way through), and a busy machine doubles that
-    for solver in ("cbs", "cbs-plain"):
-        result = solve(instance, solver, time_limit_s=120)
-        assert result.status == "success", (solver, result.message)
-        assert validate(instance, result.solution.paths).valid
-        assert result.soc == optimum, solver
-    ecbs = solve(instance, "ecbs", w=1.5, time_limit_s=120)
-    assert ecbs.status == "success"
+    result = solve(instance, "cbs", time_limit_s=TIME_LIMIT_S)
+    assert result.status == "success", result.message
+    assert validate(instance, result.solution.paths).valid
+    assert result.soc == optimum
+    ecbs = solve(instance, "ecbs", w=1.5, time_limit_s=TIME_LIMIT_S)
+    assert ecbs.status == "success", ecbs.message
     assert validate(instance, ecbs.solution.paths).valid
     assert ecbs.lower_bound <= optimum <= ecbs.soc <= 1.5 * optimum
+    plain = solve(instance, "cbs-plain", time_limit_s=PLAIN_TIME_LIMIT_S)
+    if plain.status == "success":
+        assert validate(instance, plain.solution.paths).valid
+        assert plain.soc == optimum
+    else:
+        assert plain.status == "timeout"
 
 
 def test_brute_force_matches_a_hand_derived_optimum() -> None:
     pocket = np.array([[1, 1, 1, 1, 1], [0, 0, 1, 0, 0]], dtype=bool)
     assert brute_force_soc(MapfInstance(pocket, ((0, 0), (0, 4)), ((0, 4), (0, 0)))) == 11
     assert brute_force_soc(MapfInstance(pocket, ((0, 2), (0, 0)), ((0, 2), (0, 4)))) == 7
+    corridor = np.ones((1, 4), dtype=bool)
+    assert brute_force_soc(MapfInstance(corridor, ((0, 0), (0, 3)), ((0, 3), (0, 0)))) is None
+
+
+@pytest.mark.parametrize("instance", DEAD_ENDS, ids=["first", "second"])
+def test_dead_end_goals_have_optimum_32(instance: MapfInstance) -> None:
+    assert brute_force_soc(instance) == 32
+
+
+@pytest.mark.parametrize("instance", DEAD_ENDS, ids=["first", "second"])
+def test_cbs_solves_dead_end_goals_optimally_in_two_seconds(instance: MapfInstance) -> None:
+    result = solve(instance, "cbs", time_limit_s=2.0)
+    assert result.status == "success", result.message
+    assert validate(instance, result.solution.paths).valid
+    assert result.soc == 32
+
+
+@pytest.mark.parametrize("instance", DEAD_ENDS, ids=["first", "second"])
+def test_ecbs_solves_dead_end_goals_within_its_bound(instance: MapfInstance) -> None:
+    result = solve(instance, "ecbs", w=1.2, time_limit_s=2.0)
+    assert result.status == "success", result.message
+    assert validate(instance, result.solution.paths).valid
+    assert result.lower_bound <= 32 <= result.soc <= 1.2 * 32

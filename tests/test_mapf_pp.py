@@ -66,3 +66,14 @@ def test_bad_order_is_rejected() -> None:
     instance = MapfInstance(POCKET, ((0, 2), (0, 0)), ((0, 2), (0, 4)))
     with pytest.raises(ValueError, match="permutation"):
         solve(instance, "pp", order=(0, 0))
+
+
+@pytest.mark.parametrize("solver", ["pp", "sipp-pp"])
+def test_pp_gives_up_once_every_order_failed(solver: str) -> None:
+    # a swap through a side pocket: both orders fail, restarts cannot help (cbs solves it)
+    instance = MapfInstance(POCKET, ((0, 0), (0, 4)), ((0, 4), (0, 0)))
+    result = solve(instance, solver, time_limit_s=30)
+    assert result.status == "failed"
+    assert result.details["attempts"] == 2
+    assert result.runtime_s < 1.0
+    assert solve(instance, "cbs", time_limit_s=5).soc == 11

@@ -118,7 +118,7 @@ def solve(
                     deadline.elapsed(),
                     stats.high,
                     stats.low,
-                    message=f"no order found in {attempts} attempts",
+                    message=f"no priority order worked ({attempts} tried; PP is incomplete)",
                     details=details,
                 )
         elif solver == "ecbs":

@@ -5,6 +5,12 @@ Both levels are focal searches. The low level (``focal_astar``) returns a path o
 agents, and a lower bound ``f_min``. A high-level node's lower bound ``LB`` is the sum of its
 agents' bounds; the high level expands, among the nodes with ``SOC ≤ w · min LB``, the one with the
 fewest conflicts. The returned SOC is therefore at most ``w`` times the optimal SOC.
+
+Conflicts are split as in ``cbs``: target conflicts on the parked agent's path length (target
+reasoning, Li et al., AIJ 2021), and two groups of agents that conflicted more than
+``MERGE_THRESHOLD`` times are merged into a meta-agent (MA-CBS, Sharon et al., SoCS 2012) and the
+search restarts (Boyarski et al., IJCAI 2015). A meta-agent is planned optimally by the joint
+search (``joint``), so its cost is its own lower bound and the bound argument above still holds.
 """
 
 from __future__ import annotations
@@ -12,19 +18,33 @@ from __future__ import annotations
 from collections.abc import Sequence
 from heapq import heappop, heappush
 
-from planners.mapf.conflicts import all_conflicts, conflicts_of, positions
+import numpy as np
+
+from planners.mapf.conflicts import Conflict, all_conflicts, conflicts_of, positions
+from planners.mapf.constraints import (
+    JOINT_BUDGET,
+    LENGTH_LE,
+    MAX_GROUP,
+    MERGE_THRESHOLD,
+    Constraint,
+    as_target,
+    groups_of,
+    members,
+    merged,
+    split,
+    table_for,
+    violators,
+)
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
+from planners.mapf.joint import JointSearchLimit, joint_astar
 from planners.mapf.low_level import SearchStats, focal_astar
 from planners.mapf.model import InfeasibleInstanceError, path_cost
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 
-Constraint = tuple[int, int, int]
-
 
 class _Node:
     __slots__ = (
-        "agent",
         "conflicts",
         "constraint",
         "costs",
@@ -39,22 +59,24 @@ class _Node:
     def __init__(
         self,
         parent: _Node | None,
-        agent: int,
         constraint: Constraint | None,
         paths: list[list[int]],
         costs: list[int],
         lbs: list[int],
     ) -> None:
         self.parent = parent
-        self.agent = agent
         self.constraint = constraint
         self.paths = paths
         self.costs = costs
         self.lbs = lbs
         self.soc = sum(costs)
         self.lb = sum(lbs)
-        self.conflicts: list[tuple[int, int, int, int, int]] = []
+        self.conflicts: list[Conflict] = []
         self.done = False
+
+
+class _Restart(Exception):
+    """Two groups were merged: the search starts again from a new root."""
 
 
 def ecbs(
@@ -64,108 +86,228 @@ def ecbs(
     w: float,
     deadline: Deadline,
     stats: SearchStats,
+    merge_threshold: int = MERGE_THRESHOLD,
 ) -> tuple[list[list[int]], int]:
     """Paths with SOC ≤ w · optimum, and the lower bound that proves it; raises SearchTimeout."""
     if w < 1.0:
         raise ValueError(f"w must be ≥ 1, got {w}")
-    n = graph.num_cells
-    k = len(starts)
-    graph.precompute(goals)
-
-    def table_for(node: _Node, agent: int) -> ConstraintTable:
-        table = ConstraintTable(n)
-        while node.parent is not None:
-            if node.agent == agent:
-                u, v, t = node.constraint
-                if v == -1:
-                    table.add_vertex(u, t)
-                else:
-                    table.add_edge(u, v, t)
-            node = node.parent
-        return table
-
-    paths: list[list[int]] = []
-    lbs: list[int] = []
-    for i in range(k):
-        found = focal_astar(
-            graph,
-            starts[i],
-            goals[i],
-            ConstraintTable(n),
-            ConflictAvoidanceTable.from_paths(n, paths),
-            w,
-            deadline,
-            stats,
-        )
-        if found is None:
-            raise RuntimeError("an agent has no path although its goal is reachable")
-        paths.append(found[0])
-        lbs.append(found[1])
-    root = _Node(None, -1, None, paths, [path_cost(p) for p in paths], lbs)
-    root.conflicts = all_conflicts(paths)
-
-    counter = 0
-    open_heap: list[tuple[int, int, _Node]] = []
-    focal: list[tuple[int, int, int, _Node]] = []
-    waiting: list[tuple[int, int, _Node]] = []
-    threshold = w * root.lb + 1e-9
-
-    def push(node: _Node) -> None:
-        nonlocal counter
-        counter += 1
-        heappush(open_heap, (node.lb, counter, node))
-        if node.soc <= threshold:
-            heappush(focal, (len(node.conflicts), node.soc, counter, node))
-        else:
-            heappush(waiting, (node.soc, counter, node))
-
-    push(root)
+    search = _Ecbs(graph, starts, goals, w, deadline, stats, merge_threshold)
     while True:
-        deadline.check()
-        while open_heap and open_heap[0][2].done:
-            heappop(open_heap)
-        if not open_heap:
-            raise InfeasibleInstanceError("no solution: ECBS exhausted its constraint tree")
-        bound = w * open_heap[0][0] + 1e-9
-        if bound > threshold:
-            threshold = bound
-            while waiting and waiting[0][0] <= threshold:
-                soc, c, node = heappop(waiting)
-                heappush(focal, (len(node.conflicts), soc, c, node))
-        # the node at the top of OPEN has SOC ≤ w · LB, so FOCAL is never empty here
-        while focal[0][3].done:
-            heappop(focal)
-        node = heappop(focal)[3]
-        node.done = True
-        if not node.conflicts:
-            return node.paths, open_heap[0][0]
-        stats.high += 1
-        t, a, b, u, v = min(node.conflicts)
-        split = [(a, (u, -1, t)), (b, (u, -1, t))] if v == -1 else [(a, (u, v, t)), (b, (v, u, t))]
-        pos = positions(node.paths)
+        try:
+            return search.run()
+        except _Restart:
+            continue
+
+
+class _Ecbs:
+    def __init__(
+        self,
+        graph: GridGraph,
+        starts: Sequence[int],
+        goals: Sequence[int],
+        w: float,
+        deadline: Deadline,
+        stats: SearchStats,
+        merge_threshold: int,
+    ) -> None:
+        self.graph = graph
+        self.starts = list(starts)
+        self.goals = list(goals)
+        self.w = w
+        self.deadline = deadline
+        self.stats = stats
+        self.merge_threshold = merge_threshold
+        self.k = len(self.starts)
+        self.group: tuple[int, ...] = tuple(range(self.k))
+        self._conflict_counts: dict[tuple[frozenset[int], frozenset[int]], int] = {}
+        self._too_big: set[frozenset[int]] = set()
+        self._joint_plans: dict[frozenset[int], list[list[int]]] = {}
+        graph.precompute(self.goals)
+
+    def run(self) -> tuple[list[list[int]], int]:
+        w = self.w
+        root = self._root()
+        counter = 0
+        open_heap: list[tuple[int, int, _Node]] = []
+        focal: list[tuple[int, int, int, _Node]] = []
+        waiting: list[tuple[int, int, _Node]] = []
+        threshold = w * root.lb + 1e-9
+
+        def push(node: _Node) -> None:
+            nonlocal counter
+            counter += 1
+            heappush(open_heap, (node.lb, counter, node))
+            if node.soc <= threshold:
+                heappush(focal, (len(node.conflicts), node.soc, counter, node))
+            else:
+                heappush(waiting, (node.soc, counter, node))
+
+        push(root)
+        while True:
+            self.deadline.check()
+            while open_heap and open_heap[0][2].done:
+                heappop(open_heap)
+            if not open_heap:
+                raise InfeasibleInstanceError("no solution: ECBS exhausted its constraint tree")
+            bound = w * open_heap[0][0] + 1e-9
+            if bound > threshold:
+                threshold = bound
+                while waiting and waiting[0][0] <= threshold:
+                    soc, c, node = heappop(waiting)
+                    heappush(focal, (len(node.conflicts), soc, c, node))
+            # the node at the top of OPEN has SOC ≤ w · LB, so FOCAL is never empty here
+            while focal[0][3].done:
+                heappop(focal)
+            node = heappop(focal)[3]
+            node.done = True
+            if not node.conflicts:
+                return node.paths, open_heap[0][0]
+            self.stats.high += 1
+            conflict = min(node.conflicts)
+            self._count(node, conflict[1], conflict[2])
+            pos = positions(node.paths)
+            for constraint in split(conflict):
+                child = _Node(node, constraint, list(node.paths), list(node.costs), list(node.lbs))
+                agents = (
+                    violators(constraint, pos) if constraint[0] == LENGTH_LE else [constraint[1]]
+                )
+                changed = self._replan(child, agents, pos)
+                if changed is None:
+                    continue
+                self._update_conflicts(child, node.conflicts, changed, pos)
+                push(child)
+
+    def _count(self, node: _Node, a: int, b: int) -> None:
+        """Count a conflict between the groups of a and b; past the threshold merge them and
+        restart (raises _Restart) unless the merged group is too large or too hard."""
+        if not self.merge_threshold:
+            return
+        ga = frozenset(members(self.group, self.group[a]))
+        gb = frozenset(members(self.group, self.group[b]))
+        key = (ga, gb) if min(ga) < min(gb) else (gb, ga)
+        count = self._conflict_counts.get(key, 0) + 1
+        self._conflict_counts[key] = count
+        both = ga | gb
+        if count <= self.merge_threshold or len(both) > MAX_GROUP or both in self._too_big:
+            return
+        n = self.graph.num_cells
+        agents = sorted(both)
         lengths = [len(p) for p in node.paths]
-        for agent, constraint in split:
-            child = _Node(
-                node, agent, constraint, list(node.paths), list(node.costs), list(node.lbs)
+        cat = ConflictAvoidanceTable.from_positions(n, positions(node.paths), lengths, agents)
+        try:
+            paths = joint_astar(
+                self.graph,
+                [self.starts[i] for i in agents],
+                [self.goals[i] for i in agents],
+                [ConstraintTable(n) for _ in agents],
+                cat,
+                self.deadline,
+                self.stats,
+                JOINT_BUDGET,
             )
-            found = focal_astar(
-                graph,
-                starts[agent],
-                goals[agent],
-                table_for(child, agent),
-                ConflictAvoidanceTable.from_positions(n, pos, lengths, agent),
-                w,
-                deadline,
-                stats,
+        except JointSearchLimit:
+            self._too_big.add(both)
+            return
+        if paths is None:
+            raise InfeasibleInstanceError(
+                f"no solution: agents {agents} have no joint plan even on their own"
             )
-            if found is None:
-                continue
-            path, f_min = found
-            child.paths[agent] = path
-            child.costs[agent] = path_cost(path)
-            child.lbs[agent] = max(child.lbs[agent], f_min)
-            child.soc = sum(child.costs)
-            child.lb = sum(child.lbs)
-            kept = [c for c in node.conflicts if c[1] != agent and c[2] != agent]
-            child.conflicts = kept + conflicts_of(agent, path, pos)
-            push(child)
+        self._joint_plans[both] = paths
+        self.group = merged(self.group, a, b)
+        raise _Restart
+
+    def _root(self) -> _Node:
+        n = self.graph.num_cells
+        paths: list[list[int]] = [[] for _ in range(self.k)]
+        lbs = [0] * self.k
+        planned: list[int] = []
+        for gid in sorted(set(self.group)):
+            agents = members(self.group, gid)
+            if len(agents) > 1:
+                for i, path in zip(agents, self._joint_plans[frozenset(agents)], strict=True):
+                    paths[i] = path
+                    lbs[i] = path_cost(path)
+            else:
+                found = focal_astar(
+                    self.graph,
+                    self.starts[gid],
+                    self.goals[gid],
+                    ConstraintTable(n),
+                    ConflictAvoidanceTable.from_paths(n, [paths[i] for i in planned]),
+                    self.w,
+                    self.deadline,
+                    self.stats,
+                )
+                if found is None:
+                    raise RuntimeError("an agent has no path although its goal is reachable")
+                paths[gid], lbs[gid] = found
+            planned.extend(agents)
+        root = _Node(None, None, paths, [path_cost(p) for p in paths], lbs)
+        root.conflicts = [as_target(c, self.goals, root.costs) for c in all_conflicts(paths)]
+        return root
+
+    def _replan(self, node: _Node, agents: Sequence[int], pos: np.ndarray) -> list[int] | None:
+        """Replan the groups of ``agents`` under the node's constraints; the agents replanned,
+        or None if a group has no plan."""
+        n = self.graph.num_cells
+        lengths = [len(p) for p in node.paths]
+        constraints = []
+        anc: _Node | None = node
+        while anc is not None and anc.constraint is not None:
+            constraints.append(anc.constraint)
+            anc = anc.parent
+        changed: list[int] = []
+        for group in groups_of(self.group, agents):
+            cat = ConflictAvoidanceTable.from_positions(n, pos, lengths, group)
+            tables = [table_for(n, constraints, i) for i in group]
+            if len(group) == 1:
+                agent = group[0]
+                found = focal_astar(
+                    self.graph,
+                    self.starts[agent],
+                    self.goals[agent],
+                    tables[0],
+                    cat,
+                    self.w,
+                    self.deadline,
+                    self.stats,
+                )
+                if found is None:
+                    return None
+                path, f_min = found
+                node.paths[agent] = path
+                node.costs[agent] = path_cost(path)
+                node.lbs[agent] = max(node.lbs[agent], f_min)
+            else:
+                paths = joint_astar(
+                    self.graph,
+                    [self.starts[i] for i in group],
+                    [self.goals[i] for i in group],
+                    tables,
+                    cat,
+                    self.deadline,
+                    self.stats,
+                )
+                if paths is None:
+                    return None
+                for i, path in zip(group, paths, strict=True):
+                    node.paths[i] = path
+                    node.costs[i] = node.lbs[i] = path_cost(path)
+            changed.extend(group)
+        node.soc = sum(node.costs)
+        node.lb = sum(node.lbs)
+        return changed
+
+    def _update_conflicts(
+        self, node: _Node, inherited: list[Conflict], changed: list[int], pos: np.ndarray
+    ) -> None:
+        moved = set(changed)
+        kept = [c for c in inherited if c[1] not in moved and c[2] not in moved]
+        if len(changed) > 1:
+            pos = positions(node.paths)
+        done: set[int] = set()
+        new: list[Conflict] = []
+        for agent in changed:
+            new.extend(c for c in conflicts_of(agent, node.paths[agent], pos) if c[2] not in done)
+            done.add(agent)
+        node.conflicts = kept + [as_target(c, self.goals, node.costs) for c in new]

@@ -3,7 +3,9 @@
 States are ``(cell, t)`` with unit-cost moves and waits and the cached BFS distance as heuristic,
 raised to ``earliest_finish - t`` when the goal is constrained later on (both consistent). A
 ``max_finish`` bound (target reasoning's ``l ≤ t``) prunes states that cannot reach the goal in
-time. Beyond
+time. The goal counts only where the agent enters it (or starts there): an agent that waited on
+its goal since before ``min_finish`` must leave and come back, so a state "just arrived at the
+goal" is kept apart from "waiting on the goal". Beyond
 the last time any constraint or avoidance entry mentions, ``(cell, t)`` and ``(cell, t + 1)`` have
 the same future, so states are merged there ("time collapse"): the state space is finite and a
 search with no solution ends instead of waiting forever.
@@ -72,10 +74,12 @@ def space_time_astar(
         horizon = max(horizon, cat.horizon + 1)
         cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
     span = horizon + 1
+    arrived = n * span  # key of the goal entered from another cell at t: arrived + t
     cells = [start]
     times = [0]
     confs = [0]
     parents = [-1]
+    keys = [arrived if start == goal else start * span]
     h0 = max(dist[start], earliest)
     heap = [(h0, 0, 0, 0)]
     closed: set[int] = set()
@@ -86,14 +90,14 @@ def space_time_astar(
             _f, conf, _, node = heappop(heap)
             cell = cells[node]
             t = times[node]
-            key = cell * span + (t if t < horizon else horizon)
+            key = keys[node]
             if key in closed:
                 continue
             closed.add(key)
             expanded += 1
             if expanded % _CHECK_EVERY == 0:
                 deadline.check()
-            if cell == goal and t >= earliest:
+            if key >= arrived and t >= earliest:
                 return _path(cells, parents, node)
             nt = t + 1
             tn = nt * n
@@ -110,7 +114,8 @@ def space_time_astar(
                     continue
                 if earliest - nt > h:
                     h = earliest - nt
-                nkey = nc * span + (nt if nt < horizon else horizon)
+                tk = nt if nt < horizon else horizon
+                nkey = arrived + tk if nc == goal and nc != cell else nc * span + tk
                 if nkey in closed:
                     continue
                 c = conf
@@ -131,6 +136,7 @@ def space_time_astar(
                 times.append(nt)
                 confs.append(c)
                 parents.append(node)
+                keys.append(nkey)
                 heappush(heap, (nt + h, c, -nt, idx))
         return None
     finally:
@@ -163,12 +169,13 @@ def focal_astar(
     cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
     horizon = max(table.horizon, earliest, cat.horizon) + 1
     span = horizon + 1
+    arrived = n * span  # key of the goal entered from another cell at t: arrived + t
     cells = [start]
     times = [0]
     fs = [max(dist[start], earliest)]
     confs = [0]
     parents = [-1]
-    keys = [start * span]
+    keys = [arrived if start == goal else start * span]
     current: dict[int, int] = {keys[0]: 0}
     done: set[int] = set()
     open_heap = [(fs[0], 0)]
@@ -204,7 +211,7 @@ def focal_astar(
                 deadline.check()
             cell = cells[node]
             t = times[node]
-            if cell == goal and t >= earliest:
+            if keys[node] >= arrived and t >= earliest:
                 return _path(cells, parents, node), f_min
             nt = t + 1
             tn = nt * n
@@ -227,7 +234,8 @@ def focal_astar(
                 pa = cat_p.get(nc)
                 if pa is not None and nt >= pa:
                     c += 1
-                nkey = nc * span + (nt if nt < horizon else horizon)
+                tk = nt if nt < horizon else horizon
+                nkey = arrived + tk if nc == goal and nc != cell else nc * span + tk
                 old = current.get(nkey)
                 if old is not None and times[old] <= nt and confs[old] <= c:
                     continue

@@ -5,12 +5,15 @@ paths of all higher-priority agents (cells, moves, and their goals from arrival 
 space-time A* or SIPP as the single-agent planner. PP is fast but incomplete: when an agent finds
 no path, the whole plan restarts with a fresh random order (seeded, so runs are reproducible),
 until one succeeds or the deadline passes (Bennewitz et al. 2002 search over orders similarly).
+A plan depends only on the order, so once every order of a small group has failed (all k! of
+them, tracked up to ``EXHAUSTIVE_AGENTS`` agents) restarts cannot help and PP gives up.
 """
 
 from __future__ import annotations
 
 import random
 from collections.abc import Sequence
+from math import factorial
 
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
@@ -19,6 +22,8 @@ from planners.mapf.sipp import sipp
 from planners.mapf.tables import ConstraintTable
 
 LOW_LEVELS = ("astar", "sipp")
+# up to this many agents PP remembers the orders it tried and stops when all k! have failed
+EXHAUSTIVE_AGENTS = 6
 
 
 def plan_in_order(
@@ -61,7 +66,7 @@ def prioritized(
     """(paths or None, the order that was used last, number of orders tried).
 
     ``order`` defaults to the agents' index order; ``max_restarts=None`` restarts until the
-    deadline raises SearchTimeout.
+    deadline raises SearchTimeout, or until every order has failed (small groups only).
     """
     if low_level not in LOW_LEVELS:
         raise ValueError(f"low_level must be one of {LOW_LEVELS}, got {low_level!r}")
@@ -72,6 +77,8 @@ def prioritized(
     graph.precompute(goals)
     rng = random.Random(seed)
     attempts = 0
+    orders = factorial(k) if k <= EXHAUSTIVE_AGENTS else None
+    failed: set[tuple[int, ...]] = set()
     while True:
         attempts += 1
         stats.high += 1
@@ -80,5 +87,11 @@ def prioritized(
             return result, tuple(current), attempts
         if max_restarts is not None and attempts > max_restarts:
             return None, tuple(current), attempts
+        if orders is not None:
+            failed.add(tuple(current))
+            if len(failed) == orders:
+                return None, tuple(current), attempts
         deadline.check()
         rng.shuffle(current)
+        while orders is not None and tuple(current) in failed:
+            rng.shuffle(current)
