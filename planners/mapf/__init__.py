@@ -9,20 +9,28 @@ Entry point for the rest of the system::
     if result.status == "success":
         paths = result.solution.paths        # paths[i][t] = (row, col); agents stay at the end
     # result.status: "success" | "timeout" | "infeasible" (rejected before search, or CBS/ECBS
-    # exhausted their search; reason in result.message) | "failed" (PP, max_restarts exhausted)
+    # proved there is none; reason in result.message) | "failed" (PP: every priority order
+    # failed, or max_restarts exhausted)
 
 Solvers (``SOLVERS``):
 
-- ``"pp"``: prioritized planning with space-time A*, randomized restarts (fast, incomplete).
+- ``"pp"``: prioritized planning with space-time A*, randomized restarts (fast, incomplete); it
+  gives up once every order of a small group has failed.
 - ``"sipp-pp"``: the same with SIPP as single-agent planner.
-- ``"cbs"``: ICBS, optimal sum of costs (cardinal conflicts via MDDs, bypass, CG heuristic).
-- ``"cbs-plain"``: CBS without those improvements, the baseline of ``fleet bench mapf``.
-- ``"ecbs"``: ECBS(w), SOC ≤ w · optimum.
+- ``"cbs"``: ICBS, optimal sum of costs (cardinal conflicts via MDDs, bypass, CG heuristic), with
+  target reasoning (length constraints for agents parked on their goals) and meta-agents (agents
+  that keep conflicting are merged and planned by an optimal joint A* with operator
+  decomposition, ``joint``), so agents that block each other in dead ends are solved quickly.
+- ``"cbs-plain"``: CBS without those improvements, the textbook baseline of ``fleet bench mapf``;
+  it can split target conflicts one timestep at a time for a very long while on tiny instances.
+- ``"ecbs"``: ECBS(w), SOC ≤ w · optimum, with the same target reasoning and meta-agents.
 
 Model, formats and checks: ``model`` (costs, feasibility check), ``movingai`` (.map/.scen),
 ``yaml_format`` (libMultiRobotPlanning YAML), ``validate`` (independent solution checker),
-``generate`` (seeded benchmark maps and scenarios). All solvers are deterministic for a given input
-(and seed), and honour ``time_limit_s`` by returning status ``"timeout"``.
+``generate`` (seeded benchmark maps and scenarios), ``brute_force`` (the optimum of tiny
+instances by exhaustive joint search), ``tiny`` (every solver against it: ``fleet bench mapf
+--tiny``). All solvers are deterministic for a given input (and seed), and honour
+``time_limit_s`` by returning status ``"timeout"``.
 """
 
 from __future__ import annotations
