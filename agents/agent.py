@@ -43,6 +43,7 @@ from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, S
 from agents.slam.persistence import load_state, save_state
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
 from fleet.bus import Bus
+from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
 from fleet.protocol import (
     Award,
@@ -106,6 +107,9 @@ class Agent:
         self._map_snapshot: SlamMap | None = None
         self._patches = PatchTracker(cfg.slam.map_tile, cfg.slam.patch_tolerance)
         self.sweep_from = 0
+        self.chain: list[str] = []
+        self.chain_starts = np.zeros(0, dtype=np.int32)
+        self.chain_time_s = 0.0
         self.market = MarketClient(
             rid,
             cfg.robot.max_vel_x,
@@ -117,6 +121,7 @@ class Agent:
         self._calls_ready = threading.Condition()
         self._last_save = -1e9
         self._unlocalized_logged = False
+        self._was_localized = True
 
     def spawn(
         self, start: tuple[float, float, float], respawn: bool = False, timeout: float = 30.0
@@ -155,6 +160,7 @@ class Agent:
         if not reply.ok:
             raise ValueError(f"spawn refused: {reply.error}")
         with self.lock:
+            self._was_localized = saved is None
             if saved is not None:
                 lidar = self.cfg.lidar
                 self.pose_source = RelocalizingSlamPose(
@@ -218,11 +224,17 @@ class Agent:
 
     def _on_plan(self, _key: str, msg: Plan) -> None:
         with self.lock:
-            if msg.plan_id == self.plan_id or not self.market.holds(msg.task):
+            if msg.plan_id == self.plan_id:
+                self._cut_plan(msg)
+                return
+            if not self.market.holds(msg.task):
                 return
             self.plan_id = msg.plan_id
             self.task = msg.task
             self.sweep_from = msg.sweep_from
+            self.chain = list(msg.chain) or [msg.task]
+            self.chain_starts = msg.chain_starts if len(msg.chain) else np.array([msg.sweep_from])
+            self.chain_time_s = sum(w.time_s for w in self.market.queue if w.id in self.chain)
             self.follow = FollowState(msg.waypoints) if len(msg.waypoints) else None
             self.state = "driving" if self.follow is not None else "done"
         log.info(
@@ -233,11 +245,22 @@ class Agent:
             len(msg.waypoints),
         )
 
+    def _cut_plan(self, msg: Plan) -> None:
+        """The coordinator took back the end of the plan being driven (tasks it gave to others):
+        stop at its new end, driving on as before until there."""
+        follow = self.follow
+        if follow is None or len(msg.waypoints) >= len(follow.waypoints):
+            return
+        self.follow = dataclasses.replace(follow, waypoints=msg.waypoints)
+        self.chain = list(msg.chain) or [msg.task]
+        self.chain_starts = msg.chain_starts if len(msg.chain) else np.array([msg.sweep_from])
+        log.info("%s: plan %d now ends after %s", self.rid, msg.plan_id, self.chain[-1])
+
     def _on_award(self, _key: str, msg: Award) -> None:
         with self.lock:
             taken = self.market.on_award(msg)
             driving = self.follow is not None and not self.follow.done
-            dropped = taken and driving and not self.market.holds(self.task)
+            dropped = taken and driving and not any(self.market.holds(t) for t in self.chain)
             if dropped:
                 self.follow = None
                 self.task = ""
@@ -271,15 +294,31 @@ class Agent:
                 calls, self._calls = self._calls, []
             if not self.ready:
                 continue
+            if not self.market.has_floor:
+                self._fetch_floor()
             latest = max(c.round for c in calls)
             calls = [c for c in calls if c.round == latest]
             with self.lock:
                 assert self.pose_source is not None
                 self.market.use_map(self._map_snapshot)
-                commitment = self.market.commitment(self.pose_source.pose(), self.follow, self.task)
+                commitment = self.market.commitment(
+                    self.pose_source.pose(), self.follow, self.chain, self.chain_time_s
+                )
                 bids = self.market.bids(calls, commitment)
             for b in bids:
                 self.bus.publish(self.keys.bid(b.task, self.rid), b, control=True)
+
+    def _fetch_floor(self) -> None:
+        try:
+            msg = self.bus.request(self.keys.floor_map(), Request(self.rid), MapPatches, 1.0)
+        except (TimeoutError, RuntimeError, ValueError) as e:
+            log.warning(
+                "%s: no floor plan from the coordinator (%s); pricing on its own map", self.rid, e
+            )
+            return
+        floor = unpack_grid(msg)
+        with self.lock:
+            self.market.use_floor(floor)
 
     def heartbeat_loop(self) -> None:
         """A heartbeat every 1 / ``agent.heartbeat_hz`` wall seconds, whatever sim time does."""
@@ -336,10 +375,14 @@ class Agent:
             velocity = self.velocity
             stale = scan.stamp - self.odom_stamp > a.stale_after_s
             follow = self.follow
-            plan_id, task, sweep_from = self.plan_id, self.task, self.sweep_from
+            plan_id, sweep_from = self.plan_id, self.sweep_from
+            task = _current_task(self.chain, self.chain_starts, self.follow) or self.task
             planned = plan_id >= 0
             localized = getattr(src, "localized", True)
             failed = getattr(src, "failed", False)
+        if localized and not self._was_localized:
+            log.info("%s found itself at (%.2f, %.2f, %.2f) in its saved map", self.rid, *pose)
+        self._was_localized = localized
         if self._last_xy is not None:
             self.distance_m += float(
                 np.hypot(pose[0] - self._last_xy[0], pose[1] - self._last_xy[1])
@@ -529,3 +572,12 @@ def _map_message(stamp: float, seq: int, tile: int, update: MapUpdate) -> MapPat
         tile,
         [(p.row, p.col, p.data) for p in update.patches],
     )
+
+
+def _current_task(chain: list[str], starts: np.ndarray, follow: FollowState | None) -> str:
+    """The task of a chained plan the robot is sweeping: the last one whose sweep it has
+    begun (the first while it drives the transit)."""
+    if not chain or follow is None:
+        return ""
+    begun = int(np.searchsorted(starts, follow.index - 1, side="right"))
+    return chain[min(max(begun - 1, 0), len(chain) - 1)]

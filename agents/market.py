@@ -3,9 +3,11 @@
 A robot prices a called task from what it knows — its own pose estimate, the plan it is
 driving, the tasks it has won (its last :class:`~fleet.protocol.Award`) and its own SLAM map —
 as the marginal cost of appending the task to its commitments (``planners.auction.make_bid``,
-Koenig et al. 2006). Travel is estimated on its map with unknown cells counted as free and
-obstacles grown by its radius (``planners.auction.TravelGrid``); before it has a map, by the
-straight line.
+Koenig et al. 2006). Travel is estimated on the floor plan the coordinator shares
+(``coord/map``), obstacles grown by the robot's radius (``planners.auction.TravelGrid``): at the
+first auction a robot has seen one room, and travel priced on that alone would ignore every
+wall beyond it. Until it has the floor plan, on its own SLAM map with unknown cells counted as
+free; before that, by the straight line.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from agents.follower import FollowState
 from agents.slam.slam_map import SlamMap
 from fleet.protocol import Award, Bid, TaskCall
 from planners import auction
-from planners.grid import dilate
+from planners.grid import GridMap, dilate
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,7 @@ class MarketClient:
         self.queue: tuple[Won, ...] = ()
         self._travel: auction.Travel = self._straight
         self._travel_map: SlamMap | None = None
+        self.has_floor = False
 
     def on_award(self, msg: Award) -> bool:
         """Take a newer award (True); an older or repeated one changes nothing."""
@@ -67,9 +70,16 @@ class MarketClient:
     def holds(self, task: str) -> bool:
         return any(w.id == task for w in self.queue)
 
+    def use_floor(self, floor: GridMap) -> None:
+        """Price travel on the floor plan from now on (outside it counts as blocked)."""
+        blocked = dilate(floor.occupied | floor.unknown, self.radius, floor.resolution)
+        self._travel = auction.TravelGrid(~blocked, floor.resolution, floor.origin, self.speed)
+        self.has_floor = True
+
     def use_map(self, occupancy: SlamMap | None) -> None:
-        """Price travel on this map from now on (rebuilt only when it is a new snapshot)."""
-        if occupancy is None or occupancy is self._travel_map:
+        """Without the floor plan, price travel on this SLAM map (rebuilt only when it is a new
+        snapshot)."""
+        if self.has_floor or occupancy is None or occupancy is self._travel_map:
             return
         grid = occupancy.to_gridmap(*self.thresholds)
         blocked = dilate(grid.occupied, self.radius, grid.resolution)
@@ -77,21 +87,25 @@ class MarketClient:
         self._travel_map = occupancy
 
     def commitment(
-        self, pose: tuple[float, float, float], follow: FollowState | None, task: str
+        self,
+        pose: tuple[float, float, float],
+        follow: FollowState | None,
+        chain: list[str],
+        chain_time_s: float,
     ) -> auction.Commitment:
-        """What the robot has won, priced from ``pose``: the rest of the plan it drives for
-        ``task`` (scaled from the task's time by the length left), then its queued tasks with
-        the travel to each."""
+        """What the robot has won, priced from ``pose``: the rest of the plan it drives for the
+        tasks of ``chain`` (their ``chain_time_s`` scaled by the length left), then its other
+        queued tasks with the travel to each."""
         xy = (float(pose[0]), float(pose[1]))
         items = list(self.queue)
         current = auction.Commitment(xy)
-        if items and follow is not None and not follow.done and items[0].id == task:
+        if items and follow is not None and not follow.done and items[0].id in chain:
             wps = follow.waypoints
             left = math.dist(xy, wps[follow.index]) + _length(wps[follow.index :])
             total = max(_length(wps), 1e-9)
             end = (float(wps[-1][0]), float(wps[-1][1]))
-            current = auction.Commitment(xy, items[0].time_s * min(left / total, 1.0), end)
-            items = items[1:]
+            current = auction.Commitment(xy, chain_time_s * min(left / total, 1.0), end)
+            items = [w for w in items if w.id not in chain]
         for w in items:
             travel = float(self._travel(np.array(current.end), np.array([w.entry]))[0])
             current = current.with_task(w.entry, w.exit, w.time_s, travel)

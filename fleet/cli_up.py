@@ -73,7 +73,7 @@ def up(
     from fleet.dashboard import FleetWatcher
     from fleet.launcher import Launcher, free_port, wait_for_port
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
-    from fleet.report import build_report, render_png, write_json
+    from fleet.report import build_report, job_report, render_png, write_json
     from fleet.rundir import RunTable, cmdline, write_table
 
     if not 1 <= robots <= MAX_ROBOTS:
@@ -154,7 +154,13 @@ def up(
             makespan,
             wall_s,
             status,
-            {"world": world_path, "robot_count": robots, "speed": speed, "seed": seed},
+            {
+                "world": world_path,
+                "robot_count": robots,
+                "speed": speed,
+                "seed": seed,
+                **job_report(run_dir / "coordinator.sqlite"),
+            },
             skipped,
         )
         write_json(run_dir / "report.json", report)
@@ -230,9 +236,12 @@ def _watch(watcher, launcher, stop, until_done, timeout, headless, t0) -> str:
             wall = time.monotonic() - t0
             if live is not None:
                 live.update(watcher.table(wall), refresh=True)
-            elif wall - last_line >= 5.0:
-                print(watcher.line(wall), file=sys.stderr, flush=True)
-                last_line = wall
+            else:
+                for line in watcher.take_events():
+                    print(f"event: {line}", file=sys.stderr, flush=True)
+                if wall - last_line >= 5.0:
+                    print(watcher.line(wall), file=sys.stderr, flush=True)
+                    last_line = wall
             dead = launcher.dead()
             fatal = {n: c for n, c in dead.items() if n in FATAL_PROCESSES}
             if fatal:

@@ -108,6 +108,9 @@ class Keys:
     def events(self) -> str:
         return f"{self.root}/coord/events"
 
+    def floor_map(self) -> str:
+        return f"{self.root}/coord/map"
+
     def ops(self, verb: str) -> str:
         return f"{self.root}/ops/{verb}"
 
@@ -276,8 +279,11 @@ class Heartbeat(Message):
 class Plan(Message):
     """A waypoint path (nav_msgs/Path in 2D) for one robot; ``task`` names the job it serves.
 
-    ``sweep_from`` is the index of the waypoint where the task's sweep begins (before it: the
-    transit to it); the segments from there on are the task's pieces, in the direction driven."""
+    ``sweep_from`` is the index of the waypoint where the sweep begins (before it: the transit
+    to it); the segments from there on are the pieces of the tasks it sweeps, in the direction
+    driven. A plan may chain several tasks of the robot's queue that follow on without a
+    transit: ``chain`` names them in order and ``chain_starts`` gives the waypoint where each
+    one's sweep begins (the first is ``sweep_from``; an empty chain means just ``task``)."""
 
     TYPE: ClassVar[str] = "plan"
     stamp: float
@@ -285,6 +291,10 @@ class Plan(Message):
     task: str
     waypoints: Annotated[np.ndarray, Arr("<f8", (2,))]
     sweep_from: int = 0
+    chain: list[str] = field(default_factory=list)
+    chain_starts: Annotated[np.ndarray, Arr("<i4")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int32)
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -352,7 +362,8 @@ class FleetEvent(Message):
     planned (tasks made), joined, lost, reopened (a lost robot's task back in the market),
     rejoined, awarded, reassigned (a reopened task won again), withdrawn (an unstarted task
     taken back to balance the fleet), done (a task), finished (the job), resumed (a restarted
-    coordinator); ``wall`` is Unix time."""
+    coordinator), auction (one auction ended: how many lots, how long); ``wall`` is Unix
+    time."""
 
     TYPE: ClassVar[str] = "event"
     stamp: float
@@ -730,8 +741,21 @@ def _check_shapes(msg: Message) -> None:
         n = len(msg.tasks)
         if len(msg.entries) != n or len(msg.exits) != n or len(msg.times_s) != n:
             raise DecodeError(f"award: entries, exits and times_s must each have {n} rows")
-    elif isinstance(msg, Plan) and not 0 <= msg.sweep_from <= max(len(msg.waypoints) - 1, 0):
+    elif isinstance(msg, Plan):
+        _check_plan(msg)
+
+
+def _check_plan(msg: Plan) -> None:
+    last = max(len(msg.waypoints) - 1, 0)
+    if not 0 <= msg.sweep_from <= last:
         raise DecodeError(f"plan.sweep_from: {msg.sweep_from} is not a waypoint index")
+    starts = msg.chain_starts
+    if len(starts) != len(msg.chain):
+        raise DecodeError(f"plan.chain_starts: {len(starts)} starts for {len(msg.chain)} tasks")
+    if len(starts) and (
+        starts[0] != msg.sweep_from or np.any(np.diff(starts) < 0) or starts[-1] > last
+    ):
+        raise DecodeError("plan.chain_starts: must begin at sweep_from and rise within the path")
 
 
 MAX_MAP_TILE = 1024

@@ -1,9 +1,14 @@
-"""The end-of-run report: ``report.json`` (numbers) and ``report.png`` (the cleaned floor)."""
+"""The end-of-run report: ``report.json`` (numbers) and ``report.png`` (the cleaned floor).
+
+The job part (``events``, ``tasks``) comes from the coordinator's state file: every event with
+its sim and wall time, and per task its owners over time, rebuilt from the events.
+"""
 
 from __future__ import annotations
 
 import json
 import os
+import sqlite3
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -61,6 +66,57 @@ def build_report(
         "robots": robots,
         **extra,
     }
+
+
+def job_report(state: Path) -> dict[str, Any]:
+    """``events`` and ``tasks`` from the coordinator's SQLite ``state`` (read-only). A task's
+    ``owners`` are [robot, from, to] in sim seconds (``to`` None while it still held it at the
+    end): a hold begins with an award and ends when the task is done, withdrawn, or its owner
+    is lost. ``overlaps`` lists tasks held by two robots at once (it should stay empty)."""
+    if not state.exists():
+        return {"events": None, "tasks": None, "overlaps": None}
+    db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
+    try:
+        cols = ("wall", "sim", "kind", "robot", "task", "detail")
+        events = [
+            dict(zip(cols, row, strict=True))
+            for row in db.execute(f"SELECT {', '.join(cols)} FROM events ORDER BY seq")
+        ]
+        tasks = {
+            tid: {
+                "id": tid,
+                "parent": parent,
+                "area_m2": round(area, 3),
+                "time_s": round(t_s, 1),
+                "state": st,
+                "owners": [],
+            }
+            for tid, parent, area, t_s, st in db.execute(
+                "SELECT id, parent, area_m2, time_s, state FROM tasks ORDER BY rowid"
+            )
+        }
+    finally:
+        db.close()
+    held: dict[str, list[Any]] = {}
+    for e in events:
+        kind, robot, task, sim = e["kind"], e["robot"], e["task"], round(e["sim"], 2)
+        if kind in ("awarded", "reassigned") and task in tasks:
+            hold = [robot, sim, None]
+            tasks[task]["owners"].append(hold)
+            held[task] = hold
+        elif kind in ("done", "withdrawn") and task in held:
+            held.pop(task)[2] = sim
+        elif kind == "lost":
+            for tid in [t for t, h in held.items() if h[0] == robot]:
+                held.pop(tid)[2] = sim
+    overlaps = [
+        tid
+        for tid, t in tasks.items()
+        if any(
+            a[2] is None or a[2] > b[1] for a, b in zip(t["owners"], t["owners"][1:], strict=False)
+        )
+    ]
+    return {"events": events, "tasks": list(tasks.values()), "overlaps": overlaps}
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

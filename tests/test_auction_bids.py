@@ -5,7 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planners.auction import Bid, Commitment, Task, allocate, make_bid, makespan, winner
+from planners.auction import (
+    Bid,
+    Commitment,
+    Task,
+    allocate,
+    make_bid,
+    makespan,
+    regions,
+    task_lot,
+    winner,
+)
 
 
 def straight(speed: float = 1.0):
@@ -147,3 +157,46 @@ def test_busy_robots_are_priced_from_their_commitments():
     assert got == {"a": [], "b": [("t01", True), ("t00", True)]}
     assert makespan(got, tasks, robots, straight()) == pytest.approx(100.0)
     assert makespan({}, tasks, {}, straight()) == 0.0
+
+
+def _chain(times: list[float]) -> list[Task]:
+    xs = np.concatenate([[0.0], np.cumsum(times)])
+    return [
+        Task(f"t{i:02d}", np.array([[xs[i], 0.0], [xs[i + 1], 0.0]]), 1.0, t, (1,))
+        for i, t in enumerate(times)
+    ]
+
+
+def test_regions_cut_the_tour_into_runs_of_about_equal_time() -> None:
+    tasks = _chain([10.0, 10.0, 30.0, 10.0, 10.0, 10.0, 20.0, 10.0])
+    lots = regions(tasks, 3)
+    # cuts at the boundaries nearest 1/3 and 2/3 of the 110 s: after 50 s and after 70 s
+    assert [lot.tasks for lot in lots] == [
+        ("t00", "t01", "t02"),
+        ("t03", "t04"),
+        ("t05", "t06", "t07"),
+    ]
+    assert [lot.time_s for lot in lots] == [50.0, 20.0, 40.0]
+    assert sum(len(lot.tasks) for lot in lots) == len(tasks)
+    assert [t for lot in lots for t in lot.tasks] == [t.id for t in tasks]
+    for lot in lots:
+        first, last = lot.tasks[0], lot.tasks[-1]
+        assert np.allclose(lot.entry, tasks[int(first[1:])].entry)
+        assert np.allclose(lot.exit, tasks[int(last[1:])].exit)
+
+
+def test_regions_never_leave_a_robot_an_empty_run() -> None:
+    tasks = _chain([100.0, 1.0, 1.0])
+    lots = regions(tasks, 3)
+    assert [lot.tasks for lot in lots] == [("t00",), ("t01",), ("t02",)]
+    assert len(regions(tasks, 5)) == 3
+    assert regions([], 2) == ()
+    with pytest.raises(ValueError, match="k must be"):
+        regions(tasks, 0)
+
+
+def test_a_single_task_lot_is_the_task() -> None:
+    task = _chain([5.0])[0]
+    lot = task_lot(task)
+    assert lot.id == lot.tasks[0] == "t00" and lot.time_s == 5.0
+    assert np.allclose(lot.entry, task.entry) and np.allclose(lot.exit, task.exit)

@@ -47,7 +47,8 @@ def test_a_plan_is_a_transit_to_the_task_then_its_sweep(small, reverse):
     planner, tasks = small
     task = tasks[2]
     start = (float(planner.dock[0]), float(planner.dock[1]))
-    waypoints, sweep_from = planner.drive(start, task, reverse)
+    waypoints, starts = planner.drive(start, [(task, reverse)])
+    (sweep_from,) = starts
     sweep = task.path[::-1] if reverse else task.path
     assert np.allclose(waypoints[0], start)
     assert np.array_equal(waypoints[sweep_from:], sweep)
@@ -59,6 +60,21 @@ def test_a_plan_is_a_transit_to_the_task_then_its_sweep(small, reverse):
 def test_a_robot_at_the_task_entry_starts_sweeping_at_once(small):
     planner, tasks = small
     task = tasks[1]
-    waypoints, sweep_from = planner.drive(tuple(task.entry), task, False)
-    assert sweep_from == 0
+    waypoints, starts = planner.drive(tuple(task.entry), [(task, False)])
+    assert starts == [0]
     assert np.array_equal(waypoints, task.path)
+
+
+def test_tasks_that_follow_on_are_one_plan_each_from_where_the_last_ends(small):
+    planner, tasks = small
+    run = tasks[1:4]
+    waypoints, starts = planner.drive(tuple(planner.dock), [(t, False) for t in run])
+    for task, a, b in zip(run, starts, [*starts[1:], len(waypoints) - 1], strict=True):
+        assert np.array_equal(waypoints[a : b + 1], task.path)
+    # backwards: last task first, each reversed, still one unbroken path
+    back = [(t, True) for t in reversed(run)]
+    waypoints, starts = planner.drive(tuple(run[-1].exit), back)
+    assert starts[0] == 0
+    assert np.array_equal(
+        waypoints[starts[1] :], np.vstack([run[1].path[::-1], run[0].path[::-1][1:]])
+    )

@@ -11,29 +11,11 @@ import time
 from pathlib import Path
 
 import pytest
+from fleet_runs import children_of
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 
 WORLD = Path(__file__).resolve().parents[1] / "configs" / "worlds" / "small.yaml"
-
-
-def _children_of(pid: int) -> list[int]:
-    """Every process whose parent chain leads to ``pid`` (read from /proc)."""
-    parents = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                stat = Path(f"/proc/{entry}/stat").read_text()
-            except OSError:
-                continue
-            parents[int(entry)] = int(stat.rsplit(")", 1)[1].split()[1])
-    out, frontier = [], [pid]
-    while frontier:
-        p = frontier.pop()
-        kids = [c for c, pp in parents.items() if pp == p]
-        out += kids
-        frontier += kids
-    return out
 
 
 def _fleet_up(run_dir: Path, robots: int, timeout_s: float = 150.0) -> dict:
@@ -62,7 +44,7 @@ def _fleet_up(run_dir: Path, robots: int, timeout_s: float = 150.0) -> dict:
     try:
         deadline = time.monotonic() + 300
         while proc.poll() is None and time.monotonic() < deadline:
-            children.update(_children_of(proc.pid))
+            children.update(children_of(proc.pid))
             time.sleep(0.5)
         output = proc.communicate(timeout=60)[0].decode(errors="replace")
     finally:

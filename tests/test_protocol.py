@@ -118,6 +118,8 @@ def messages(draw: st.DrawFn, cls: type[Message]) -> Message:
         lengths = dict.fromkeys(("entries", "exits", "times_s"), len(fixed["tasks"]))
     elif cls is Plan:
         fixed["sweep_from"] = 0
+        fixed["chain"] = []
+        lengths["chain_starts"] = 0
     elif cls is CoverageImage:
         fixed["rows"] = draw(st.integers(0, 6))
         fixed["cols"] = draw(st.integers(0, 6))
@@ -308,6 +310,8 @@ def _example(cls: type[Message]) -> Message:
             kwargs[name] = ["r0", "r1"]
         elif name == "sweep_from":
             kwargs[name] = 1
+        elif name == "chain_starts":
+            kwargs[name] = np.array([1, 1], dtype=np.int32)
         elif name == "rows":
             kwargs[name] = 2
         elif name == "cols":

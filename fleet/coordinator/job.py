@@ -163,13 +163,14 @@ class Job:
                 reopened.append(rec.task.id)
         return reopened, made
 
-    def withdraw_unstarted(self) -> list[str]:
-        """Every queued task but the one each robot drives, and any not yet swept, goes back to
-        the market (a task boundary for all of them): the next auction rebalances the fleet."""
+    def withdraw_unstarted(self, keep: set[str] | frozenset[str] = frozenset()) -> list[str]:
+        """Every queued task but the one each robot drives (and those in ``keep``: in plans
+        being driven), and any not yet swept, goes back to the market (a task boundary for all
+        of them): the next auction rebalances the fleet."""
         out = []
         for rid in sorted({r.owner for r in self.tasks.values() if r.state == ASSIGNED}):
             for rec in self.queue(rid)[1:]:  # type: ignore[arg-type]
-                if not rec.started:
+                if not rec.started and rec.task.id not in keep:
                     rec.state, rec.owner, rec.reverse = OPEN, None, False
                     out.append(rec.task.id)
         return out

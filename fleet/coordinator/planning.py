@@ -8,7 +8,8 @@ they are, so a restarted coordinator or a changed fleet prices the same tasks.
 
 Plans: the transit from where the robot reports itself to the end of the task it enters by (A*
 on the floor plan inflated by the robot, ``planners.coverage.transit``), then the task's sweep
-in the direction it won it.
+in the direction it won it, and the sweeps of the tasks queued after it that begin where it
+ends (a region's run of the tour is one plan: the robot does not stop between its tasks).
 """
 
 from __future__ import annotations
@@ -72,16 +73,23 @@ class TaskPlanner:
         return tasks
 
     def drive(
-        self, from_xy: tuple[float, float], task: Task, reverse: bool
-    ) -> tuple[np.ndarray, int]:
-        """(waypoints, index where the sweep begins): transit to the task, then its sweep."""
-        sweep = task.path[::-1] if reverse else task.path
+        self, from_xy: tuple[float, float], chain: list[tuple[Task, bool]]
+    ) -> tuple[np.ndarray, list[int]]:
+        """(waypoints, where each task's sweep begins): the transit to the first task, then the
+        sweeps of ``chain`` ((task, reverse) pairs, each beginning where the one before ends)."""
+        sweeps = [task.path[::-1] if reverse else task.path for task, reverse in chain]
         start = np.asarray(from_xy, dtype=float)
         try:
-            leg = self.transit.path(start, sweep[0])
+            leg = self.transit.path(start, sweeps[0][0])
         except ValueError:
-            log.warning("no transit from %s to task %s on the floor plan", from_xy, task.id)
-            leg = np.array([start, sweep[0]])
+            log.warning("no transit from %s to task %s on the floor plan", from_xy, chain[0][0].id)
+            leg = np.array([start, sweeps[0][0]])
         leg = without_straight_vertices(np.asarray(leg, dtype=float))
-        waypoints = np.vstack([leg[:-1], sweep])
-        return waypoints, len(leg) - 1
+        parts = [leg[:-1]]
+        starts = []
+        at = len(leg) - 1
+        for sweep in sweeps:
+            starts.append(at)
+            parts.append(sweep if len(parts) == 1 else sweep[1:])
+            at += len(sweep) - 1
+        return np.vstack(parts), starts

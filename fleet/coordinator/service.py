@@ -31,9 +31,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from fleet.bus import Bus
-from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, Job
+from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, Job, TaskRecord
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
+from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
 from fleet.protocol import (
     Award,
@@ -53,6 +54,8 @@ from planners import auction
 log = logging.getLogger("coordinator")
 
 LOOP_S = 0.05
+# queued tasks whose ends meet within this go into one plan: the robot drives on between them
+CHAIN_M = 0.01
 STATE_PERIOD_S = 0.5
 RESEND_S = 0.5
 PERSIST_ROBOTS_S = 1.0
@@ -94,6 +97,10 @@ class Coordinator:
         self.rejected: Counter[str] = Counter()
         self.need_auction = False
         self.lost_at: dict[str, float] = {}
+        # the idle-robot rebalance runs once per change of who works: a robot that wins its
+        # withdrawn tasks back must not be asked again and again
+        self.version = 0
+        self.balanced_version = -1
         self._round: _Round | None = None
         self._bids: dict[tuple[str, str], Bid] = {}
         self._bids_cond = threading.Condition()
@@ -105,6 +112,8 @@ class Coordinator:
         bus.subscribe(self.keys.all_bids(), Bid, self._on_bid)
         bus.subscribe(self.keys.ack("*"), AwardAck, self._on_ack)
         bus.serve(self.keys.plan("*"), Request, self._on_plan_query)
+        floor = pack_grid(planner.grid)
+        bus.serve(self.keys.floor_map(), Request, lambda _req: floor)
         bus.watch_alive("agent", self._on_join, self._on_leave)
 
     # ---- restart ------------------------------------------------------------------------
@@ -177,14 +186,21 @@ class Coordinator:
             plan = self.plans.get(rid)
             if plan is None or msg.plan_id != plan.plan_id or r.liveness == LOST:
                 return
-            if self.job.progress(rid, plan.task, msg.swept):
-                self._save_task(plan.task)
-            current = self.job.current(rid)
-            if msg.state == "done" and current is not None and current.task.id == plan.task:
-                self.job.finish(rid, plan.task)
-                self._save_task(plan.task)
-                self._event("done", rid, plan.task, "")
-                self.wake.set()
+            pieces = len(plan.waypoints) - 1 - plan.sweep_from
+            if len(msg.swept) != pieces:
+                return
+            for tid, (a, b) in _chain_pieces(plan, pieces):
+                swept = msg.swept[a:b]
+                if self.job.progress(rid, tid, swept):
+                    self._save_task(tid)
+                rec = self.job.tasks.get(tid)
+                held = rec is not None and rec.state == ASSIGNED and rec.owner == rid
+                if held and (msg.state == "done" or swept.all()):
+                    self.job.finish(rid, tid)
+                    self.version += 1
+                    self._save_task(tid)
+                    self._event("done", rid, tid, "")
+                    self.wake.set()
 
     def _on_ack(self, key: str, msg: AwardAck) -> None:
         rid = self.keys.robot_of(key)
@@ -220,7 +236,7 @@ class Coordinator:
         with self.lock:
             plan = self.plans.get(req.sender)
             current = self.job.current(req.sender)
-        if plan is None or current is None or current.task.id != plan.task:
+        if plan is None or current is None or current.task.id not in _chain_of(plan):
             raise LookupError(f"no plan for {req.sender} now")
         return plan
 
@@ -242,6 +258,7 @@ class Coordinator:
 
     def _lose(self, rid: str, why: str) -> None:
         reopened, made = self.job.lose(rid)
+        self.version += 1
         self._event("lost", rid, "", why)
         now = time.monotonic()
         self.lost_at.update(dict.fromkeys(reopened, now))
@@ -255,10 +272,27 @@ class Coordinator:
         self.wake.set()
 
     def _rebalance(self) -> None:
-        withdrawn = self.job.withdraw_unstarted()
+        """Withdraw the unstarted tasks for a new auction. A robot keeps the task it drives and
+        the one its plan goes on to (it may be entering it already); its plan is cut before the
+        first task it gave up, under the same plan id, so it drives on without a stop."""
+        self.version += 1
+        self.balanced_version = self.version
+        keep = set()
+        for rid in self.plans:
+            queue = [rec.task.id for rec in self.job.queue(rid)[:2]]
+            keep.update(t for t in queue if t in _chain_of(self.plans[rid]))
+        withdrawn = self.job.withdraw_unstarted(keep=keep)
         for tid in withdrawn:
             self._event("withdrawn", "", tid, "back to the market")
         self._save_task(*withdrawn)
+        for rid, plan in list(self.plans.items()):
+            chain = _chain_of(plan)
+            cut = next((j for j, t in enumerate(chain) if t in withdrawn), None)
+            if cut is not None and cut > 0:
+                self.plans[rid] = plan = _cut_plan(plan, cut)
+                if self.store is not None:
+                    self.store.save_plan(rid, plan)
+                self.bus.publish(self.keys.plan(rid), plan, control=True)
         self._publish_awards()
         self.need_auction = True
         self.wake.set()
@@ -294,37 +328,34 @@ class Coordinator:
 
     # ---- the market ---------------------------------------------------------------------
 
+    def _lots(self, regions: tuple[auction.Lot, ...] | None) -> dict[str, auction.Lot]:
+        """What the next round sells: the regions none of whose tasks is sold yet, or every
+        open task on its own."""
+        open_ids = {r.task.id for r in self.job.open_tasks()}
+        if regions is not None:
+            return {lot.id: lot for lot in regions if set(lot.tasks) <= open_ids}
+        return {tid: auction.task_lot(self.job.tasks[tid].task) for tid in open_ids}
+
     def _auction(self) -> None:
-        """Sequential single-item auctions over the bus until no open task or no bidder."""
+        """Sequential single-item auctions over the bus until nothing is open or no robot bids.
+
+        The first allocation, when every task is open and no robot has work, sells one region
+        per robot in the market (``planners.auction.regions``); later ones sell single tasks."""
         t0 = time.monotonic()
         awarded = 0
+        with self.lock:
+            first = all(r.state == "open" for r in self.job.tasks.values())
+            bidders = self.job.market()
+            tour = [r.task for r in self.job.tasks.values()]
+        regions = auction.regions(tour, len(bidders)) if first and bidders else None
         while not self.stop.is_set():
             with self.lock:
                 self.need_auction = False
-                open_tasks = {r.task.id: r.task for r in self.job.open_tasks()}
+                lots = self._lots(regions)
                 bidders = frozenset(self.job.market())
-            if not open_tasks or not bidders:
+            if not lots or not bidders:
                 break
-            self.round_seq += 1
-            rnd = _Round(self.round_seq, frozenset(open_tasks), bidders)
-            with self._bids_cond:
-                self._round = rnd
-                self._bids = {}
-            for t in open_tasks.values():
-                call = TaskCall(
-                    self.clock, rnd.number, t.id, *t.entry, *t.exit, t.time_s, t.area_m2
-                )
-                self.bus.publish(self.keys.task(t.id), call, control=True)
-            deadline = time.monotonic() + self.params.bid_timeout_s
-            want = len(open_tasks) * len(bidders)
-            with self._bids_cond:
-                while len(self._bids) < want and not self.stop.is_set():
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        break
-                    self._bids_cond.wait(left)
-                bids = dict(self._bids)
-                self._round = None
+            bids = self._round_of_bids(lots, bidders)
             with self.lock:
                 market = set(self.job.market())
                 live = [b for b in bids.values() if b.robot in market]
@@ -338,56 +369,101 @@ class Coordinator:
                 if best is None:
                     log.warning(
                         "auction round %d: no bids from %s within %.1f s",
-                        rnd.number,
+                        self.round_seq,
                         ", ".join(sorted(bidders)),
                         self.params.bid_timeout_s,
                     )
                     break
-                rec = self.job.award(best.task, best.robot, best.reverse)
-                self._save_task(best.task)
-                if self.store is not None:
-                    self.store.add_bids(
-                        [
-                            (
-                                rnd.number,
-                                b.task,
-                                b.robot,
-                                b.marginal_s,
-                                b.total_s,
-                                int(b.reverse),
-                                int(b.task == best.task and b.robot == best.robot),
-                            )
-                            for b in live
-                        ]
-                    )
-                    self.store.set_meta(round_seq=self.round_seq)
-                lost_at = self.lost_at.pop(rec.task.id, None)
-                if lost_at is None:
-                    self._event("awarded", best.robot, best.task, f"{best.total_s:.1f} s")
-                else:
-                    after = time.monotonic() - lost_at
-                    self._event(
-                        "reassigned", best.robot, best.task, f"{after:.3f} s after the loss"
-                    )
-                self._publish_awards()
+                self._sell(lots[best.task], best, live)
                 awarded += 1
         if awarded:
-            log.info("auction: %d tasks awarded in %.0f ms", awarded, 1e3 * (time.monotonic() - t0))
+            ms = 1e3 * (time.monotonic() - t0)
+            log.info("auction: %d lots sold in %.0f ms", awarded, ms)
+            with self.lock:
+                self._event("auction", "", "", f"{awarded} lots in {ms:.0f} ms")
+
+    def _round_of_bids(
+        self, lots: dict[str, auction.Lot], bidders: frozenset[str]
+    ) -> dict[tuple[str, str], Bid]:
+        """Call every lot; the bids that came within ``bid_timeout_s`` (all, usually sooner)."""
+        self.round_seq += 1
+        rnd = _Round(self.round_seq, frozenset(lots), bidders)
+        with self._bids_cond:
+            self._round = rnd
+            self._bids = {}
+        for lot in lots.values():
+            call = TaskCall(
+                self.clock, rnd.number, lot.id, *lot.entry, *lot.exit, lot.time_s, lot.area_m2
+            )
+            self.bus.publish(self.keys.task(lot.id), call, control=True)
+        deadline = time.monotonic() + self.params.bid_timeout_s
+        want = len(lots) * len(bidders)
+        with self._bids_cond:
+            while len(self._bids) < want and not self.stop.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self._bids_cond.wait(left)
+            self._round = None
+            return dict(self._bids)
+
+    def _sell(self, lot: auction.Lot, best: auction.Bid, live: list[Bid]) -> None:
+        """Award ``lot``'s tasks to the winner (in the order it drives them), log the round."""
+        order = lot.tasks[::-1] if best.reverse else lot.tasks
+        for tid in order:
+            self.job.award(tid, best.robot, best.reverse)
+            lost_at = self.lost_at.pop(tid, None)
+            if lost_at is None:
+                self._event("awarded", best.robot, tid, f"{lot.id}: {best.total_s:.1f} s")
+            else:
+                after = time.monotonic() - lost_at
+                self._event("reassigned", best.robot, tid, f"{after:.3f} s after the loss")
+        self._save_task(*order)
+        if self.store is not None:
+            self.store.add_bids(
+                [
+                    (
+                        self.round_seq,
+                        b.task,
+                        b.robot,
+                        b.marginal_s,
+                        b.total_s,
+                        int(b.reverse),
+                        int(b.task == best.task and b.robot == best.robot),
+                    )
+                    for b in live
+                ]
+            )
+            self.store.set_meta(round_seq=self.round_seq)
+        self._publish_awards()
 
     def _dispatch(self) -> None:
         """Send a plan to every robot whose current task has none yet (once it has the award)."""
         for rid, r in self.job.robots.items():
             if r.liveness == LOST or r.xy is None:
                 continue
-            current = self.job.current(rid)
+            queue = self.job.queue(rid)
             plan = self.plans.get(rid)
-            if current is None or r.acked_seq < r.award_seq:
+            if not queue or r.acked_seq < r.award_seq:
                 continue
-            if plan is not None and plan.task == current.task.id:
+            if plan is not None and queue[0].task.id in _chain_of(plan):
                 continue
-            waypoints, sweep_from = self.planner.drive(r.xy, current.task, current.reverse)
+            chain = [queue[0]]
+            for rec in queue[1:]:
+                if math.dist(_driven_end(chain[-1]), _driven_start(rec)) > CHAIN_M:
+                    break
+                chain.append(rec)
+            waypoints, starts = self.planner.drive(r.xy, [(rec.task, rec.reverse) for rec in chain])
             self.plan_seq += 1
-            plan = Plan(self.clock, self.plan_seq, current.task.id, waypoints, sweep_from)
+            plan = Plan(
+                self.clock,
+                self.plan_seq,
+                chain[0].task.id,
+                waypoints,
+                starts[0],
+                [rec.task.id for rec in chain],
+                np.array(starts, dtype=np.int32),
+            )
             self.plans[rid] = plan
             if self.store is not None:
                 self.store.save_plan(rid, plan)
@@ -425,7 +501,7 @@ class Coordinator:
                     self._check_heartbeats()
                     idle = [rid for rid in self.job.market() if self.job.current(rid) is None]
                     queued = any(len(self.job.queue(rid)) > 1 for rid in self.job.robots)
-                    if idle and queued:
+                    if idle and queued and self.version != self.balanced_version:
                         self._rebalance()
                     auction_due = bool(idle and self.job.open_tasks())
                 auction_due = auction_due or self.need_auction
@@ -477,3 +553,39 @@ class Coordinator:
             counts["done"],
         )
         self.bus.publish(self.keys.coord_state(), state, control=True)
+
+
+def _chain_of(plan: Plan) -> list[str]:
+    return list(plan.chain) or [plan.task]
+
+
+def _chain_pieces(plan: Plan, pieces: int) -> list[tuple[str, tuple[int, int]]]:
+    """Each task of the plan with the slice of the plan's pieces that sweeps it."""
+    chain = _chain_of(plan)
+    starts = [int(s) - plan.sweep_from for s in plan.chain_starts] or [0]
+    ends = [*starts[1:], pieces]
+    return [(t, (a, b)) for t, a, b in zip(chain, starts, ends, strict=True)]
+
+
+def _driven_start(rec: TaskRecord) -> tuple[float, float]:
+    xy = rec.task.exit if rec.reverse else rec.task.entry
+    return float(xy[0]), float(xy[1])
+
+
+def _driven_end(rec: TaskRecord) -> tuple[float, float]:
+    xy = rec.task.entry if rec.reverse else rec.task.exit
+    return float(xy[0]), float(xy[1])
+
+
+def _cut_plan(plan: Plan, j: int) -> Plan:
+    """The plan up to the start of its ``j``-th chained task (same id: the robot drives on)."""
+    end = int(plan.chain_starts[j])
+    return Plan(
+        plan.stamp,
+        plan.plan_id,
+        plan.task,
+        plan.waypoints[: end + 1],
+        plan.sweep_from,
+        list(plan.chain[:j]),
+        plan.chain_starts[:j],
+    )

@@ -22,6 +22,9 @@ The model:
   marginal cost (least total driving), MiniMax the lowest total committed time of the robot
   after the award (least makespan: what a cleaning job is judged by). :func:`allocate` runs all
   rounds in one process; :func:`makespan` judges the result.
+* **Lots.** A call sells a :class:`Lot`: one task, or — in the first allocation — a region of
+  consecutive tasks, one per robot (:func:`regions`), so each robot starts on a contiguous part
+  of the floor.
 
 Public API::
 
@@ -37,10 +40,12 @@ Public API::
     winner(bids, objective="minimax") -> Bid | None
     allocate(tasks, robots, travel, objective="minimax") -> {robot: [(task id, reverse)]}
     makespan(allocation, tasks, robots, travel) -> seconds
+    Lot(id, tasks, entry, exit, time_s, area_m2); task_lot(task); regions(tasks, k) -> lots
 """
 
 from planners.auction.allocation import allocate, makespan
 from planners.auction.bids import OBJECTIVES, Bid, Commitment, Travel, make_bid, winner
+from planners.auction.lots import Lot, regions, task_lot
 from planners.auction.tasks import Task, remainder, split_tour
 from planners.auction.travel import UNREACHABLE_FACTOR, TravelGrid, travel_times
 
@@ -49,14 +54,17 @@ __all__ = [
     "UNREACHABLE_FACTOR",
     "Bid",
     "Commitment",
+    "Lot",
     "Task",
     "Travel",
     "TravelGrid",
     "allocate",
     "make_bid",
     "makespan",
+    "regions",
     "remainder",
     "split_tour",
+    "task_lot",
     "travel_times",
     "winner",
 ]
