@@ -40,6 +40,7 @@ from planners.mapf.constraints import (
     LENGTH_LE,
     MAX_GROUP,
     MERGE_THRESHOLD,
+    REPLAN_BUDGET,
     TARGET,
     Constraint,
     as_target,
@@ -172,11 +173,17 @@ class ConflictBasedSearch:
                 return node.paths
             self.stats.high += 1
             conflict = min(node.conflicts)
-            self._count(node, conflict[2], conflict[3])
+            a, b = conflict[2], conflict[3]
+            if self._count(a, b):
+                self._merge(node, a, b)
             pos = positions(node.paths)
             children = []
             for constraint in split(conflict[1:]):
-                child = self._child(node, constraint, pos)
+                try:
+                    child = self._child(node, constraint, pos, self._replan_budget(a, b))
+                except JointSearchLimit:
+                    self._merge(node, a, b)
+                    child = self._child(node, constraint, pos, None)
                 if child is None:
                     continue
                 if (
@@ -197,19 +204,33 @@ class ConflictBasedSearch:
         self._counter += 1
         heappush(open_list, (node.soc + node.h, len(node.conflicts), self._counter, node))
 
-    def _count(self, node: _Node, a: int, b: int) -> None:
-        """Count a conflict between the groups of a and b; past ``merge_threshold``, merge them
-        and restart (raises _Restart) unless the merged group is too large or too hard."""
+    def _count(self, a: int, b: int) -> bool:
+        """Count a conflict between the groups of a and b: whether they should merge now."""
         threshold = self.options.merge_threshold
         if not threshold:
-            return
+            return False
         ga = frozenset(members(self.group, self.group[a]))
         gb = frozenset(members(self.group, self.group[b]))
         key = (ga, gb) if min(ga) < min(gb) else (gb, ga)
         count = self._conflict_counts.get(key, 0) + 1
         self._conflict_counts[key] = count
-        both = ga | gb
-        if count <= threshold or len(both) > MAX_GROUP or both in self._too_big:
+        return count > threshold
+
+    def _mergeable(self, a: int, b: int) -> frozenset[int] | None:
+        """The agents of a's and b's groups together, if they may be merged."""
+        if not self.options.merge_threshold:
+            return None
+        both = frozenset(members(self.group, self.group[a]) + members(self.group, self.group[b]))
+        return None if len(both) > MAX_GROUP or both in self._too_big else both
+
+    def _replan_budget(self, a: int, b: int) -> int | None:
+        return REPLAN_BUDGET if self._mergeable(a, b) is not None else None
+
+    def _merge(self, node: _Node, a: int, b: int) -> None:
+        """Merge the groups of a and b and restart (raises _Restart), unless the merged group
+        is too large or its joint search exceeds ``JOINT_BUDGET`` (then nothing happens)."""
+        both = self._mergeable(a, b)
+        if both is None:
             return
         n = self.graph.num_cells
         lengths = [len(p) for p in node.paths]
@@ -287,18 +308,23 @@ class ConflictBasedSearch:
     def _table(self, node: _Node, agent: int) -> ConstraintTable:
         return table_for(self.graph.num_cells, self._constraints(node), agent)
 
-    def _child(self, node: _Node, constraint: Constraint, pos: np.ndarray) -> _Node | None:
+    def _child(
+        self, node: _Node, constraint: Constraint, pos: np.ndarray, budget: int | None
+    ) -> _Node | None:
         child = _Node(node, constraint, list(node.paths), list(node.costs), dict(node.mdds))
         agents = violators(constraint, pos) if constraint[0] == LENGTH_LE else [constraint[1]]
-        changed = self._replan(child, agents, pos)
+        changed = self._replan(child, agents, pos, budget)
         if changed is None:
             return None
         self._update_conflicts(child, node.conflicts, changed, pos if len(changed) == 1 else None)
         return child
 
-    def _replan(self, node: _Node, agents: Sequence[int], pos: np.ndarray) -> list[int] | None:
+    def _replan(
+        self, node: _Node, agents: Sequence[int], pos: np.ndarray, budget: int | None
+    ) -> list[int] | None:
         """Replan the groups of ``agents`` in ``node``; the agents replanned, or None if one of
-        those groups has no plan. Single agents use space-time A*, groups the joint search."""
+        those groups has no plan. Single agents use space-time A*, groups the joint search
+        (raises JointSearchLimit past ``budget`` expansions)."""
         n = self.graph.num_cells
         lengths = [len(p) for p in node.paths]
         constraints = self._constraints(node)
@@ -330,6 +356,7 @@ class ConflictBasedSearch:
                     cat,
                     self.deadline,
                     self.stats,
+                    budget,
                 )
             if paths is None:
                 return None

@@ -41,7 +41,11 @@ MERGE_THRESHOLD = 10
 # the largest meta-agent; the joint search grows exponentially with it
 MAX_GROUP = 4
 # states the first joint search of a merged group may expand before the merge is given up
-JOINT_BUDGET = 100_000
+JOINT_BUDGET = 500_000
+# states a meta-agent's replanning under constraints may expand before its group is merged with
+# the group it conflicts with instead (where that merge is allowed): proving that a group has
+# no plan under many constraints can cost far more than planning the larger group without them
+REPLAN_BUDGET = 20_000
 
 
 def table_for(n: int, constraints: Iterable[Constraint], agent: int) -> ConstraintTable:

@@ -86,26 +86,27 @@ def joint_astar(
             return None
     horizon = max([tb.horizon for tb in tables] + earliest + [cat.horizon if cat else 0]) + 1
     full = (1 << m) - 1
-
-    around: dict[tuple[int, int], list[int]] = {}
+    # alone[i][mask]: agent i's cost to finish from each cell, the agents in mask parked
+    alone: list[list[list[int] | None]] = [[None] * (full + 1) for _ in range(m)]
 
     def dist_around(i: int, fin: int) -> list[int]:
         """Agent i's distances to its goal avoiding the goals of the finished agents."""
         mask = fin & ~(1 << i)
         if not mask:
             return dists[i]
-        got = around.get((i, mask))
+        return _distances(graph, goals[i], {goals[j] for j in range(m) if mask >> j & 1})
+
+    def single(i: int, fin: int) -> list[int]:
+        """Agent i's distances around the finished agents; on its goal (unfinished) 2, as it
+        must step off and come back."""
+        mask = fin & ~(1 << i)
+        got = alone[i][mask]
         if got is None:
-            parked = {goals[j] for j in range(m) if mask >> j & 1}
-            got = around[(i, mask)] = _distances(graph, goals[i], parked)
+            got = alone[i][mask] = _alone(graph, goals[i], dist_around(i, mask)).tolist()
         return got
 
     def h_of(i: int, cell: int, t: int, fin: int) -> int:
-        dist = dist_around(i, fin)
-        d = dist[cell]
-        if d == 0:
-            # on its goal but not finished: it must step off and come back
-            d = 2 if any(dist[c] == 1 for c in graph.neighbours[cell]) else UNREACHABLE
+        d = single(i, fin)[cell]
         e = earliest[i] - t
         return d if d >= e else e
 
@@ -149,16 +150,16 @@ def joint_astar(
         h: int,
     ) -> None:
         """Queue a state; ``h`` is its single-agent heuristic, or -1 to compute it anew."""
+        key = (t if t < horizon else horizon, i, pos, new, fin)
+        old = best.get(key)
+        if old is not None and old <= (g, conf):
+            return
         if h < 0:
             h = 0
             for j in range(m):
                 if not fin >> j & 1:
                     h += h_of(j, new[j], t + 1, fin) if j < i else h_of(j, pos[j], t, fin)
         if h >= UNREACHABLE:
-            return
-        key = (t if t < horizon else horizon, i, pos, new, fin)
-        old = best.get(key)
-        if old is not None and old <= (g, conf):
             return
         hp = h_pairs(pos, new, i, fin, t) if pair_values else 0
         if hp >= UNREACHABLE:
@@ -293,8 +294,12 @@ def joint_astar(
                         c += 1
                 moved = (*new, v)
                 if v != goal or nt + 2 <= latest[i]:
-                    p2, n2, i2, t2 = settle(pos, moved, i + 1, fin, t)
-                    push(p2, n2, i2, fin, t2, g, c, node, h_rest + h_of(i, v, nt, fin))
+                    hv = h_rest + h_of(i, v, nt, fin)
+                    if i + 1 < m and not fin >> (i + 1) & 1:
+                        push(pos, moved, i + 1, fin, t, g, c, node, hv)
+                    else:
+                        p2, n2, i2, t2 = settle(pos, moved, i + 1, fin, t)
+                        push(p2, n2, i2, fin, t2, g, c, node, hv)
                 if v == goal and u != goal and earliest[i] <= nt:
                     done = fin | 1 << i
                     p2, n2, i2, t2 = settle(pos, moved, i + 1, done, t)
