@@ -18,8 +18,9 @@ meta-agents, optimal for SOC.
   from a new root with the merged group (merge & restart, Boyarski et al., IJCAI 2015). Every
   run is a complete CBS over a partition of the agents, so optimality is kept; agents that
   block each other in a dead end are solved jointly in milliseconds instead of being split
-  forever. A merge whose first joint search exceeds ``JOINT_BUDGET`` expansions is given up,
-  and that pair is split as before.
+  forever. Two groups are also merged when a meta-agent's replanning under constraints runs
+  past ``REPLAN_BUDGET`` joint expansions. A merge whose first joint search exceeds
+  ``JOINT_BUDGET`` expansions is given up, and that pair is split as before.
 - The low level is space-time A* that breaks ties toward fewer collisions with the other agents'
   paths (a conflict-avoidance table), and the high level toward fewer conflicts.
 

@@ -9,8 +9,9 @@ fewest conflicts. The returned SOC is therefore at most ``w`` times the optimal 
 Conflicts are split as in ``cbs``: target conflicts on the parked agent's path length (target
 reasoning, Li et al., AIJ 2021), and two groups of agents that conflicted more than
 ``MERGE_THRESHOLD`` times are merged into a meta-agent (MA-CBS, Sharon et al., SoCS 2012) and the
-search restarts (Boyarski et al., IJCAI 2015). A meta-agent is planned optimally by the joint
-search (``joint``), so its cost is its own lower bound and the bound argument above still holds.
+search restarts (Boyarski et al., IJCAI 2015), as do two groups whose replanning runs past
+``REPLAN_BUDGET`` joint expansions. A meta-agent is planned optimally by the joint search
+(``joint``), so its cost is its own lower bound and the bound argument above still holds.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from planners.mapf.constraints import (
     LENGTH_LE,
     MAX_GROUP,
     MERGE_THRESHOLD,
+    REPLAN_BUDGET,
     Constraint,
     as_target,
     groups_of,
@@ -164,31 +166,49 @@ class _Ecbs:
                 return node.paths, open_heap[0][0]
             self.stats.high += 1
             conflict = min(node.conflicts)
-            self._count(node, conflict[1], conflict[2])
+            a, b = conflict[1], conflict[2]
+            if self._count(a, b):
+                self._merge(node, a, b)
             pos = positions(node.paths)
             for constraint in split(conflict):
                 child = _Node(node, constraint, list(node.paths), list(node.costs), list(node.lbs))
                 agents = (
                     violators(constraint, pos) if constraint[0] == LENGTH_LE else [constraint[1]]
                 )
-                changed = self._replan(child, agents, pos)
+                budget = REPLAN_BUDGET if self._mergeable(a, b) is not None else None
+                try:
+                    changed = self._replan(child, agents, pos, budget)
+                except JointSearchLimit:
+                    self._merge(node, a, b)
+                    changed = self._replan(child, agents, pos, None)
                 if changed is None:
                     continue
                 self._update_conflicts(child, node.conflicts, changed, pos)
                 push(child)
 
-    def _count(self, node: _Node, a: int, b: int) -> None:
-        """Count a conflict between the groups of a and b; past the threshold merge them and
-        restart (raises _Restart) unless the merged group is too large or too hard."""
+    def _count(self, a: int, b: int) -> bool:
+        """Count a conflict between the groups of a and b: whether they should merge now."""
         if not self.merge_threshold:
-            return
+            return False
         ga = frozenset(members(self.group, self.group[a]))
         gb = frozenset(members(self.group, self.group[b]))
         key = (ga, gb) if min(ga) < min(gb) else (gb, ga)
         count = self._conflict_counts.get(key, 0) + 1
         self._conflict_counts[key] = count
-        both = ga | gb
-        if count <= self.merge_threshold or len(both) > MAX_GROUP or both in self._too_big:
+        return count > self.merge_threshold
+
+    def _mergeable(self, a: int, b: int) -> frozenset[int] | None:
+        """The agents of a's and b's groups together, if they may be merged."""
+        if not self.merge_threshold:
+            return None
+        both = frozenset(members(self.group, self.group[a]) + members(self.group, self.group[b]))
+        return None if len(both) > MAX_GROUP or both in self._too_big else both
+
+    def _merge(self, node: _Node, a: int, b: int) -> None:
+        """Merge the groups of a and b and restart (raises _Restart), unless the merged group
+        is too large or its joint search exceeds ``JOINT_BUDGET`` (then nothing happens)."""
+        both = self._mergeable(a, b)
+        if both is None:
             return
         n = self.graph.num_cells
         agents = sorted(both)
@@ -246,9 +266,11 @@ class _Ecbs:
         root.conflicts = [as_target(c, self.goals, root.costs) for c in all_conflicts(paths)]
         return root
 
-    def _replan(self, node: _Node, agents: Sequence[int], pos: np.ndarray) -> list[int] | None:
+    def _replan(
+        self, node: _Node, agents: Sequence[int], pos: np.ndarray, budget: int | None
+    ) -> list[int] | None:
         """Replan the groups of ``agents`` under the node's constraints; the agents replanned,
-        or None if a group has no plan."""
+        or None if a group has no plan (JointSearchLimit past ``budget`` joint expansions)."""
         n = self.graph.num_cells
         lengths = [len(p) for p in node.paths]
         constraints = []
@@ -287,6 +309,7 @@ class _Ecbs:
                     cat,
                     self.deadline,
                     self.stats,
+                    budget,
                 )
                 if paths is None:
                     return None
