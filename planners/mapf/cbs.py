@@ -13,7 +13,8 @@ meta-agents, optimal for SOC.
   that agent's path length (``constraints``); for the parked agent it is always cardinal.
 - Meta-agents (MA-CBS, Sharon et al., SoCS 2012): when two groups of agents have conflicted
   more than ``MERGE_THRESHOLD`` times in the search (MA-CBS's conflict matrix), they are merged
-  into one meta-agent of at most ``MAX_GROUP`` agents, planned by an optimal joint A* with
+  into one meta-agent (at most ``MAX_GROUP`` agents, and fewer on large maps, see
+  ``constraints.may_merge``), planned by an optimal joint A* with
   operator decomposition (``joint``) under its members' constraints, and the search restarts
   from a new root with the merged group (merge & restart, Boyarski et al., IJCAI 2015). Every
   run is a complete CBS over a partition of the agents, so optimality is kept; agents that
@@ -39,13 +40,13 @@ from planners.mapf.conflicts import Conflict, all_conflicts, conflicts_of, posit
 from planners.mapf.constraints import (
     JOINT_BUDGET,
     LENGTH_LE,
-    MAX_GROUP,
     MERGE_THRESHOLD,
     REPLAN_BUDGET,
     TARGET,
     Constraint,
     as_target,
     groups_of,
+    may_merge,
     members,
     merged,
     split,
@@ -149,6 +150,7 @@ class ConflictBasedSearch:
         self._counter = 0
         self._conflict_counts: dict[tuple[frozenset[int], frozenset[int]], int] = {}
         self._too_big: set[frozenset[int]] = set()
+        self._free_cells = int(graph.free.sum())
         self._joint_plans: dict[frozenset[int], list[list[int]]] = {}
         graph.precompute(self.goals)
 
@@ -222,7 +224,8 @@ class ConflictBasedSearch:
         if not self.options.merge_threshold:
             return None
         both = frozenset(members(self.group, self.group[a]) + members(self.group, self.group[b]))
-        return None if len(both) > MAX_GROUP or both in self._too_big else both
+        ok = may_merge(len(both), self._free_cells) and both not in self._too_big
+        return both if ok else None
 
     def _replan_budget(self, a: int, b: int) -> int | None:
         return REPLAN_BUDGET if self._mergeable(a, b) is not None else None

@@ -25,12 +25,12 @@ from planners.mapf.conflicts import Conflict, all_conflicts, conflicts_of, posit
 from planners.mapf.constraints import (
     JOINT_BUDGET,
     LENGTH_LE,
-    MAX_GROUP,
     MERGE_THRESHOLD,
     REPLAN_BUDGET,
     Constraint,
     as_target,
     groups_of,
+    may_merge,
     members,
     merged,
     split,
@@ -123,6 +123,7 @@ class _Ecbs:
         self.group: tuple[int, ...] = tuple(range(self.k))
         self._conflict_counts: dict[tuple[frozenset[int], frozenset[int]], int] = {}
         self._too_big: set[frozenset[int]] = set()
+        self._free_cells = int(graph.free.sum())
         self._joint_plans: dict[frozenset[int], list[list[int]]] = {}
         graph.precompute(self.goals)
 
@@ -202,7 +203,8 @@ class _Ecbs:
         if not self.merge_threshold:
             return None
         both = frozenset(members(self.group, self.group[a]) + members(self.group, self.group[b]))
-        return None if len(both) > MAX_GROUP or both in self._too_big else both
+        ok = may_merge(len(both), self._free_cells) and both not in self._too_big
+        return both if ok else None
 
     def _merge(self, node: _Node, a: int, b: int) -> None:
         """Merge the groups of a and b and restart (raises _Restart), unless the merged group
