@@ -50,6 +50,9 @@ def _register_all() -> None:
     from fleet import cli_ops
 
     cli_ops.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_recovery
+
+    cli_recovery.register(app, plan_app, bench_app, slam_app)
 
 
 _register_all()

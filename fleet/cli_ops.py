@@ -8,7 +8,6 @@ Each reads the run dir's process table (``processes.json``, written by `fleet up
 
 from __future__ import annotations
 
-import inspect
 import json
 import os
 import signal
@@ -21,6 +20,7 @@ from typing import Annotated, Any
 import typer
 
 from fleet.cli_processes import _fail
+from fleet.help_text import reflow
 from fleet.rundir import (
     RunDirError,
     RunTable,
@@ -399,10 +399,4 @@ def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
     for name, command in (("kill", kill), ("respawn", respawn), ("status", status), ("down", down)):
-        app.command(name, help=_reflow(command.__doc__ or ""))(command)
-
-
-def _reflow(doc: str) -> str:
-    """A docstring as help: each paragraph on one line, so the terminal wraps it."""
-    paragraphs = inspect.cleandoc(doc).split("\n\n")
-    return "\n\n".join(" ".join(p.split("\n")) for p in paragraphs)
+        app.command(name, help=reflow(command.__doc__ or ""))(command)

@@ -18,6 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fleet.cli import app
+from fleet.fleet_runner import descendants
 from fleet.rundir import (
     TABLE_NAME,
     ProcessRecord,
@@ -482,24 +483,6 @@ def _fleet(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
     )
 
 
-def _descendants(pid: int) -> set[int]:
-    parents = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                stat = Path(f"/proc/{entry}/stat").read_text()
-            except OSError:
-                continue
-            parents[int(entry)] = int(stat.rsplit(")", 1)[1].split()[1])
-    out, frontier = set(), [pid]
-    while frontier:
-        parent = frontier.pop()
-        kids = [c for c, pp in parents.items() if pp == parent]
-        out.update(kids)
-        frontier += kids
-    return out
-
-
 @pytest.mark.integration
 @pytest.mark.timeout(120)
 def test_kill_status_respawn_down_on_a_real_fleet(tmp_path: Path) -> None:
@@ -515,7 +498,7 @@ def test_kill_status_respawn_down_on_a_real_fleet(tmp_path: Path) -> None:
     try:
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
-            children |= _descendants(up.pid)
+            children |= set(descendants(up.pid))
             log = d / "robot-0.log"
             if (d / TABLE_NAME).exists() and log.exists() and b"spawned" in log.read_bytes():
                 break  # the robot is in the world
@@ -531,7 +514,7 @@ def test_kill_status_respawn_down_on_a_real_fleet(tmp_path: Path) -> None:
         old = table.processes["robot-0"]
         assert "--state-dir" in old.argv and str(d / "robot-0") in old.argv
         assert str(d / "coordinator.sqlite") in table.processes["coordinator"].argv
-        children |= _descendants(up.pid)
+        children |= set(descendants(up.pid))
 
         killed = _fleet("kill", "robot-0", "--signal", "KILL", "--run-dir", str(d))
         assert killed.returncode == 0, killed.stderr
@@ -550,7 +533,7 @@ def test_kill_status_respawn_down_on_a_real_fleet(tmp_path: Path) -> None:
         assert new.argv == [*old.argv, "--respawn"]
         assert (d / "robot-0.log").read_bytes().startswith(before)  # appended, not replaced
         assert process_state(new.pid, new.argv) in ("running", "stopped")
-        children |= _descendants(up.pid)
+        children |= set(descendants(up.pid))
         refused = _fleet("respawn", "robot-0", "--run-dir", str(d))
         assert refused.returncode == 2 and f"alive (pid {new.pid})" in refused.stderr
         assert up.poll() is None

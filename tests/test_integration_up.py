@@ -11,7 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
-from fleet_runs import children_of
+
+from fleet.fleet_runner import descendants
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 
@@ -44,7 +45,7 @@ def _fleet_up(run_dir: Path, robots: int, timeout_s: float = 150.0) -> dict:
     try:
         deadline = time.monotonic() + 300
         while proc.poll() is None and time.monotonic() < deadline:
-            children.update(children_of(proc.pid))
+            children.update(descendants(proc.pid))
             time.sleep(0.5)
         output = proc.communicate(timeout=60)[0].decode(errors="replace")
     finally:
