@@ -127,6 +127,7 @@ class Coordinator:
         self.plan_seq = int(meta.get("plan_seq", 0))
         self.round_seq = int(meta.get("round_seq", 0))
         self.phase = str(meta.get("phase", "cleaning"))
+        self.clock = float(meta.get("clock", 0.0))
         now = time.time()
         for rid, r in self.job.robots.items():
             # robots are heard from again within a heartbeat; until then none counts as silent
@@ -487,6 +488,9 @@ class Coordinator:
     # ---- main loop ----------------------------------------------------------------------
 
     def run(self, grace_s: float) -> None:
+        """Plan the tasks (unless resumed) while the robots start, then run the job."""
+        if not self.job.tasks:
+            self._plan_tasks()
         gather_start = time.monotonic()
         last_state = last_robots = 0.0
         while not self.stop.is_set():
@@ -496,7 +500,10 @@ class Coordinator:
             with self.lock:
                 if self.phase == "gathering":
                     if self._gathered(time.monotonic() - gather_start, grace_s):
-                        self._plan_tasks()
+                        self.phase = "auction"
+                        self.need_auction = True
+                        if self.store is not None:
+                            self.store.set_meta(phase=self.phase)
                 else:
                     self._check_heartbeats()
                     idle = [rid for rid in self.job.market() if self.job.current(rid) is None]
@@ -515,14 +522,15 @@ class Coordinator:
                         self.phase = "done"
                         log.info("every task is done: the floor is clean")
                         self._event("finished", "", "", "")
+                        if self.store is not None:
+                            self.store.set_meta(phase=self.phase)
                     elif self.phase == "auction" and not self.job.open_tasks():
                         self.phase = "cleaning"
-                    if self.store is not None:
-                        self.store.set_meta(phase=self.phase)
                 now = time.monotonic()
                 if self.store is not None and now - last_robots > PERSIST_ROBOTS_S:
                     last_robots = now
                     self.store.save_robots(list(self.job.robots.values()))
+                    self.store.set_meta(phase=self.phase, clock=self.clock)
                 if now - last_state > STATE_PERIOD_S:
                     last_state = now
                     self._publish_state()
@@ -530,14 +538,13 @@ class Coordinator:
     def _plan_tasks(self) -> None:
         t0 = time.perf_counter()
         tasks = self.planner.tasks()
-        self.job.add_tasks(tasks)
         log.info("planned %d tasks in %.2f s", len(tasks), time.perf_counter() - t0)
-        if self.store is not None:
-            self.store.save_tasks(list(self.job.tasks.values()))
-            self.store.set_meta(expected_robots=self.expected)
-        self._event("planned", "", "", f"{len(tasks)} tasks")
-        self.phase = "auction"
-        self.need_auction = True
+        with self.lock:
+            self.job.add_tasks(tasks)
+            if self.store is not None:
+                self.store.save_tasks(list(self.job.tasks.values()))
+                self.store.set_meta(expected_robots=self.expected)
+            self._event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
         counts = self.job.counts()
