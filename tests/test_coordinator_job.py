@@ -82,14 +82,19 @@ def test_a_robot_lost_before_sweeping_anything_gives_back_whole_tasks(job: Job):
     assert job.tasks["t00"].state == OPEN and not job.tasks["t00"].reverse
 
 
-def test_withdrawing_takes_back_only_the_unstarted_queued_tasks(job: Job):
-    job.award("t00", "robot-0", False)
-    job.award("t01", "robot-0", False)
-    job.award("t02", "robot-0", False)
+def test_withdrawing_takes_back_the_far_half_of_the_unstarted_queued_tasks(job: Job):
+    for tid in ("t00", "t01", "t02"):
+        job.award(tid, "robot-0", False)
     job.award("t03", "robot-1", False)
-    assert job.withdraw_unstarted() == ["t01", "t02"]
-    assert [r.task.id for r in job.queue("robot-0")] == ["t00"]
+    # robot-0 drives t00 and keeps the near half of the rest; robot-1 keeps what it drives
+    assert job.withdraw_unstarted() == ["t02"]
+    assert [r.task.id for r in job.queue("robot-0")] == ["t00", "t01"]
     assert [r.task.id for r in job.queue("robot-1")] == ["t03"]
+    # a task already begun is never withdrawn; a single unstarted one is
+    job.progress("robot-0", "t01", np.array([1, 0, 0, 0], dtype=np.uint8))
+    assert job.withdraw_unstarted() == []
+    job.award("t02", "robot-1", False)
+    assert job.withdraw_unstarted() == ["t02"]
 
 
 def test_the_job_is_finished_when_every_task_is_done_or_replaced(job: Job):

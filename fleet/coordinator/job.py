@@ -5,9 +5,9 @@ is unit-tested without processes:
 
 - A task is ``open`` (no live owner), ``assigned`` (in one robot's queue, at ``position``),
   ``done``, or ``replaced`` (by its remainder, when its owner was lost part-way).
-- A robot drives the first task of its queue; the rest are unstarted and may be withdrawn and
-  auctioned again at a task boundary (``withdraw_unstarted``), which is how an idle robot wins
-  work back from busy ones.
+- A robot drives the first task of its queue; the rest are unstarted, and the back half of them
+  may be withdrawn and auctioned again at a task boundary (``withdraw_unstarted``), which is
+  how an idle robot wins work back from busy ones.
 - A lost robot keeps nothing: the unswept remainder of the task it was driving becomes a new
   open task (``t07`` → ``t07.1``), its unstarted tasks open again (``lose``). No task is ever in
   two queues.
@@ -163,16 +163,17 @@ class Job:
                 reopened.append(rec.task.id)
         return reopened, made
 
-    def withdraw_unstarted(self, keep: set[str] | frozenset[str] = frozenset()) -> list[str]:
-        """Every queued task but the one each robot drives (and those in ``keep``: in plans
-        being driven), and any not yet swept, goes back to the market (a task boundary for all
-        of them): the next auction rebalances the fleet."""
+    def withdraw_unstarted(self) -> list[str]:
+        """The back half of each robot's unstarted queue (never the task it drives) goes back
+        to the market, as in work stealing from the far end of a queue: a robot that wins it
+        starts where the owner would have got last, so the two do not work side by side (and
+        give way to each other) while they share what is left."""
         out = []
         for rid in sorted({r.owner for r in self.tasks.values() if r.state == ASSIGNED}):
-            for rec in self.queue(rid)[1:]:  # type: ignore[arg-type]
-                if not rec.started and rec.task.id not in keep:
-                    rec.state, rec.owner, rec.reverse = OPEN, None, False
-                    out.append(rec.task.id)
+            unstarted = [rec for rec in self.queue(rid)[1:] if not rec.started]  # type: ignore[arg-type]
+            for rec in unstarted[len(unstarted) // 2 :]:
+                rec.state, rec.owner, rec.reverse = OPEN, None, False
+                out.append(rec.task.id)
         return out
 
     def _next_id(self, task_id: str) -> str:

@@ -273,16 +273,13 @@ class Coordinator:
         self.wake.set()
 
     def _rebalance(self) -> None:
-        """Withdraw the unstarted tasks for a new auction. A robot keeps the task it drives and
-        the one its plan goes on to (it may be entering it already); its plan is cut before the
-        first task it gave up, under the same plan id, so it drives on without a stop."""
+        """Withdraw the unstarted tasks for a new auction. A robot keeps the task it drives; its
+        plan is cut before the first task it gave up, under the same plan id, so it drives on
+        to there without a stop. (A robot that has just entered the next task of its plan when
+        the cut arrives stops there; it has swept a piece or two of a task now sold again.)"""
         self.version += 1
         self.balanced_version = self.version
-        keep = set()
-        for rid in self.plans:
-            queue = [rec.task.id for rec in self.job.queue(rid)[:2]]
-            keep.update(t for t in queue if t in _chain_of(self.plans[rid]))
-        withdrawn = self.job.withdraw_unstarted(keep=keep)
+        withdrawn = self.job.withdraw_unstarted()
         for tid in withdrawn:
             self._event("withdrawn", "", tid, "back to the market")
         self._save_task(*withdrawn)
