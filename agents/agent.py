@@ -112,7 +112,7 @@ class Agent:
         self.chain_time_s = 0.0
         self.market = MarketClient(
             rid,
-            cfg.robot.max_vel_x,
+            cfg.agent.transit_speed,
             cfg.robot.radius,
             cfg.slam.occupied_threshold,
             cfg.slam.free_threshold,

@@ -3,11 +3,15 @@
 A robot prices a called task from what it knows — its own pose estimate, the plan it is
 driving, the tasks it has won (its last :class:`~fleet.protocol.Award`) and its own SLAM map —
 as the marginal cost of appending the task to its commitments (``planners.auction.make_bid``,
-Koenig et al. 2006). Travel is estimated on the floor plan the coordinator shares
-(``coord/map``), obstacles grown by the robot's radius (``planners.auction.TravelGrid``): at the
-first auction a robot has seen one room, and travel priced on that alone would ignore every
-wall beyond it. Until it has the floor plan, on its own SLAM map with unknown cells counted as
-free; before that, by the straight line.
+Koenig et al. 2006). Travel is priced at ``agent.transit_speed`` on the floor plan the
+coordinator shares (``coord/map``), obstacles grown by the robot's radius
+(``planners.auction.TravelGrid``): at the first auction a robot has seen one room, and travel
+priced on that alone would ignore every wall beyond it. Until it has the floor plan, on its own
+SLAM map with unknown cells counted as free; before that, by the straight line. Transits are
+priced at half the top speed because that is about what robots make on them (DWA slows in
+doorways and along walls), while tasks' times come from the coverage plan: at top speed,
+travel would look cheap next to the work a robot already holds, and an idle robot would win
+tasks it takes far longer to reach than their owner would.
 """
 
 from __future__ import annotations

@@ -6,14 +6,16 @@ from __future__ import annotations
 import json
 import math
 import os
+import queue
 import signal
 import sys
 import threading
 import time
 from collections.abc import Callable
+from concurrent import futures
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -23,6 +25,8 @@ TIMED_OUT_EXIT = 3
 # A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
 # answer for the report.
 REPORT_WAIT_S = 30.0
+# an operator's respawn waits this long for the main loop, which looks every 0.25 s
+RESPAWN_WAIT_S = 5.0
 MAX_ROBOTS = 64
 # The fleet cannot go on without these; every other process can be started again by
 # `fleet respawn NAME`.
@@ -135,10 +139,11 @@ def up(
             state = ["--state-dir", str(run_dir / rid)]
             launcher.start(rid, ["agent", "--id", rid, "--start", f"{x},{y},{th}", *common, *state])
         bus = Bus("dashboard", "up", [endpoint])
-        bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher))
+        calls = MainThreadCalls()
+        bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
         watcher = FleetWatcher(bus)
         out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
-        status = _watch(watcher, launcher, stop, until_done, timeout, headless, t0)
+        status = _watch(watcher, launcher, calls, stop, until_done, timeout, headless, t0)
         wall_s = time.monotonic() - t0
         summary = bus.request(
             bus.keys.sim_report(), Request("up"), CoverageSummary, timeout=REPORT_WAIT_S
@@ -189,11 +194,43 @@ def up(
         raise typer.Exit(1 if status != "interrupted" else 130)
 
 
-def _respawner(launcher: Launcher) -> Callable[[OpsRequest], OpsReply]:
+class MainThreadCalls:
+    """Calls asked for on other threads, made by the main thread between two looks at the
+    fleet. A process started from a Zenoh callback thread would get its parent-death signal
+    when that thread ends (Linux ties ``PR_SET_PDEATHSIG`` to the thread that forked)."""
+
+    def __init__(self) -> None:
+        self._pending: queue.Queue[tuple[Callable[[], Any], futures.Future]] = queue.Queue()
+
+    def call(self, fn: Callable[[], Any], timeout: float) -> Any:
+        """``fn()`` made by the main thread; raises TimeoutError if it does not get to it."""
+        done: futures.Future = futures.Future()
+        self._pending.put((fn, done))
+        return done.result(timeout)
+
+    def run_pending(self) -> None:
+        while True:
+            try:
+                fn, done = self._pending.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                done.set_result(fn())
+            except Exception as e:
+                done.set_exception(e)
+
+
+def _respawner(launcher: Launcher, calls: MainThreadCalls) -> Callable[[OpsRequest], OpsReply]:
     """The answer to `fleet respawn NAME`: start NAME again with the arguments it had (plus
     ``--respawn`` for an agent, which then reloads its map and pose from its --state-dir; the
     coordinator resumes from its --state file)."""
     from fleet.protocol import OpsReply
+
+    def answer(req: OpsRequest) -> OpsReply:
+        try:
+            return calls.call(lambda: respawn(req), RESPAWN_WAIT_S)
+        except futures.TimeoutError:
+            return OpsReply(False, "fleet up did not get to it: it is stopping")
 
     def respawn(req: OpsRequest) -> OpsReply:
         if req.verb != "respawn":
@@ -214,10 +251,10 @@ def _respawner(launcher: Launcher) -> Callable[[OpsRequest], OpsReply]:
         print(f"respawned {req.name} for {req.sender} (pid {proc.pid})", file=sys.stderr)
         return OpsReply(True, "")
 
-    return respawn
+    return answer
 
 
-def _watch(watcher, launcher, stop, until_done, timeout, headless, t0) -> str:
+def _watch(watcher, launcher, calls, stop, until_done, timeout, headless, t0) -> str:
     """Show progress until done, timeout, a signal or a dead router or simulator; returns why
     it stopped. Another process that dies is reported once, and the run goes on."""
     from rich.console import Console
@@ -233,6 +270,7 @@ def _watch(watcher, launcher, stop, until_done, timeout, headless, t0) -> str:
         if live is not None:
             live.start()
         while not stop.wait(0.25):
+            calls.run_pending()
             wall = time.monotonic() - t0
             if live is not None:
                 live.update(watcher.table(wall), refresh=True)

@@ -121,6 +121,7 @@ class AgentParams:
     status_hz: float = 2.0
     heartbeat_hz: float = 5.0
     state_save_s: float = 2.0
+    transit_speed: float = 0.25
 
     def validate(self) -> None:
         for name in (
@@ -128,6 +129,7 @@ class AgentParams:
             "status_hz",
             "heartbeat_hz",
             "state_save_s",
+            "transit_speed",
             "stale_after_s",
             "give_up_after_s",
             "align_exit",

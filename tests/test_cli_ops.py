@@ -557,3 +557,25 @@ def test_kill_status_respawn_down_on_a_real_fleet(tmp_path: Path) -> None:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(p, signal.SIGKILL)
     assert not left, f"orphans: {left}"
+
+
+def test_respawns_asked_on_another_thread_are_made_by_the_main_thread() -> None:
+    import threading
+    from concurrent import futures
+
+    from fleet.cli_up import MainThreadCalls
+
+    calls = MainThreadCalls()
+    seen: list[object] = []
+    asker = threading.Thread(
+        target=lambda: seen.append(calls.call(threading.current_thread, timeout=5.0))
+    )
+    asker.start()
+    deadline = time.monotonic() + 5.0
+    while not seen and time.monotonic() < deadline:
+        calls.run_pending()
+        time.sleep(0.01)
+    asker.join()
+    assert seen == [threading.main_thread()]
+    with pytest.raises(futures.TimeoutError):
+        calls.call(lambda: None, timeout=0.05)
