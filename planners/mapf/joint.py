@@ -116,7 +116,6 @@ def joint_astar(
     n_idx: list[int] = []
     n_fin: list[int] = []
     n_t: list[int] = []
-    n_g: list[int] = []
     n_parent: list[int] = []
     n_key: list[tuple] = []
     n_h: list[int] = []
@@ -173,7 +172,6 @@ def joint_astar(
         n_idx.append(i)
         n_fin.append(fin)
         n_t.append(t)
-        n_g.append(g)
         n_parent.append(parent)
         heappush(heap, (g + (h if h >= hp else hp), conf, -g, idx))
 
