@@ -91,6 +91,7 @@ class RunningFleet:
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=cwd)
         self.children: set[int] = set()
         self.output = ""
+        self.left: list[int] = []
 
     def events(self, kind: str | None = None, robot: str | None = None) -> list[dict[str, Any]]:
         return [
@@ -159,4 +160,5 @@ class RunningFleet:
         left = [p for p in self.children if Path(f"/proc/{p}").exists()]
         for p in left:
             os.kill(p, signal.SIGKILL)
+        self.left += left
         return left

@@ -39,7 +39,8 @@ def _after(events: list[dict], seq: int, kind: str, robot: str) -> list[dict]:
 def fleet(tmp_path: Path):
     run = FleetRun(tmp_path / "run")
     yield run
-    assert run.cleanup() == [], "processes left behind"
+    run.cleanup()
+    assert run.left == [], f"processes left behind: {run.left}"
 
 
 def test_a_killed_agent_is_replaced_and_its_respawn_rejoins_and_sweeps(fleet: FleetRun):

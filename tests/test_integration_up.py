@@ -3,16 +3,11 @@
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
 
-from fleet.fleet_runner import descendants
+from fleet.fleet_runner import RunningFleet
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 
@@ -22,46 +17,14 @@ WORLD = Path(__file__).resolve().parents[1] / "configs" / "worlds" / "small.yaml
 def _fleet_up(run_dir: Path, robots: int, timeout_s: float = 150.0) -> dict:
     """Run ``fleet up`` headless until done on the small world; collect every process it
     started while it ran, and kill (and report) any left after it exits."""
-    cmd = [
-        sys.executable,
-        "-m",
-        "fleet.cli",
-        "up",
-        "--robots",
-        str(robots),
-        "--world",
-        str(WORLD),
-        "--headless",
-        "--until-done",
-        "--timeout",
-        str(timeout_s),
-        "--speed",
-        "0",
-        "--run-dir",
-        str(run_dir),
-    ]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    children: set[int] = set()
-    try:
-        deadline = time.monotonic() + 300
-        while proc.poll() is None and time.monotonic() < deadline:
-            children.update(descendants(proc.pid))
-            time.sleep(0.5)
-        output = proc.communicate(timeout=60)[0].decode(errors="replace")
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            proc.wait(30)
-    time.sleep(1.0)
-    left = [p for p in children if Path(f"/proc/{p}").exists()]
-    for p in left:
-        os.kill(p, signal.SIGKILL)
+    fleet = RunningFleet(run_dir, str(WORLD), robots, timeout_s=timeout_s)
+    fleet.finish(300.0)
     return {
-        "rc": proc.returncode,
-        "output": output,
+        "rc": fleet.proc.returncode,
+        "output": fleet.output,
         "dir": run_dir,
-        "children": children,
-        "left": left,
+        "children": fleet.children,
+        "left": fleet.left,
     }
 
 

@@ -97,6 +97,8 @@ class Coordinator:
         self.rejected: Counter[str] = Counter()
         self.need_auction = False
         self.lost_at: dict[str, float] = {}
+        # tasks to sell as regions in the next auction: a lost robot's run of the tour
+        self.region_sale: list[str] = []
         # the idle-robot rebalance runs once per change of who works: a robot that wins its
         # withdrawn tasks back must not be asked again and again
         self.version = 0
@@ -263,6 +265,7 @@ class Coordinator:
         self._event("lost", rid, "", why)
         now = time.monotonic()
         self.lost_at.update(dict.fromkeys(reopened, now))
+        self.region_sale += reopened
         for tid in reopened:
             self._event("reopened", rid, tid, "remainder" if tid in made else "unstarted")
         changed = [r.task.id for r in self.job.tasks.values() if r.owner is None]
@@ -326,26 +329,33 @@ class Coordinator:
 
     # ---- the market ---------------------------------------------------------------------
 
-    def _lots(self, regions: tuple[auction.Lot, ...] | None) -> dict[str, auction.Lot]:
-        """What the next round sells: the regions none of whose tasks is sold yet, or every
+    def _lots(self, regions: tuple[auction.Lot, ...]) -> dict[str, auction.Lot]:
+        """What the next round sells: the regions none of whose tasks is sold yet, then every
         open task on its own."""
         open_ids = {r.task.id for r in self.job.open_tasks()}
-        if regions is not None:
-            return {lot.id: lot for lot in regions if set(lot.tasks) <= open_ids}
+        unsold = {lot.id: lot for lot in regions if set(lot.tasks) <= open_ids}
+        if unsold:
+            return unsold
         return {tid: auction.task_lot(self.job.tasks[tid].task) for tid in open_ids}
 
     def _auction(self) -> None:
         """Sequential single-item auctions over the bus until nothing is open or no robot bids.
 
-        The first allocation, when every task is open and no robot has work, sells one region
-        per robot in the market (``planners.auction.regions``); later ones sell single tasks."""
+        Runs of the tour are sold as regions, one per robot in the market
+        (``planners.auction.regions``): all tasks in the first allocation, and the work a lost
+        robot leaves; everything else task by task."""
         t0 = time.monotonic()
         awarded = 0
         with self.lock:
-            first = all(r.state == "open" for r in self.job.tasks.values())
+            if all(r.state == "open" for r in self.job.tasks.values()):
+                self.region_sale = list(self.job.tasks)
+            sale = sorted(
+                (t for t in self.region_sale if self.job.tasks[t].state == "open"), key=_tour_key
+            )
+            self.region_sale = []
             bidders = self.job.market()
-            tour = [r.task for r in self.job.tasks.values()]
-        regions = auction.regions(tour, len(bidders)) if first and bidders else None
+            runs = [self.job.tasks[t].task for t in sale]
+        regions = auction.regions(runs, len(bidders)) if bidders else ()
         while not self.stop.is_set():
             with self.lock:
                 self.need_auction = False
@@ -593,3 +603,8 @@ def _cut_plan(plan: Plan, j: int) -> Plan:
         list(plan.chain[:j]),
         plan.chain_starts[:j],
     )
+
+
+def _tour_key(task_id: str) -> tuple[int, ...]:
+    """Where a task lies along the tour: "t07" → (7,), its remainder "t07.1" → (7, 1)."""
+    return tuple(int(part) for part in task_id.lstrip("t").split("."))
