@@ -132,8 +132,10 @@ class Coordinator:
         self.clock = float(meta.get("clock", 0.0))
         now = time.time()
         for rid, r in self.job.robots.items():
-            # robots are heard from again within a heartbeat; until then none counts as silent
+            # robots are heard from again within a heartbeat; until then none counts as silent,
+            # and those in the market stay there (their first heartbeat is no news to rebalance)
             r.heartbeat_wall = now
+            r.ready = r.liveness != LOST
             self.sent[rid] = tuple(t.task.id for t in self.job.queue(rid))
         self.need_auction = bool(self.job.open_tasks())
         log.info(
