@@ -72,11 +72,14 @@ def job_report(state: Path) -> dict[str, Any]:
     """``events`` and ``tasks`` from the coordinator's SQLite ``state`` (read-only). A task's
     ``owners`` are [robot, from, to] in sim seconds (``to`` None while it still held it at the
     end): a hold begins with an award and ends when the task is done, withdrawn, or its owner
-    is lost. ``overlaps`` lists tasks held by two robots at once (it should stay empty)."""
+    is lost. ``overlaps`` lists tasks held by two robots at once (it should stay empty);
+    ``rejected_bids`` counts the bids the auctions ignored, by why (late, duplicate,
+    malformed, not in the market)."""
     if not state.exists():
-        return {"events": None, "tasks": None, "overlaps": None}
+        return {"events": None, "tasks": None, "overlaps": None, "rejected_bids": None}
     db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
     try:
+        meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
         cols = ("wall", "sim", "kind", "robot", "task", "detail")
         events = [
             dict(zip(cols, row, strict=True))
@@ -116,7 +119,12 @@ def job_report(state: Path) -> dict[str, Any]:
             a[2] is None or a[2] > b[1] for a, b in zip(t["owners"], t["owners"][1:], strict=False)
         )
     ]
-    return {"events": events, "tasks": list(tasks.values()), "overlaps": overlaps}
+    return {
+        "events": events,
+        "tasks": list(tasks.values()),
+        "overlaps": overlaps,
+        "rejected_bids": json.loads(meta.get("rejected_bids", "{}")),
+    }
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

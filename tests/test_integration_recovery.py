@@ -109,6 +109,8 @@ def test_a_hung_agent_loses_its_work_and_rejoins_while_garbage_is_ignored(fleet:
     reopened = {e["task"] for e in fleet.events("reopened") if e["robot"] == "robot-1"}
     reassigned = {e["task"] for e in fleet.events("reassigned")}
     assert reopened and reopened <= reassigned, fleet.explained()
+    assert report["rejected_bids"].get("late", 0) >= 1, fleet.explained()
+    assert report["rejected_bids"].get("malformed", 0) >= 1, fleet.explained()
     coordinator = (fleet.dir / "coordinator.log").read_text()
     assert "dropped malformed payload" in coordinator
     assert "ignored a late bid" in coordinator

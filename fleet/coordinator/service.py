@@ -130,6 +130,7 @@ class Coordinator:
         self.round_seq = int(meta.get("round_seq", 0))
         self.phase = str(meta.get("phase", "cleaning"))
         self.clock = float(meta.get("clock", 0.0))
+        self.rejected.update(meta.get("rejected_bids", {}))  # type: ignore[arg-type]
         now = time.time()
         for rid, r in self.job.robots.items():
             # robots are heard from again within a heartbeat; until then none counts as silent,
@@ -539,7 +540,9 @@ class Coordinator:
                 if self.store is not None and now - last_robots > PERSIST_ROBOTS_S:
                     last_robots = now
                     self.store.save_robots(list(self.job.robots.values()))
-                    self.store.set_meta(phase=self.phase, clock=self.clock)
+                    with self._bids_cond:
+                        rejected = dict(self.rejected)
+                    self.store.set_meta(phase=self.phase, clock=self.clock, rejected_bids=rejected)
                 if now - last_state > STATE_PERIOD_S:
                     last_state = now
                     self._publish_state()
