@@ -254,6 +254,7 @@ class Agent:
         self.follow = dataclasses.replace(follow, waypoints=msg.waypoints)
         self.chain = list(msg.chain) or [msg.task]
         self.chain_starts = msg.chain_starts if len(msg.chain) else np.array([msg.sweep_from])
+        self.chain_time_s = sum(w.time_s for w in self.market.queue if w.id in self.chain)
         log.info("%s: plan %d now ends after %s", self.rid, msg.plan_id, self.chain[-1])
 
     def _on_award(self, _key: str, msg: Award) -> None:
@@ -541,7 +542,12 @@ class Agent:
         self._map_snapshot = snapshot
         if self.state_dir is not None and stamp - self._last_save >= self.cfg.agent.state_save_s:
             self._last_save = stamp
-            save_state(self.state_dir, snapshot, self.pose_source.pose(), stamp)
+            try:
+                save_state(self.state_dir, snapshot, self.pose_source.pose(), stamp)
+            except OSError as e:
+                log.warning(
+                    "%s: could not save its map and pose to %s: %s", self.rid, self.state_dir, e
+                )
         update = self._patches.update(snapshot)
         if update.full or update.patches:
             self._map_seq += 1

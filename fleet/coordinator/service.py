@@ -5,18 +5,22 @@ allocation), ``cleaning``, ``done`` (every task done). The job's rules live in
 :class:`fleet.coordinator.job.Job`; the pricing in ``planners.auction``; this shell moves
 messages and keeps the job on disk (:class:`fleet.coordinator.store.JobStore`).
 
-Market (sequential single-item auctions, Koenig et al. 2006): each round calls every open
-task on ``coord/task/<task>``; every robot in the market answers each with a :class:`Bid`
-priced from its own pose and commitments; the best bid (``coordinator.objective``) wins, the
-winner gets its whole queue on ``coord/award/<robot>`` and acknowledges it, and the next round
-calls what is left. Bids that are late (another round), duplicate, malformed, or from a robot
-that is not in the market are counted and ignored. The coordinator never reads truth.
+Market (sequential single-item auctions, Koenig et al. 2006): each round calls every lot on
+sale on ``coord/task/<lot>`` — a region of consecutive tasks (the first allocation, and the
+work a lost robot leaves: one region per robot) or a single task; every robot in the market
+answers each with a :class:`Bid` priced from its own pose and commitments; the best bid
+(``coordinator.objective``) wins, the winner gets its whole queue on ``coord/award/<robot>``
+and acknowledges it, and the next round calls what is left. Bids that are late (another
+round), duplicate, malformed, or from a robot that is not in the market are counted and
+ignored. Each robot gets one plan for the run of its queue that follows on without a transit.
+The coordinator never reads truth.
 
 Recovery: a robot is lost when its liveliness token goes (a dead process) or its wall-clock
 heartbeat is silent for ``coordinator.heartbeat_timeout_s`` (a hung one). The unswept remainder
 of its task and its unstarted tasks are auctioned again at once. A robot heard from again
 rejoins with an empty queue and bids afresh; whenever a robot runs out of work while others
-hold unstarted tasks, those are withdrawn and auctioned again (a task boundary for all).
+hold unstarted tasks, the back half of each queue is withdrawn and auctioned again (a task
+boundary for all).
 """
 
 from __future__ import annotations
@@ -301,7 +305,7 @@ class Coordinator:
         self.need_auction = True
         self.wake.set()
 
-    def _publish_awards(self, force: bool = False) -> None:
+    def _publish_awards(self) -> None:
         """Send each robot its queue when it changed (or is unacknowledged and due again)."""
         now = time.monotonic()
         for rid, r in self.job.robots.items():
@@ -309,7 +313,7 @@ class Coordinator:
             ids = tuple(t.task.id for t in queue)
             changed = ids != self.sent.get(rid, ())
             due = r.acked_seq < r.award_seq and now - self.last_award_sent.get(rid, 0) > RESEND_S
-            if not (changed or due or force):
+            if not (changed or due):
                 continue
             if changed:
                 r.award_seq += 1
