@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from PIL import Image, ImageDraw
 
+from fleet.fleet_runner import read_events
 from fleet.protocol import CoverageImage, CoverageSummary
 
 PIXELS_PER_CELL = 4
@@ -80,11 +81,6 @@ def job_report(state: Path) -> dict[str, Any]:
     db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
     try:
         meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
-        cols = ("wall", "sim", "kind", "robot", "task", "detail")
-        events = [
-            dict(zip(cols, row, strict=True))
-            for row in db.execute(f"SELECT {', '.join(cols)} FROM events ORDER BY seq")
-        ]
         tasks = {
             tid: {
                 "id": tid,
@@ -100,6 +96,7 @@ def job_report(state: Path) -> dict[str, Any]:
         }
     finally:
         db.close()
+    events = [{k: v for k, v in e.items() if k != "seq"} for e in read_events(state)]
     held: dict[str, list[Any]] = {}
     for e in events:
         kind, robot, task, sim = e["kind"], e["robot"], e["task"], round(e["sim"], 2)

@@ -8,6 +8,7 @@ import pytest
 
 from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, Job
 from fleet.coordinator.store import JobStore
+from fleet.fleet_runner import read_events
 from fleet.protocol import Plan
 from planners.auction import Task
 from planners.coverage.params import CoverageParams
@@ -138,5 +139,5 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     assert not again.robots["robot-1"].ready
     assert store.plans()["robot-0"] == plan
     assert store.meta() == {"phase": "cleaning", "plan_seq": 7}
-    assert [e["kind"] for e in store.events()] == ["awarded"]
+    assert [e["kind"] for e in read_events(tmp_path / "job.sqlite")] == ["awarded"]
     store.close()

@@ -201,10 +201,3 @@ class JobStore:
             wp = np.frombuffer(wps, dtype="<f8").reshape(-1, 2).copy()
             out[robot] = Plan(float(stamp), int(pid), task, wp, int(sweep_from))
         return out
-
-    def events(self) -> list[dict[str, object]]:
-        cols = ("seq", "wall", "sim", "kind", "robot", "task", "detail")
-        return [
-            dict(zip(cols, row, strict=True))
-            for row in self.db.execute(f"SELECT {', '.join(cols)} FROM events ORDER BY seq")
-        ]
