@@ -1,0 +1,95 @@
+"""The robot's side of the market without a bus: its queue, its prices, and its swept pieces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.follower import FollowState
+from agents.market import MarketClient, swept_pieces
+from fleet.protocol import Award, TaskCall
+from planners.grid import GridMap
+
+SPEED = 0.25
+
+
+def _client() -> MarketClient:
+    return MarketClient("robot-0", SPEED, 0.17, 0.65, 0.35)
+
+
+def _award(seq: int, tasks: list[tuple[str, tuple, tuple, float]]) -> Award:
+    return Award(
+        0.0,
+        seq,
+        "robot-0",
+        [t for t, *_ in tasks],
+        np.array([e for _, e, _, _ in tasks], dtype=float).reshape(-1, 2),
+        np.array([x for _, _, x, _ in tasks], dtype=float).reshape(-1, 2),
+        np.array([s for *_, s in tasks], dtype=float),
+    )
+
+
+def _call(task: str, entry: tuple, exit_: tuple, time_s: float) -> TaskCall:
+    return TaskCall(0.0, 3, task, *entry, *exit_, time_s, 1.0)
+
+
+def test_only_a_newer_award_of_this_robot_changes_its_queue() -> None:
+    m = _client()
+    assert m.on_award(_award(2, [("t01", (0, 0), (1, 0), 10.0)]))
+    assert m.holds("t01") and m.seq == 2
+    assert not m.on_award(_award(1, []))
+    assert not m.on_award(_award(2, []))
+    other = Award(0.0, 9, "robot-1", [], np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+    assert not m.on_award(other)
+    assert m.on_award(_award(3, []))
+    assert not m.holds("t01") and m.queue == ()
+
+
+def test_bids_price_from_the_end_of_the_queue_and_skip_what_it_holds() -> None:
+    m = _client()
+    m.on_award(_award(1, [("t01", (0, 0), (2, 0), 10.0)]))
+    c = m.commitment((0.0, 0.0, 0.0), None, [], 0.0)
+    # nothing driven yet: travel to t01 (0 s) and t01 itself
+    assert c.total_s == pytest.approx(10.0)
+    calls = [_call("t01", (0, 0), (2, 0), 10.0), _call("t02", (5, 0), (3, 0), 8.0)]
+    (bid,) = m.bids(calls, c)
+    assert bid.task == "t02" and bid.robot == "robot-0" and bid.round == 3
+    # the nearer end of t02 from t01's end (2, 0) is its exit (3, 0), 1 m away
+    assert bid.reverse
+    assert bid.marginal_s == pytest.approx(1.0 / SPEED + 8.0)
+    assert bid.total_s == pytest.approx(10.0 + bid.marginal_s)
+
+
+def test_the_plan_being_driven_counts_by_the_length_left() -> None:
+    m = _client()
+    m.on_award(_award(1, [("t01", (0, 0), (4, 0), 20.0), ("t02", (4, 0), (8, 0), 20.0)]))
+    waypoints = np.array([[0.0, 0.0], [4.0, 0.0], [8.0, 0.0]])
+    follow = FollowState(waypoints, index=2)
+    c = m.commitment((6.0, 0.0, 0.0), follow, ["t01", "t02"], 40.0)
+    # 2 m of 8 left of a 40 s plan; nothing queued after it
+    assert c.total_s == pytest.approx(10.0)
+    assert c.end == (8.0, 0.0)
+
+
+def test_travel_is_priced_around_the_walls_of_the_floor_plan() -> None:
+    occupied = np.zeros((40, 40), dtype=bool)
+    occupied[:30, 20] = True  # a wall from the bottom up to y = 3 m, at x = 2 m
+    floor = GridMap(occupied, np.zeros_like(occupied), 0.1, (0.0, 0.0))
+    m = _client()
+    straight = m.commitment((1.0, 1.0, 0.0), None, [], 0.0)
+    call = [_call("t09", (3.0, 1.0), (3.0, 1.2), 5.0)]
+    (blind,) = m.bids(call, straight)
+    m.use_floor(floor)
+    (aware,) = m.bids(call, straight)
+    assert blind.marginal_s == pytest.approx(2.0 / SPEED + 5.0)
+    # over the wall's end at y = 3 m and back down: about 2 x 2.2 m
+    assert aware.marginal_s > 4.0 / SPEED + 5.0
+
+
+def test_a_piece_is_swept_once_the_robot_reached_its_far_end() -> None:
+    waypoints = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [4.0, 0.0]])
+    # waypoint 1 is where the sweep starts: three pieces, 1-2, 2-3, 3-4
+    assert swept_pieces(FollowState(waypoints, index=2), 1).tolist() == [0, 0, 0]
+    assert swept_pieces(FollowState(waypoints, index=3), 1).tolist() == [1, 0, 0]
+    assert swept_pieces(FollowState(waypoints, index=5), 1).tolist() == [1, 1, 1]
+    assert swept_pieces(None, 0).tolist() == []
