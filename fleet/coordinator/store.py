@@ -31,7 +31,7 @@ CREATE TABLE IF NOT EXISTS robots (
     heartbeat_wall REAL, restarts INTEGER, award_seq INTEGER, acked_seq INTEGER, x REAL, y REAL);
 CREATE TABLE IF NOT EXISTS plans (
     robot TEXT PRIMARY KEY, plan_id INTEGER, task TEXT, waypoints BLOB, sweep_from INTEGER,
-    stamp REAL);
+    stamp REAL, chain TEXT, chain_starts BLOB);
 CREATE TABLE IF NOT EXISTS events (
     seq INTEGER PRIMARY KEY AUTOINCREMENT, wall REAL, sim REAL, kind TEXT, robot TEXT,
     task TEXT, detail TEXT);
@@ -119,7 +119,7 @@ class JobStore:
     def save_plan(self, robot: str, plan: Plan) -> None:
         with self.db:
             self.db.execute(
-                "INSERT OR REPLACE INTO plans VALUES (?,?,?,?,?,?)",
+                "INSERT OR REPLACE INTO plans VALUES (?,?,?,?,?,?,?,?)",
                 (
                     robot,
                     plan.plan_id,
@@ -127,6 +127,8 @@ class JobStore:
                     np.ascontiguousarray(plan.waypoints, dtype="<f8").tobytes(),
                     plan.sweep_from,
                     plan.stamp,
+                    json.dumps(list(plan.chain)),
+                    np.ascontiguousarray(plan.chain_starts, dtype="<i4").tobytes(),
                 ),
             )
 
@@ -195,9 +197,18 @@ class JobStore:
 
     def plans(self) -> dict[str, Plan]:
         out = {}
-        for robot, pid, task, wps, sweep_from, stamp in self.db.execute(
-            "SELECT robot, plan_id, task, waypoints, sweep_from, stamp FROM plans"
+        for robot, pid, task, wps, sweep_from, stamp, chain, starts in self.db.execute(
+            "SELECT robot, plan_id, task, waypoints, sweep_from, stamp, chain, chain_starts "
+            "FROM plans"
         ):
             wp = np.frombuffer(wps, dtype="<f8").reshape(-1, 2).copy()
-            out[robot] = Plan(float(stamp), int(pid), task, wp, int(sweep_from))
+            out[robot] = Plan(
+                float(stamp),
+                int(pid),
+                task,
+                wp,
+                int(sweep_from),
+                json.loads(chain),
+                np.frombuffer(starts, dtype="<i4").astype(np.int32),
+            )
         return out
