@@ -11,7 +11,7 @@ import pytest
 from fleet.config import resolve_world
 from fleet.params import load_fleet_config
 from fleet.world import load_world
-from planners.auction import Task, remainder, split_tour
+from planners.auction import Task, ahead_of, remainder, split_tour
 from planners.auction.tasks import CUT_WINDOW
 from planners.coverage import CoverageParams, plan_coverage
 from planners.coverage.metrics import path_time
@@ -205,3 +205,18 @@ def test_the_remainder_drives_again_the_swept_pieces_between_unswept_ones():
 def test_swept_flags_of_the_wrong_length_raise(n):
     with pytest.raises(ValueError, match="swept"):
         remainder(_task(), np.zeros(n, bool), "t07.1", PARAMS)
+
+
+def test_what_a_robot_had_ahead_starts_past_where_it_stopped() -> None:
+    task = Task("t05", np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 2.0]]), 5.0, 20.0, (1,))
+    params = CoverageParams()
+    rest = ahead_of(task, np.array([1.0, 0.1]), False, 0.5, "t05.1", params)
+    assert rest is not None and rest.id == "t05.1"
+    assert np.allclose(rest.path, [[1.5, 0.0], [3.0, 0.0], [3.0, 2.0]])
+    assert rest.area_m2 == pytest.approx(5.0 * 3.5 / 5.0)
+    # driven backwards from (3, 2): what was ahead is the start of the task, in its own direction
+    back = ahead_of(task, np.array([2.9, 1.0]), True, 0.5, "t05.1", params)
+    assert back is not None
+    assert np.allclose(back.path, [[0.0, 0.0], [3.0, 0.0], [3.0, 0.5]])
+    # stopped within reach of the end: nothing left
+    assert ahead_of(task, np.array([3.0, 1.8]), False, 0.5, "t05.1", params) is None

@@ -56,13 +56,18 @@ def test_a_lost_robot_leaves_the_unswept_remainder_and_its_unstarted_tasks(job: 
     job.award("t01", "robot-0", False)
     job.award("t02", "robot-1", False)
     job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
+    job.robots["robot-0"].xy = (2.5, 0.05)
     reopened, made = job.lose("robot-0")
     assert made == ["t00.1"]
     assert sorted(reopened) == ["t00.1", "t01"]
     assert job.tasks["t00"].state == REPLACED
     rest = job.tasks["t00.1"]
     assert rest.state == OPEN and rest.parent == "t00"
-    assert np.allclose(rest.task.path[0], [2.0, 0.0]) and np.allclose(rest.task.path[-1], [4, 0])
+    # the rest begins two robot radii past where it stopped, mid-piece: its body is in the way
+    gap = 2 * job.params.robot_radius
+    assert np.allclose(rest.task.path[0], [2.5 + gap, 0.0]) and np.allclose(
+        rest.task.path[-1], [4, 0]
+    )
     assert job.tasks["t01"].state == OPEN and job.tasks["t01"].owner is None
     assert job.robots["robot-0"].liveness == LOST
     assert job.queue("robot-0") == []
@@ -72,8 +77,9 @@ def test_a_lost_robot_leaves_the_unswept_remainder_and_its_unstarted_tasks(job: 
     # a second loss of the remainder's owner numbers the next remainder on
     job.award("t00.1", "robot-1", False)
     job.progress("robot-1", "t00.1", np.array([1, 0], dtype=np.uint8))
+    job.robots["robot-1"].xy = None
     job.lose("robot-1")
-    assert "t00.2" in job.tasks
+    assert "t00.2" in job.tasks  # by pieces, without a pose
 
 
 def test_a_robot_lost_before_sweeping_anything_gives_back_whole_tasks(job: Job):

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.auction import Task, remainder
+from planners.auction import Task, ahead_of, remainder
 from planners.coverage.params import CoverageParams
 
 OPEN, ASSIGNED, DONE, REPLACED = "open", "assigned", "done", "replaced"
@@ -150,9 +150,17 @@ class Job:
         robot.ready = False
         reopened: list[str] = []
         made: list[str] = []
-        for rec in self.queue(rid):
+        for i, rec in enumerate(self.queue(rid)):
             if rec.started:
-                rest = remainder(rec.task, rec.swept, self._next_id(rec.task.id), self.params)
+                new_id = self._next_id(rec.task.id)
+                if i == 0 and robot.xy is not None:
+                    # its body stays where it stopped: no robot centre comes within two radii
+                    clearance = 2 * self.params.robot_radius
+                    rest = ahead_of(
+                        rec.task, np.array(robot.xy), rec.reverse, clearance, new_id, self.params
+                    )
+                else:
+                    rest = remainder(rec.task, rec.swept, new_id, self.params)
                 rec.state, rec.owner = REPLACED, None
                 if rest is not None:
                     self.tasks[rest.id] = TaskRecord(rest, parent=rec.task.id)

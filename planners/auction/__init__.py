@@ -31,6 +31,7 @@ Public API::
     Task(id, path, area_m2, time_s, cells)            .entry .exit .pieces
     split_tour(path, cell_labels, grid, target_s, params, prefix="t") -> tuple[Task, ...]
     remainder(task, swept, new_id, params) -> Task | None
+    ahead_of(task, xy, reverse, clearance, new_id, params) -> Task | None
     travel_times(free, resolution, origin, start_xy, targets_xy, speed) -> (K,) seconds
     TravelGrid(free, resolution, origin, speed)(start_xy, targets_xy) -> (K,) seconds
     Commitment(pose, current_s=0.0, current_end=None, queued=())
@@ -46,7 +47,7 @@ Public API::
 from planners.auction.allocation import allocate, makespan
 from planners.auction.bids import OBJECTIVES, Bid, Commitment, Travel, make_bid, winner
 from planners.auction.lots import Lot, regions, task_lot
-from planners.auction.tasks import Task, remainder, split_tour
+from planners.auction.tasks import Task, ahead_of, remainder, split_tour
 from planners.auction.travel import UNREACHABLE_FACTOR, TravelGrid, travel_times
 
 __all__ = [
@@ -58,6 +59,7 @@ __all__ = [
     "Task",
     "Travel",
     "TravelGrid",
+    "ahead_of",
     "allocate",
     "make_bid",
     "makespan",

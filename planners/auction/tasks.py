@@ -33,7 +33,7 @@ import numpy as np
 from planners.coverage.metrics import capsule, path_time, to_cells
 from planners.coverage.params import CoverageParams
 from planners.grid import GridMap
-from planners.polyline import heading_changes, simplify
+from planners.polyline import cut_start, heading_changes, simplify
 
 # share of target_s a cut may fall before or after its target
 CUT_WINDOW = 0.25
@@ -152,6 +152,39 @@ def remainder(task: Task, swept: np.ndarray, new_id: str, params: CoverageParams
     total = float(seg_len.sum())
     share = float(seg_len[todo].sum()) / total if total > 0 else len(todo) / task.pieces
     return Task(new_id, path, task.area_m2 * share, _time(path, params), task.cells)
+
+
+def ahead_of(
+    task: Task,
+    xy: np.ndarray,
+    reverse: bool,
+    clearance: float,
+    new_id: str,
+    params: CoverageParams,
+) -> Task | None:
+    """What a robot driving ``task`` (backwards if ``reverse``) still had ahead of it when it
+    stopped at ``xy``: the path from the point of it nearest ``xy`` on, less the first
+    ``clearance`` metres (the floor beside a dead robot's body, which no robot can reach), in
+    the task's own direction; time recomputed, area scaled by length. None if nothing is left.
+
+    Finer than :func:`remainder`: a piece counts as swept only once its far end is reached, so a
+    robot that dies near the end of a long lane would leave the whole lane — and a path into its
+    own body — to the next one."""
+    path = task.path[::-1] if reverse else task.path
+    a, d = path[:-1], np.diff(path, axis=0)
+    seg = np.hypot(*d.T)
+    t = np.clip(
+        ((np.asarray(xy, dtype=float) - a) * d).sum(axis=1) / np.maximum(seg**2, 1e-12), 0, 1
+    )
+    k = int(np.argmin(np.hypot(*(a + t[:, None] * d - xy).T)))
+    at = float(seg[:k].sum() + t[k] * seg[k]) + clearance
+    total = float(seg.sum())
+    if at >= total - 1e-6:
+        return None
+    rest = cut_start(path, at)
+    rest = rest[::-1] if reverse else rest
+    share = (total - at) / total
+    return Task(new_id, rest, task.area_m2 * share, _time(rest, params), task.cells)
 
 
 def _time(path: np.ndarray, params: CoverageParams) -> float:
