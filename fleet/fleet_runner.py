@@ -56,7 +56,7 @@ def read_events(state: Path) -> list[dict[str, Any]]:
 
 
 class RunningFleet:
-    """``fleet up --headless --until-done --speed 0`` started at construction."""
+    """``fleet up --headless --until-done --speed S`` (0 by default) started at construction."""
 
     def __init__(
         self,
@@ -66,6 +66,7 @@ class RunningFleet:
         seed: int = 0,
         timeout_s: float = 900.0,
         cwd: Path | None = None,
+        speed: float = 0.0,
     ) -> None:
         self.dir = run_dir
         cmd = [
@@ -82,7 +83,7 @@ class RunningFleet:
             "--timeout",
             str(timeout_s),
             "--speed",
-            "0",
+            str(speed),
             "--seed",
             str(seed),
             "--run-dir",

@@ -15,8 +15,17 @@ WORLDS = Path(__file__).resolve().parents[1] / "configs" / "worlds"
 class FleetRun(RunningFleet):
     """``fleet up`` on ``configs/worlds/<world>.yaml`` with three robots."""
 
-    def __init__(self, run_dir: Path, robots: int = 3, world: str = "small", timeout_s=200.0):
-        super().__init__(run_dir, str(WORLDS / f"{world}.yaml"), robots, timeout_s=timeout_s)
+    def __init__(
+        self,
+        run_dir: Path,
+        robots: int = 3,
+        world: str = "small",
+        timeout_s: float = 200.0,
+        speed: float = 0.0,
+    ) -> None:
+        super().__init__(
+            run_dir, str(WORLDS / f"{world}.yaml"), robots, timeout_s=timeout_s, speed=speed
+        )
 
     def wait_for(self, pred, timeout: float = 120.0, what: str = "") -> None:
         if not self.wait(pred, timeout, poll=0.2):
