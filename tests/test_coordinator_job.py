@@ -148,3 +148,37 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     assert store.meta() == {"phase": "cleaning", "plan_seq": 7}
     assert [e["kind"] for e in read_events(tmp_path / "job.sqlite")] == ["awarded"]
     store.close()
+
+
+def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_path):
+    from fleet.report import job_report
+
+    job = Job(CoverageParams())
+    job.add_tasks((_task("t00", 0.0), _task("t01", 10.0)))
+    store = JobStore(tmp_path / "job.sqlite")
+    store.save_tasks(list(job.tasks.values()))
+    for sim, kind, robot, task in (
+        (1.0, "awarded", "robot-0", "t00"),
+        (1.0, "awarded", "robot-1", "t01"),
+        (5.0, "lost", "robot-0", ""),
+        (5.1, "reassigned", "robot-1", "t00"),
+        (9.0, "done", "robot-1", "t01"),
+        (9.5, "awarded", "robot-2", "t01"),
+    ):
+        store.add_event(0.0, sim, kind, robot, task, "")
+    store.set_meta(rejected_bids={"late": 2})
+    store.close()
+    report = job_report(tmp_path / "job.sqlite")
+    owners = {t["id"]: t["owners"] for t in report["tasks"]}
+    assert owners["t00"] == [["robot-0", 1.0, 5.0], ["robot-1", 5.1, None]]
+    # t01 was done by robot-1 and then awarded again: held by one robot at a time
+    assert owners["t01"] == [["robot-1", 1.0, 9.0], ["robot-2", 9.5, None]]
+    assert report["overlaps"] == []
+    assert report["rejected_bids"] == {"late": 2}
+    assert [e["kind"] for e in report["events"]][:2] == ["awarded", "awarded"]
+
+    store = JobStore(tmp_path / "job.sqlite")
+    store.add_event(0.0, 9.6, "awarded", "robot-0", "t01", "")
+    store.close()
+    assert job_report(tmp_path / "job.sqlite")["overlaps"] == ["t01"]
+    assert job_report(tmp_path / "missing.sqlite")["tasks"] is None
