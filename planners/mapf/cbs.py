@@ -55,7 +55,7 @@ from planners.mapf.constraints import (
 )
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
-from planners.mapf.joint import JointSearchLimit, joint_astar
+from planners.mapf.joint import JointSearchLimit, group_plan, joint_astar
 from planners.mapf.low_level import SearchStats, space_time_astar
 from planners.mapf.mdd import mdd_singletons
 from planners.mapf.model import InfeasibleInstanceError, path_cost
@@ -245,11 +245,11 @@ class ConflictBasedSearch:
         )
         agents = sorted(both)
         try:
-            paths = joint_astar(
+            paths = group_plan(
                 self.graph,
-                [self.starts[i] for i in agents],
-                [self.goals[i] for i in agents],
-                [ConstraintTable(n) for _ in agents],
+                self.starts,
+                self.goals,
+                agents,
                 cat,
                 self.deadline,
                 self.stats,
@@ -258,10 +258,6 @@ class ConflictBasedSearch:
         except JointSearchLimit:
             self._too_big.add(both)
             return
-        if paths is None:
-            raise InfeasibleInstanceError(
-                f"no solution: agents {agents} have no joint plan even on their own"
-            )
         self._joint_plans[both] = paths
         self.group = merged(self.group, a, b)
         raise _Restart

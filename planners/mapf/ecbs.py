@@ -40,7 +40,7 @@ from planners.mapf.constraints import (
 )
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
-from planners.mapf.joint import JointSearchLimit, joint_astar
+from planners.mapf.joint import JointSearchLimit, group_plan, joint_astar
 from planners.mapf.low_level import SearchStats, focal_astar
 from planners.mapf.model import InfeasibleInstanceError, path_cost
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
@@ -225,11 +225,11 @@ class _Ecbs:
         lengths = [len(p) for p in node.paths]
         cat = ConflictAvoidanceTable.from_positions(n, positions(node.paths), lengths, agents)
         try:
-            paths = joint_astar(
+            paths = group_plan(
                 self.graph,
-                [self.starts[i] for i in agents],
-                [self.goals[i] for i in agents],
-                [ConstraintTable(n) for _ in agents],
+                self.starts,
+                self.goals,
+                agents,
                 cat,
                 self.deadline,
                 self.stats,
@@ -238,10 +238,6 @@ class _Ecbs:
         except JointSearchLimit:
             self._too_big.add(both)
             return
-        if paths is None:
-            raise InfeasibleInstanceError(
-                f"no solution: agents {agents} have no joint plan even on their own"
-            )
         self._joint_plans[both] = paths
         self.group = merged(self.group, a, b)
         raise _Restart

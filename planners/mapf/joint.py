@@ -41,6 +41,7 @@ import numpy as np
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import UNREACHABLE, GridGraph
 from planners.mapf.low_level import SearchStats
+from planners.mapf.model import InfeasibleInstanceError
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 
 _CHECK_EVERY = 256
@@ -52,6 +53,36 @@ PAIR_MAX_CELLS = 64
 
 class JointSearchLimit(Exception):
     """The joint search expanded more states than its budget allowed (the group is too hard)."""
+
+
+def group_plan(
+    graph: GridGraph,
+    starts: Sequence[int],
+    goals: Sequence[int],
+    agents: Sequence[int],
+    cat: ConflictAvoidanceTable | None,
+    deadline: Deadline,
+    stats: SearchStats,
+    budget: int,
+) -> list[list[int]]:
+    """The optimal plan of a new meta-agent (MA-CBS, Sharon et al. 2012: merge and restart):
+    ``agents`` planned jointly without constraints. Raises JointSearchLimit past ``budget``
+    expansions, and InfeasibleInstanceError when the group has no plan even on its own."""
+    paths = joint_astar(
+        graph,
+        [starts[i] for i in agents],
+        [goals[i] for i in agents],
+        [ConstraintTable(graph.num_cells) for _ in agents],
+        cat,
+        deadline,
+        stats,
+        budget,
+    )
+    if paths is None:
+        raise InfeasibleInstanceError(
+            f"no solution: agents {list(agents)} have no joint plan even on their own"
+        )
+    return paths
 
 
 def joint_astar(
