@@ -5,6 +5,7 @@ from __future__ import annotations
 import gzip
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,9 +20,36 @@ from agents.slam.carmen import (
     format_odom,
     format_param,
     format_robotlaser1,
+    param_value,
     parse_lines,
     read_log,
 )
+
+SLAM_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "slam"
+ACES = SLAM_DATA / "aces-corrected.log.gz"
+FR079 = SLAM_DATA / "freiburg-079-corrected.log.gz"
+
+# Lines copied verbatim from the head of freiburg-079-corrected.log (the FLASER shortened to 4
+# beams, its geometry then given by the same PARAM lines) and of aces-corrected.log.
+FR079_LINES = [
+    "# message formats defined: PARAM SYNC ODOM FLASER RLASER",
+    "# PARAM param_name param_value",
+    "PARAM robot_allow_rear_motion off 1071078718.462310 merci 1071078718.462309",
+    "PARAM robot_front_laser_max 80.99 1071078718.462518 merci 1071078718.462517",
+    "PARAM laser_front_laser_dev /dev/usb/ttyUSB1 1071078718.467646 merci 1071078718.467644",
+    "PARAM laser_front_laser_resolution 0.5 1071078718.467699 merci 1071078718.467699",
+    "NEFF 10",
+    "ODOM 0 0 0 0 0 0 0.015885 pippo 0.015885",
+    "FLASER 4 1.65 1.66 1.63 81.91 0.00123601 -0.00106807 2.85e-05 0.00123601 -0.00106807 "
+    "2.85e-05 0.227623 pippo 0.227623",
+]
+ACES_LINES = [
+    "PARAM robot_use_laser on nohost 0",
+    "PARAM simulator_num_readings 180 nohost 0",
+    "ODOM 0 0 0 0 0 0 0.110201 pippo 0.110201",
+    "FLASER 4 6.66 6.86 7.16 50 0.89706 -0.180771 -0.454003 0.89706 -0.180771 -0.454003 "
+    "21.0199 pippo 21.0199",
+]
 
 FLASER_4 = "FLASER 4 1.0 2.0 3.0 4.0 0.1 0.2 0.3 0.4 0.5 0.6 100.5 host 100.6"
 ODOM = "ODOM 1.0 2.0 0.5 0.3 0.1 0.0 101.0 host 101.1"
@@ -43,7 +71,7 @@ def test_comments_params_and_messages():
             ROBOTLASER,
         ]
     )
-    assert log.params == {"robot_front_laser_max": "50.0"}
+    assert log.params == {"robot_front_laser_max": "50.0"}  # a PARAM without the suffix
     assert log.skipped == {"SYNC": 1}
     assert log.truncated_line is None
     flaser, odom, robot = log.records
@@ -71,6 +99,90 @@ def test_flaser_angles_default_and_from_params():
     )
     assert log.scans[0].angle_min == pytest.approx(math.radians(-50))
     assert log.scans[0].angle_increment == pytest.approx(math.radians(0.5))
+
+
+@pytest.mark.parametrize(
+    ("tokens", "value"),
+    [
+        ("PARAM a 0.5 1071078718.467699 merci 1071078718.467699", "0.5"),
+        ("PARAM a /dev/usb/ttyUSB1 1071078718.467646 merci 1071078718.467644", "/dev/usb/ttyUSB1"),
+        ("PARAM a on nohost 0", "on"),
+        ("PARAM a 180 nohost 0", "180"),
+        ("PARAM a 50.0", "50.0"),
+        ("PARAM a two words 1.0 host 1.0", "two words"),
+    ],
+)
+def test_param_value_drops_the_timestamps_and_host(tokens, value):
+    assert param_value(tokens.split()) == value
+
+
+def test_real_freiburg_lines_parse():
+    log = parse_lines(FR079_LINES, source="fr079")
+    assert log.params["laser_front_laser_resolution"] == "0.5"
+    assert log.params["laser_front_laser_dev"] == "/dev/usb/ttyUSB1"
+    assert log.params["robot_allow_rear_motion"] == "off"
+    assert log.skipped == {"NEFF": 1}
+    odom, flaser = log.records
+    assert isinstance(odom, OdomRecord) and odom.hostname == "pippo"
+    assert odom.timestamp == 0.015885 and odom.logger_timestamp == 0.015885
+    assert flaser.kind == "FLASER" and flaser.max_range == 80.99
+    assert flaser.angle_increment == pytest.approx(math.radians(0.5))
+    assert flaser.angle_min == pytest.approx(math.radians(-1.0))  # 4 beams at 0.5°: a 2° fov
+    assert flaser.laser_pose == (0.00123601, -0.00106807, 2.85e-05)
+    assert flaser.timestamp == 0.227623 and flaser.hostname == "pippo"
+
+
+def test_real_aces_lines_parse():
+    log = parse_lines(ACES_LINES, source="aces")
+    assert log.params == {"robot_use_laser": "on", "simulator_num_readings": "180"}
+    (odom, flaser) = log.records
+    assert odom.pose == (0.0, 0.0, 0.0) and odom.timestamp == 0.110201
+    np.testing.assert_array_equal(flaser.ranges, [6.66, 6.86, 7.16, 50])
+    assert flaser.angle_min == pytest.approx(-math.pi / 2)
+    assert flaser.angle_increment == pytest.approx(math.pi / 4)
+    assert flaser.max_range == 81.9 and flaser.logger_timestamp == 21.0199
+
+
+def test_rear_laser_has_its_own_geometry_and_is_not_replayed_with_the_front():
+    lines = [
+        "PARAM laser_rear_laser_fov 90 1.0 h 1.0",
+        "PARAM robot_rear_laser_max 20 1.0 h 1.0",
+        "RLASER 3 1.0 2.0 3.0 0 0 3.1416 0 0 0 5.0 h 5.0",
+        FLASER_4,
+    ]
+    log = parse_lines(lines)
+    rear, front = log.scans
+    assert rear.kind == "RLASER" and rear.max_range == 20.0
+    assert rear.angle_min == pytest.approx(math.radians(-45))
+    assert rear.angle_increment == pytest.approx(math.radians(45))
+    assert log.front_scans == [front]
+    assert [r.kind for r in parse_lines(lines[:3]).front_scans] == ["RLASER"]
+
+
+def test_a_bad_laser_param_names_its_own_line():
+    lines = [FLASER_4, "PARAM laser_front_laser_resolution half 1.0 h 1.0", FLASER_4]
+    with pytest.raises(CarmenParseError) as err:
+        parse_lines(lines, source="run.log")
+    assert str(err.value).startswith("run.log:2:") and "'half'" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("path", "scans", "beams", "resolution_deg", "max_range"),
+    [(ACES, 440, 180, 1.0, 81.9), (FR079, 4791, 360, 0.5, 80.99)],
+)
+def test_real_logs_read_whole(path, scans, beams, resolution_deg, max_range):
+    if not path.exists():
+        pytest.skip(f"{path} is absent (shared data not checked out)")
+    log = read_log(path)
+    assert len(log.scans) == scans and log.truncated_line is None
+    assert {r.ranges.size for r in log.scans} == {beams}
+    first = log.scans[0]
+    assert first.angle_min == pytest.approx(-math.pi / 2)
+    assert first.angle_increment == pytest.approx(math.radians(resolution_deg))
+    assert first.max_range == max_range
+    assert sum(isinstance(r, OdomRecord) for r in log.records) > scans
+    stamps = [r.timestamp for r in log.scans]
+    assert stamps == sorted(stamps)
 
 
 def test_truncated_last_line_is_dropped_and_reported():

@@ -1,24 +1,34 @@
-"""CARMEN log files: parse ``FLASER``, ``ROBOTLASER1``, ``ODOM`` and ``PARAM`` lines; write them.
+"""CARMEN log files: parse ``PARAM``, ``FLASER``, ``RLASER``, ``ROBOTLASER1`` and ``ODOM`` lines;
+write them.
 
 The format is the CARMEN robot toolkit's text log, one message per line (the format of the
-public SLAM datasets such as the Intel Research Lab log):
+public SLAM datasets such as the Intel Research Lab, ACES and Freiburg 079 logs). Every message
+line ends with ``ipc_timestamp ipc_hostname logger_timestamp``:
 
+- ``PARAM name value ipc_timestamp ipc_hostname logger_timestamp``. Some writers leave out the
+  IPC timestamp (``PARAM name value hostname logger_timestamp``) or the whole suffix
+  (``PARAM name value``); the value is what remains once a trailing ``[number] host number`` is
+  taken off. Numeric laser parameters are checked where they are read, and a bad one is an
+  error naming its own line.
 - ``FLASER n r1 … rn x y theta odom_x odom_y odom_theta timestamp hostname logger_timestamp``;
-  ``x y theta`` is the laser's pose, ``odom_*`` the robot's raw odometry. The beams span
-  ``laser_front_laser_fov`` degrees (default 180) starting at −fov/2, spaced by
-  ``laser_front_laser_resolution`` degrees when a ``PARAM`` line gives it, else fov/(n−1) when n
-  is odd (181 beams include both ends) and fov/n when n is even (180 beams at 1°).
-  ``robot_front_laser_max`` gives the maximum range (default 81.9 m, the SICK "no return").
+  ``x y theta`` is the laser's pose, ``odom_*`` the robot's raw odometry. ``RLASER`` is the
+  same for the rear laser. The beams of the front laser span ``laser_front_laser_fov`` degrees
+  starting at −fov/2, spaced by ``laser_front_laser_resolution`` degrees (rear:
+  ``laser_rear_laser_*``). Without the fov, it is the resolution times the beam spacings
+  (n−1 when n is odd, as 181 beams include both ends; n when even, as 180 beams at 1°); without
+  either, 180°. ``robot_front_laser_max`` (``robot_rear_laser_max``) gives the maximum range
+  (default 81.9 m, the SICK "no return").
 - ``ROBOTLASER1 laser_type start_angle field_of_view angular_resolution maximum_range accuracy
   remission_mode n r1 … rn m e1 … em laser_x laser_y laser_theta robot_x robot_y robot_theta
-  tv rv forward_safety_dist side_safety_dist turn_axis timestamp hostname logger_timestamp``.
+  tv rv forward_safety_dist side_safety_dist turn_axis timestamp hostname logger_timestamp``:
+  carries its own geometry.
 - ``ODOM x y theta tv rv accel timestamp hostname logger_timestamp``.
 
-Lines starting with ``#`` and empty lines are skipped; ``PARAM name value`` lines are collected;
-other message types (``SYNC``, ``TRUEPOS``, …) are counted and skipped. A broken last line (a log
-cut off while recording) is dropped and reported; a broken line anywhere else raises
-``CarmenParseError`` naming file and line. Files ending in ``.gz`` or starting with the gzip
-magic bytes are decompressed transparently.
+Lines starting with ``#`` and empty lines are skipped; other message types (``SYNC``,
+``TRUEPOS``, ``NEFF``, …) are counted and skipped. A broken last line (a log cut off while
+recording) is dropped and reported; a broken line anywhere else raises ``CarmenParseError``
+naming file and line. Files ending in ``.gz`` or starting with the gzip magic bytes are
+decompressed transparently.
 """
 
 from __future__ import annotations
@@ -37,6 +47,16 @@ Pose = tuple[float, float, float]
 
 FLASER_DEFAULT_FOV_DEG = 180.0
 FLASER_DEFAULT_MAX_RANGE = 81.9
+# PARAM names of the FLASER / RLASER geometry: (fov, resolution, maximum range), all numbers.
+LASER_PARAMS = {
+    "FLASER": (
+        "laser_front_laser_fov",
+        "laser_front_laser_resolution",
+        "robot_front_laser_max",
+    ),
+    "RLASER": ("laser_rear_laser_fov", "laser_rear_laser_resolution", "robot_rear_laser_max"),
+}
+NUMERIC_PARAMS = frozenset(name for names in LASER_PARAMS.values() for name in names)
 
 
 class CarmenParseError(ValueError):
@@ -86,7 +106,16 @@ class CarmenLog:
 
     @property
     def scans(self) -> list[LaserRecord]:
+        """Every laser record, front and rear, in log order."""
         return [r for r in self.records if isinstance(r, LaserRecord)]
+
+    @property
+    def front_scans(self) -> list[LaserRecord]:
+        """The scans of one laser, for SLAM: all but ``RLASER`` ones, unless the log holds only
+        rear scans (front and rear scans interleaved would be two sensors on one pose)."""
+        scans = self.scans
+        front = [r for r in scans if r.kind != "RLASER"]
+        return front if front else scans
 
 
 class _Tokens:
@@ -162,18 +191,28 @@ class _Tokens:
             )
 
 
-def _param_float(params: dict[str, str], name: str, default: float, source: str) -> float:
-    if name not in params:
-        return default
+def _is_number(token: str) -> bool:
     try:
-        return float(params[name])
+        float(token)
     except ValueError:
-        raise CarmenParseError(
-            source, 0, f"PARAM {name} is not a number: {params[name]!r}"
-        ) from None
+        return False
+    return True
 
 
-def _flaser(t: _Tokens, params: dict[str, str]) -> LaserRecord:
+def param_value(tokens: list[str]) -> str:
+    """The value of a ``PARAM`` line split into ``tokens`` (``PARAM``, name, value…): the trailing
+    ``[ipc_timestamp] hostname logger_timestamp`` is taken off when present (see the module
+    docstring), and what is left, joined by spaces, is the value."""
+    rest = tokens[2:]
+    if len(rest) >= 3 and _is_number(rest[-1]) and not _is_number(rest[-2]):
+        rest = rest[:-2]
+        if len(rest) >= 2 and _is_number(rest[-1]):
+            rest = rest[:-1]
+    return " ".join(rest)
+
+
+def _flaser(t: _Tokens, params: dict[str, float]) -> LaserRecord:
+    kind = t.tokens[0]
     n = t.int("num_readings")
     ranges = t.floats(n, "range_readings")
     laser_pose = t.pose("laser")
@@ -182,22 +221,20 @@ def _flaser(t: _Tokens, params: dict[str, str]) -> LaserRecord:
     hostname = t.str("hostname")
     logger_timestamp = t.float("logger_timestamp")
     t.end()
-    fov = math.radians(
-        _param_float(params, "laser_front_laser_fov", FLASER_DEFAULT_FOV_DEG, t.source)
-    )
-    if "laser_front_laser_resolution" in params:
-        increment = math.radians(
-            _param_float(params, "laser_front_laser_resolution", 1.0, t.source)
-        )
+    fov_name, resolution_name, max_name = LASER_PARAMS[kind]
+    spacings = max(n - 1 if n % 2 else n, 1)
+    if resolution_name in params:
+        increment = math.radians(params[resolution_name])
+        fov = math.radians(params.get(fov_name, params[resolution_name] * spacings))
     else:
-        increment = fov / max(n - 1 if n % 2 else n, 1)
-    max_range = _param_float(params, "robot_front_laser_max", FLASER_DEFAULT_MAX_RANGE, t.source)
+        fov = math.radians(params.get(fov_name, FLASER_DEFAULT_FOV_DEG))
+        increment = fov / spacings
     return LaserRecord(
-        "FLASER",
+        kind,
         ranges,
         -0.5 * fov,
         increment,
-        max_range,
+        params.get(max_name, FLASER_DEFAULT_MAX_RANGE),
         laser_pose,
         robot_pose,
         timestamp,
@@ -256,6 +293,7 @@ def parse_lines(lines: Iterable[str], source: str = "<lines>") -> CarmenLog:
     """Parse CARMEN log lines (see the module docstring); ``source`` names them in errors."""
     records: list[LaserRecord | OdomRecord] = []
     params: dict[str, str] = {}
+    numeric: dict[str, float] = {}
     skipped: Counter = Counter()
     pending: CarmenParseError | None = None
     for number, raw in enumerate(lines, start=1):
@@ -271,9 +309,16 @@ def parse_lines(lines: Iterable[str], source: str = "<lines>") -> CarmenLog:
             if kind == "PARAM":
                 if len(tokens) < 3:
                     raise CarmenParseError(source, number, "PARAM needs a name and a value")
-                params[tokens[1]] = " ".join(tokens[2:])
-            elif kind == "FLASER":
-                records.append(_flaser(t, params))
+                value = param_value(tokens)
+                if tokens[1] in NUMERIC_PARAMS:
+                    if not _is_number(value):
+                        raise CarmenParseError(
+                            source, number, f"PARAM {tokens[1]} is not a number: {value!r}"
+                        )
+                    numeric[tokens[1]] = float(value)
+                params[tokens[1]] = value
+            elif kind in LASER_PARAMS:
+                records.append(_flaser(t, numeric))
             elif kind == "ROBOTLASER1":
                 records.append(_robotlaser1(t))
             elif kind == "ODOM":
@@ -281,8 +326,6 @@ def parse_lines(lines: Iterable[str], source: str = "<lines>") -> CarmenLog:
             else:
                 skipped[kind] += 1
         except CarmenParseError as e:
-            if e.line == 0:
-                raise CarmenParseError(source, number, str(e).split(": ", 1)[1]) from None
             pending = e
     truncated = pending.line if pending is not None else None
     return CarmenLog(records, params, skipped, truncated)
@@ -316,8 +359,11 @@ def _fmt(values: Sequence[float] | np.ndarray, precision: int) -> str:
     return " ".join(f"{v:.{precision}f}" for v in values)
 
 
-def format_param(name: str, value: str | float) -> str:
-    return f"PARAM {name} {value}"
+def format_param(
+    name: str, value: str | float, timestamp: float = 0.0, hostname: str = "nohost"
+) -> str:
+    """A PARAM line with the ``ipc_timestamp ipc_hostname logger_timestamp`` suffix."""
+    return f"PARAM {name} {value} {timestamp:.6f} {hostname} {timestamp:.6f}"
 
 
 def format_flaser(

@@ -42,9 +42,9 @@ def replay_log(
     map frame starts at ``initial_pose``, by default the first scan's odometry pose, so the
     trajectory is comparable with the log's own poses.
     """
-    scans = log.scans
+    scans = log.front_scans
     if not scans:
-        raise ValueError("the log holds no FLASER or ROBOTLASER1 lines")
+        raise ValueError("the log holds no FLASER, RLASER or ROBOTLASER1 lines")
     start = initial_pose if initial_pose is not None else scans[0].laser_pose
     slam = Slam(
         params, start, range_min=range_min, range_max=scans[0].max_range, keep_trajectory=True
