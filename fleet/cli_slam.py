@@ -43,13 +43,19 @@ def replay(
 
     Writes, into --out: map.png (ROS map_server colours: black occupied, white free, grey
     unknown; with map.yaml beside it), trajectory.csv (header t,x,y,theta: the pose after each
-    scan, as corrected by the final loop-closure optimization) and timing.json (milliseconds
-    per scan, replay speed as a multiple of real time, loop closures).
+    scan, as corrected by the final loop-closure optimization), live.csv (the same, as SLAM
+    gave it at each scan) and timing.json (milliseconds per scan, replay speed as a multiple
+    of real time, loop closures).
+
+    When LOG.truth.csv lies beside the log (`fleet sim --record-carmen` writes it), both
+    trajectories and the log's odometry are scored against it: RPE over 1, 5 and 20 scans
+    (Kümmerle et al. 2009) and ATE after a rigid alignment; the headline is the live one.
 
     Example: fleet slam replay intel.gfs.log.gz --out /tmp/intel
     """
     from agents.slam.carmen import CarmenParseError, read_log
     from agents.slam.replay import replay_log
+    from fleet.carmen_recorder import truth_path_for
     from fleet.config import ConfigError
     from fleet.params import load_fleet_config
 
@@ -64,6 +70,14 @@ def replay(
         typer.echo(f"error: {log}: {e}", err=True)
         raise typer.Exit(2) from None
     summary = write_replay_outputs(result, parsed, out, params, log)
+    truth_file = truth_path_for(log)
+    if truth_file.exists():
+        try:
+            summary.update(score_against_truth(result, parsed, truth_file))
+        except ValueError as e:
+            typer.echo(f"error: {e}", err=True)
+            raise typer.Exit(2) from None
+        (out / "timing.json").write_text(json.dumps(summary, indent=2) + "\n")
     if as_json:
         typer.echo(json.dumps(summary))
         return
@@ -205,6 +219,29 @@ def _run_with_progress(run, w, cfg, seconds: float, seed: int, scale: float, out
         return run(w, cfg, seconds, seed, scale, out, progress=progress)
 
 
+def score_against_truth(result, parsed, truth_file: Path) -> dict:
+    """Scores of the live and final trajectories and of the log's odometry against a truth file
+    (rows t, x, y, theta; each scan paired with the truth row of its timestamp)."""
+    import numpy as np
+
+    from agents.slam.evaluation import associate, trajectory_scores
+    from fleet.carmen_recorder import read_truth
+
+    truth = read_truth(truth_file)
+    est_i, ref_i = associate(result.trajectory[:, 0], truth[:, 0], max_dt=1e-3)
+    if len(est_i) != len(result.trajectory):
+        missing = len(result.trajectory) - len(est_i)
+        raise ValueError(f"{truth_file}: {missing} scans have no truth row at their time")
+    ref = truth[ref_i]
+    odom = np.array([s.laser_pose for s in parsed.front_scans])[est_i]
+    return {
+        "truth": str(truth_file),
+        **trajectory_scores(result.live[est_i], ref),
+        **trajectory_scores(result.trajectory[est_i], ref, prefix="final_"),
+        **trajectory_scores(odom, ref[:, 1:], prefix="odom_"),
+    }
+
+
 def write_replay_outputs(result, parsed, out: Path, params, log: Path) -> dict:
     import numpy as np
     from PIL import Image
@@ -213,6 +250,14 @@ def write_replay_outputs(result, parsed, out: Path, params, log: Path) -> dict:
     np.savetxt(
         out / "trajectory.csv",
         result.trajectory,
+        delimiter=",",
+        header="t,x,y,theta",
+        comments="",
+        fmt=["%.6f", "%.4f", "%.4f", "%.5f"],
+    )
+    np.savetxt(
+        out / "live.csv",
+        result.live,
         delimiter=",",
         header="t,x,y,theta",
         comments="",

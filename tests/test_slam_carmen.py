@@ -282,3 +282,33 @@ def test_fleet_slam_replay_reports_the_broken_line(tmp_path):
     result = CliRunner().invoke(app, ["slam", "replay", str(log), "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
     assert f"{log}:2:" in result.output
+
+
+def test_fleet_slam_replay_scores_against_the_truth_beside_the_log(tmp_path):
+    from fleet.cli import app
+
+    truth = loop_route([(0.62, 0.52), (3.02, 0.52), (3.02, 2.22), (0.62, 2.22)], 0.3, 10.0)
+    log = tmp_path / "room.log.gz"
+    _write_sim_log(log, truth)
+    out = tmp_path / "out"
+    plain = CliRunner().invoke(app, ["slam", "replay", str(log), "--out", str(out), "--json"])
+    assert "ate_m" not in json.loads(plain.stdout)
+    # The truth file is shifted 0.1 m along x from the poses the log's odometry holds, after
+    # the first scan: ATE (aligned) stays small but the first relative poses are 0.1 m off.
+    moved = truth.copy()
+    moved[1:, 0] += 0.1
+    rows = np.column_stack([0.1 * np.arange(len(truth)), moved])
+    np.savetxt(
+        tmp_path / "room.log.gz.truth.csv", rows, delimiter=",", header="t,x,y,theta", comments=""
+    )
+    result = CliRunner().invoke(app, ["slam", "replay", str(log), "--out", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    for prefix in ("", "final_", "odom_"):
+        for key in ("rpe1_m", "rpe5_m", "rpe20_m", "ate_m"):
+            assert f"{prefix}{key}" in summary
+    assert summary["odom_rpe1_m"] == pytest.approx(0.1 / (len(truth) - 1), abs=1e-3)
+    assert summary["rpe1_m"] > 0.09 / len(truth)
+    assert summary["ate_m"] < 0.1 and summary["final_ate_m"] < 0.1
+    assert json.loads((out / "timing.json").read_text())["truth"].endswith("truth.csv")
+    assert (out / "live.csv").read_text().startswith("t,x,y,theta")

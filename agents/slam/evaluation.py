@@ -129,3 +129,30 @@ def relative_pose_error(
         float(np.sqrt(np.mean(trans**2))),
         float(np.sqrt(np.mean(rot**2))),
     )
+
+
+def pairs_by_index(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i, i + k) over n poses: the relations "k scans apart" of Kümmerle et al. 2009."""
+    i = np.arange(max(n - k, 0))
+    return i, i + k
+
+
+RPE_SCAN_STEPS = (1, 5, 20)
+
+
+def trajectory_scores(est: np.ndarray, ref: np.ndarray, prefix: str = "") -> dict[str, float]:
+    """The figures the log benchmarks quote for one trajectory against its reference (paired
+    row by row): translational RPE (mean over every pair of poses 1, 5 and 20 scans apart,
+    Kümmerle et al. 2009) and rotational RPE in degrees, and ATE RMSE after the rigid alignment
+    of :func:`align_rigid_2d` (Sturm et al. 2012). Keys start with ``prefix``; a step longer
+    than the trajectory is left out."""
+    out: dict[str, float] = {}
+    n = len(_poses(est))
+    for k in RPE_SCAN_STEPS:
+        if n <= k:
+            continue
+        rpe = relative_pose_error(est, ref, *pairs_by_index(n, k))
+        out[f"{prefix}rpe{k}_m"] = rpe.trans_mean
+        out[f"{prefix}rpe{k}_deg"] = math.degrees(rpe.rot_mean)
+    out[f"{prefix}ate_m"] = ate_rmse(est, ref, align=True)
+    return out

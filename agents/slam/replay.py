@@ -3,21 +3,25 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from agents.slam.carmen import CarmenLog
+from agents.slam.carmen import CarmenLog, LaserRecord
 from agents.slam.params import SlamParams
 from agents.slam.slam import Pose, Slam
 
 
 @dataclass(frozen=True, eq=False)
 class ReplayResult:
-    """``trajectory`` rows are (t, x, y, theta), the pose after each scan; ``scan_seconds`` the
-    processing time of each scan; ``log_seconds`` the span of the scans' timestamps."""
+    """``trajectory`` rows are (t, x, y, theta), each scan's pose as corrected by the final
+    graph optimization; ``live`` the same rows as ``Slam.process`` returned them at the scan's
+    time (what a robot drives on); ``scan_seconds`` the processing time of each scan;
+    ``log_seconds`` the span of the scans' timestamps."""
 
     trajectory: np.ndarray
+    live: np.ndarray
     scan_seconds: np.ndarray
     log_seconds: float
     slam: Slam
@@ -34,15 +38,18 @@ def replay_log(
     params: SlamParams,
     range_min: float = 0.05,
     initial_pose: Pose | None = None,
+    scans: Sequence[LaserRecord] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> ReplayResult:
-    """Feed every laser record to one ``Slam``; the laser pose of each record is its odometry.
-    The trajectory holds each scan's pose as corrected by the final graph optimization.
+    """Feed every front laser record to one ``Slam``; the laser pose of each record is its
+    odometry. ``scans`` replaces the log's own (e.g. the same scans with other odometry);
+    ``progress(done, total)`` is called every 100 scans and at the end.
 
     ODOM lines are not needed: FLASER and ROBOTLASER1 carry the odometry pose at scan time. The
     map frame starts at ``initial_pose``, by default the first scan's odometry pose, so the
     trajectory is comparable with the log's own poses.
     """
-    scans = log.front_scans
+    scans = list(scans) if scans is not None else log.front_scans
     if not scans:
         raise ValueError("the log holds no FLASER, RLASER or ROBOTLASER1 lines")
     start = initial_pose if initial_pose is not None else scans[0].laser_pose
@@ -58,8 +65,15 @@ def replay_log(
         )
         seconds[i] = time.perf_counter() - t0
         trajectory[i] = (rec.timestamp, *est.pose)
+        if progress is not None and i % 100 == 99:
+            progress(i + 1, len(scans))
     t0 = time.perf_counter()
     slam.finish()
     seconds[-1] += time.perf_counter() - t0
+    live = trajectory.copy()
     trajectory[:, 1:] = slam.trajectory()
-    return ReplayResult(trajectory, seconds, float(scans[-1].timestamp - scans[0].timestamp), slam)
+    if progress is not None:
+        progress(len(scans), len(scans))
+    return ReplayResult(
+        trajectory, live, seconds, float(scans[-1].timestamp - scans[0].timestamp), slam
+    )
