@@ -67,7 +67,8 @@ def up(
     config: ConfigOpt = None,
 ) -> None:
     """Run the whole fleet: a Zenoh router, the simulator, the coordinator and N agents, each
-    its own process, with a live view; writes report.json and report.png at the end.
+    its own process, with a live view; writes report.json, the report pictures (report.png,
+    coverage.png and SVGs of both) and the data they are drawn from at the end.
 
     Examples: `fleet up --robots 3` (the home, until Ctrl-C);
     `fleet up --robots 2 --world small --headless --until-done --timeout 300`.
@@ -77,7 +78,15 @@ def up(
     from fleet.dashboard import FleetWatcher
     from fleet.launcher import Launcher, free_port, wait_for_port
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
-    from fleet.report import build_report, job_report, render_png, write_json
+    from fleet.report import (
+        ReportError,
+        RunRecorder,
+        build_report,
+        job_report,
+        load_run,
+        write_json,
+    )
+    from fleet.report_figures import render_report
     from fleet.rundir import RunTable, cmdline, write_table
 
     if not 1 <= robots <= MAX_ROBOTS:
@@ -142,6 +151,7 @@ def up(
         calls = MainThreadCalls()
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
         watcher = FleetWatcher(bus)
+        recorder = RunRecorder(bus)
         out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
         status = _watch(watcher, launcher, calls, stop, until_done, timeout, headless, t0)
         wall_s = time.monotonic() - t0
@@ -169,9 +179,8 @@ def up(
             skipped,
         )
         write_json(run_dir / "report.json", report)
-        with watcher.lock:
-            tracks = {rid: list(v.track) for rid, v in watcher.robots.items()}
-        render_png(run_dir / "report.png", image, tracks)
+        recorder.write(run_dir, image, cfg.robot.cleaning_width)
+        render_report(load_run(run_dir))
         out(
             f"{status}: coverage {100 * report['coverage']:.1f} %, repetition "
             f"{100 * report['repetition']:.1f} %, makespan {report['makespan_s']} s sim, "
@@ -179,7 +188,7 @@ def up(
             f"{run_dir / 'report.json'}, {run_dir / 'report.png'}",
             err=True,
         )
-    except (TimeoutError, RuntimeError) as e:
+    except (TimeoutError, RuntimeError, ReportError) as e:
         typer.secho(
             f"error: could not collect the report: {e}; logs in {run_dir}/", fg="red", err=True
         )

@@ -1,33 +1,60 @@
-"""The end-of-run report: ``report.json`` (numbers) and ``report.png`` (the cleaned floor).
+"""The end-of-run report: ``report.json`` (numbers) and the data its pictures are drawn from.
 
 The job part (``events``, ``tasks``) comes from the coordinator's state file: every event with
 its sim and wall time, and per task its owners over time, rebuilt from the events.
+
+``fleet up`` also writes, beside ``report.json``, what the pictures (``fleet.report_figures``)
+need, so ``fleet report RUN_DIR`` can draw them again from the run dir alone:
+
+* ``coverage.npz``: the simulator's final cleaning grid (visits and cleanable cells, row 0 at
+  ``origin_y``), its resolution and origin in metres, and the brush width;
+* ``tracks.csv``: ``sim_s,robot,x,y``, each robot's true position every ``TRACK_STEP_M``;
+* ``coverage.csv``: ``sim_s,coverage,repetition``, the fleet's cleaning over time;
+* ``collisions.csv``: ``sim_s,kind,robot,other,x,y``, every contact.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import sqlite3
+import threading
+import zipfile
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from PIL import Image, ImageDraw
 
 from fleet.fleet_runner import read_events
-from fleet.protocol import CoverageImage, CoverageSummary
+from fleet.protocol import Collision, CoverageImage, CoverageSummary, TruthPose
 
-PIXELS_PER_CELL = 4
-TRACK_COLOURS = [
-    (31, 119, 180),
-    (255, 127, 14),
-    (148, 103, 189),
-    (214, 39, 40),
-    (23, 190, 207),
-    (140, 86, 75),
-]
+if TYPE_CHECKING:
+    from fleet.bus import Bus
+
+REPORT_FILE = "report.json"
+GRID_FILE = "coverage.npz"
+TRACKS_FILE = "tracks.csv"
+COVERAGE_FILE = "coverage.csv"
+COLLISIONS_FILE = "collisions.csv"
+# a robot's track keeps a true position when it is this far from the last one kept
+TRACK_STEP_M = 0.05
+TRACK_COLUMNS = ("sim_s", "robot", "x", "y")
+COVERAGE_COLUMNS = ("sim_s", "coverage", "repetition")
+COLLISION_COLUMNS = ("sim_s", "kind", "robot", "other", "x", "y")
+# report.json fields the pictures read, and their JSON types
+REPORT_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "status": str,
+    "coverage": (int, float),
+    "repetition": (int, float),
+    "sim_time_s": (int, float),
+    "wall_s": (int, float),
+    "cleanable_m2": (int, float),
+    "collisions": dict,
+    "robots": dict,
+}
 
 
 def build_report(
@@ -131,31 +158,210 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
-def render_png(
-    path: Path, image: CoverageImage, tracks: dict[str, list[tuple[float, float]]]
-) -> None:
-    """Cleaned cells green (darker = more passes), missed cleanable cells red, the rest grey;
-    each robot's true track drawn on top."""
-    visits = image.visits.reshape(image.rows, image.cols)
-    cleanable = image.cleanable.reshape(image.rows, image.cols).astype(bool)
-    rgb = np.full((image.rows, image.cols, 3), 60, dtype=np.uint8)
-    rgb[cleanable] = (230, 80, 80)
-    swept = visits > 0
-    shade = np.clip(255 - 40 * (visits.astype(np.int32) - 1), 90, 255).astype(np.uint8)
-    rgb[swept, 0] = shade[swept] // 3
-    rgb[swept, 1] = shade[swept]
-    rgb[swept, 2] = shade[swept] // 3
-    img = Image.fromarray(np.flipud(rgb)).resize(
-        (image.cols * PIXELS_PER_CELL, image.rows * PIXELS_PER_CELL), Image.NEAREST
+class ReportError(Exception):
+    """A run dir the report cannot be drawn from; the message names the file and field."""
+
+
+class RunRecorder:
+    """Records, during a run, what the report pictures need and the live view does not keep:
+    true tracks with their sim times, the fleet's coverage over time, and the contacts."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.lock = threading.Lock()
+        self.tracks: dict[str, list[tuple[float, float, float]]] = {}
+        self.coverage: list[tuple[float, float, float]] = []
+        self.collisions: list[Collision] = []
+        self._robot_of = bus.keys.robot_of
+        bus.subscribe(bus.keys.all_robots("truth"), TruthPose, self._on_truth)
+        bus.subscribe(bus.keys.coverage(), CoverageSummary, self._on_coverage)
+        bus.subscribe(bus.keys.collisions(), Collision, self._on_collision)
+
+    def _on_truth(self, key: str, m: TruthPose) -> None:
+        with self.lock:
+            track = self.tracks.setdefault(self._robot_of(key), [])
+            if not track or abs(track[-1][1] - m.x) + abs(track[-1][2] - m.y) >= TRACK_STEP_M:
+                track.append((m.stamp, m.x, m.y))
+
+    def _on_coverage(self, _key: str, m: CoverageSummary) -> None:
+        with self.lock:
+            if not self.coverage or m.stamp > self.coverage[-1][0]:
+                self.coverage.append((m.stamp, m.coverage, m.repetition))
+
+    def _on_collision(self, _key: str, m: Collision) -> None:
+        with self.lock:
+            self.collisions.append(m)
+
+    def write(self, run_dir: Path, image: CoverageImage, cleaning_width_m: float) -> None:
+        """Write the grid, tracks, coverage and collision files into ``run_dir``."""
+        with self.lock:
+            tracks = [(t, rid, x, y) for rid, tr in sorted(self.tracks.items()) for t, x, y in tr]
+            coverage = list(self.coverage)
+            collisions = [(c.stamp, c.kind, c.robot, c.other, c.x, c.y) for c in self.collisions]
+        write_grid(run_dir / GRID_FILE, image, cleaning_width_m)
+        _write_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS, tracks)
+        _write_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS, coverage)
+        _write_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS, collisions)
+
+
+def write_grid(path: Path, image: CoverageImage, cleaning_width_m: float) -> None:
+    """The cleaning grid as ``coverage.npz`` (see the module docstring)."""
+    shape = (image.rows, image.cols)
+    with path.open("wb") as f:
+        np.savez_compressed(
+            f,
+            visits=image.visits.reshape(shape),
+            cleanable=image.cleanable.reshape(shape).astype(bool),
+            resolution=image.resolution,
+            origin=np.array([image.origin_x, image.origin_y]),
+            cleaning_width_m=cleaning_width_m,
+        )
+
+
+def _write_csv(path: Path, header: tuple[str, ...], rows: list[tuple[Any, ...]]) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with tmp.open("w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(header)
+        out.writerows([round(v, 4) if isinstance(v, float) else v for v in row] for row in rows)
+    os.replace(tmp, path)
+
+
+@dataclass
+class RunData:
+    """Everything the report pictures are drawn from, read back from a run dir."""
+
+    run_dir: Path
+    report: dict[str, Any]
+    visits: np.ndarray
+    cleanable: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    cleaning_width_m: float
+    tracks: dict[str, np.ndarray] = field(default_factory=dict)
+    coverage: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    collisions: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def robots(self) -> list[str]:
+        """Every robot of the run: those in report.json and those with a track."""
+        return sorted(set(self.report["robots"]) | set(self.tracks))
+
+    @property
+    def events(self) -> list[dict[str, Any]]:
+        return self.report.get("events") or []
+
+
+def load_run(run_dir: Path) -> RunData:
+    """Read a run dir written by ``fleet up``; raises ReportError naming the file and field."""
+    if not run_dir.is_dir():
+        raise ReportError(f"no such run dir: {run_dir}")
+    report = _read_report(run_dir / REPORT_FILE)
+    grid = _read_grid(run_dir / GRID_FILE)
+    tracks: dict[str, list[tuple[float, float, float]]] = {}
+    for line, row in _read_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS):
+        t, x, y = (_number(row, k, run_dir / TRACKS_FILE, line) for k in ("sim_s", "x", "y"))
+        tracks.setdefault(row["robot"], []).append((t, x, y))
+    coverage = [
+        tuple(_number(row, k, run_dir / COVERAGE_FILE, line) for k in COVERAGE_COLUMNS)
+        for line, row in _read_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS)
+    ]
+    collisions = []
+    for line, row in _read_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS):
+        path = run_dir / COLLISIONS_FILE
+        collisions.append(
+            {
+                **row,
+                **{k: _number(row, k, path, line) for k in ("sim_s", "x", "y")},
+            }
+        )
+    return RunData(
+        run_dir=run_dir,
+        report=report,
+        tracks={rid: np.array(tr, dtype=float) for rid, tr in tracks.items()},
+        coverage=np.array(coverage, dtype=float).reshape(-1, 3),
+        collisions=collisions,
+        **grid,
     )
-    draw = ImageDraw.Draw(img)
-    scale = PIXELS_PER_CELL / image.resolution
-    height = image.rows * PIXELS_PER_CELL
-    for i, (_rid, track) in enumerate(sorted(tracks.items())):
-        if len(track) < 2:
-            continue
-        pts = [
-            ((x - image.origin_x) * scale, height - (y - image.origin_y) * scale) for x, y in track
-        ]
-        draw.line(pts, fill=TRACK_COLOURS[i % len(TRACK_COLOURS)], width=2)
-    img.save(path)
+
+
+def _read_report(path: Path) -> dict[str, Any]:
+    try:
+        raw = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ReportError(f"cannot read {path}: {e}") from None
+    except json.JSONDecodeError as e:
+        raise ReportError(f"{path} is not valid JSON: {e}") from None
+    if not isinstance(raw, dict):
+        raise ReportError(f"{path}: expected a JSON object, got {type(raw).__name__}")
+    for key, kind in REPORT_FIELDS.items():
+        if key not in raw:
+            raise ReportError(f"{path}: missing field {key}")
+        if not isinstance(raw[key], kind) or isinstance(raw[key], bool):
+            raise ReportError(f"{path}: field {key} has the wrong type: {raw[key]!r}")
+    events = raw.get("events")
+    if events is not None and not (
+        isinstance(events, list)
+        and all(isinstance(e, dict) and {"sim", "kind", "robot"} <= e.keys() for e in events)
+    ):
+        raise ReportError(f"{path}: field events must be a list of {{sim, kind, robot, ...}}")
+    return raw
+
+
+def _read_grid(path: Path) -> dict[str, Any]:
+    try:
+        with np.load(path) as npz:
+            visits = np.asarray(npz["visits"])
+            cleanable = np.asarray(npz["cleanable"]).astype(bool)
+            resolution = float(npz["resolution"])
+            origin = np.asarray(npz["origin"], dtype=float)
+            width = float(npz["cleaning_width_m"])
+    except FileNotFoundError:
+        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends") from None
+    except KeyError as e:
+        raise ReportError(f"{path}: missing array {e.args[0]}") from None
+    except (OSError, ValueError, TypeError, zipfile.BadZipFile) as e:
+        raise ReportError(f"{path} is not a readable cleaning grid: {e}") from None
+    if visits.ndim != 2 or visits.shape != cleanable.shape:
+        raise ReportError(
+            f"{path}: visits {visits.shape} and cleanable {cleanable.shape} must be one 2-D shape"
+        )
+    if not resolution > 0 or origin.shape != (2,) or not width > 0:
+        raise ReportError(f"{path}: resolution and cleaning_width_m must be > 0, origin x, y")
+    return {
+        "visits": visits.astype(np.int64),
+        "cleanable": cleanable,
+        "resolution": resolution,
+        "origin": (float(origin[0]), float(origin[1])),
+        "cleaning_width_m": width,
+    }
+
+
+def _read_csv(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
+    """The rows of a CSV file with ``columns`` as its header, each with its line number."""
+    try:
+        with path.open(newline="") as f:
+            rows = list(csv.reader(f))
+    except FileNotFoundError:
+        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise ReportError(f"cannot read {path}: {e}") from None
+    if not rows or tuple(rows[0]) != columns:
+        raise ReportError(f"{path}: line 1 must be the header {','.join(columns)}")
+    out = []
+    for line, row in enumerate(rows[1:], start=2):
+        if len(row) != len(columns):
+            raise ReportError(f"{path}:{line}: expected {len(columns)} fields, got {len(row)}")
+        out.append((line, dict(zip(columns, row, strict=True))))
+    return out
+
+
+def _number(row: dict[str, str], key: str, path: Path, line: int) -> float:
+    try:
+        value = float(row[key])
+    except ValueError:
+        raise ReportError(f"{path}:{line}: field {key} is not a number: {row[key]!r}") from None
+    if not np.isfinite(value):
+        raise ReportError(f"{path}:{line}: field {key} is not finite: {row[key]!r}")
+    return value
