@@ -5,8 +5,9 @@ coordinator sends. It takes part in the market (:mod:`agents.market`): it bids o
 from its own pose and commitments, acknowledges the queue it is awarded, drives only plans for
 tasks it holds, and reports the pieces of its task it has swept. A thread of its own sends a
 heartbeat on wall time, so a hung agent falls silent. With a state directory it saves its SLAM
-map and pose every ``agent.state_save_s``; started with ``respawn`` it takes over its robot's
-body where it stands, finds itself in the saved map, and bids only once it has.
+map and pose every ``agent.state_save_s`` and its pose alone every ``agent.pose_save_s``;
+started with ``respawn`` it takes over its robot's body where it stands, finds itself in the
+saved map (first within ``respawn_window`` of the saved pose), and bids only once it has.
 
 Each scan triggers one control step; the cmd_vel it publishes carries that
 scan's stamp, which is how the simulator knows the agent has kept up. When its odometry is
@@ -22,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import math
 import queue
 import threading
 import time
@@ -40,7 +42,7 @@ from agents.peers import (
     without_peers,
 )
 from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
-from agents.slam.persistence import load_state, save_state
+from agents.slam.persistence import load_state, save_pose, save_state
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
@@ -75,6 +77,9 @@ ODOM_WAIT_S = 0.02
 MAX_LATENCY_S = 0.5
 # task calls of one auction round arrive together: bid on them in one go
 BID_GATHER_S = 0.003
+# a respawned robot's SLAM estimate of where it stood is itself this far off at most
+RESPAWN_MARGIN_XY = 0.05
+RESPAWN_MARGIN_THETA = 0.1
 
 
 class Agent:
@@ -120,6 +125,7 @@ class Agent:
         self._calls: list[TaskCall] = []
         self._calls_ready = threading.Condition()
         self._last_save = -1e9
+        self._last_pose_save = -1e9
         self._unlocalized_logged = False
         self._was_localized = True
 
@@ -164,7 +170,11 @@ class Agent:
             if saved is not None:
                 lidar = self.cfg.lidar
                 self.pose_source = RelocalizingSlamPose(
-                    self.cfg.slam, saved, lidar.range_min, lidar.range_max
+                    self.cfg.slam,
+                    saved,
+                    lidar.range_min,
+                    lidar.range_max,
+                    near=respawn_window(self.cfg),
                 )
             else:
                 self.pose_source = self._make_pose_source((reply.x, reply.y, reply.theta))
@@ -565,6 +575,40 @@ class Agent:
                 continue
             self.step(scan)
             self.publish_map(scan.stamp)
+            self.save_pose(scan.stamp)
+
+    def save_pose(self, stamp: float) -> None:
+        """With a state directory, write the pose every ``agent.pose_save_s`` (sim time) once the
+        robot knows where it is, so a respawn searches a small window around it."""
+        src = self.pose_source
+        if (
+            self.state_dir is None
+            or src is None
+            or not getattr(src, "localized", True)
+            or stamp - self._last_pose_save < self.cfg.agent.pose_save_s
+        ):
+            return
+        self._last_pose_save = stamp
+        try:
+            save_pose(self.state_dir, src.pose(), stamp)
+        except OSError as e:
+            log.warning("%s: could not save its pose to %s: %s", self.rid, self.state_dir, e)
+
+
+def respawn_window(cfg: FleetConfig) -> tuple[float, float]:
+    """How far (± m, ± rad) a robot's body can be from the pose its agent last saved: it drove
+    on for at most ``agent.pose_save_s`` plus the simulator's ``max_lag_s`` at top speed, then
+    braked to a stop at its acceleration limits (v²/2a), plus a margin for the estimate's own
+    error."""
+    r = cfg.robot
+    seconds = cfg.agent.pose_save_s + cfg.sim.max_lag_s
+    xy = r.max_vel_x * seconds + r.max_vel_x**2 / (2 * r.acc_lim_x) + RESPAWN_MARGIN_XY
+    theta = (
+        r.max_vel_theta * seconds
+        + r.max_vel_theta**2 / (2 * r.acc_lim_theta)
+        + RESPAWN_MARGIN_THETA
+    )
+    return xy, min(theta, math.pi)
 
 
 def _map_message(stamp: float, seq: int, tile: int, update: MapUpdate) -> MapPatches:

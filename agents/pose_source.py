@@ -130,13 +130,17 @@ class SlamPose:
 class RelocalizingSlamPose:
     """SLAM for a restarted agent: first find the robot in its saved map, then track as usual.
 
-    Until localized, each scan (paired with odometry; at most one attempt per scan) is matched
-    against the saved map around the saved pose (``agents.slam.relocalize``); after
-    ``reloc_max_scans`` failed attempts the source is ``failed`` with the last reason and stays
-    so. Meanwhile ``pose()`` is the saved pose with the search window as its covariance, and the
-    agent must not drive. Once a scan matches, a fresh ``SlamPose`` starts at the found pose and
-    is given the recent odometry and that scan, so its pose is tied to the odometry at the scan's
-    stamp and later odometry increments apply from there.
+    Until localized, each scan (paired with odometry) is matched against the saved map
+    (``agents.slam.relocalize``) around the saved pose: first within ``near`` (± metres,
+    ± radians: how far the body can have moved since that pose was saved, see
+    ``respawn_window``), then, if that finds nothing, within the wide ``reloc_window_xy`` and
+    ``reloc_window_theta`` (a body pushed or carried away). After ``reloc_max_scans`` failed
+    attempts the source is ``failed`` with the last reason, and tries again only on every
+    ``reloc_max_scans``-th scan (peers that stood in view may have left). Meanwhile ``pose()``
+    is the saved pose with the wide window as its covariance, and the agent must not drive.
+    Once a scan matches, a fresh ``SlamPose`` starts at the found pose and is given the recent
+    odometry and that scan, so its pose is tied to the odometry at the scan's stamp and later
+    odometry increments apply from there.
 
     ``occupancy()`` is the saved map, and once localized the new SLAM's map laid over it (a cell
     the new SLAM has observed replaces the saved one), so the map saved next still holds what was
@@ -146,15 +150,22 @@ class RelocalizingSlamPose:
     name = "slam"
 
     def __init__(
-        self, params: SlamParams, saved: SavedState, range_min: float, range_max: float
+        self,
+        params: SlamParams,
+        saved: SavedState,
+        range_min: float,
+        range_max: float,
+        near: tuple[float, float] | None = None,
     ) -> None:
         self._params = params
         self._saved = saved
+        self._near = near
         self._range_min = range_min
         self._range_max = range_max
         self._field: LikelihoodField | None = None
         self._history: deque[Odometry] = deque(maxlen=ODOM_HISTORY)
         self._slam: SlamPose | None = None
+        self._scans = 0
         self._attempts = 0
         self._failed = False
         self._reason = "no scan with odometry yet"
@@ -182,27 +193,38 @@ class RelocalizingSlamPose:
         if self._slam is not None:
             self._slam.on_scan(msg)
             return
-        if self._failed or not self._history:
-            return
         p = self._params
+        if not self._history:
+            return
+        self._scans += 1
+        if self._failed and self._scans % p.reloc_max_scans:
+            return
         if self._field is None:
             self._field = map_field(self._saved.occupancy, p)
         self._attempts += 1
-        result = relocalize(
-            self._saved.occupancy,
-            p,
-            msg.ranges.astype(np.float64),
-            msg.angle_min,
-            msg.angle_increment,
-            self._saved.pose,
-            p.reloc_window_xy,
-            p.reloc_window_theta,
-            self._range_min,
-            self._range_max,
-            field=self._field,
-        )
+        windows = {"wide": (p.reloc_window_xy, p.reloc_window_theta)}
+        if self._near is not None:
+            windows = {"near": self._near, **windows}
+        reasons = []
+        for name, (window_xy, window_theta) in windows.items():
+            result = relocalize(
+                self._saved.occupancy,
+                p,
+                msg.ranges.astype(np.float64),
+                msg.angle_min,
+                msg.angle_increment,
+                self._saved.pose,
+                window_xy,
+                window_theta,
+                self._range_min,
+                self._range_max,
+                field=self._field,
+            )
+            if result.ok:
+                break
+            reasons.append(f"{name}: {result.reason}")
         if not result.ok:
-            self._reason = f"scan {self._attempts}: {result.reason}"
+            self._reason = f"attempt {self._attempts}: {'; '.join(reasons)}"
             self._failed = self._attempts >= p.reloc_max_scans
             return
         slam = SlamPose(p, result.pose, self._range_min, self._range_max)

@@ -121,6 +121,7 @@ class AgentParams:
     status_hz: float = 2.0
     heartbeat_hz: float = 5.0
     state_save_s: float = 2.0
+    pose_save_s: float = 0.2
     transit_speed: float = 0.25
 
     def validate(self) -> None:
@@ -129,6 +130,7 @@ class AgentParams:
             "status_hz",
             "heartbeat_hz",
             "state_save_s",
+            "pose_save_s",
             "transit_speed",
             "stale_after_s",
             "give_up_after_s",

@@ -16,14 +16,17 @@ import numpy as np
 import pytest
 from slam_sim import box, scan
 
+from agents.agent import respawn_window
 from agents.pose_source import RelocalizingSlamPose, SlamPose, overlay
 from agents.slam.geometry import wrap_angle
 from agents.slam.params import SlamParams
 from agents.slam.persistence import (
+    POSE_FILE,
     STATE_FILE,
     SavedState,
     StateError,
     load_state,
+    save_pose,
     save_state,
     state_path,
 )
@@ -32,7 +35,7 @@ from agents.slam.slam import Slam
 from agents.slam.slam_map import SlamMap
 from fleet.config import resolve_world
 from fleet.params import FleetConfig, load_fleet_config
-from fleet.protocol import LaserScan
+from fleet.protocol import LaserScan, Odometry
 from fleet.world import load_world
 from sim_server.core import SimCore
 
@@ -123,6 +126,34 @@ def test_saved_state_round_trips_map_pose_and_stamp(tmp_path: Path) -> None:
     assert state.occupancy.resolution == 0.05
     assert state.occupancy.origin == (-1.225, 2.475)
     assert sorted(p.name for p in (tmp_path / "a" / "b").iterdir()) == [STATE_FILE]
+
+
+def test_the_newer_of_the_saved_poses_is_loaded(tmp_path: Path) -> None:
+    occupancy = SlamMap(np.ones((32, 32), np.float32), 0.05, (0.0, 0.0))
+    save_state(tmp_path, occupancy, (1.0, 1.0, 0.0), 10.0)
+    save_pose(tmp_path, (1.2, 1.1, 0.5), 10.6)
+    state = load_state(tmp_path)
+    assert state.pose == (1.2, 1.1, 0.5) and state.stamp == 10.6
+    save_state(tmp_path, occupancy, (1.3, 1.2, 0.6), 12.0)  # the map's pose is newer now
+    assert load_state(tmp_path).pose == (1.3, 1.2, 0.6)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [POSE_FILE, STATE_FILE]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("{", "unreadable pose"),
+        ('{"pose": [1, 2], "stamp": 3}', "unreadable pose"),
+        ('{"pose": [1, 2, NaN], "stamp": 30}', "finite"),
+        ('{"pose": [1, 2, 7], "stamp": 30}', "heading"),
+    ],
+)
+def test_damaged_pose_file_raises_naming_it(tmp_path: Path, text: str, message: str) -> None:
+    save_state(tmp_path, SlamMap(np.ones((8, 8), np.float32), 0.05, (0.0, 0.0)), (0, 0, 0), 1)
+    (tmp_path / POSE_FILE).write_text(text)
+    with pytest.raises(StateError, match=message) as err:
+        load_state(tmp_path)
+    assert str(tmp_path / POSE_FILE) in str(err.value)
 
 
 def _write_npz(path: Path, **arrays: np.ndarray) -> None:
@@ -284,10 +315,66 @@ def test_relocalizing_pose_source_fails_after_max_scans_with_the_last_reason(
     source = RelocalizingSlamPose(params, saved, cfg.lidar.range_min, cfg.lidar.range_max)
     _drive(core, source, [(0.25, 0.0, 0.0)])
     assert not source.failed and not source.localized  # two attempts so far
-    _drive(core, source, [(0.5, 0.0, 0.0)])
+    _drive(core, source, [(0.1, 0.0, 0.0)])
     assert source.failed and not source.localized
-    assert source.reason.startswith("scan 3: ") and "reloc_min_score" in source.reason
+    assert source.reason.startswith("attempt 3: ") and "reloc_min_score" in source.reason
     assert source.pose() == saved.pose
+    _drive(core, source, [(0.5, 0.0, 0.0)])  # five more scans: one more attempt (every third)
+    assert source.reason.startswith("attempt 4: ")
+
+
+def test_failed_relocalization_retries_and_succeeds_once_the_view_matches(
+    cfg: FleetConfig, home_run: tuple[SavedState, Pose]
+) -> None:
+    """A robot that cannot find itself keeps trying now and then: carried back into the mapped
+    room (the body is put there), it finds itself on a later try."""
+    saved, truth_at_save = home_run
+    params = dataclasses.replace(cfg.slam, reloc_max_scans=3)
+    core = _core(cfg, "home", (9.0, 4.6, 0.3), seed=23)
+    source = RelocalizingSlamPose(params, saved, cfg.lidar.range_min, cfg.lidar.range_max)
+    _drive(core, source, [(0.35, 0.0, 0.0)])
+    assert source.failed and not source.localized
+    core.remove_robot("r")
+    core.add_robot("r", _moved(truth_at_save, 0.3, 1.0, math.radians(30)))
+    _drive(core, source, [(0.35, 0.0, 0.0)])
+    assert source.localized, source.reason
+    xy, theta = _error(source.pose(), core.truth()["r"])
+    assert xy < 0.05 and theta < math.radians(2.0)
+
+
+def test_near_window_resolves_a_room_that_looks_the_same_turned_half_a_turn(
+    cfg: FleetConfig,
+) -> None:
+    """In the bare symmetric room the wide search is ambiguous; the window the body can have
+    moved in since its last saved pose holds only the true pose, and the source takes it."""
+    params = dataclasses.replace(cfg.slam, reloc_max_scans=2)
+    occupancy = _symmetric_room_map(params)
+    truth = (2.3, 1.65, 0.4)
+    saved = SavedState(occupancy, (2.2, 1.5, 0.1), 1.0)
+    segments = np.array(box(0.0, 0.0, 4.0, 3.0))
+    ranges, a0, inc = scan(segments, np.array(truth), rng=np.random.default_rng(5))
+    msg = LaserScan(2.0, a0, inc, 0.1, 6.0, ranges.astype(np.float32))
+    odom = Odometry(2.0, *truth, 0.0, 0.0)
+    wide_only = RelocalizingSlamPose(params, saved, 0.1, 6.0)
+    near_first = RelocalizingSlamPose(params, saved, 0.1, 6.0, near=(0.45, 0.9))
+    for source in (wide_only, near_first):
+        source.on_odometry(odom)
+        source.on_scan(msg)
+    assert not wide_only.localized and "wide: ambiguous" in wide_only.reason
+    assert near_first.localized, near_first.reason
+    xy, theta = _error(near_first.pose(), truth)
+    assert xy < 0.05 and theta < math.radians(2.0)
+
+
+def test_respawn_window_bounds_the_drift_since_the_last_saved_pose(cfg: FleetConfig) -> None:
+    xy, theta = respawn_window(cfg)
+    r, seconds = cfg.robot, cfg.agent.pose_save_s + cfg.sim.max_lag_s
+    assert xy > r.max_vel_x * seconds + r.max_vel_x**2 / (2 * r.acc_lim_x)
+    assert theta > r.max_vel_theta * seconds
+    # a mirror pose (turned half a turn) is never inside it with the defaults
+    assert theta < math.pi / 2 and xy < 0.6
+    slower = dataclasses.replace(cfg, agent=dataclasses.replace(cfg.agent, pose_save_s=2.0))
+    assert respawn_window(slower)[0] > xy + 0.5 * r.max_vel_x
 
 
 def test_overlay_keeps_the_saved_map_under_the_new_one() -> None:
