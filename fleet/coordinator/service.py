@@ -93,6 +93,7 @@ class Coordinator:
         self.job = Job(planner.params)
         self.plans: dict[str, Plan] = {}
         self.sent: dict[str, tuple[str, ...]] = {}
+        self.renumbered: set[str] = set()  # robots whose queue goes out again under a new number
         self.last_award_sent: dict[str, float] = {}
         self.phase = "gathering"
         self.clock = 0.0
@@ -216,9 +217,23 @@ class Coordinator:
         rid = self.keys.robot_of(key)
         with self.lock:
             r = self.job.robots.get(rid)
-            if r is not None and msg.robot == rid and msg.seq <= r.award_seq:
+            if r is None or msg.robot != rid:
+                return
+            if msg.seq <= r.award_seq:
                 r.acked_seq = max(r.acked_seq, msg.seq)
-                self.wake.set()
+            else:
+                # the agent took an award numbered past ours (ours were lost in a restart):
+                # number on from its and send the queue again
+                log.warning(
+                    "%s acknowledged award %d, past our %d; sending its queue again as %d",
+                    rid,
+                    msg.seq,
+                    r.award_seq,
+                    msg.seq + 1,
+                )
+                r.award_seq = msg.seq
+                self.renumbered.add(rid)
+            self.wake.set()
 
     def _on_bid(self, key: str, msg: Bid) -> None:
         rid = self.keys.robot_of(key)
@@ -311,13 +326,18 @@ class Coordinator:
         for rid, r in self.job.robots.items():
             queue = self.job.queue(rid)
             ids = tuple(t.task.id for t in queue)
-            changed = ids != self.sent.get(rid, ())
+            changed = ids != self.sent.get(rid, ()) or rid in self.renumbered
+            self.renumbered.discard(rid)
             due = r.acked_seq < r.award_seq and now - self.last_award_sent.get(rid, 0) > RESEND_S
             if not (changed or due):
                 continue
             if changed:
                 r.award_seq += 1
                 self.sent[rid] = ids
+                if self.store is not None:
+                    # a restarted coordinator must number on from here: an agent ignores an
+                    # award numbered at or below one it has taken
+                    self.store.save_robots([r])
             ends = [
                 (t.task.exit, t.task.entry) if t.reverse else (t.task.entry, t.task.exit)
                 for t in queue
