@@ -327,7 +327,9 @@ def bench_sim(
     factor (`rtf`) and lidar rays per second (`rays_per_s`).
 
     Robots drive arcs whose curvature changes slowly, so they sweep the world, hit walls and
-    each other; everything a live run computes (physics, lidar, odometry, cleaning) is computed.
+    each other. The loop is the live simulator's (`SimCore.tick`): physics, lidar, odometry,
+    cleaning, true poses and the run's summary at the rates a live run computes them; only
+    the bus is left out.
     On a shared machine compare `rtf_cpu` (sim seconds per CPU second of this process), which
     other work disturbs much less than `rtf`; `load_avg` is the 1-minute load when it finished.
     """
@@ -357,7 +359,7 @@ def bench_sim(
             t = core.t
             for i in range(robots):
                 core.set_cmd(f"r{i}", 0.4, 0.8 * math.sin(0.3 * t + phase[i]))
-        scans += len(core.step().scans)
+        scans += len(core.tick(time.perf_counter() - t0).scans)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - cpu0
     result = {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -108,3 +109,113 @@ def cut_start(path: np.ndarray, cut: float) -> np.ndarray:
     before = ends[i] - seg[i]
     start = path[i] + (path[i + 1] - path[i]) * ((cut - before) / seg[i])
     return np.vstack([start, path[i + 1 :]])
+
+
+@dataclass(frozen=True)
+class _Turns:
+    """Turns of a simplified stretch of polyline, with the headings of its first and last
+    segments of non-zero length (None when it has none), so two stretches can be joined."""
+
+    count: int
+    first: float | None
+    last: float | None
+
+
+class TurnCounter:
+    """``count_turns(simplify(points, tolerance), min_angle_deg)`` of a polyline that grows by
+    appended points, without simplifying it again from scratch at every count.
+
+    Ramer–Douglas–Peucker splits a stretch ``(i, j)`` of the polyline at the point farthest from
+    its chord, and what it keeps between ``i`` and ``j`` depends on those points alone. Points
+    are only appended, so each stretch's turns are remembered once worked out: a count after
+    new points works out only the stretches that end at the newest point, and the ones whose
+    split moved, and finds the rest remembered. The counts are exactly those of
+    :func:`count_turns` on :func:`simplify`'s result.
+    """
+
+    def __init__(self, tolerance: float, min_angle_deg: float = 45.0) -> None:
+        self.tolerance = tolerance
+        self._min_angle = math.radians(min_angle_deg)
+        self._pts = np.zeros((64, 2))
+        self._n = 0
+        self._memo: dict[tuple[int, int], _Turns] = {}
+        self._counted = (0, 0)
+
+    def __len__(self) -> int:
+        return self._n
+
+    def append(self, x: float, y: float) -> None:
+        if self._n == len(self._pts):
+            self._pts = np.vstack([self._pts, np.zeros_like(self._pts)])
+        self._pts[self._n] = x, y
+        self._n += 1
+
+    def points(self) -> np.ndarray:
+        """The polyline so far (a copy)."""
+        return self._pts[: self._n].copy()
+
+    def turns(self) -> int:
+        n = self._n
+        if self._counted[0] != n:
+            self._counted = (n, self._stretch(0, n - 1).count if n >= 2 else 0)
+        return self._counted[1]
+
+    def _stretch(self, first: int, last: int) -> _Turns:
+        """The turns of stretch ``(first, last)``: splits worked out depth first, with an
+        explicit stack (a spiral's simplification nests as deep as it has vertices)."""
+        memo = self._memo
+        splits: dict[tuple[int, int], int] = {}
+        stack = [(first, last)]
+        while stack:
+            i, j = stack[-1]
+            if (i, j) in memo:
+                stack.pop()
+                continue
+            m = splits.get((i, j))
+            if m is None:
+                m = self._split(i, j)
+                if m < 0:
+                    memo[i, j] = self._segment(i, j)
+                    stack.pop()
+                    continue
+                splits[i, j] = m
+                stack.append((m, j))
+                stack.append((i, m))
+                continue
+            stack.pop()
+            memo[i, j] = self._join(memo[i, m], memo[m, j])
+        return memo[first, last]
+
+    def _split(self, i: int, j: int) -> int:
+        """Where :func:`simplify` splits stretch ``(i, j)``, or -1 where it keeps only its ends."""
+        if j - i < 2:
+            return -1
+        pts = self._pts
+        a, b = pts[i], pts[j]
+        seg = b - a
+        length = math.hypot(seg[0], seg[1])
+        rel = pts[i + 1 : j] - a
+        if length < 1e-12:
+            dist = np.hypot(rel[:, 0], rel[:, 1])
+        else:
+            dist = np.abs(rel[:, 0] * seg[1] - rel[:, 1] * seg[0]) / length
+        k = int(np.argmax(dist))
+        return i + 1 + k if dist[k] > self.tolerance else -1
+
+    def _segment(self, i: int, j: int) -> _Turns:
+        dx, dy = self._pts[j] - self._pts[i]
+        if math.hypot(dx, dy) <= 1e-9:
+            return _Turns(0, None, None)
+        h = math.atan2(dy, dx)
+        return _Turns(0, h, h)
+
+    def _join(self, a: _Turns, b: _Turns) -> _Turns:
+        turn = 0
+        if a.last is not None and b.first is not None:
+            change = abs((b.first - a.last + math.pi) % (2 * math.pi) - math.pi)
+            turn = int(change > self._min_angle)
+        return _Turns(
+            a.count + b.count + turn,
+            a.first if a.first is not None else b.first,
+            b.last if b.last is not None else a.last,
+        )

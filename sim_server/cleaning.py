@@ -53,7 +53,11 @@ def _window(half: int) -> np.ndarray:
 
 
 class CleaningGrid:
-    """Visit counts of every floor cell, updated from the robots' true positions."""
+    """Visit counts of every floor cell, updated from the robots' true positions.
+
+    The cleanable cells swept and their visits summed are counted as cells are swept, so
+    :meth:`coverage` and :meth:`repetition` cost nothing however large the floor.
+    """
 
     def __init__(self, grid: GridMap, cleanable: np.ndarray, cleaning_width: float) -> None:
         self.grid = grid
@@ -61,6 +65,9 @@ class CleaningGrid:
         self.visits = np.zeros(grid.shape, dtype=np.uint16)
         self.radius = cleaning_width / 2
         self._pos: dict[str, tuple[float, float]] = {}
+        self._cleanable_cells = int(cleanable.sum())
+        self._swept_cells = 0
+        self._visits_sum = 0
 
     def swept(self, start: np.ndarray, end: np.ndarray, fresh: np.ndarray) -> np.ndarray:
         """Flat indices of the cells that enter the brush as it moves from ``start`` to ``end``.
@@ -105,7 +112,13 @@ class CleaningGrid:
             return
         for i, pos in zip(idx.tolist(), xy[idx].tolist(), strict=True):
             self._pos[robots[i]] = (pos[0], pos[1])
-        np.add.at(self.visits.reshape(-1), self.swept(prev[idx], xy[idx], fresh[idx]), 1)
+        cells = self.swept(prev[idx], xy[idx], fresh[idx])
+        visits = self.visits.reshape(-1)
+        clean = cells[self.cleanable.reshape(-1)[cells]]
+        first = np.unique(clean)
+        self._swept_cells += int(np.count_nonzero(visits[first] == 0))
+        self._visits_sum += len(clean)
+        np.add.at(visits, cells, 1)
 
     def forget(self, robot: str) -> None:
         """A robot left; its next appearance starts a fresh pass."""
@@ -113,15 +126,14 @@ class CleaningGrid:
 
     @property
     def cleanable_m2(self) -> float:
-        return float(self.cleanable.sum()) * self.grid.resolution**2
+        return float(self._cleanable_cells) * self.grid.resolution**2
 
     def coverage(self) -> float:
-        total = int(self.cleanable.sum())
-        if total == 0:
-            return 0.0
-        return float(np.count_nonzero(self.visits[self.cleanable])) / total
+        """Swept cleanable cells / cleanable cells."""
+        total = self._cleanable_cells
+        return float(self._swept_cells) / total if total else 0.0
 
     def repetition(self) -> float:
-        v = self.visits[self.cleanable]
-        swept = np.count_nonzero(v)
-        return float(v.sum(dtype=np.int64)) / swept - 1.0 if swept else 0.0
+        """Visits summed over the swept cleanable cells / those cells − 1."""
+        swept = self._swept_cells
+        return float(self._visits_sum) / swept - 1.0 if swept else 0.0

@@ -14,7 +14,7 @@ import numpy as np
 from fleet.params import FleetConfig
 from fleet.protocol import Collision, CoverageSummary, LaserScan, Odometry
 from fleet.world import World
-from planners.polyline import count_turns, simplify
+from planners.polyline import TurnCounter
 from sim_server.cleaning import CleaningGrid, cleanable_mask
 from sim_server.lidar import (
     SegmentIndex,
@@ -39,6 +39,8 @@ COLLISION_DEBOUNCE_S = 1.0
 # far below the 5 cm cells. summary() sweeps up to the current poses; the grid itself is current
 # at every step the default coverage rate (2 Hz) publishes it.
 CLEANING_HZ = 10.0
+# The true poses go to the dashboard and the report this often.
+TRUTH_HZ = 10.0
 
 
 @dataclass
@@ -46,24 +48,31 @@ class RobotState:
     """A robot's metrics; they outlive its departure and continue when it comes back.
 
     While the robot is in the world its distance driven accumulates in :class:`SimCore`'s
-    arrays; ``path_length_m`` is brought up to date by :meth:`SimCore.all_robots`.
+    arrays; ``path_length_m`` is brought up to date by :meth:`SimCore.all_robots`. Its driven
+    path, sampled every ``TRAJECTORY_SAMPLE_M``, goes into ``trajectory``, which keeps the turns
+    counted so far, so a summary does not simplify the whole path again.
     """
 
     rid: str
     path_length_m: float = 0.0
-    samples: list[tuple[float, float]] = field(default_factory=list)
+    trajectory: TurnCounter = field(default_factory=lambda: TurnCounter(TURN_SIMPLIFY_TOL_M))
     wall_collisions: int = 0
     robot_collisions: int = 0
 
     def turns(self) -> int:
-        return count_turns(simplify(np.array(self.samples), TURN_SIMPLIFY_TOL_M))
+        return self.trajectory.turns()
 
 
 @dataclass
 class StepOutput:
+    """What one step produced; ``truth`` and ``summary`` are filled by :meth:`SimCore.tick`
+    on the steps they fall due."""
+
     scans: list[tuple[str, LaserScan]] = field(default_factory=list)
     odometry: list[tuple[str, Odometry]] = field(default_factory=list)
     collisions: list[Collision] = field(default_factory=list)
+    truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    summary: CoverageSummary | None = None
 
 
 def world_segments(world: World) -> np.ndarray:
@@ -95,6 +104,8 @@ class SimCore:
         self.scan_every = max(1, round(cfg.sim.physics_hz / cfg.lidar.rate_hz))
         self.odom_every = max(1, round(cfg.sim.physics_hz / cfg.odometry.rate_hz))
         self.clean_every = max(1, round(cfg.sim.physics_hz / CLEANING_HZ))
+        self.truth_every = max(1, round(cfg.sim.physics_hz / TRUTH_HZ))
+        self.summary_every = max(1, round(cfg.sim.physics_hz / cfg.sim.coverage_hz))
         from sim_server.physics import Physics
 
         self.physics = Physics(world, self._on_contact)
@@ -149,7 +160,7 @@ class SimCore:
             raise ValueError(why)
         self.physics.add_robot(rid, pose, self.cfg.robot.radius, self.cfg.robot.mass)
         state = self.departed.pop(rid, None) or RobotState(rid)
-        state.samples.append((pose[0], pose[1]))
+        state.trajectory.append(pose[0], pose[1])
         self.robots[rid] = state
         self._reindex()
         self._poses = self.physics.poses(self._ids)
@@ -228,7 +239,7 @@ class SimCore:
         self._path += np.hypot(xy[:, 0] - prev_xy[:, 0], xy[:, 1] - prev_xy[:, 1])
         far = np.hypot(xy[:, 0] - self._sampled_xy[:, 0], xy[:, 1] - self._sampled_xy[:, 1])
         for i in np.nonzero(far >= TRAJECTORY_SAMPLE_M)[0].tolist():
-            self.robots[ids[i]].samples.append((float(xy[i, 0]), float(xy[i, 1])))
+            self.robots[ids[i]].trajectory.append(float(xy[i, 0]), float(xy[i, 1]))
             self._sampled_xy[i] = xy[i]
         if self.steps % self.clean_every == 0:
             self.cleaning.update(ids, xy)
@@ -240,6 +251,17 @@ class SimCore:
             ]
         if self.steps % self.scan_every == 0:
             out.scans = self.scan_all()
+        return out
+
+    def tick(self, wall_s: float) -> StepOutput:
+        """One pass of the live simulator's loop (``SimServer.run``): a step, with the true poses
+        at ``TRUTH_HZ`` and the summary at ``sim.coverage_hz`` when they fall due. ``fleet bench
+        sim`` runs this loop too, so it pays what a live run pays but the bus."""
+        out = self.step()
+        if self.steps % self.truth_every == 0:
+            out.truth = self.truth()
+        if self.steps % self.summary_every == 0:
+            out.summary = self.summary(wall_s)
         return out
 
     def truth(self) -> dict[str, tuple[float, float, float]]:

@@ -36,7 +36,6 @@ from sim_server.core import SimCore
 
 log = logging.getLogger("sim")
 
-TRUTH_HZ = 10.0
 IMAGE_PERIOD_S = 2.0
 
 
@@ -182,8 +181,6 @@ class SimServer:
     def run(self) -> None:
         sim = self.cfg.sim
         clock_every = max(1, round(sim.physics_hz / sim.clock_hz))
-        truth_every = max(1, round(sim.physics_hz / TRUTH_HZ))
-        cover_every = max(1, round(sim.physics_hz / sim.coverage_hz))
         pace_wall, pace_sim = time.monotonic(), self.core.t
         waiting = False
         while not self.stop.is_set():
@@ -208,7 +205,7 @@ class SimServer:
                 if ahead < -0.2:
                     pace_wall, pace_sim = now, self.core.t
             with self.lock:
-                out = self.core.step()
+                out = self.core.tick(time.monotonic() - self.wall0)
                 for rid, msg in out.scans:
                     link = self.links.get(rid)
                     if link is not None and not link.scanned:
@@ -218,7 +215,6 @@ class SimServer:
                 if self.recorder is not None:
                     self.recorder.record(out.odometry, out.scans, self.core.truth)
                 steps = self.core.steps
-                truth = self.core.truth() if steps % truth_every == 0 else {}
             k = self.keys
             for c in out.collisions:
                 log.warning(
@@ -229,9 +225,9 @@ class SimServer:
                 self.bus.publish(k.robot(rid, "odom"), msg)
             for rid, msg in out.scans:
                 self.bus.publish(k.robot(rid, "scan"), msg, control=True)
-            for rid, (x, y, th) in truth.items():
+            for rid, (x, y, th) in out.truth.items():
                 self.bus.publish(k.robot(rid, "truth"), TruthPose(self.core.t, x, y, th))
             if steps % clock_every == 0:
                 self.bus.publish(k.clock(), Clock(self.core.t, self.speed, False))
-            if steps % cover_every == 0:
-                self.bus.publish(k.coverage(), self.summary())
+            if out.summary is not None:
+                self.bus.publish(k.coverage(), out.summary)

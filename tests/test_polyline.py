@@ -2,9 +2,18 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
-from planners.polyline import heading_changes, path_length, without_straight_vertices
+from planners.polyline import (
+    TurnCounter,
+    count_turns,
+    heading_changes,
+    path_length,
+    simplify,
+    without_straight_vertices,
+)
 
 
 def test_straight_runs_become_one_segment_and_turns_stay() -> None:
@@ -38,3 +47,46 @@ def test_the_coverage_plan_drives_no_straight_vertices() -> None:
     path = plan.paths[0]
     assert (np.hypot(*np.diff(path, axis=0).T) > 1e-9).all()
     assert (heading_changes(path) > 1e-6).all()
+
+
+def _counted_as_it_grows(points: np.ndarray, every: int) -> list[tuple[int, int]]:
+    """(points so far, turns) from a TurnCounter counted every ``every`` points, and from
+    simplifying the same prefix from scratch."""
+    counter = TurnCounter(0.05)
+    pairs = []
+    for k, (x, y) in enumerate(points.tolist(), start=1):
+        counter.append(x, y)
+        if k % every == 0 or k == len(points):
+            scratch = count_turns(simplify(points[:k], 0.05))
+            pairs.append((counter.turns(), scratch))
+    return pairs
+
+
+def test_turns_counted_as_a_path_grows_equal_a_count_from_scratch() -> None:
+    rng = np.random.default_rng(3)
+    # A wandering drive (slowly varying curvature, sampled every 5 cm), a lawnmower with
+    # repeated points at its corners and a square spiral (its simplification nests as deep as
+    # it has corners): all with many turns at 0.05 m tolerance.
+    heading = np.cumsum(rng.normal(0, 0.25, 1500))
+    wander = np.cumsum(0.05 * np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)
+    lanes = [[[0, y], [3, y], [3, y], [3, y + 0.3]] for y in np.arange(0, 3, 0.6)]
+    mower = np.array([p for lane in lanes for p in lane], dtype=float)
+    mower = np.vstack([np.linspace(a, b, 12) for a, b in itertools.pairwise(mower)])
+    steps = [[(1, 0), (0, 1), (-1, 0), (0, -1)][k % 4] for k in range(40) for _ in range(k + 1)]
+    spiral = np.cumsum(0.05 * np.array(steps, dtype=float), axis=0)
+    for points, every in ((wander, 7), (wander, 1), (mower, 3), (spiral, 5)):
+        pairs = _counted_as_it_grows(points, every)
+        assert [a for a, _ in pairs] == [b for _, b in pairs]
+        assert pairs[-1][1] > 10
+
+
+def test_turn_counter_of_short_paths() -> None:
+    counter = TurnCounter(0.05)
+    assert counter.turns() == 0
+    counter.append(1.0, 1.0)
+    counter.append(1.0, 1.0)
+    assert counter.turns() == 0 and len(counter) == 2
+    counter.append(2.0, 1.0)
+    counter.append(2.0, 2.0)
+    assert counter.turns() == 1
+    np.testing.assert_array_equal(counter.points(), [[1, 1], [1, 1], [2, 1], [2, 2]])

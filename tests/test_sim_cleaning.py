@@ -154,3 +154,22 @@ def test_cells_outside_the_grid_are_ignored() -> None:
     cleaning.update(["r"], np.array([[0.6, -0.1]]))
     assert cleaning.visits.sum() > 0
     assert cleaning.visits[5:].sum() == 0
+
+
+def test_coverage_and_repetition_kept_as_cells_are_swept_equal_a_recount() -> None:
+    grid = _grid()
+    # Half the floor cleanable, two robots whose paths cross each other and themselves, so
+    # one update sweeps some cells twice and some outside the cleanable half.
+    cleanable = np.zeros(grid.shape, dtype=bool)
+    cleanable[:, : grid.shape[1] // 2] = True
+    cleaning = CleaningGrid(grid, cleanable, WIDTH)
+    paths = [_random_path(3), _random_path(4)]
+    for step, xy in enumerate(zip(*paths, strict=True)):
+        cleaning.update(["a", "b"], np.array(xy))
+        if step % 10 == 0 or step == len(paths[0]) - 1:
+            v = cleaning.visits[cleanable]
+            swept = np.count_nonzero(v)
+            assert cleaning.coverage() == swept / cleanable.sum()
+            assert cleaning.repetition() == (v.sum() / swept - 1.0 if swept else 0.0)
+    assert cleaning.repetition() > 0.5
+    assert cleaning.cleanable_m2 == pytest.approx(cleanable.sum() * RES**2)

@@ -12,7 +12,8 @@ from fleet.config import configs_dir
 from fleet.params import FleetConfig, load_fleet_config
 from fleet.protocol import Collision
 from fleet.world import World, load_world
-from sim_server.core import SimCore
+from planners.polyline import count_turns, path_length, simplify
+from sim_server.core import TRAJECTORY_SAMPLE_M, TURN_SIMPLIFY_TOL_M, SimCore
 
 
 @pytest.fixture(scope="module")
@@ -255,3 +256,22 @@ def test_a_robot_that_leaves_keeps_its_metrics_and_its_last_sweep(
     y = sim.truth()["r0"][1]
     assert sim.summary(0.0).path_length_m[0] == pytest.approx(x_left - 0.8 + y - 0.6, abs=1e-6)
     assert sim.cleaning.visits.max() == 1
+
+
+def test_tick_is_a_step_with_truth_and_summary_when_due(world: World, cfg: FleetConfig) -> None:
+    sim = SimCore(world, cfg)
+    sim.add_robot("r0", (1.0, 1.0, 0.0))
+    summaries = []
+    for k in range(round(3.0 / sim.dt)):
+        sim.set_cmd("r0", 0.3, 0.6 * math.sin(0.5 * k * sim.dt) + 0.5)
+        out = sim.tick(0.0)
+        assert bool(out.truth) == (sim.steps % sim.truth_every == 0)
+        if out.truth:
+            assert out.truth == sim.truth()
+        if out.summary is not None:
+            summaries.append(out.summary)
+    assert len(summaries) == round(3.0 * cfg.sim.coverage_hz)
+    last = summaries[-1]
+    points = sim.robots["r0"].trajectory.points()
+    assert last.turns[0] == count_turns(simplify(points, TURN_SIMPLIFY_TOL_M))
+    assert last.path_length_m[0] == pytest.approx(path_length(points), abs=TRAJECTORY_SAMPLE_M)
