@@ -17,13 +17,22 @@ ConnectOpt = Annotated[
     typer.Option(
         "--connect",
         "-c",
-        help="Zenoh router endpoint to connect to (repeatable), e.g. tcp/192.168.1.5:7447.",
+        help="Zenoh router endpoint to connect to (repeatable), e.g. tcp/192.168.1.5:7447; "
+        "FLEET_CONNECT may hold them, separated by spaces.",
+        envvar="FLEET_CONNECT",
     ),
 ]
-FleetOpt = Annotated[str, typer.Option("--fleet", help="Fleet name: the key prefix fleet/<name>/.")]
+FleetOpt = Annotated[
+    str,
+    typer.Option("--fleet", help="Fleet name: the key prefix fleet/<name>/.", envvar="FLEET_NAME"),
+]
 ConfigOpt = Annotated[
     Path | None,
-    typer.Option("--config", help="Parameter file (default: the built-in configs/fleet.yaml)."),
+    typer.Option(
+        "--config",
+        help="Parameter file (default: the built-in configs/fleet.yaml).",
+        envvar="FLEET_CONFIG",
+    ),
 ]
 WorldOpt = Annotated[
     str,
@@ -31,6 +40,7 @@ WorldOpt = Annotated[
         "--world",
         "-w",
         help="World YAML or ROS map_server YAML, or a built-in world name (home, small).",
+        envvar="FLEET_WORLD",
     ),
 ]
 
@@ -173,9 +183,18 @@ def agent(
     start: Annotated[
         str | None,
         typer.Option(
-            "--start", help="Spawn pose x,y,theta (m, m, rad); default: the world's next start."
+            "--start", help="Spawn pose x,y,theta (m, m, rad); default: see --start-index."
         ),
     ] = None,
+    start_index: Annotated[
+        int,
+        typer.Option(
+            "--start-index",
+            min=0,
+            help="Without --start, spawn at the world's start pose number K (0-based), where "
+            "`fleet up` puts robot-K: the world's listed starts, then free poses by the dock.",
+        ),
+    ] = 0,
     world: WorldOpt = "home",
     connect: ConnectOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,
@@ -215,7 +234,10 @@ def agent(
         cfg, _ = _load(config)
     else:
         cfg, w = _load(config, world)
-        pose = w.start_poses(1, cfg.robot.radius)[0]
+        try:
+            pose = w.start_poses(start_index + 1, cfg.robot.radius)[start_index]
+        except ValueError as e:
+            _fail(f"--start-index {start_index}: {e}")
     bus = _bus("agent", robot_id, connect, fleet)
     a = Agent(bus, robot_id, cfg, state_dir)
     _stop_on_signals(a.stop)
