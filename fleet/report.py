@@ -102,9 +102,16 @@ def job_report(state: Path) -> dict[str, Any]:
     end): a hold begins with an award and ends when the task is done, withdrawn, or its owner
     is lost. ``overlaps`` lists tasks held by two robots at once (it should stay empty);
     ``rejected_bids`` counts the bids the auctions ignored, by why (late, duplicate,
-    malformed, not in the market)."""
+    malformed, not in the market); ``plan_estimate_s`` is the makespan the first allocation
+    priced (the longest of the winners' committed times), None if it never completed."""
     if not state.exists():
-        return {"events": None, "tasks": None, "overlaps": None, "rejected_bids": None}
+        return {
+            "events": None,
+            "tasks": None,
+            "overlaps": None,
+            "rejected_bids": None,
+            "plan_estimate_s": None,
+        }
     db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
     try:
         meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
@@ -148,6 +155,7 @@ def job_report(state: Path) -> dict[str, Any]:
         "tasks": list(tasks.values()),
         "overlaps": overlaps,
         "rejected_bids": json.loads(meta.get("rejected_bids", "{}")),
+        "plan_estimate_s": json.loads(meta.get("estimate_s", "null")),
     }
 
 

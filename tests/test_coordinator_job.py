@@ -166,9 +166,10 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
         (9.5, "awarded", "robot-2", "t01"),
     ):
         store.add_event(0.0, sim, kind, robot, task, "")
-    store.set_meta(rejected_bids={"late": 2})
+    store.set_meta(rejected_bids={"late": 2}, estimate_s=123.4)
     store.close()
     report = job_report(tmp_path / "job.sqlite")
+    assert report["plan_estimate_s"] == 123.4
     owners = {t["id"]: t["owners"] for t in report["tasks"]}
     assert owners["t00"] == [["robot-0", 1.0, 5.0], ["robot-1", 5.1, None]]
     # t01 was done by robot-1 and then awarded again: held by one robot at a time
@@ -182,3 +183,4 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
     store.close()
     assert job_report(tmp_path / "job.sqlite")["overlaps"] == ["t01"]
     assert job_report(tmp_path / "missing.sqlite")["tasks"] is None
+    assert job_report(tmp_path / "missing.sqlite")["plan_estimate_s"] is None

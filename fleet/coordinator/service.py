@@ -373,8 +373,10 @@ class Coordinator:
         robot leaves; everything else task by task."""
         t0 = time.monotonic()
         awarded = 0
+        committed: list[float] = []
         with self.lock:
-            if all(r.state == "open" for r in self.job.tasks.values()):
+            first = all(r.state == "open" for r in self.job.tasks.values())
+            if first:
                 self.region_sale = list(self.job.tasks)
             sale = sorted(
                 (t for t in self.region_sale if self.job.tasks[t].state == "open"), key=_tour_key
@@ -410,7 +412,12 @@ class Coordinator:
                     )
                     break
                 self._sell(lots[best.task], best, live)
+                committed.append(best.total_s)
                 awarded += 1
+        if first and committed:
+            with self.lock:
+                if not self.job.open_tasks():
+                    self._estimate(max(committed))
         if awarded:
             ms = 1e3 * (time.monotonic() - t0)
             log.info("auction: %d lots sold in %.0f ms", awarded, ms)
@@ -441,6 +448,14 @@ class Coordinator:
                 self._bids_cond.wait(left)
             self._round = None
             return dict(self._bids)
+
+    def _estimate(self, makespan_s: float) -> None:
+        """The job's makespan as the first allocation prices it: the longest of the winners'
+        committed times (travel from where each stood, and the cleaning time of what it won)."""
+        log.info("the first allocation's makespan estimate: %.1f s", makespan_s)
+        self._event("estimated", "", "", f"makespan {makespan_s:.1f} s")
+        if self.store is not None:
+            self.store.set_meta(estimate_s=round(makespan_s, 2))
 
     def _sell(self, lot: auction.Lot, best: auction.Bid, live: list[Bid]) -> None:
         """Award ``lot``'s tasks to the winner (in the order it drives them), log the round."""
