@@ -44,10 +44,12 @@ from agents.peers import (
 from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
 from agents.slam.persistence import load_state, save_pose, save_state
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
+from agents.time_use import step_kind
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
 from fleet.protocol import (
+    TIME_KINDS,
     Award,
     AwardAck,
     Clock,
@@ -104,6 +106,7 @@ class Agent:
         self.task = ""
         self.state = "waiting"
         self.distance_m = 0.0
+        self.time_s = np.zeros(len(TIME_KINDS))
         self.clock = 0.0
         self._last_xy: tuple[float, float] | None = None
         self._last_status = -1e9
@@ -402,6 +405,7 @@ class Agent:
         v = w = 0.0
         obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
         dt = 1.0 / self.cfg.lidar.rate_hz
+        kind = "other"
         if stale:
             state = "stale"
         elif not localized:
@@ -415,6 +419,7 @@ class Agent:
                 )
         elif follow is None or follow.done:
             state = "done" if planned else "waiting"
+            kind = "idle"
             self.idle, result = keep_clear(
                 self.idle,
                 pose,
@@ -428,6 +433,7 @@ class Agent:
             )
             v, w = result.v, result.w
         else:
+            before = follow
             follow, result = control_step(
                 follow,
                 predict(pose, self.command, self.latency_s),
@@ -455,11 +461,13 @@ class Agent:
                             *pose,
                         )
                     self.follow = follow
+            kind = step_kind(before, follow, sweep_from)
             if result is None:
                 state = "done"
             else:
                 v, w = result.v, result.w
                 state = "driving" if result.admissible else "blocked"
+        self.time_s[TIME_KINDS.index(kind)] += dt
         self.state = state
         self.command = (v, w)
         lag = min(max(self.clock - scan.stamp, 0.0), MAX_LATENCY_S)
@@ -536,6 +544,7 @@ class Agent:
                     follow.skipped if follow is not None else 0,
                     plan_id,
                     swept_pieces(follow, sweep_from),
+                    self.time_s.copy(),
                 ),
                 control=True,
             )

@@ -84,6 +84,7 @@ def up(
         build_report,
         job_report,
         load_run,
+        time_use_of,
         write_json,
     )
     from fleet.report_figures import render_report
@@ -164,6 +165,7 @@ def up(
         makespan = watcher.makespan() if status == "done" else None
         with watcher.lock:
             skipped = {rid: v.status.skipped for rid, v in watcher.robots.items() if v.status}
+            time_use = {rid: time_use_of(v.status) for rid, v in watcher.robots.items() if v.status}
         report = build_report(
             summary,
             makespan,
@@ -177,6 +179,7 @@ def up(
                 **job_report(run_dir / "coordinator.sqlite"),
             },
             skipped,
+            time_use,
         )
         write_json(run_dir / "report.json", report)
         recorder.write(run_dir, image, cfg.robot.cleaning_width)

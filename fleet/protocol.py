@@ -26,6 +26,9 @@ import numpy as np
 
 SCHEMA_VERSION = 1
 DEFAULT_FLEET = "default"
+# what a robot's control steps were spent on, in the order of RobotStatus.time_s
+# (see agents.time_use.step_kind)
+TIME_KINDS = ("sweep", "transit", "turn", "yield", "escape", "idle", "other")
 
 M = TypeVar("M", bound="Message")
 
@@ -245,7 +248,9 @@ class RobotStatus(Message):
     """What an agent is doing: state, task, progress along its path, and how many waypoints of
     it were given up as unreachable (``skipped``). ``plan_id`` is the plan it drives and
     ``swept`` (one 0/1 per piece of that plan's task, see :class:`Plan`) the pieces it has swept
-    by its own pose estimate, so the coordinator knows the exact remainder of the task."""
+    by its own pose estimate, so the coordinator knows the exact remainder of the task.
+    ``time_s`` is the sim time its control steps have spent on each of ``TIME_KINDS`` since it
+    started."""
 
     TYPE: ClassVar[str] = "status"
     stamp: float
@@ -260,6 +265,9 @@ class RobotStatus(Message):
     plan_id: int = -1
     swept: Annotated[np.ndarray, Arr("|u1")] = field(
         default_factory=lambda: np.zeros(0, dtype=np.uint8)
+    )
+    time_s: Annotated[np.ndarray, Arr("<f8")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.float64)
     )
 
 

@@ -29,7 +29,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fleet.fleet_runner import read_events
-from fleet.protocol import Collision, CoverageImage, CoverageSummary, TruthPose
+from fleet.protocol import (
+    TIME_KINDS,
+    Collision,
+    CoverageImage,
+    CoverageSummary,
+    RobotStatus,
+    TruthPose,
+)
 
 if TYPE_CHECKING:
     from fleet.bus import Bus
@@ -57,6 +64,14 @@ REPORT_FIELDS: dict[str, type | tuple[type, ...]] = {
 }
 
 
+def time_use_of(status: RobotStatus) -> dict[str, float] | None:
+    """An agent's reported seconds per kind of control step, by name (None from an agent that
+    does not report them)."""
+    if len(status.time_s) != len(TIME_KINDS):
+        return None
+    return {k: round(float(t), 1) for k, t in zip(TIME_KINDS, status.time_s, strict=True)}
+
+
 def build_report(
     summary: CoverageSummary,
     makespan_s: float | None,
@@ -64,10 +79,14 @@ def build_report(
     status: str,
     extra: dict[str, Any],
     skipped: Mapping[str, int] | None = None,
+    time_use: Mapping[str, Mapping[str, float]] | None = None,
 ) -> dict[str, Any]:
     """The report as a JSON-ready dict. ``makespan_s`` is None when the job did not finish;
-    ``skipped`` holds the waypoints each agent last reported giving up on (None: unknown)."""
+    ``skipped`` holds the waypoints each agent last reported giving up on, and ``time_use`` the
+    sim seconds it last reported per kind of control step (``fleet.protocol.TIME_KINDS``);
+    None where unknown."""
     skipped = skipped or {}
+    time_use = time_use or {}
     robots = {
         rid: {
             "path_length_m": round(float(summary.path_length_m[i]), 3),
@@ -75,6 +94,7 @@ def build_report(
             "wall_collisions": int(summary.wall_collisions[i]),
             "robot_collisions": int(summary.robot_collisions[i]),
             "skipped_waypoints": skipped.get(rid),
+            "time_s": time_use.get(rid),
         }
         for i, rid in enumerate(summary.robots)
     }
