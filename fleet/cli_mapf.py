@@ -16,6 +16,15 @@ SOLVER_HELP = (
 )
 
 
+# Exit statuses of `fleet plan mapf`, one per outcome a script may want to tell apart.
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_INVALID = 3
+EXIT_TIMEOUT = 4
+EXIT_INFEASIBLE = 5
+EXIT_BY_STATUS = {"failed": EXIT_FAILED, "timeout": EXIT_TIMEOUT, "infeasible": EXIT_INFEASIBLE}
+
+
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
@@ -23,7 +32,7 @@ def register(
     bench_app.command("mapf")(bench_mapf)
 
 
-def _fail(message: str, code: int = 2) -> None:
+def _fail(message: str, code: int = EXIT_BAD_INPUT) -> None:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(code)
 
@@ -65,9 +74,13 @@ def plan_mapf(
     """Solve a MAPF instance and print status, SOC, makespan, runtime and nodes expanded.
 
     The solution is checked by the independent validator (bounds, obstacles, unit moves,
-    vertex/swap conflicts, goals) before anything is printed or written. Exit status: 0 solved,
-    1 no solution (infeasible, timeout, or PP failed; the reason and what to try go to stderr),
-    2 bad input, 3 invalid solution.
+    vertex/swap conflicts, goals) before anything is printed or written. Without a solution the
+    reason and what to try go to stderr.
+
+    Exit status: 0 solved; 1 prioritized planning failed (no priority order worked: PP is
+    incomplete, a complete solver may still succeed); 2 bad input; 3 invalid solution (a
+    solver bug); 4 timeout (--time-limit passed); 5 infeasible (proved to have no solution:
+    an unreachable goal, two agents on one start or goal, or a complete search that ran out).
 
     Examples:
 
@@ -131,13 +144,13 @@ def plan_mapf(
         if out is not None and result.solution is not None:
             Console().print(f"schedule written to {out}")
     if report is not None and not report.valid:
-        _fail("invalid solution: " + "; ".join(report.errors), code=3)
+        _fail("invalid solution: " + "; ".join(report.errors), code=EXIT_INVALID)
     if result.status != "success":
         typer.echo(f"{solver}: {result.status}: {result.message}", err=True)
         hint = _hint(solver, result.status)
         if hint:
             typer.echo(hint, err=True)
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_BY_STATUS[result.status])
 
 
 def _hint(solver: str, status: str) -> str:

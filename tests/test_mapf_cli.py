@@ -70,7 +70,7 @@ def test_plan_rejects_infeasible_and_bad_input(tmp_path: Path) -> None:
         "agents: [{name: a, start: [0, 0], goal: [2, 0]}]\n"
     )
     result = runner.invoke(app, ["plan", "mapf", str(tmp_path / "in.yaml"), "--json"])
-    assert result.exit_code == 1
+    assert result.exit_code == 5
     summary = json.loads(result.stdout)
     assert summary["status"] == "infeasible"
     assert "unreachable" in summary["message"]
@@ -134,7 +134,7 @@ def test_plan_timeout_exits_non_zero(tmp_path: Path) -> None:
     map_path, scen_path, _ = _files(tmp_path)
     args = ["plan", "mapf", str(map_path), str(scen_path), "--time-limit", "0", "--json"]
     result = runner.invoke(app, args)
-    assert result.exit_code == 1, result.output
+    assert result.exit_code == 4, result.output
     assert json.loads(result.stdout)["status"] == "timeout"
     assert "--time-limit" in result.stderr
 
@@ -155,3 +155,11 @@ def test_bench_tiny_checks_solvers_against_the_brute_force() -> None:
     result = runner.invoke(app, ["bench", "mapf", "--tiny", "3", "--solver", "cbs"])
     assert result.exit_code == 0, result.output
     assert "slowest for cbs" in result.stdout
+
+
+def test_help_documents_each_exit_status() -> None:
+    result = runner.invoke(app, ["plan", "mapf", "--help"], env={"COLUMNS": "5000"})
+    assert result.exit_code == 0
+    for status in ("0 solved", "1 prioritized planning failed", "2 bad input", "3 invalid"):
+        assert status in result.output
+    assert "4 timeout" in result.output and "5 infeasible" in result.output
