@@ -3,10 +3,12 @@ job on disk."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, Job
+from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, GivenUpWaypoints, Job
 from fleet.coordinator.store import JobStore
 from fleet.fleet_runner import read_events
 from fleet.protocol import Plan
@@ -184,3 +186,23 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
     assert job_report(tmp_path / "job.sqlite")["overlaps"] == ["t01"]
     assert job_report(tmp_path / "missing.sqlite")["tasks"] is None
     assert job_report(tmp_path / "missing.sqlite")["plan_estimate_s"] is None
+
+
+def test_given_up_waypoints_are_counted_across_plans_cuts_and_a_restart() -> None:
+    given_up = GivenUpWaypoints()
+    assert given_up.finished_message() == "every task is done, no waypoint given up"
+    for plan_id, skipped in ((1, 0), (1, 1), (1, 1), (1, 2), (2, 0), (2, 1)):
+        given_up.report("robot-0", plan_id, skipped)
+    # a cut plan under the same id: the agent's count starts again and rises once more
+    given_up.report("robot-0", 2, 0)
+    given_up.report("robot-0", 2, 1)
+    given_up.report("robot-1", 5, 2)
+    assert given_up.by_robot == {"robot-0": 4, "robot-1": 2}
+    # the coordinator restarts from its state file; the agents report their counts again
+    resumed = GivenUpWaypoints.from_json(json.loads(json.dumps(given_up.to_json())))
+    assert resumed.report("robot-1", 5, 2) == 0
+    assert resumed.report("robot-1", 5, 3) == 1
+    assert resumed.total == 7
+    message = resumed.finished_message()
+    assert "7 waypoint(s) were given up" in message and "robot-0 4, robot-1 3" in message
+    assert "the floor is clean" not in message

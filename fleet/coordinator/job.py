@@ -190,3 +190,49 @@ class Job:
         while f"{base}.{k}" in self.tasks:
             k += 1
         return f"{base}.{k}"
+
+
+@dataclass
+class GivenUpWaypoints:
+    """Waypoints the robots gave up as unreachable, counted from their status reports.
+
+    An agent reports how many waypoints of the plan it drives it has given up (its count
+    starts again with each plan, and may start again when a plan is cut), so every rise of a
+    (robot, plan) count is added to the robot's total. ``seen`` is kept with the totals across
+    the coordinator's restart, so the counts the agents report again are not added twice.
+    """
+
+    by_robot: dict[str, int] = field(default_factory=dict)
+    seen: dict[str, int] = field(default_factory=dict)
+
+    def report(self, robot: str, plan_id: int, skipped: int) -> int:
+        """Take a robot's status count for a plan; returns how many more it gave up."""
+        key = f"{robot}/{plan_id}"
+        more = max(0, skipped - self.seen.get(key, 0))
+        self.seen[key] = skipped
+        if more:
+            self.by_robot[robot] = self.by_robot.get(robot, 0) + more
+        return more
+
+    @property
+    def total(self) -> int:
+        return sum(self.by_robot.values())
+
+    def finished_message(self) -> str:
+        """What the coordinator says when every task is done."""
+        if not self.total:
+            return "every task is done, no waypoint given up"
+        each = ", ".join(f"{rid} {n}" for rid, n in sorted(self.by_robot.items()) if n)
+        return (
+            f"every task is done, but {self.total} waypoint(s) were given up as unreachable "
+            f"({each}): the floor around them may not be clean"
+        )
+
+    def to_json(self) -> dict[str, dict[str, int]]:
+        return {"by_robot": dict(self.by_robot), "seen": dict(self.seen)}
+
+    @classmethod
+    def from_json(cls, data: object) -> GivenUpWaypoints:
+        if not isinstance(data, dict):
+            return cls()
+        return cls(dict(data.get("by_robot", {})), dict(data.get("seen", {})))

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fleet.bus import Bus
-from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, Job, TaskRecord
+from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, GivenUpWaypoints, Job, TaskRecord
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
 from fleet.floor_map import pack_grid
@@ -100,6 +100,7 @@ class Coordinator:
         self.plan_seq = 0
         self.round_seq = 0
         self.rejected: Counter[str] = Counter()
+        self.given_up = GivenUpWaypoints()
         self.need_auction = False
         self.lost_at: dict[str, float] = {}
         # tasks to sell as regions in the next auction: a lost robot's run of the tour
@@ -136,6 +137,7 @@ class Coordinator:
         self.phase = str(meta.get("phase", "cleaning"))
         self.clock = float(meta.get("clock", 0.0))
         self.rejected.update(meta.get("rejected_bids", {}))  # type: ignore[arg-type]
+        self.given_up = GivenUpWaypoints.from_json(meta.get("given_up_waypoints"))
         now = time.time()
         for rid, r in self.job.robots.items():
             # robots are heard from again within a heartbeat; until then none counts as silent,
@@ -194,6 +196,8 @@ class Coordinator:
         with self.lock:
             r = self.job.robot(rid)
             r.state, r.task, r.progress = msg.state, msg.task, msg.progress
+            if msg.plan_id >= 0 and self.given_up.report(rid, msg.plan_id, msg.skipped):
+                log.warning("%s has given up %d waypoint(s)", rid, self.given_up.by_robot[rid])
             plan = self.plans.get(rid)
             if plan is None or msg.plan_id != plan.plan_id or r.liveness == LOST:
                 return
@@ -569,7 +573,7 @@ class Coordinator:
                     self._dispatch()
                     if self.job.finished and self.phase != "done":
                         self.phase = "done"
-                        log.info("every task is done: the floor is clean")
+                        log.info(self.given_up.finished_message())
                         self._event("finished", "", "", "")
                         if self.store is not None:
                             self.store.set_meta(phase=self.phase)
@@ -581,7 +585,12 @@ class Coordinator:
                     self.store.save_robots(list(self.job.robots.values()))
                     with self._bids_cond:
                         rejected = dict(self.rejected)
-                    self.store.set_meta(phase=self.phase, clock=self.clock, rejected_bids=rejected)
+                    self.store.set_meta(
+                        phase=self.phase,
+                        clock=self.clock,
+                        rejected_bids=rejected,
+                        given_up_waypoints=self.given_up.to_json(),
+                    )
                 if now - last_state > STATE_PERIOD_S:
                     last_state = now
                     self._publish_state()
