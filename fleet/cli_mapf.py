@@ -192,8 +192,9 @@ def bench_mapf(
         list[str] | None,
         typer.Option(
             "--map",
-            help="Maps to run (repeatable; default: all): random-32-32-10, random-32-32-20, "
-            "room-32-32-7, maze-32-32-2, warehouse-32-32.",
+            help="Maps to run (repeatable; default: all generated ones): gen-random-10pct, "
+            "gen-random-20pct, gen-rooms-7x7, gen-maze-2wide, gen-shelves; or the path of a "
+            "MovingAI .map file, run on the .scen files beside it named after it.",
         ),
     ] = None,
     k_step: Annotated[int, typer.Option(min=1, help="Agents added per step.")] = 10,
@@ -216,14 +217,21 @@ def bench_mapf(
 ) -> None:
     """For each solver and map, the largest number of agents solved within the time limit.
 
-    Maps are 32 x 32, built with fixed seeds and written in the MovingAI format (random 10% and
-    20% obstacles, rooms, a maze with 2-wide corridors, a warehouse); each step k uses the first k
-    agents of each scenario, and a (map, solver) pair stops after a k where it solved none. Every
+    The maps are generated here, 32 x 32 with fixed seeds, and written in the MovingAI format:
+    gen-random-10pct and gen-random-20pct (random obstacles), gen-rooms-7x7 (7 x 7 rooms, one
+    door per wall), gen-maze-2wide (a maze with 2-wide corridors), gen-shelves (2-deep shelves,
+    2-wide aisles). They are not the MovingAI benchmark's maps, so figures published for those
+    do not compare; --map PATH runs a MovingAI .map file of your own instead, on the first
+    --scenarios of the PATH-stem-*.scen files beside it. Each step k uses the first k agents of
+    each scenario, and a (map, solver) pair stops after a k where it solved none. Every
     solution is validated. cbs-plain (CBS without ICBS improvements) is the baseline for cbs.
 
     Default (about 3-5 minutes on 2 cores): --time-limit 5 --k-step 10 --k-max 200.
-    The CBS target run: fleet bench mapf --map random-32-32-10 --solver cbs --solver cbs-plain
-    --time-limit 60 --k-step 5 --scenarios 3
+
+    The CBS target run: --map gen-random-10pct --solver cbs --solver cbs-plain --time-limit 60
+    --k-step 5 --scenarios 3. On a MovingAI map of your own, for example:
+
+      fleet bench mapf --map mapf-map/random-32-32-10.map --solver cbs --time-limit 60 --k-step 5
 
     With --tiny N: N seeded random instances of at most 5 x 5 cells and 4 agents, each solver
     checked against the brute-force optimum (cbs, cbs-plain: optimal; ecbs: within its bound;
@@ -244,13 +252,28 @@ def bench_mapf(
         return
     time_limit = 5.0 if time_limit is None else time_limit
     w = 1.2 if w is None else w
-    from planners.mapf.bench import optimal_soc_mismatches, run_suite, summarize, write_suite
+    from planners.mapf.bench import (
+        optimal_soc_mismatches,
+        run_suite,
+        summarize,
+        user_suite,
+        write_suite,
+    )
     from planners.mapf.generate import benchmark_maps
+    from planners.mapf.movingai import FormatError
 
     known = list(benchmark_maps(seed))
-    for name in maps or []:
-        if name not in known:
-            _fail(f"--map must be among {', '.join(known)}, got {name!r}")
+    generated = [name for name in maps or [] if name in known]
+    own = [Path(name) for name in maps or [] if name not in known]
+    for path in own:
+        if path.suffix != ".map" or not path.is_file():
+            _fail(
+                f"--map must be among {', '.join(known)} or a MovingAI .map file, got {str(path)!r}"
+            )
+    try:
+        own_files = user_suite(own, scenarios)
+    except ValueError as err:
+        _fail(str(err))
     if quick:
         time_limit, k_step, k_max = 1.0, 20, 100
     k_values = list(range(k_step, k_max + 1, k_step))
@@ -270,8 +293,13 @@ def bench_mapf(
     with tempfile.TemporaryDirectory() as tmp:
         directory = keep or Path(tmp)
         directory.mkdir(parents=True, exist_ok=True)
-        files = write_suite(directory, k_max, seed, scenarios, maps)
-        runs = run_suite(files, chosen, k_values, time_limit, w, progress)
+        files = {}
+        if generated or not own:
+            files = write_suite(directory, k_max, seed, scenarios, generated)
+        try:
+            runs = run_suite({**files, **own_files}, chosen, k_values, time_limit, w, progress)
+        except FormatError as err:
+            _fail(str(err))
     rows = summarize(runs)
     mismatches = optimal_soc_mismatches(runs)
     config = {

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 
 from fleet.cli import app
 from planners.mapf import MapfInstance, validate
+from planners.mapf.bench import user_suite
 from planners.mapf.generate import random_instance, random_map
 from planners.mapf.movingai import write_map, write_scen
 from planners.mapf.yaml_format import instance_to_mapping, schedule_from_mapping, write_yaml
@@ -89,7 +90,7 @@ def test_bench_smoke(tmp_path: Path) -> None:
         "mapf",
         "--json",
         "--map",
-        "random-32-32-10",
+        "gen-random-10pct",
         "--solver",
         "pp",
         "--solver",
@@ -109,8 +110,8 @@ def test_bench_smoke(tmp_path: Path) -> None:
     rows = {row["solver"]: row for row in report["summary"]}
     assert rows["pp"]["max_k"] == rows["cbs"]["max_k"] == 10
     assert rows["cbs"]["all_valid"] is True
-    assert (tmp_path / "random-32-32-10.map").exists()
-    assert (tmp_path / "random-32-32-10-0.scen").exists()
+    assert (tmp_path / "gen-random-10pct.map").exists()
+    assert (tmp_path / "gen-random-10pct-0.scen").exists()
 
 
 def test_plan_without_a_solution_exits_non_zero_and_suggests_cbs(tmp_path: Path) -> None:
@@ -163,3 +164,24 @@ def test_help_documents_each_exit_status() -> None:
     for status in ("0 solved", "1 prioritized planning failed", "2 bad input", "3 invalid"):
         assert status in result.output
     assert "4 timeout" in result.output and "5 infeasible" in result.output
+
+
+def test_bench_runs_a_users_movingai_map_on_the_scenarios_beside_it(tmp_path: Path) -> None:
+    free = random_map(16, 16, 0.1, 7)
+    write_map(tmp_path / "mine.map", free)
+    for i in (1, 2, 10):
+        write_scen(tmp_path / f"mine-random-{i}.scen", "mine.map", random_instance(free, 6, i))
+    files = user_suite([tmp_path / "mine.map"], 2)
+    assert files == {
+        "mine": (tmp_path / "mine.map", [tmp_path / f"mine-random-{i}.scen" for i in (1, 2)])
+    }
+    args = ["bench", "mapf", "--json", "--map", str(tmp_path / "mine.map"), "--solver", "cbs"]
+    result = runner.invoke(app, [*args, "--k-step", "3", "--k-max", "6", "--scenarios", "2"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert [(r["map"], r["max_k"]) for r in report["summary"]] == [("mine", 6)]
+    assert {run["scenario"] for run in report["runs"]} == {0, 1}
+    (tmp_path / "lone.map").write_text((tmp_path / "mine.map").read_text())
+    for bad, why in (("lone.map", "no lone-*.scen"), ("random-32-32-10", "a MovingAI .map file")):
+        result = runner.invoke(app, ["bench", "mapf", "--map", str(tmp_path / bad)])
+        assert result.exit_code == 2 and why in result.output, result.output

@@ -1,7 +1,8 @@
 """The MAPF benchmark behind ``fleet bench mapf``: the largest k each solver solves per map.
 
 Each map of ``generate.benchmark_maps`` is written as a MovingAI ``.map`` with ``scenarios``
-seeded ``.scen`` files of ``k_max`` agents, read back through the parsers, and every solver runs
+seeded ``.scen`` files of ``k_max`` agents (or a user's own MovingAI files are taken,
+``user_suite``), read back through the parsers, and every solver runs
 on the first k agents of each scenario for k = k_step, 2·k_step, ... up to k_max, stopping after
 the first k at which it solves none. Every solution goes through the validator; CBS runs also
 record whether their SOC equals the optimum found by the other CBS variant at the same k.
@@ -9,6 +10,7 @@ record whether their SOC equals the optimum found by the other CBS variant at th
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,6 +52,22 @@ def write_suite(
             write_scen(scen_path, f"{name}.map", random_instance(free, k, seed + 1000 * i))
             scens.append(scen_path)
         out[name] = (map_path, scens)
+    return out
+
+
+def user_suite(map_paths: Sequence[Path], scenarios: int) -> dict[str, tuple[Path, list[Path]]]:
+    """The user's own MovingAI maps, each with the first ``scenarios`` of the ``.scen`` files
+    beside it whose names start with the map's (``random-32-32-10-random-1.scen``, ...), in
+    natural order; named by the map's file name."""
+    out = {}
+    for map_path in map_paths:
+        scens = sorted(
+            map_path.parent.glob(f"{map_path.stem}-*.scen"),
+            key=lambda p: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", p.name)],
+        )
+        if not scens:
+            raise ValueError(f"no {map_path.stem}-*.scen beside {map_path}")
+        out[map_path.stem] = (map_path, scens[:scenarios])
     return out
 
 

@@ -47,7 +47,7 @@ from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 
 # ECBS splits a target conflict on path lengths only once its two groups have conflicted this
 # many times: its focal search, guided by conflict counts, does better with the plain vertex split
-# on open maps (warehouse-32-32, k = 170: 0.7 s instead of a timeout), and the length split is
+# on open maps (gen-shelves, k = 170: 0.7 s instead of a timeout), and the length split is
 # what settles the agents that keep meeting at a parked agent's goal
 TARGET_AFTER = 2
 
