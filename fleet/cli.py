@@ -56,6 +56,9 @@ def _register_all() -> None:
     from fleet import cli_report
 
     cli_report.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_certs
+
+    cli_certs.register(app, plan_app, bench_app, slam_app)
     from fleet.help_text import reflow_commands
 
     reflow_commands(app)
