@@ -3,6 +3,8 @@
 * Processes open a **client** session connected to one or more routers (``--connect``);
   ``fleet router`` (and ``fleet up``, embedded) runs a session in **router** mode.
 * Multicast scouting is off unless asked for, so separate fleets on one machine never meet.
+* A Zenoh config file (``zenoh_config``) may add what a secured router needs: TLS files, a
+  user and password (``fleet certs`` writes them); mode, endpoints and scouting are set here.
 * Control traffic (plans, cmd_vel, spawn) is reliable with congestion control BLOCK; sensor
   streams use DROP so a slow subscriber never stalls the simulator.
 * A malformed payload is counted per key and logged once per key, never raised.
@@ -16,6 +18,7 @@ import logging
 import threading
 from collections import Counter
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import zenoh
@@ -34,11 +37,13 @@ def make_config(
     connect: Iterable[str] = (),
     listen: Iterable[str] = (),
     multicast: bool = False,
+    zenoh_config: Path | None = None,
 ) -> zenoh.Config:
-    """A Zenoh config: ``mode`` client, peer or router; endpoints like ``tcp/127.0.0.1:7447``."""
+    """A Zenoh config: ``mode`` client, peer or router; endpoints like ``tcp/127.0.0.1:7447``;
+    on top of the JSON5 file ``zenoh_config`` when given (ValueError names it if unreadable)."""
     if mode not in ("client", "peer", "router"):
         raise ValueError(f"mode must be client, peer or router, got {mode!r}")
-    conf = zenoh.Config()
+    conf = zenoh.Config() if zenoh_config is None else _config_file(zenoh_config)
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast))
     connect = list(connect)
@@ -55,6 +60,15 @@ def make_config(
     return conf
 
 
+def _config_file(path: Path) -> zenoh.Config:
+    if not path.is_file():
+        raise ValueError(f"Zenoh config {path}: no such file")
+    try:
+        return zenoh.Config.from_file(str(path))
+    except Exception as e:  # zenoh raises ZError for syntax and schema errors
+        raise ValueError(f"Zenoh config {path}: {e}") from None
+
+
 def validate_endpoint(endpoint: str) -> None:
     """Reject endpoints that are not ``proto/host:port`` with a clear message."""
     proto, sep, rest = endpoint.partition("/")
@@ -67,9 +81,9 @@ def validate_endpoint(endpoint: str) -> None:
         raise ValueError(f"bad Zenoh endpoint {endpoint!r}: the port must be 1–65535")
 
 
-def open_router(listen: Iterable[str]) -> zenoh.Session:
+def open_router(listen: Iterable[str], zenoh_config: Path | None = None) -> zenoh.Session:
     """Open a Zenoh session in router mode listening on ``listen``."""
-    return zenoh.open(make_config("router", listen=listen))
+    return zenoh.open(make_config("router", listen=listen, zenoh_config=zenoh_config))
 
 
 class Bus:
@@ -82,11 +96,12 @@ class Bus:
         connect: Iterable[str] = (DEFAULT_ENDPOINT,),
         fleet: str = DEFAULT_FLEET,
         mode: str = "client",
+        zenoh_config: Path | None = None,
     ) -> None:
         self.keys = Keys(fleet)
         self.role = role
         self.ident = ident
-        self.session = zenoh.open(make_config(mode, connect=connect))
+        self.session = zenoh.open(make_config(mode, connect=connect, zenoh_config=zenoh_config))
         self.decode_errors: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
@@ -117,7 +132,9 @@ class Bus:
             self._publishers[key] = pub
         pub.put(msg.encode())
 
-    def _on_bad(self, key: str, err: DecodeError) -> None:
+    def drop_malformed(self, key: str, err: DecodeError) -> None:
+        """Count and log (the first and every 100th time per key) a payload that did not
+        decode."""
         with self._lock:
             self.decode_errors[key] += 1
             n = self.decode_errors[key]
@@ -132,7 +149,7 @@ class Bus:
             try:
                 msg = decode(sample.payload.to_bytes(), cls)
             except DecodeError as e:
-                self._on_bad(k, e)
+                self.drop_malformed(k, e)
                 return
             try:
                 callback(k, msg)
@@ -152,7 +169,7 @@ class Bus:
             try:
                 req = decode(query.payload.to_bytes() if query.payload else b"", cls)
             except DecodeError as e:
-                self._on_bad(k, e)
+                self.drop_malformed(k, e)
                 query.reply_err(str(e))
                 return
             try:

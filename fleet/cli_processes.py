@@ -34,6 +34,15 @@ ConfigOpt = Annotated[
         envvar="FLEET_CONFIG",
     ),
 ]
+ZenohConfigOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--zenoh-config",
+        help="Zenoh config file (JSON5) under the fleet's own settings, e.g. the TLS files, user "
+        "and password for a secured router that `fleet certs DIR` wrote as DIR/<user>.json5.",
+        envvar="FLEET_ZENOH_CONFIG",
+    ),
+]
 WorldOpt = Annotated[
     str,
     typer.Option(
@@ -83,11 +92,19 @@ def _load(config: Path | None, world: str | None = None):
     return cfg, w
 
 
-def _bus(role: str, ident: str, connect: list[str] | None, fleet: str):
+def _bus(
+    role: str,
+    ident: str,
+    connect: list[str] | None,
+    fleet: str,
+    zenoh_config: Path | None = None,
+):
     from fleet.bus import Bus
 
     try:
-        return Bus(role, ident, connect or [DEFAULT_ENDPOINT], fleet=fleet)
+        return Bus(
+            role, ident, connect or [DEFAULT_ENDPOINT], fleet=fleet, zenoh_config=zenoh_config
+        )
     except ValueError as e:
         _fail(str(e))
     except Exception as e:  # zenoh raises ZError for unreachable routers
@@ -99,18 +116,23 @@ def router(
         list[str] | None,
         typer.Option("--listen", "-l", help="Endpoint to listen on (repeatable)."),
     ] = None,
+    zenoh_config: ZenohConfigOpt = None,
 ) -> None:
     """Run a Zenoh router, so fleet processes on this or other machines can meet.
 
     Example: `fleet router --listen tcp/0.0.0.0:7447`, then on each machine
     `fleet agent --id robot-0 --connect tcp/<router-host>:7447`.
+
+    Secured (TLS, a password per process, an access-control list): `fleet certs lab`, then
+    `fleet router --listen tls/0.0.0.0:7447 --zenoh-config lab/router.json5` and each process
+    with `--connect tls/<router-host>:7447 --zenoh-config lab/<its user>.json5`.
     """
     from fleet.bus import open_router
 
     _setup_logging("router")
     endpoints = listen or [DEFAULT_ENDPOINT]
     try:
-        session = open_router(endpoints)
+        session = open_router(endpoints, zenoh_config)
     except ValueError as e:
         _fail(str(e))
     except Exception as e:
@@ -132,6 +154,7 @@ def sim(
     ] = 1.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed for sensor noise.")] = 0,
     connect: ConnectOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,
     config: ConfigOpt = None,
     record_carmen: Annotated[
@@ -166,7 +189,7 @@ def sim(
             recorder = CarmenRecorder(record_carmen, record_robot, comment=f"world {w.name}")
         except OSError as e:
             _fail(f"--record-carmen: cannot write {record_carmen}: {e}")
-    bus = _bus("sim", "sim", connect, fleet)
+    bus = _bus("sim", "sim", connect, fleet, zenoh_config)
     starts = np.array([p[:2] for p in w.start_poses(1, cfg.robot.radius)])
     server = SimServer(bus, w, cfg, speed=speed, seed=seed, starts_xy=starts, recorder=recorder)
     _stop_on_signals(server.stop)
@@ -197,6 +220,7 @@ def agent(
     ] = 0,
     world: WorldOpt = "home",
     connect: ConnectOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,
     config: ConfigOpt = None,
     state_dir: Annotated[
@@ -238,7 +262,7 @@ def agent(
             pose = w.start_poses(start_index + 1, cfg.robot.radius)[start_index]
         except ValueError as e:
             _fail(f"--start-index {start_index}: {e}")
-    bus = _bus("agent", robot_id, connect, fleet)
+    bus = _bus("agent", robot_id, connect, fleet, zenoh_config)
     a = Agent(bus, robot_id, cfg, state_dir)
     _stop_on_signals(a.stop)
     try:
@@ -256,6 +280,7 @@ def coordinator(
     ] = 1,
     world: WorldOpt = "home",
     connect: ConnectOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,
     config: ConfigOpt = None,
     state: Annotated[
@@ -287,7 +312,7 @@ def coordinator(
         store = JobStore(state) if state is not None else None
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
-    bus = _bus("coordinator", "coordinator", connect, fleet)
+    bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
     c = Coordinator(bus, planner, robots, cfg.coordinator, store)
     _stop_on_signals(c.stop)
     try:
