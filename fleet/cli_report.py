@@ -14,6 +14,7 @@ def report(
     run_dir: Annotated[
         Path,
         typer.Argument(
+            metavar="RUN_DIR",
             help="A run dir written by `fleet up` (runs/<date-time> by default).",
             show_default=False,
         ),
