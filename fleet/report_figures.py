@@ -54,6 +54,11 @@ EVENT_MARKERS = {
     "done": ("|", "task done"),
 }
 FLEET_EVENTS = ("resumed", "finished")
+# events drawn above the others when they fall on one spot
+EVENT_ZORDER = {"lost": 6, "rejoined": 5, "joined": 5}
+# a robot's id label is stacked above those of robots that ended within this distance
+LABEL_NEAR_M = 0.8
+LABEL_STEP_PT = 14
 COLLISION_MARKER = "*"
 
 
@@ -116,6 +121,8 @@ def map_figure(data: RunData) -> tuple[Figure, float]:
     ax.set_aspect("equal")
     ax.set_axis_off()
     handles: list[Artist] = []
+    lost = lost_at_end(data)
+    ends: list[np.ndarray] = []
     for rid in data.robots:
         colour = robot_colour(rid)
         track = data.tracks.get(rid)
@@ -126,11 +133,18 @@ def map_figure(data: RunData) -> tuple[Figure, float]:
             continue
         ax.plot(track[:, 1], track[:, 2], color=colour, lw=1.6, solid_capstyle="round")
         ax.plot(*track[0, 1:], marker="o", ms=6, color=colour, mec="white")
-        ax.plot(*track[-1, 1:], marker="s", ms=6, color=colour, mec="white")
+        end = track[-1, 1:]
+        if rid in lost:
+            ax.plot(*end, marker="X", ms=11, color=colour, mec="black", zorder=5)
+        else:
+            ax.plot(*end, marker="s", ms=6, color=colour, mec="white")
+        # labels of robots that ended close together are stacked, not drawn over each other
+        stacked = sum(np.hypot(*(end - e)) < LABEL_NEAR_M for e in ends)
+        ends.append(end)
         text = ax.annotate(
             rid,
-            track[-1, 1:],
-            xytext=(6, 6),
+            end,
+            xytext=(6, 6 + LABEL_STEP_PT * stacked),
             textcoords="offset points",
             color=colour,
             fontsize=9,
@@ -171,6 +185,10 @@ def map_figure(data: RunData) -> tuple[Figure, float]:
         Line2D([], [], ls="", marker="o", color="grey", mec="white", label="start"),
         Line2D([], [], ls="", marker="s", color="grey", mec="white", label="end"),
     ]
+    if lost:
+        handles.append(
+            Line2D([], [], ls="", marker="X", ms=9, color="grey", mec="black", label="lost there")
+        )
     if data.collisions:
         handles.append(Line2D([], [], ls="", marker="x", mew=2, color="black", label="contact"))
     legend = fig.legend(
@@ -217,6 +235,15 @@ def _figures_text(data: RunData) -> str:
     if events:
         lines.append(f"robots lost   {lost}")
     return "\n".join(lines)
+
+
+def lost_at_end(data: RunData) -> set[str]:
+    """The robots whose last liveness event is ``lost`` (no ``joined`` or ``rejoined`` after)."""
+    last: dict[str, str] = {}
+    for e in data.events:
+        if e["kind"] in ("lost", "joined", "rejoined"):
+            last[e["robot"]] = e["kind"]
+    return {rid for rid, kind in last.items() if kind == "lost"}
 
 
 def swept_over_time(data: RunData, robot: str) -> tuple[np.ndarray, np.ndarray]:
@@ -284,13 +311,13 @@ def timeline_figure(data: RunData) -> Figure:
         if kind in FLEET_EVENTS:
             ax.axvline(t, color="grey", ls="--", lw=1)
             ax.annotate(
-                kind,
-                (t, 1.0),
+                f"{kind} ",
+                (t, 0.02),
                 xycoords=("data", "axes fraction"),
                 rotation=90,
                 fontsize=7,
                 ha="right",
-                va="top",
+                va="bottom",
                 color="grey",
             )
             continue
@@ -299,7 +326,16 @@ def timeline_figure(data: RunData) -> Figure:
         ts, ys = curves[rid]
         y = float(np.interp(t, ts, ys)) if len(ts) else 0.0
         marker = EVENT_MARKERS[kind][0]
-        ax.plot(t, y, marker=marker, ms=9, color=robot_colour(rid), mec="black", ls="")
+        ax.plot(
+            t,
+            y,
+            marker=marker,
+            ms=11 if kind == "lost" else 9,
+            color=robot_colour(rid),
+            mec="black",
+            ls="",
+            zorder=EVENT_ZORDER.get(kind, 4),
+        )
         kinds_seen.add(kind)
     for c in data.collisions:
         rid = c["robot"]

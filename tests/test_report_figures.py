@@ -70,6 +70,7 @@ def test_the_map_has_a_legend_with_every_robot_and_each_robot_is_labelled_with_i
         assert rid in legend
         assert _texts(run_dir / "report.svg", f"label-{rid}") == [rid]
     assert "missed" in legend and "cleaned once" in legend and "4+" in legend
+    assert "lost there" not in legend
     svg_text = (run_dir / "report.svg").read_text()
     assert "coverage 97.8 %" in svg_text and "makespan" in svg_text
 
@@ -97,7 +98,7 @@ def test_each_track_is_drawn_in_its_robots_colour(run_dir: Path) -> None:
         assert near > 500, f"{rid}'s colour {robot_colour(rid)} is hardly in the picture"
 
 
-def test_the_timeline_marks_a_lost_robot_and_each_robots_share_grows(run_dir: Path) -> None:
+def test_a_lost_robot_is_marked_on_both_pictures_and_each_robots_share_grows(run_dir: Path) -> None:
     report = json.loads((run_dir / REPORT_FILE).read_text())
     report["events"].append(
         {"wall": 0.0, "sim": 60.0, "kind": "lost", "robot": "robot-1", "task": "", "detail": ""}
@@ -107,6 +108,7 @@ def test_the_timeline_marks_a_lost_robot_and_each_robots_share_grows(run_dir: Pa
     render_report(data)
     legend = _texts(run_dir / "coverage.svg", "legend")
     assert "lost" in legend and "joined" in legend
+    assert "lost there" in _texts(run_dir / "report.svg", "legend")
     assert any("robot-0" in t for t in legend) and any("robot-1" in t for t in legend)
     shares = {rid: swept_over_time(data, rid)[1] for rid in ROBOTS}
     for share in shares.values():
