@@ -66,7 +66,9 @@ PUBLISH_MESSAGES = ("put", "delete")
 ANSWER_MESSAGES = ("declare_queryable", "reply")
 ROBOT_TOPICS = ("cmd_vel", "pose", "intent", "status", "map", "heartbeat")
 SENSOR_TOPICS = ("scan", "odom", "truth")
-COORD_TOPICS = ("task", "plan", "award", "state", "events", "map")
+# the coordinator's keys: single ones, and families with one key per task or robot
+COORD_KEYS = ("state", "events", "map")
+COORD_FAMILIES = ("task", "plan", "award")
 HEADER = (
     "// A secured fleet router: TLS, a user and password per process, and an access-control\n"
     "// list (fleet/lab_security.py says who may do what). Written by `fleet certs`.\n"
@@ -142,8 +144,7 @@ def access_control(robots: int) -> dict[str, Any]:
             "coordinator publishes",
             PUBLISH_MESSAGES,
             ["ingress"],
-            [f"{f}/coord/{t}" for t in ("state", "events", "map")]
-            + [f"{f}/coord/{t}/**" for t in ("task", "plan", "award")],
+            [f"{f}/coord/{t}" for t in COORD_KEYS] + [f"{f}/coord/{t}/**" for t in COORD_FAMILIES],
         ),
         _rule(
             "coordinator answers",
