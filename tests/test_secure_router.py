@@ -5,7 +5,6 @@ control; multicast scouting off) on a free port, and fleet buses as the processe
 from __future__ import annotations
 
 import json
-import os
 import stat
 import subprocess
 import sys
@@ -55,12 +54,8 @@ class Router:
 @pytest.fixture(scope="module")
 def router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Router]:
     work = tmp_path_factory.mktemp("secure")
-    cwd = os.getcwd()
-    os.chdir(work)
-    try:
-        result = CliRunner().invoke(app, ["certs", "lab", "--robots", "3"])
-    finally:
-        os.chdir(cwd)
+    # the shipped router config reads lab/..., relative to the router's working dir
+    result = CliRunner().invoke(app, ["certs", str(work / "lab"), "--robots", "3"])
     assert result.exit_code == 0, result.output
     port = free_port()
     endpoint = f"tls/127.0.0.1:{port}"
