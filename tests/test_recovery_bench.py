@@ -64,3 +64,9 @@ def test_the_bench_measures_a_kill_and_a_hang_on_a_real_fleet(tmp_path: Path) ->
     assert result["trials"][1]["detection_s"] >= 0.75
     assert result["auction_ms_per_lot"]["n"] >= 1
     assert (tmp_path / "bench.json").exists()
+    # the runs end without a report: robot-robot contacts are in the simulator's log
+    logs = sorted(tmp_path.glob("latency-*/sim.log"))
+    assert logs
+    lines = [ln for log in logs for ln in log.read_text().splitlines()]
+    contacts = [ln for ln in lines if "collision robot" in ln]
+    assert contacts == [], "\n".join(contacts)
