@@ -53,6 +53,9 @@ def _register_all() -> None:
     from fleet import cli_recovery
 
     cli_recovery.register(app, plan_app, bench_app, slam_app)
+    from fleet import cli_dashboard
+
+    cli_dashboard.register(app, plan_app, bench_app, slam_app)
     from fleet import cli_fleet_bench
 
     cli_fleet_bench.register(app, plan_app, bench_app, slam_app)

@@ -25,9 +25,11 @@ TIMED_OUT_EXIT = 3
 # A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
 # answer for the report.
 REPORT_WAIT_S = 30.0
-# an operator's respawn waits this long for the main loop, which looks every 0.25 s
+# an operator's respawn waits this long for the main loop, which looks every REDRAW_S
 RESPAWN_WAIT_S = 5.0
 MAX_ROBOTS = 64
+# the fleet is looked at (and the live view redrawn) this often, in wall seconds
+REDRAW_S = 0.2
 # The fleet cannot go on without these; every other process can be started again by
 # `fleet respawn NAME`.
 FATAL_PROCESSES = ("router", "sim")
@@ -75,7 +77,7 @@ def up(
     """
     from fleet.bus import Bus
     from fleet.config import resolve_world
-    from fleet.dashboard import FleetWatcher
+    from fleet.dashboard import BusFeed, FleetWatcher
     from fleet.launcher import Launcher, free_port, wait_for_port
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
     from fleet.report import (
@@ -151,10 +153,13 @@ def up(
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
-        watcher = FleetWatcher(bus)
+        watcher = FleetWatcher(DEFAULT_FLEET)
+        feed = BusFeed(bus, watcher, fetch=not headless)
         recorder = RunRecorder(bus)
         out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
-        status = _watch(watcher, launcher, calls, stop, until_done, timeout, headless, t0)
+        status = _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, t0)
+        feed.pump()
+        feed.close()
         wall_s = time.monotonic() - t0
         summary = bus.request(
             bus.keys.sim_report(), Request("up"), CoverageSummary, timeout=REPORT_WAIT_S
@@ -266,26 +271,44 @@ def _respawner(launcher: Launcher, calls: MainThreadCalls) -> Callable[[OpsReque
     return answer
 
 
-def _watch(watcher, launcher, calls, stop, until_done, timeout, headless, t0) -> str:
+def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, t0) -> str:
     """Show progress until done, timeout, a signal or a dead router or simulator; returns why
-    it stopped. Another process that dies is reported once, and the run goes on."""
+    it stopped. Another process that dies is reported once, and the run goes on. On a
+    terminal (and without --headless) the live view of `fleet dashboard` shows it, until q
+    closes the view; then, as without a terminal, plain lines."""
     from rich.console import Console
-    from rich.live import Live
+
+    from fleet.cli_ops import ProcessActions
+    from fleet.dashboard_term import TerminalView, ViewControl
 
     console = Console(stderr=True)
-    live = (
-        None if headless or not console.is_terminal else Live(console=console, auto_refresh=False)
-    )
+    control = ViewControl(watcher, ProcessActions(launcher.run_dir))
+    view = None
+    if not headless and console.is_terminal:
+        view = TerminalView(watcher, control, console)
     last_line = -1e9
     reported: dict[str, int] = {}
+
+    def say(text: str, kind: str) -> None:
+        if view is not None:
+            watcher.note(kind, text)
+        else:
+            console.print(f"[{'red' if kind == 'error' else 'yellow'}]{text}")
+
     try:
-        if live is not None:
-            live.start()
-        while not stop.wait(0.25):
+        if view is not None:
+            view.start()
+        while not stop.wait(REDRAW_S):
             calls.run_pending()
+            feed.pump()
             wall = time.monotonic() - t0
-            if live is not None:
-                live.update(watcher.table(wall), refresh=True)
+            if view is not None and control.quit.is_set():
+                view.stop()
+                view = None
+                watcher.take_events()  # the view has shown them
+                console.print("the view is closed; the fleet runs on (Ctrl-C stops it)")
+            if view is not None:
+                view.draw()
             else:
                 for line in watcher.take_events():
                     print(f"event: {line}", file=sys.stderr, flush=True)
@@ -296,26 +319,30 @@ def _watch(watcher, launcher, calls, stop, until_done, timeout, headless, t0) ->
             fatal = {n: c for n, c in dead.items() if n in FATAL_PROCESSES}
             if fatal:
                 name, code = next(iter(fatal.items()))
-                console.print(
-                    f"[red]{name} exited with code {code}; see {launcher.run_dir / (name + '.log')}"
-                )
+                log = launcher.run_dir / (name + ".log")
+                if view is not None:
+                    view.stop()
+                    view = None
+                say(f"{name} exited with code {code}; see {log}", "error")
                 return "error"
             for name, code in dead.items():
                 restarts = launcher.records[name].restarts
                 if reported.get(name) != restarts:
                     reported[name] = restarts
-                    console.print(
-                        f"[yellow]{name} exited with code {code}; `fleet respawn {name}` starts "
-                        "it again"
+                    say(
+                        f"{name} exited with code {code}; `fleet respawn {name}` starts it again",
+                        "lost",
                     )
+            watcher.set_restarts({n: r.restarts for n, r in launcher.records.items()})
             if until_done and watcher.done:
                 return "done"
             if timeout is not None and wall > timeout:
                 return "timeout"
         return "done" if watcher.done else "stopped"
     finally:
-        if live is not None:
-            live.stop()
+        if view is not None:
+            view.stop()
+        control.close()
         print(watcher.line(time.monotonic() - t0), file=sys.stderr, flush=True)
 
 

@@ -1,113 +1,317 @@
-"""Watching a run: collects coverage, robot status, collisions and true poses from the bus.
+"""Watching a run: the dashboard's model of the fleet, built from bus messages only.
 
-The dashboard reads truth (for metrics and the report picture) and commands nothing.
+:class:`FleetWatcher` is the model: each ``on_*`` method takes one decoded message (or a
+liveliness change) and updates it; :meth:`FleetWatcher.snapshot` copies what a view needs into
+a :class:`FleetSnapshot`, which :mod:`fleet.dashboard_view` draws. Nothing here draws or reads
+a terminal, so tests feed recorded messages straight in.
+
+:class:`BusFeed` connects a model to the bus. Streams that come at control rate from every
+robot (true poses, intents, status, the sim clock) go into Zenoh ring buffers and are decoded
+by :meth:`BusFeed.pump` on the view's thread, only the newest per key: a Python callback and a
+decode per sample would cost the dashboard more than it draws. The job's
+messages (events, fleet state, plans, collisions, heartbeats, coverage) arrive by callback.
+A background thread fetches the floor plan (served by the coordinator) and the cleaned area
+(served by the simulator) once a second.
+
+The dashboard reads truth (where the robots really are) and commands nothing.
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
-from rich.console import Group, RenderableType
-from rich.table import Table
-from rich.text import Text
+import numpy as np
 
 from fleet.bus import Bus
+from fleet.floor_map import unpack_grid
 from fleet.protocol import (
     Clock,
     Collision,
+    CoverageImage,
     CoverageSummary,
+    DecodeError,
     FleetEvent,
     FleetState,
+    Heartbeat,
+    Intent,
+    Keys,
+    MapPatches,
+    Message,
     Plan,
+    Request,
     RobotStatus,
     TruthPose,
+    decode,
 )
+from planners.grid import GridMap
 
-TRACK_STEP_M = 0.05
-EVENTS_SHOWN = 6
+log = logging.getLogger(__name__)
+
+EVENTS_KEPT = 200
 # routine events the view does not list; every event is in report.json
-QUIET_EVENTS = ("awarded", "done", "joined")
+QUIET_EVENTS = ("awarded", "done", "auction")
+# wall seconds over which message rates are averaged
+RATE_WINDOW_S = 2.0
+# sim seconds over which a robot's speed is averaged
+SPEED_WINDOW_S = 1.0
+# a robot whose heartbeat is older than this (wall seconds) shows as silent
+SILENT_AFTER_S = 1.0
+# ring buffers of the high-rate streams: room for a second of 10 robots at 4x speed
+RING_CAPACITY = 2048
+# how often the floor plan and the cleaned area are asked for, and how long a query may take
+FETCH_PERIOD_S = 1.0
+FETCH_TIMEOUT_S = 1.0
 
 
 @dataclass
 class RobotView:
+    """What the model knows of one robot. ``pose`` is its true pose (x, y, theta) at sim time
+    ``pose_stamp``; ``intent`` the (x, y) points of its path ahead; ``alive`` whether its
+    liveliness token is there (None until heard of)."""
+
     status: RobotStatus | None = None
-    track: list[tuple[float, float]] = field(default_factory=list)
+    pose: tuple[float, float, float] | None = None
+    pose_stamp: float = 0.0
+    speed: float = 0.0
+    intent: np.ndarray | None = None
+    heartbeat_wall: float | None = None
+    alive: bool | None = None
+    recent: deque[tuple[float, float, float]] = field(default_factory=lambda: deque(maxlen=64))
+
+
+@dataclass(frozen=True)
+class EventLine:
+    """One line of the events panel: wall time, kind (for colour) and text."""
+
+    wall: float
+    kind: str
+    text: str
+
+
+@dataclass(frozen=True)
+class RobotRow:
+    """One robot as the view shows it. ``liveness`` is alive, silent (no heartbeat for
+    ``SILENT_AFTER_S``), lost (the coordinator says so or its liveliness token went) or
+    unknown; ``restarts`` is None when no process table is known."""
+
+    rid: str
+    liveness: str
+    state: str
+    task: str
+    progress: float | None
+    speed: float
+    heartbeat_age: float | None
+    restarts: int | None
+    skipped: int
+    pose: tuple[float, float, float] | None
+    intent: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class FleetSnapshot:
+    """Everything a view draws, copied out of the model at one moment."""
+
+    wall: float
+    fleet: str
+    phase: str
+    sim_time: float
+    coverage: float | None
+    repetition: float | None
+    tasks: tuple[int, int, int] | None
+    eta_s: float | None
+    robots: list[RobotRow]
+    events: list[EventLine]
+    rates: list[tuple[str, float]]
+    floor: GridMap | None
+    cleaned: CoverageImage | None
+    collisions: int
+    note: str = ""
+
+
+class RateMeter:
+    """Messages per second per key pattern (robot ids replaced by ``*``), over a sliding
+    window of wall time."""
+
+    def __init__(self, window_s: float = RATE_WINDOW_S) -> None:
+        self.window_s = window_s
+        self._seen: dict[str, deque[tuple[float, int]]] = {}
+        self._lock = threading.Lock()
+
+    def count(self, key: str, n: int = 1, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        pattern = key_pattern(key)
+        with self._lock:
+            self._seen.setdefault(pattern, deque()).append((now, n))
+
+    def rates(self, now: float | None = None) -> list[tuple[str, float]]:
+        """(pattern, messages per second), busiest first."""
+        now = time.monotonic() if now is None else now
+        out = []
+        with self._lock:
+            for pattern, seen in self._seen.items():
+                while seen and seen[0][0] < now - self.window_s:
+                    seen.popleft()
+                out.append((pattern, sum(n for _, n in seen) / self.window_s))
+        return sorted(out, key=lambda r: (-r[1], r[0]))
+
+
+def key_pattern(key: str) -> str:
+    """``fleet/<f>/robot/robot-3/truth`` → ``robot/*/truth``; other keys lose their
+    ``fleet/<f>/`` prefix and any id after ``plan/``, ``award/``, ``ack/``."""
+    parts = str(key).split("/")[2:]
+    if len(parts) >= 3 and parts[0] == "robot":
+        parts[1] = "*"
+    elif len(parts) >= 3 and parts[0] == "coord" and parts[1] in ("plan", "award", "ack", "task"):
+        parts[2:] = ["*"]
+    return "/".join(parts)
 
 
 class FleetWatcher:
-    def __init__(self, bus: Bus) -> None:
-        self.keys = bus.keys
+    """The dashboard's model of a fleet (see the module docstring). Thread-safe: callbacks
+    on Zenoh threads and the view's thread both go through ``lock``."""
+
+    def __init__(self, fleet: str = "default", silent_after_s: float = SILENT_AFTER_S) -> None:
+        self.keys = Keys(fleet)
+        self.silent_after_s = silent_after_s
         self.lock = threading.Lock()
         self.clock = 0.0
         self.coverage: CoverageSummary | None = None
         self.fleet: FleetState | None = None
         self.robots: dict[str, RobotView] = {}
         self.collisions: list[Collision] = []
-        self.events: deque[FleetEvent] = deque(maxlen=EVENTS_SHOWN)
-        self._unseen: list[FleetEvent] = []
+        self.events: deque[EventLine] = deque(maxlen=EVENTS_KEPT)
+        self.rates = RateMeter()
+        self.floor: GridMap | None = None
+        self.cleaned: CoverageImage | None = None
+        self.restarts: dict[str, int] | None = None
+        self._unseen: list[EventLine] = []
         self.started_at: float | None = None
+        self.started_wall: float | None = None
         self.finished_at: float | None = None
-        k = self.keys
-        bus.subscribe(k.clock(), Clock, self._on_clock)
-        bus.subscribe(k.coverage(), CoverageSummary, self._on_coverage)
-        bus.subscribe(k.coord_state(), FleetState, self._on_fleet)
-        bus.subscribe(k.all_robots("status"), RobotStatus, self._on_status)
-        bus.subscribe(k.all_robots("truth"), TruthPose, self._on_truth)
-        bus.subscribe(k.collisions(), Collision, self._on_collision)
-        bus.subscribe(k.plan("*"), Plan, self._on_plan)
-        bus.subscribe(k.events(), FleetEvent, self._on_event)
 
-    def _robot(self, key: str) -> RobotView:
-        return self.robots.setdefault(self.keys.robot_of(key), RobotView())
+    def _robot(self, rid: str) -> RobotView:
+        return self.robots.setdefault(rid, RobotView())
 
-    def _on_clock(self, _k: str, m: Clock) -> None:
+    def _event(self, wall: float, kind: str, text: str) -> None:
+        line = EventLine(wall, kind, text)
+        self.events.append(line)
+        self._unseen.append(line)
+
+    # ---- messages in ----------------------------------------------------------------------
+
+    def on_clock(self, _key: str, m: Clock) -> None:
         with self.lock:
             self.clock = max(self.clock, m.stamp)
 
-    def _on_coverage(self, _k: str, m: CoverageSummary) -> None:
+    def on_coverage(self, _key: str, m: CoverageSummary) -> None:
         with self.lock:
             self.coverage = m
 
-    def _on_fleet(self, _k: str, m: FleetState) -> None:
+    def on_fleet(self, _key: str, m: FleetState) -> None:
         with self.lock:
             self.fleet = m
+            for rid in m.robots:
+                self._robot(rid)
             if m.phase == "done" and self.finished_at is None:
                 self.finished_at = m.stamp
 
-    def _on_status(self, key: str, m: RobotStatus) -> None:
+    def on_status(self, key: str, m: RobotStatus) -> None:
+        rid = self.keys.robot_of(key)
         with self.lock:
-            self._robot(key).status = m
+            robot = self._robot(rid)
+            before = robot.status.skipped if robot.status is not None else 0
+            if robot.status is not None and robot.status.stamp > m.stamp:
+                return
+            robot.status = m
+            if m.skipped > before:
+                more = m.skipped - before
+                rest = f"{m.task:<8} {more} unreachable waypoint(s), {m.skipped} in all"
+                self._event(time.time(), "gave up", _line(m.stamp, "gave up", rid, rest))
 
-    def _on_truth(self, key: str, m: TruthPose) -> None:
+    def on_truth(self, key: str, m: TruthPose) -> None:
+        rid = self.keys.robot_of(key)
         with self.lock:
-            track = self._robot(key).track
-            if not track or abs(track[-1][0] - m.x) + abs(track[-1][1] - m.y) >= TRACK_STEP_M:
-                track.append((m.x, m.y))
+            robot = self._robot(rid)
+            if robot.pose is not None and m.stamp < robot.pose_stamp:
+                return
+            robot.pose = (m.x, m.y, m.theta)
+            robot.pose_stamp = m.stamp
+            recent = robot.recent
+            recent.append((m.stamp, m.x, m.y))
+            while len(recent) > 2 and recent[1][0] <= m.stamp - SPEED_WINDOW_S:
+                recent.popleft()
+            t0, x0, y0 = recent[0]
+            robot.speed = math.hypot(m.x - x0, m.y - y0) / (m.stamp - t0) if m.stamp > t0 else 0.0
 
-    def _on_plan(self, _k: str, m: Plan) -> None:
+    def on_intent(self, key: str, m: Intent) -> None:
+        with self.lock:
+            self._robot(self.keys.robot_of(key)).intent = m.points[:, 1:3].copy()
+
+    def on_heartbeat(self, key: str, _m: Heartbeat) -> None:
+        with self.lock:
+            self._robot(self.keys.robot_of(key)).heartbeat_wall = time.time()
+
+    def on_plan(self, _key: str, m: Plan) -> None:
         with self.lock:
             if self.started_at is None or m.stamp < self.started_at:
                 self.started_at = m.stamp
+            if self.started_wall is None:
+                self.started_wall = time.time()
 
-    def _on_event(self, _k: str, m: FleetEvent) -> None:
-        if m.kind not in QUIET_EVENTS:
-            with self.lock:
-                self.events.append(m)
-                self._unseen.append(m)
+    def on_event(self, _key: str, m: FleetEvent) -> None:
+        if m.kind in QUIET_EVENTS:
+            return
+        with self.lock:
+            self._event(m.wall, m.kind, _event_text(m))
+
+    def on_collision(self, _key: str, m: Collision) -> None:
+        with self.lock:
+            self.collisions.append(m)
+            what = f"robot {m.other}" if m.kind == "robot" else m.kind
+            rest = f"with {what} at ({m.x:.2f}, {m.y:.2f})"
+            self._event(time.time(), "contact", _line(m.stamp, "contact", m.robot, rest))
+
+    def on_alive(self, rid: str, alive: bool) -> None:
+        """An agent's liveliness token appeared (``alive``) or went."""
+        with self.lock:
+            robot = self._robot(rid)
+            robot.alive = alive
+            if alive:
+                robot.heartbeat_wall = time.time()
+
+    def on_floor(self, m: MapPatches) -> None:
+        with self.lock:
+            self.floor = unpack_grid(m)
+
+    def on_cleaned(self, m: CoverageImage) -> None:
+        with self.lock:
+            self.cleaned = m
+
+    def set_restarts(self, restarts: dict[str, int]) -> None:
+        """How often each process was restarted, from the run's process table."""
+        with self.lock:
+            self.restarts = dict(restarts)
+
+    def note(self, kind: str, text: str) -> None:
+        """An operator's action or a local problem, shown among the events."""
+        with self.lock:
+            self._event(time.time(), kind, text)
+
+    # ---- what views read ------------------------------------------------------------------
 
     def take_events(self) -> list[str]:
         """The events (but the routine ones) since the last call, one line each."""
         with self.lock:
             unseen, self._unseen = self._unseen, []
-        return [_event_line(e) for e in unseen]
-
-    def _on_collision(self, _k: str, m: Collision) -> None:
-        with self.lock:
-            self.collisions.append(m)
+        return [_stamped(e) for e in unseen]
 
     @property
     def done(self) -> bool:
@@ -121,67 +325,75 @@ class FleetWatcher:
                 return None
             return self.finished_at - (self.started_at or 0.0)
 
-    def _tasks(self) -> str:
-        f = self.fleet
-        if f is None:
-            return ""
-        return f"tasks {f.tasks_open} open, {f.tasks_assigned} assigned, {f.tasks_done} done"
-
-    def table(self, wall_s: float) -> RenderableType:
-        """The live view: a robot table under the fleet's figures, then the latest events."""
+    def snapshot(self, now: float | None = None, events: int = EVENTS_KEPT) -> FleetSnapshot:
+        """A copy of what the view draws at wall time ``now``, with the last ``events``."""
+        now = time.time() if now is None else now
+        rates = self.rates.rates()
         with self.lock:
+            f = self.fleet
+            lost = set(f.lost) if f else set()
+            rows = [self._row(rid, v, rid in lost, now) for rid, v in sorted(self.robots.items())]
+            tasks = (f.tasks_open, f.tasks_assigned, f.tasks_done) if f else None
             cov = self.coverage
-            phase = self.fleet.phase if self.fleet else "starting"
-            lost = set(self.fleet.lost) if self.fleet else set()
-            rtf = self.clock / wall_s if wall_s > 0 else 0.0
-            title = (
-                f"fleet — {phase} — sim {self.clock:7.1f} s ({rtf:4.1f}× real time) — "
-                f"coverage {100 * cov.coverage if cov else 0:5.1f} % — "
-                f"repetition {100 * cov.repetition if cov else 0:4.1f} % — {self._tasks()}"
+            return FleetSnapshot(
+                wall=now,
+                fleet=self.keys.fleet,
+                phase=f.phase if f else "starting",
+                sim_time=self.clock,
+                coverage=cov.coverage if cov else None,
+                repetition=cov.repetition if cov else None,
+                tasks=tasks,
+                eta_s=self._eta(now),
+                robots=rows,
+                events=list(self.events)[-events:] if events > 0 else [],
+                rates=rates,
+                floor=self.floor,
+                cleaned=self.cleaned,
+                collisions=len(self.collisions),
             )
-            t = Table(title=title, expand=False)
-            for col in (
-                "robot",
-                "live",
-                "state",
-                "task",
-                "progress",
-                "skipped",
-                "distance m",
-                "wall hits",
-                "robot hits",
-            ):
-                t.add_column(
-                    col,
-                    justify="right" if col not in ("robot", "live", "state", "task") else "left",
-                )
-            hits = {}
-            if cov is not None:
-                hits = {
-                    r: (int(cov.wall_collisions[i]), int(cov.robot_collisions[i]))
-                    for i, r in enumerate(cov.robots)
-                }
-            for rid in sorted(self.robots):
-                s = self.robots[rid].status
-                w, r = hits.get(rid, (0, 0))
-                live = "[red]lost[/]" if rid in lost else "alive"
-                if s is None:
-                    t.add_row(rid, live, "—", "", "", "", "", str(w), str(r))
-                    continue
-                t.add_row(
-                    rid,
-                    live,
-                    s.state,
-                    s.task,
-                    f"{100 * s.progress:5.1f} %",
-                    str(s.skipped),
-                    f"{s.distance_m:7.1f}",
-                    str(w),
-                    str(r),
-                )
-            return Group(t, *(Text(_event_line(e)) for e in self.events))
+
+    def _row(self, rid: str, v: RobotView, lost: bool, now: float) -> RobotRow:
+        age = None if v.heartbeat_wall is None else max(0.0, now - v.heartbeat_wall)
+        if lost or v.alive is False:
+            liveness = "lost"
+        elif age is not None and age > self.silent_after_s:
+            liveness = "silent"
+        elif v.alive or age is not None:
+            liveness = "alive"
+        else:
+            liveness = "unknown"
+        s = v.status
+        restarts = None if self.restarts is None else self.restarts.get(rid, 0)
+        return RobotRow(
+            rid=rid,
+            liveness=liveness,
+            state=s.state if s else "",
+            task=s.task if s else "",
+            progress=s.progress if s else None,
+            speed=v.speed,
+            heartbeat_age=age,
+            restarts=restarts,
+            skipped=s.skipped if s else 0,
+            pose=v.pose,
+            intent=v.intent,
+        )
+
+    def _eta(self, now: float) -> float | None:
+        """Wall seconds until the last task is done, at the pace tasks have been done so far
+        (tasks are cut to about the same cleaning time); None before the first is done."""
+        f = self.fleet
+        if f is None or self.started_wall is None:
+            return None
+        if f.phase == "done":
+            return 0.0
+        total = f.tasks_open + f.tasks_assigned + f.tasks_done
+        if f.tasks_done == 0 or total == 0:
+            return None
+        elapsed = max(0.0, now - self.started_wall)
+        return elapsed * (total - f.tasks_done) / f.tasks_done
 
     def line(self, wall_s: float) -> str:
+        """One plain line of the fleet's state, for logs and terminals without a screen."""
         with self.lock:
             cov = self.coverage
             phase = self.fleet.phase if self.fleet else "starting"
@@ -192,12 +404,141 @@ class FleetWatcher:
                 if v.status is not None
             )
             lost = f" lost={','.join(self.fleet.lost)}" if self.fleet and self.fleet.lost else ""
+            f = self.fleet
+            tasks = (
+                f" tasks {f.tasks_open} open, {f.tasks_assigned} assigned, {f.tasks_done} done"
+                if f
+                else ""
+            )
             return (
                 f"[{wall_s:6.1f} s] {phase} sim={self.clock:.1f}s "
-                f"coverage={100 * cov.coverage if cov else 0:.1f}% {self._tasks()}{lost} {states}"
+                f"coverage={100 * cov.coverage if cov else 0:.1f}%{tasks}{lost} {states}"
             )
 
 
-def _event_line(e: FleetEvent) -> str:
-    when = time.strftime("%H:%M:%S", time.localtime(e.wall))
-    return f"{when} sim {e.stamp:7.1f} s  {e.kind:<10} {e.robot:<10} {e.task:<8} {e.detail}"
+def _event_text(e: FleetEvent) -> str:
+    return _line(e.stamp, e.kind, e.robot, f"{e.task:<8} {e.detail}")
+
+
+def _line(stamp: float, kind: str, robot: str, rest: str) -> str:
+    """An event's text: sim time, kind, robot and the rest, in columns."""
+    return f"sim {stamp:7.1f} s  {kind:<10} {robot:<10} {rest}".rstrip()
+
+
+def _stamped(e: EventLine) -> str:
+    return f"{time.strftime('%H:%M:%S', time.localtime(e.wall))} {e.text}"
+
+
+# what BusFeed takes from ring buffers, newest per key only: topic under robot/<id>/, its
+# message type and the model's method
+_RING_STREAMS: tuple[tuple[str, type[Message], str], ...] = (
+    ("truth", TruthPose, "on_truth"),
+    ("intent", Intent, "on_intent"),
+    ("status", RobotStatus, "on_status"),
+)
+
+
+class BusFeed:
+    """Feeds a :class:`FleetWatcher` from a bus (see the module docstring). Call
+    :meth:`pump` before each look at the model; :meth:`close` stops the fetch thread."""
+
+    def __init__(self, bus: Bus, watcher: FleetWatcher, fetch: bool = True) -> None:
+        import zenoh
+
+        self.bus = bus
+        self.watcher = watcher
+        k = bus.keys
+        w = watcher
+        self._rings: list[tuple[Any, type[Message], Callable[[str, Any], None]]] = []
+        for topic, cls, method in _RING_STREAMS:
+            sub = bus.session.declare_subscriber(
+                k.all_robots(topic), zenoh.handlers.RingChannel(RING_CAPACITY)
+            )
+            self._rings.append((sub, cls, getattr(w, method)))
+        clock = bus.session.declare_subscriber(k.clock(), zenoh.handlers.RingChannel(64))
+        self._rings.append((clock, Clock, w.on_clock))
+        for key, cls, handler in (
+            (k.coverage(), CoverageSummary, w.on_coverage),
+            (k.coord_state(), FleetState, w.on_fleet),
+            (k.collisions(), Collision, w.on_collision),
+            (k.plan("*"), Plan, w.on_plan),
+            (k.events(), FleetEvent, w.on_event),
+            (k.all_robots("heartbeat"), Heartbeat, w.on_heartbeat),
+        ):
+            bus.subscribe(key, cls, self._counted(handler))
+        bus.watch_alive(
+            "agent", lambda rid: w.on_alive(rid, True), lambda rid: w.on_alive(rid, False)
+        )
+        self._stop = threading.Event()
+        self._fetcher: threading.Thread | None = None
+        if fetch:
+            self._fetcher = threading.Thread(target=self._fetch_loop, name="dashboard-fetch")
+            self._fetcher.daemon = True
+            self._fetcher.start()
+
+    def _counted(self, handler: Callable[[str, Any], None]) -> Callable[[str, Any], None]:
+        rates = self.watcher.rates
+
+        def on_message(key: str, msg: Any) -> None:
+            rates.count(key)
+            handler(key, msg)
+
+        return on_message
+
+    def pump(self) -> int:
+        """Decode the newest sample per key of what the ring buffers hold into the model;
+        returns how many samples came (all are counted in the rates)."""
+        now = time.monotonic()
+        seen = 0
+        rates = self.watcher.rates
+        for sub, cls, handler in self._rings:
+            newest: dict[str, Any] = {}
+            counts: dict[str, int] = {}
+            while (sample := sub.try_recv()) is not None:
+                key = str(sample.key_expr)
+                newest[key] = sample
+                counts[key] = counts.get(key, 0) + 1
+            for key, n in counts.items():
+                rates.count(key, n, now)
+                seen += n
+            for key, sample in newest.items():
+                try:
+                    msg = decode(sample.payload.to_bytes(), cls)
+                except DecodeError as e:
+                    self.bus.drop_malformed(key, e)
+                    continue
+                handler(key, msg)
+        return seen
+
+    def fetch_once(self) -> None:
+        """Ask for the floor plan (until it came) and the cleaned area, once each."""
+        req = Request(f"dashboard-{self.bus.ident}")
+        w = self.watcher
+        if w.floor is None:
+            with contextlib.suppress(TimeoutError, RuntimeError, DecodeError):
+                w.on_floor(
+                    self.bus.request(self.bus.keys.floor_map(), req, MapPatches, FETCH_TIMEOUT_S)
+                )
+        with contextlib.suppress(TimeoutError, RuntimeError, DecodeError):
+            w.on_cleaned(
+                self.bus.request(
+                    self.bus.keys.coverage_image(), req, CoverageImage, FETCH_TIMEOUT_S
+                )
+            )
+
+    def _fetch_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.fetch_once()
+            except Exception:
+                log.exception("the dashboard could not fetch the floor plan or cleaned area")
+            self._stop.wait(FETCH_PERIOD_S)
+
+    def close(self) -> None:
+        """Stop fetching; the subscriptions end with the bus."""
+        self._stop.set()
+        if self._fetcher is not None:
+            self._fetcher.join(timeout=2 * FETCH_TIMEOUT_S + 1.0)
+        for sub, *_ in self._rings:
+            with contextlib.suppress(Exception):
+                sub.undeclare()
