@@ -1,4 +1,5 @@
-"""`fleet bench fleet`: what whole fleets deliver on the floor, over worlds and seeds."""
+"""`fleet bench fleet` and `fleet bench follow`: what fleets, and one robot on its own, deliver
+on the floor, over worlds and seeds."""
 
 from __future__ import annotations
 
@@ -103,7 +104,91 @@ def bench_fleet(
         typer.echo("\n".join(table_lines(result)))
 
 
+def bench_follow(
+    worlds: Annotated[
+        str,
+        typer.Option(
+            "--worlds",
+            "-w",
+            help="Comma-separated worlds: built-in names (home, small), world YAML files, or "
+            "ROS map_server YAML files.",
+        ),
+    ] = "small,home",
+    seeds: Annotated[
+        str, typer.Option("--seeds", help="Seeds of the runs: 0,1,2 or 0-4 or a mix.")
+    ] = "0-4",
+    pose: Annotated[
+        str,
+        typer.Option(
+            "--pose", help="What the robot drives on: slam (its own, as in fleet up) or truth."
+        ),
+    ] = "slam",
+    latency: Annotated[
+        float,
+        typer.Option(
+            "--latency",
+            help="Sim seconds between a scan and its command taking effect (0: as fleet up "
+            "--speed 0; up to sim.max_lag_s in real time).",
+        ),
+    ] = 0.0,
+    config: Annotated[
+        Path | None, typer.Option("--config", help="fleet.yaml to use instead of the default.")
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """One robot drives the coordinator's whole coverage tour with the real path follower on
+    the real simulator core, in one process and without the bus: what the plan and the follower
+    lose on the floor, apart from peers, the market and the processes.
+
+    Per run: coverage and repetition (the simulator's grid), sim time against the plan's
+    estimate, contacts and waypoints given up (with where), the sweep's tracking error, and
+    the sim seconds per kind of control step (sweep, transit, turn in place, escape, ...);
+    per world the medians and totals. Deterministic for a seed, and fast (the small world in
+    seconds), so a change to the follower or the plan can be judged over many seeds and maps.
+
+    Examples: `fleet bench follow`; `fleet bench follow --worlds home --seeds 0-9 --json`;
+    `fleet bench follow --worlds ../shared/data/maps/cob_ipa_apartment.yaml --pose truth`.
+    """
+    from fleet.config import ConfigError, resolve_world
+    from fleet.follow_bench import follow_tour, run_line, summarize
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
+
+    if pose not in ("slam", "truth"):
+        _fail(f"--pose must be slam or truth, not {pose!r}")
+    if latency < 0 or not math.isfinite(latency):
+        _fail(f"--latency must be a finite number >= 0, got {latency}")
+    try:
+        cfg = load_fleet_config(config)
+        chosen = [
+            load_world(resolve_world(w.strip()), cfg.robot.radius)
+            for w in worlds.split(",")
+            if w.strip()
+        ]
+    except ConfigError as e:
+        _fail(str(e))
+    if not chosen:
+        _fail("--worlds: no world given")
+    runs = []
+    for world in chosen:
+        for seed in _seeds(seeds):
+            runs.append(follow_tour(world, cfg, seed, pose, latency))
+            print(run_line(runs[-1]), file=sys.stderr, flush=True)
+    result = {"pose": pose, "latency_s": latency, "runs": runs, "worlds": summarize(runs)}
+    if as_json:
+        print(json.dumps(result))
+        return
+    for name, s in result["worlds"].items():
+        typer.echo(
+            f"{name}: {s['finished']}/{s['runs']} finished; medians: coverage "
+            f"{100 * s['coverage']:.1f} %, repetition {100 * s['repetition']:.1f} %, time "
+            f"×{s['time_over_estimate']} the plan's estimate; contacts {s['contacts']}, given "
+            f"up {s['given_up']} in all; worst tracking p95 {100 * s['tracking_p95_m']:.1f} cm"
+        )
+
+
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
     bench_app.command("fleet", help=reflow(bench_fleet.__doc__ or ""))(bench_fleet)
+    bench_app.command("follow", help=reflow(bench_follow.__doc__ or ""))(bench_follow)

@@ -72,3 +72,21 @@ def test_bad_arguments_are_refused_before_any_run(args: list[str], message: str)
         timeout=60,
     )
     assert out.returncode != 0 and message in out.stderr, out.stderr
+
+
+def test_one_robot_drives_the_small_worlds_whole_tour_in_process() -> None:
+    from fleet.config import resolve_world
+    from fleet.follow_bench import follow_tour
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
+
+    cfg = load_fleet_config()
+    world = load_world(resolve_world("small"), cfg.robot.radius)
+    r = follow_tour(world, cfg, seed=0, pose_source="truth")
+    assert r["finished"] and r["contacts"] == 0
+    assert r["coverage"] > 0.95 and 0.0 < r["repetition"] < 0.6
+    # every control step is put somewhere, and the run took longer than the plan's estimate
+    assert sum(r["time_s"].values()) == pytest.approx(r["sim_s"], abs=0.5)
+    assert r["time_s"]["sweep"] > 0.5 * r["plan_estimate_s"] and r["time_over_estimate"] > 1.0
+    assert 0 < r["tracking_m"]["mean"] < r["tracking_m"]["p95"] <= r["tracking_m"]["max"]
+    assert len(r["given_up_points"]) == r["given_up"]
