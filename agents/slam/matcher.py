@@ -115,17 +115,20 @@ class CorrelativeMatcher:
         coarse_factor: int,
         penalize: bool = True,
         search_points: int | None = None,
+        penalties: tuple[float, float] | None = None,
     ) -> MatchResult:
         """Match ``points`` (N, 2, sensor frame) against ``field`` around ``prior`` (field frame).
 
         With ``penalize`` the score is reduced with the squared distance from the prior (an
-        odometry prior); loop-closure searches turn it off, their prior carries drift. With
+        odometry prior; ``penalties`` per m² and per rad² replace the parameters' own);
+        loop-closure searches turn it off, their prior carries drift. With
         ``search_points`` the discrete search uses an evenly strided subset of that many points
         (and refines only the best coarse cells); the refinement and the score use all points.
         """
         p = self.params
-        t_pen = p.translation_penalty if penalize else 0.0
-        r_pen = p.rotation_penalty if penalize else 0.0
+        if penalties is None:
+            penalties = (p.translation_penalty, p.rotation_penalty)
+        t_pen, r_pen = penalties if penalize else (0.0, 0.0)
         res = field.resolution
         rows, cols = field.shape
         prior = np.asarray(prior, dtype=float)
@@ -159,11 +162,17 @@ class CorrelativeMatcher:
         offs = np.arange(f)
         samples: list[np.ndarray] = []
         best = -np.inf
-        batch = 4
-        for k in range(0, order.size, batch):
+        k, batch = 0, 4
+        while k < order.size:
             if coarse_sorted[k] < best - margin:
                 break
-            ti, jy, jx = np.unravel_index(order[k : k + batch], coarse.shape)
+            # Coarse cells in order of their bound, in batches that double (up to 64): the first
+            # few set the best fine score, later ones are cut by it in few numpy calls.
+            chunk = order[k : k + batch]
+            chunk = chunk[coarse_sorted[k : k + batch] >= best - margin]
+            k += batch
+            batch = min(2 * batch, 64)
+            ti, jy, jx = np.unravel_index(chunk, coarse.shape)
             ky = starts[jy][:, None] + offs  # (B, f)
             kx = starts[jx][:, None] + offs
             r = np.clip(row0[ti][:, None, :] + ky[:, :, None], 0, rows - 1)  # (B, f, N)

@@ -40,8 +40,15 @@ class SlamParams:
     search_window_theta: float = 0.2
     angular_step: float = 0.008  # ≈ resolution / typical range: a far point moves ≤ one cell
     coarse_factor: int = 4  # low-resolution level = max-pool over coarse_factor² cells
-    translation_penalty: float = 20.0  # score penalty per m² away from the odometry prior
-    rotation_penalty: float = 40.0  # score penalty per rad² away from the odometry prior
+    translation_penalty: float = 20.0  # score penalty per m² away from the odometry prior ...
+    rotation_penalty: float = 40.0  # ... per rad²; at most these, and at most prior_weight / σ²
+    # Odometry motion model of one step (dd metres, dθ radians): σ_xy = a·dd + b per axis,
+    # σ_θ = c·|dθ| + d·dd; a long or turning step then gets a weaker prior (see prior_weight).
+    motion_xy_per_m: float = 0.05
+    motion_xy_floor: float = 0.002
+    motion_theta_per_rad: float = 0.05
+    motion_theta_per_m: float = 0.02
+    prior_weight: float = 0.005  # penalty per m² = min(translation_penalty, this / σ_xy²)
     min_match_score: float = 0.35  # below this mean likelihood, trust odometry instead
     refine_iterations: int = 6  # Gauss–Newton steps on the interpolated field after the search
     score_information_gain: float = 0.1  # Olson §IV weights exp(gain·N·(score − best))
@@ -65,7 +72,7 @@ class SlamParams:
     odom_sigma_theta: float = 0.03
     loop_sigma_xy: float = 0.05
     loop_sigma_theta: float = 0.02
-    huber_scale: float = 3.0  # in standard deviations: a wrong loop closure is down-weighted
+    huber_scale: float = 1.0  # in standard deviations: a wrong loop closure is down-weighted
     optimize_every_nodes: int = 20  # optimize at most this often, and only after new closures
 
     # Relocalization of a restarted agent in its saved map (agents/slam/relocalize.py)
@@ -102,6 +109,8 @@ class SlamParams:
             "loop_sigma_xy",
             "loop_sigma_theta",
             "huber_scale",
+            "motion_xy_floor",
+            "prior_weight",
             "reloc_window_xy",
             "reloc_window_theta",
             "reloc_angular_step",
@@ -112,6 +121,9 @@ class SlamParams:
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
+        for name in ("motion_xy_per_m", "motion_theta_per_rad", "motion_theta_per_m"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0")
         if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < self.p_max < 1:
             raise ValueError("need 0 < p_min < p_miss < 0.5 < p_hit < p_max < 1")
         if not self.p_min < self.free_threshold < self.occupied_threshold < self.p_max:

@@ -1,4 +1,4 @@
-"""A 2D pose graph optimized by sparse nonlinear least squares (scipy ``least_squares``).
+"""A 2D pose graph optimized by sparse nonlinear least squares (Gauss–Newton, sparse solve).
 
 Every constraint says "pose b seen from pose a is z": residual r = (a⁻¹ ⊕ b) ⊖ z, whitened by
 its standard deviations (the SPA formulation of Konolige et al. 2010, as used for submaps and
@@ -12,14 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import least_squares
+from scipy.sparse.linalg import spsolve
 
 from agents.slam.geometry import wrap_angle
 
 
 @dataclass(frozen=True)
 class OptimizationReport:
-    """Function evaluations used and ½Σr² of the whitened residuals before and after."""
+    """Gauss–Newton iterations used and the Huber cost of the whitened residuals before and
+    after."""
 
     iterations: int
     initial_cost: float
@@ -59,8 +60,14 @@ class PoseGraph:
         self._z.append(np.asarray(z, dtype=float))
         self._w.append(np.array([1.0 / sigma_xy, 1.0 / sigma_xy, 1.0 / sigma_theta]))
 
-    def optimize(self, huber_scale: float, max_iterations: int = 20) -> OptimizationReport:
-        """Minimize the whitened residuals with a Huber loss (scale in standard deviations)."""
+    def optimize(
+        self, huber_scale: float, max_iterations: int = 10, tolerance: float = 1e-5
+    ) -> OptimizationReport:
+        """Minimize the whitened residuals with a Huber loss (scale in standard deviations) by
+        Gauss–Newton with iteratively reweighted least squares, from the current poses (the
+        previous solution: incremental use needs few iterations). Each step solves the sparse
+        normal equations JᵀWJ·δ = −JᵀWr (SuperLU with a COLAMD ordering); it stops when no
+        variable moves by ``tolerance`` or after ``max_iterations``."""
         if not self._a:
             return OptimizationReport(0, 0.0, 0.0)
         a = np.asarray(self._a)
@@ -110,20 +117,42 @@ class PoseGraph:
             )
             return sp.csr_matrix((data, (row_idx, col_idx)), shape=(3 * m + 3, 3 * n))
 
-        result = least_squares(
-            residuals,
-            self._poses.reshape(-1),
-            jac=jacobian,
-            method="trf",
-            tr_solver="lsmr",
-            loss="huber",
-            f_scale=huber_scale,
-            max_nfev=max_iterations,
-            x_scale="jac",
-        )
-        initial = float(0.5 * np.sum(residuals(self._poses.reshape(-1)) ** 2))
-        final = float(0.5 * np.sum(residuals(result.x) ** 2))
-        x = result.x.reshape(n, 3)
+        # A tiny Levenberg damping keeps poses that no constraint touches yet (a submap just
+        # started) from making the normal equations singular; it moves nothing else.
+        damping = sp.identity(3 * n, format="csr") * 1e-9
+        x = self._poses.reshape(-1).copy()
+        initial = final = _huber_cost(residuals(x), m, huber_scale)
+        iterations = 0
+        while iterations < max_iterations:
+            iterations += 1
+            r = residuals(x)
+            jac = jacobian(x)
+            weights = _huber_weights(r, m, huber_scale)
+            jw = sp.diags(weights) @ jac
+            h = (jac.T @ jw + damping).tocsc()
+            step = spsolve(h, -(jw.T @ r))
+            x += step
+            final = _huber_cost(residuals(x), m, huber_scale)
+            if np.max(np.abs(step)) < tolerance:
+                break
+        x = x.reshape(n, 3)
         x[:, 2] = wrap_angle(x[:, 2])
         self._poses = x
-        return OptimizationReport(int(result.nfev), initial, final)
+        return OptimizationReport(iterations, initial, final)
+
+
+def _huber_weights(r: np.ndarray, m: int, scale: float) -> np.ndarray:
+    """Iteratively reweighted least squares weights of the Huber loss, one per constraint:
+    1 where its whitened 3-vector residual e is within ``scale``, scale/‖e‖ beyond (the anchor
+    rows keep weight 1)."""
+    norms = np.linalg.norm(r[: 3 * m].reshape(m, 3), axis=1)
+    per = np.where(norms <= scale, 1.0, scale / np.maximum(norms, 1e-12))
+    return np.concatenate([np.repeat(per, 3), np.ones(r.size - 3 * m)])
+
+
+def _huber_cost(r: np.ndarray, m: int, scale: float) -> float:
+    """Σ ρ(‖e‖) over the constraints (ρ(e) = e²/2 within ``scale``, scale·(e − scale/2)
+    beyond) plus ½‖r‖² of the anchor rows."""
+    norms = np.linalg.norm(r[: 3 * m].reshape(m, 3), axis=1)
+    rho = np.where(norms <= scale, 0.5 * norms**2, scale * (norms - 0.5 * scale))
+    return float(rho.sum() + 0.5 * np.sum(r[3 * m :] ** 2))

@@ -23,6 +23,7 @@ class ReplayResult:
     trajectory: np.ndarray
     live: np.ndarray
     scan_seconds: np.ndarray
+    scan_cpu_seconds: np.ndarray
     log_seconds: float
     slam: Slam
 
@@ -58,22 +59,25 @@ def replay_log(
     )
     trajectory = np.empty((len(scans), 4))
     seconds = np.empty(len(scans))
+    cpu = np.empty(len(scans))
     for i, rec in enumerate(scans):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         est = slam.process(
             rec.ranges, rec.angle_min, rec.angle_increment, rec.laser_pose, rec.timestamp
         )
         seconds[i] = time.perf_counter() - t0
+        cpu[i] = time.process_time() - c0
         trajectory[i] = (rec.timestamp, *est.pose)
         if progress is not None and i % 100 == 99:
             progress(i + 1, len(scans))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     slam.finish()
     seconds[-1] += time.perf_counter() - t0
+    cpu[-1] += time.process_time() - c0
     live = trajectory.copy()
     trajectory[:, 1:] = slam.trajectory()
     if progress is not None:
         progress(len(scans), len(scans))
     return ReplayResult(
-        trajectory, live, seconds, float(scans[-1].timestamp - scans[0].timestamp), slam
+        trajectory, live, seconds, cpu, float(scans[-1].timestamp - scans[0].timestamp), slam
     )

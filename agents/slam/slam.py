@@ -147,7 +147,8 @@ class Slam:
             self._add_node(points, odom, t)
             self._remember_pose()
             return SlamEstimate(self.pose, self._covariance.copy(), t, True, 1.0)
-        prior = compose(self._pose, relative(self._last_odom, odom))
+        step = relative(self._last_odom, odom)
+        prior = compose(self._pose, step)
         self._last_odom = odom
         submap = self._active[0]
         matched, score = False, 0.0
@@ -161,6 +162,7 @@ class Slam:
                 p.search_window_xy,
                 p.search_window_theta,
                 p.coarse_factor,
+                penalties=self._prior_penalties(step),
             )
             score = result.score
             matched = score >= p.min_match_score
@@ -176,6 +178,25 @@ class Slam:
             self._add_node(points, odom, t)
         self._remember_pose()
         return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
+
+    def _prior_penalties(self, step: np.ndarray) -> tuple[float, float]:
+        """Score penalties per m² and rad² for leaving the odometry prior of one ``step``.
+
+        The step's odometry uncertainty follows the linear motion model of ``SlamParams``
+        (σ_xy = a·dd + b, σ_θ = c·|dθ| + d·dd, as Thrun et al., Probabilistic Robotics §5.4,
+        with standard deviations instead of variances). A Gaussian prior with that σ, weighed
+        against the scan's mean likelihood, costs prior_weight·d²/σ²; the penalty is that,
+        capped by the fixed translation_penalty / rotation_penalty, which hold for short steps
+        (where the odometry is better than any scan in a featureless corridor)."""
+        p = self.params
+        dd = math.hypot(step[0], step[1])
+        sigma_xy = p.motion_xy_per_m * dd + p.motion_xy_floor
+        sigma_theta = p.motion_theta_per_rad * abs(step[2]) + p.motion_theta_per_m * dd
+        t_pen = min(p.translation_penalty, p.prior_weight / sigma_xy**2)
+        r_pen = p.rotation_penalty
+        if sigma_theta > 0:
+            r_pen = min(r_pen, p.prior_weight / sigma_theta**2)
+        return t_pen, r_pen
 
     def trajectory(self) -> np.ndarray:
         """(scans, 3) poses of every processed scan after the latest graph optimization."""
