@@ -171,18 +171,16 @@ def up(
         with watcher.lock:
             skipped = {rid: v.status.skipped for rid, v in watcher.robots.items() if v.status}
             time_use = {rid: time_use_of(v.status) for rid, v in watcher.robots.items() if v.status}
+        job = job_report(run_dir / "coordinator.sqlite")
+        # an agent's own count starts again with each plan: the coordinator's spans them all
+        for rid, n in (job["given_up_waypoints"] or {}).items():
+            skipped[rid] = max(n, skipped.get(rid) or 0)
         report = build_report(
             summary,
             makespan,
             wall_s,
             status,
-            {
-                "world": world_path,
-                "robot_count": robots,
-                "speed": speed,
-                "seed": seed,
-                **job_report(run_dir / "coordinator.sqlite"),
-            },
+            {"world": world_path, "robot_count": robots, "speed": speed, "seed": seed, **job},
             skipped,
             time_use,
         )

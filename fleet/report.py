@@ -123,7 +123,9 @@ def job_report(state: Path) -> dict[str, Any]:
     is lost. ``overlaps`` lists tasks held by two robots at once (it should stay empty);
     ``rejected_bids`` counts the bids the auctions ignored, by why (late, duplicate,
     malformed, not in the market); ``plan_estimate_s`` is the makespan the first allocation
-    priced (the longest of the winners' committed times), None if it never completed."""
+    priced (the longest of the winners' committed times), None if it never completed;
+    ``given_up_waypoints`` the waypoints each robot gave up over all its plans, as the
+    coordinator counted them (robots that gave up none are left out)."""
     if not state.exists():
         return {
             "events": None,
@@ -131,6 +133,7 @@ def job_report(state: Path) -> dict[str, Any]:
             "overlaps": None,
             "rejected_bids": None,
             "plan_estimate_s": None,
+            "given_up_waypoints": None,
         }
     db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
     try:
@@ -176,6 +179,7 @@ def job_report(state: Path) -> dict[str, Any]:
         "overlaps": overlaps,
         "rejected_bids": json.loads(meta.get("rejected_bids", "{}")),
         "plan_estimate_s": json.loads(meta.get("estimate_s", "null")),
+        "given_up_waypoints": json.loads(meta.get("given_up_waypoints", "{}")).get("by_robot", {}),
     }
 
 

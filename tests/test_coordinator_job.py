@@ -168,10 +168,15 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
         (9.5, "awarded", "robot-2", "t01"),
     ):
         store.add_event(0.0, sim, kind, robot, task, "")
-    store.set_meta(rejected_bids={"late": 2}, estimate_s=123.4)
+    store.set_meta(
+        rejected_bids={"late": 2},
+        estimate_s=123.4,
+        given_up_waypoints={"by_robot": {"robot-1": 2}, "seen": {"robot-1/3": 2}},
+    )
     store.close()
     report = job_report(tmp_path / "job.sqlite")
     assert report["plan_estimate_s"] == 123.4
+    assert report["given_up_waypoints"] == {"robot-1": 2}
     owners = {t["id"]: t["owners"] for t in report["tasks"]}
     assert owners["t00"] == [["robot-0", 1.0, 5.0], ["robot-1", 5.1, None]]
     # t01 was done by robot-1 and then awarded again: held by one robot at a time
