@@ -270,8 +270,9 @@ def _respawner(launcher: Launcher, calls: MainThreadCalls) -> Callable[[OpsReque
 
 
 def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, t0) -> str:
-    """Show progress until done, timeout, a signal or a dead router or simulator; returns why
-    it stopped. Another process that dies is reported once, and the run goes on. On a
+    """Show progress until done, timeout, a signal, a dead router or simulator, or a coordinator
+    that failed with an error; returns why it stopped. Another process that dies (a killed
+    coordinator, any agent) is reported once, and the run goes on. On a
     terminal (and without --headless) the live view of `fleet dashboard` shows it, until q
     closes the view; then, as without a terminal, plain lines."""
     from rich.console import Console
@@ -314,7 +315,12 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
                     print(watcher.line(wall), file=sys.stderr, flush=True)
                     last_line = wall
             dead = launcher.dead()
-            fatal = {n: c for n, c in dead.items() if n in FATAL_PROCESSES}
+            # a coordinator that failed by itself (not killed by a signal) fails again if respawned
+            fatal = {
+                n: c
+                for n, c in dead.items()
+                if n in FATAL_PROCESSES or (n == "coordinator" and c > 0)
+            }
             if fatal:
                 name, code = next(iter(fatal.items()))
                 log = launcher.run_dir / (name + ".log")
