@@ -14,6 +14,7 @@ from typing import Annotated, Any
 
 import typer
 
+from fleet.cli_ops import STATE_FILE
 from fleet.cli_processes import ZenohConfigOpt, _bus, _fail
 from fleet.help_text import reflow
 
@@ -93,6 +94,8 @@ def dashboard(
     name = fleet or (table.fleet if table is not None else DEFAULT_FLEET)
     bus = _bus("dashboard", f"view-{os.getpid()}", endpoints, name, zenoh_config)
     watcher = FleetWatcher(name)
+    if run_dir is not None:
+        _past_events(watcher, run_dir / STATE_FILE)
     feed = BusFeed(bus, watcher)
     actions = ProcessActions(run_dir) if table is not None and run_dir is not None else None
     control = ViewControl(watcher, actions)
@@ -162,6 +165,19 @@ def _loop(
                 last_line = tick
                 print(watcher.line(tick - t0), file=sys.stderr, flush=True)
         stop.wait(max(0.0, 1.0 / REDRAW_HZ - (time.monotonic() - tick)))
+
+
+def _past_events(watcher: Any, state: Path) -> None:
+    """The job's events so far, from the coordinator's state file, so a view that attaches
+    late starts with them (read before subscribing: a few may be missed, none shown twice)."""
+    from fleet.dashboard import EVENTS_KEPT
+    from fleet.fleet_runner import read_events
+    from fleet.protocol import FleetEvent
+
+    for e in read_events(state)[-EVENTS_KEPT:]:
+        watcher.on_event(
+            "", FleetEvent(e["sim"], e["wall"], e["kind"], e["robot"], e["task"], e["detail"])
+        )
 
 
 def bench_dashboard(

@@ -227,10 +227,11 @@ class FleetWatcher:
         rid = self.keys.robot_of(key)
         with self.lock:
             robot = self._robot(rid)
-            before = robot.status.skipped if robot.status is not None else 0
+            before = robot.status.skipped if robot.status is not None else m.skipped
             if robot.status is not None and robot.status.stamp > m.stamp:
                 return
             robot.status = m
+            # a view that came late has no earlier count: what was given up before is not news
             if m.skipped > before:
                 more = m.skipped - before
                 rest = f"{m.task:<8} {more} unreachable waypoint(s), {m.skipped} in all"

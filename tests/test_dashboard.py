@@ -256,3 +256,30 @@ def test_the_kill_key_sends_the_selected_robots_agent_sigterm(tmp_path: Path) ->
         for p in procs.values():
             p.kill()
             p.wait()
+
+
+def test_a_view_that_attaches_late_starts_with_the_jobs_events_and_no_old_news(
+    tmp_path: Path,
+) -> None:
+    from fleet.cli_dashboard import _past_events
+    from fleet.coordinator.store import JobStore
+
+    store = JobStore(tmp_path / "coordinator.sqlite")
+    store.add_event(1000.0, 5.0, "lost", "robot-1", "t02", "its liveliness token is gone")
+    store.add_event(1001.0, 5.1, "awarded", "robot-0", "t02", "")
+    store.add_event(1002.0, 5.2, "reassigned", "robot-0", "t02", "0.030 s after the loss")
+    store.close()
+    w = FleetWatcher()
+    _past_events(w, tmp_path / "coordinator.sqlite")
+    assert [e.kind for e in w.snapshot().events] == ["lost", "reassigned"]
+    # the first status heard sets the count of waypoints given up; only later ones are news
+    w.on_status(
+        KEYS.robot("robot-0", "status"),
+        RobotStatus(6.0, "driving", "t02", 0.1, 1, 9, 1.0, skipped=4),
+    )
+    assert [e.kind for e in w.snapshot().events] == ["lost", "reassigned"]
+    w.on_status(
+        KEYS.robot("robot-0", "status"),
+        RobotStatus(7.0, "driving", "t02", 0.2, 2, 9, 1.5, skipped=5),
+    )
+    assert w.snapshot().events[-1].text.endswith("1 unreachable waypoint(s), 5 in all")
