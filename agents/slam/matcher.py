@@ -116,6 +116,7 @@ class CorrelativeMatcher:
         penalize: bool = True,
         search_points: int | None = None,
         penalties: tuple[float, float] | None = None,
+        max_coarse: int | None = None,
     ) -> MatchResult:
         """Match ``points`` (N, 2, sensor frame) against ``field`` around ``prior`` (field frame).
 
@@ -124,6 +125,9 @@ class CorrelativeMatcher:
         loop-closure searches turn it off, their prior carries drift. With
         ``search_points`` the discrete search uses an evenly strided subset of that many points
         (and refines only the best coarse cells); the refinement and the score use all points.
+        With ``max_coarse`` at most that many coarse cells (the highest bounds) are searched at
+        the fine level: a search for a match that is not there (most loop-closure candidates)
+        finds no bound to prune with and would otherwise score most of the window.
         """
         p = self.params
         if penalties is None:
@@ -163,13 +167,15 @@ class CorrelativeMatcher:
         samples: list[np.ndarray] = []
         best = -np.inf
         k, batch = 0, 4
-        while k < order.size:
+        limit = order.size if max_coarse is None else min(order.size, max_coarse)
+        while k < limit:
             if coarse_sorted[k] < best - margin:
                 break
             # Coarse cells in order of their bound, in batches that double (up to 64): the first
             # few set the best fine score, later ones are cut by it in few numpy calls.
-            chunk = order[k : k + batch]
-            chunk = chunk[coarse_sorted[k : k + batch] >= best - margin]
+            end = min(k + batch, limit)
+            chunk = order[k:end]
+            chunk = chunk[coarse_sorted[k:end] >= best - margin]
             k += batch
             batch = min(2 * batch, 64)
             ti, jy, jx = np.unravel_index(chunk, coarse.shape)

@@ -64,6 +64,17 @@ class SlamParams:
     loop_min_submap_gap: int = 2  # never close against the newest few submaps
     loop_max_candidates: int = 2
     loop_search_points: int = 90  # the loop-closure search scores this many evenly spaced points
+    loop_max_coarse: int = 48  # the search refines at most this many coarse cells (time bound)
+    # The window grows with the odometry uncertainty accumulated since the last closure
+    # (loop_window_sigmas standard deviations, at least loop_window_xy/_theta, at most these):
+    loop_window_sigmas: float = 3.0
+    loop_window_max_xy: float = 2.0
+    loop_window_max_theta: float = 0.5
+    # A closure found beyond loop_window_xy/_theta of the estimate is only kept once a second
+    # one, within loop_confirm_nodes nodes, implies the same correction (within these):
+    loop_agree_xy: float = 0.3
+    loop_agree_theta: float = 0.05
+    loop_confirm_nodes: int = 25
 
     # Pose graph (sparse least squares)
     constraint_sigma_xy: float = 0.02
@@ -109,6 +120,11 @@ class SlamParams:
             "loop_sigma_xy",
             "loop_sigma_theta",
             "huber_scale",
+            "loop_window_sigmas",
+            "loop_window_max_xy",
+            "loop_window_max_theta",
+            "loop_agree_xy",
+            "loop_agree_theta",
             "motion_xy_floor",
             "prior_weight",
             "reloc_window_xy",
@@ -138,6 +154,8 @@ class SlamParams:
         for name in (
             "map_tile",
             "loop_search_points",
+            "loop_max_coarse",
+            "loop_confirm_nodes",
             "field_refresh_nodes",
             "loop_every_nodes",
             "optimize_every_nodes",

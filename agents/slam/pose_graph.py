@@ -61,7 +61,7 @@ class PoseGraph:
         self._w.append(np.array([1.0 / sigma_xy, 1.0 / sigma_xy, 1.0 / sigma_theta]))
 
     def optimize(
-        self, huber_scale: float, max_iterations: int = 10, tolerance: float = 1e-5
+        self, huber_scale: float, max_iterations: int = 5, tolerance: float = 1e-4
     ) -> OptimizationReport:
         """Minimize the whitened residuals with a Huber loss (scale in standard deviations) by
         Gauss–Newton with iteratively reweighted least squares, from the current poses (the

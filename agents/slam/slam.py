@@ -20,7 +20,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agents.slam.geometry import compose, relative, scan_to_points, transform_points
+from agents.slam.geometry import (
+    compose,
+    inverse,
+    relative,
+    scan_to_points,
+    transform_points,
+    wrap_angle,
+)
 from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
 from agents.slam.occupancy import LogOddsGrid, log_odds
 from agents.slam.params import SlamParams
@@ -63,6 +70,17 @@ class _Submap:
     finished: bool = False
     field: LikelihoodField | None = None
     field_nodes: int = -1
+
+
+@dataclass(frozen=True, eq=False)
+class _Closure:
+    """A loop-closure match: node ``node_id`` seen from submap ``submap_graph_id`` at ``pose``;
+    ``correction`` is the map-frame rigid motion it implies for the node's estimate."""
+
+    node_id: int
+    submap_graph_id: int
+    pose: np.ndarray
+    correction: np.ndarray
 
 
 @dataclass(eq=False)
@@ -109,6 +127,11 @@ class Slam:
         self._nodes = 0
         self._loop_closures = 0
         self._pending_loops = 0
+        # Odometry uncertainty accumulated since the last loop closure (variances, m² and rad²)
+        # and a closure waiting for a second one that agrees (see _close_loops).
+        self._drift_var_xy = 0.0
+        self._drift_var_theta = 0.0
+        self._unconfirmed: _Closure | None = None
         self._nodes_since_optimization = 0
         self._optimizations = 0
         self._cache: _MapCache | None = None
@@ -309,13 +332,11 @@ class Slam:
             self._new_submap(pose)
         node_id = self._graph.add_pose(pose)
         if self._last_node_id is not None:
+            step = relative(self._last_node_odom, odom)
             self._graph.add_constraint(
-                self._last_node_id,
-                node_id,
-                relative(self._last_node_odom, odom),
-                p.odom_sigma_xy,
-                p.odom_sigma_theta,
+                self._last_node_id, node_id, step, p.odom_sigma_xy, p.odom_sigma_theta
             )
+            self._accumulate_drift(step)
         for s in self._active:
             local = relative(self._graph.poses[s.graph_id], pose)
             s.grid.insert(local[:2], transform_points(local, points))
@@ -338,10 +359,45 @@ class Slam:
         if self._pending_loops and self._nodes_since_optimization >= p.optimize_every_nodes:
             self._optimize()
 
+    def _accumulate_drift(self, step: np.ndarray) -> None:
+        """Grow the uncertainty since the last closure by one odometry step (the motion model
+        of ``_prior_penalties``; a heading error σ_θ moves the position by σ_θ·dd, first-order
+        propagation)."""
+        p = self.params
+        dd = math.hypot(step[0], step[1])
+        sigma_xy = p.motion_xy_per_m * dd + p.motion_xy_floor
+        sigma_theta = p.motion_theta_per_rad * abs(step[2]) + p.motion_theta_per_m * dd
+        self._drift_var_xy += sigma_xy**2 + self._drift_var_theta * dd**2
+        self._drift_var_theta += sigma_theta**2
+
+    def _loop_windows(self) -> tuple[float, float]:
+        """Search half-widths (m, rad): loop_window_sigmas standard deviations of the drift
+        since the last closure, within [loop_window_xy, loop_window_max_xy] (and theta)."""
+        p = self.params
+        k = p.loop_window_sigmas
+        xy = min(max(p.loop_window_xy, k * math.sqrt(self._drift_var_xy)), p.loop_window_max_xy)
+        theta = min(
+            max(p.loop_window_theta, k * math.sqrt(self._drift_var_theta)),
+            p.loop_window_max_theta,
+        )
+        return xy, theta
+
     def _close_loops(self, node_id: int, points: np.ndarray) -> None:
+        """Match the node against finished submaps near it (Hess et al. 2016 §V), in a window
+        that grows with the drift since the last closure. A match close to the estimate (within
+        loop_window_xy / loop_window_theta) is added at once; one further off, found only
+        thanks to the grown window, is held until a second match within loop_confirm_nodes
+        nodes implies the same rigid correction of the trajectory (a wrong match in a building
+        of similar corridors rarely repeats consistently), then both are added."""
         p = self.params
         pose = self._graph.poses[node_id]
+        window_xy, window_theta = self._loop_windows()
+        radius = p.loop_search_radius + window_xy
         newest_allowed = self._active[0].index - p.loop_min_submap_gap
+        if self._unconfirmed is not None and node_id - self._unconfirmed.node_id > (
+            p.loop_confirm_nodes
+        ):
+            self._unconfirmed = None
         candidates = []
         for s in self._submaps:
             if not s.finished or s.index > newest_allowed or s.grid.touched is None:
@@ -349,7 +405,7 @@ class Slam:
             lo, hi = self._submap_box(s)
             gap = np.maximum(np.maximum(lo - pose[:2], pose[:2] - hi), 0.0)
             distance = float(np.hypot(*gap))
-            if distance <= p.loop_search_radius:
+            if distance <= radius:
                 candidates.append((distance, s))
         candidates.sort(key=lambda c: c[0])
         for _, s in candidates[: p.loop_max_candidates]:
@@ -358,18 +414,52 @@ class Slam:
                 s.field,
                 points,
                 relative(sm_pose, pose),
-                p.loop_window_xy,
-                p.loop_window_theta,
+                window_xy,
+                window_theta,
                 p.loop_coarse_factor,
                 penalize=False,
                 search_points=p.loop_search_points,
+                max_coarse=p.loop_max_coarse,
             )
-            if result.score >= p.loop_min_score:
-                self._graph.add_constraint(
-                    s.graph_id, node_id, result.pose, p.loop_sigma_xy, p.loop_sigma_theta
-                )
-                self._loop_closures += 1
-                self._pending_loops += 1
+            if result.score < p.loop_min_score:
+                continue
+            matched = compose(sm_pose, result.pose)
+            closure = _Closure(node_id, s.graph_id, result.pose, compose(matched, inverse(pose)))
+            off = relative(pose, matched)
+            near = math.hypot(off[0], off[1]) <= p.loop_window_xy and abs(off[2]) <= (
+                p.loop_window_theta
+            )
+            if near:
+                self._add_closure(closure)
+            elif self._unconfirmed is not None and self._agrees(self._unconfirmed, closure):
+                self._add_closure(self._unconfirmed)
+                self._add_closure(closure)
+                self._unconfirmed = None
+            else:
+                self._unconfirmed = closure
+
+    def _agrees(self, a: _Closure, b: _Closure) -> bool:
+        """Whether two closures imply the same rigid correction: moved by each, the later node
+        lands within loop_agree_xy, and the rotations differ by at most loop_agree_theta."""
+        p = self.params
+        node = self._graph.poses[b.node_id]
+        gap = compose(a.correction, node)[:2] - compose(b.correction, node)[:2]
+        turn = abs(float(wrap_angle(a.correction[2] - b.correction[2])))
+        return math.hypot(gap[0], gap[1]) <= p.loop_agree_xy and turn <= p.loop_agree_theta
+
+    def _add_closure(self, closure: _Closure) -> None:
+        p = self.params
+        self._graph.add_constraint(
+            closure.submap_graph_id,
+            closure.node_id,
+            closure.pose,
+            p.loop_sigma_xy,
+            p.loop_sigma_theta,
+        )
+        self._loop_closures += 1
+        self._pending_loops += 1
+        self._drift_var_xy = 0.0
+        self._drift_var_theta = 0.0
 
     def _optimize(self) -> None:
         before = self._graph.poses[self._last_node_id].copy()
