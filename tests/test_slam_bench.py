@@ -158,3 +158,25 @@ def test_fleet_bench_slam_refuses_bad_options():
     result = CliRunner().invoke(app, ["bench", "slam", "--world", "no-such-world"])
     assert result.exit_code == 2
     assert "no-such-world" in result.output
+
+
+def test_shift_world_moves_every_part_of_the_world():
+    from fleet.config import resolve_world
+    from fleet.slam_bench import shift_world
+    from fleet.world import load_world
+
+    world = load_world(resolve_world("home"))
+    moved = shift_world(world, 0.025, -0.01)
+    for a, b in zip(world.polygons, moved.polygons, strict=True):
+        np.testing.assert_allclose(b - a, np.broadcast_to([0.025, -0.01], a.shape))
+    assert moved.bounds == pytest.approx(np.add(world.bounds, [0.025, -0.01, 0.025, -0.01]))
+    assert [s[:2] for s in moved.starts] == pytest.approx(
+        [(x + 0.025, y - 0.01) for x, y, _ in world.starts]
+    )
+    if world.dock is not None:
+        assert moved.dock == pytest.approx(
+            (world.dock[0] + 0.025, world.dock[1] - 0.01, world.dock[2])
+        )
+    assert moved.start_poses(1, 0.17)[0][:2] == pytest.approx(
+        (world.start_poses(1, 0.17)[0][0] + 0.025, world.start_poses(1, 0.17)[0][1] - 0.01)
+    )
