@@ -269,22 +269,24 @@ def duration(seconds: float) -> str:
 
 
 def header(snap: FleetSnapshot) -> Line:
-    """Phase, sim time, coverage with its bar, repetition, tasks and the ETA, on one line."""
+    """The view's note (if any), phase, coverage with its bar, the ETA, tasks, sim time,
+    repetition and contacts on one line, most wanted first (a narrow terminal cuts the end)."""
     cov = snap.coverage or 0.0
-    parts = [f"fleet {snap.fleet} — {snap.phase} — sim {snap.sim_time:.1f} s"]
-    parts.append(f"coverage {progress_bar(cov)} {100 * cov:5.1f} %")
-    if snap.repetition is not None:
-        parts.append(f"repetition {100 * snap.repetition:.1f} %")
+    parts = [f"fleet {snap.fleet}", snap.phase]
+    parts.append(f"coverage {progress_bar(cov)} {100 * cov:4.1f} %")
+    if snap.eta_s is not None:
+        parts.append("done" if snap.phase == "done" else f"ETA {duration(snap.eta_s)}")
     if snap.tasks is not None:
         o, a, d = snap.tasks
         parts.append(f"tasks {d}/{o + a + d} done")
-    if snap.eta_s is not None:
-        parts.append("done" if snap.phase == "done" else f"ETA {duration(snap.eta_s)}")
+    parts.append(f"sim {snap.sim_time:.1f} s")
+    if snap.repetition is not None:
+        parts.append(f"repetition {100 * snap.repetition:.1f} %")
     if snap.collisions:
         parts.append(f"contacts {snap.collisions}")
-    line: Line = [(" — ".join(parts), "bold")]
+    line: Line = [(" · ".join(parts), "bold")]
     if snap.note:
-        line.append((f"  {snap.note}", "yellow"))
+        line.insert(0, (f"{snap.note} · ", "bold yellow"))
     return line
 
 
