@@ -195,6 +195,7 @@ class FleetWatcher:
         self._unseen: list[EventLine] = []
         self.started_at: float | None = None
         self.started_wall: float | None = None
+        self._first_state: tuple[float, int] | None = None
         self.finished_at: float | None = None
 
     def _robot(self, rid: str) -> RobotView:
@@ -218,6 +219,8 @@ class FleetWatcher:
     def on_fleet(self, _key: str, m: FleetState) -> None:
         with self.lock:
             self.fleet = m
+            if self._first_state is None:
+                self._first_state = (time.time(), m.tasks_done)
             for rid in m.robots:
                 self._robot(rid)
             if m.phase == "done" and self.finished_at is None:
@@ -271,6 +274,8 @@ class FleetWatcher:
         if m.kind in QUIET_EVENTS:
             return
         with self.lock:
+            if m.kind == "planned" and (self.started_wall is None or m.wall < self.started_wall):
+                self.started_wall = m.wall
             self._event(m.wall, m.kind, _event_text(m))
 
     def on_collision(self, _key: str, m: Collision) -> None:
@@ -381,17 +386,25 @@ class FleetWatcher:
 
     def _eta(self, now: float) -> float | None:
         """Wall seconds until the last task is done, at the pace tasks have been done so far
-        (tasks are cut to about the same cleaning time); None before the first is done."""
+        (tasks are cut to about the same cleaning time): since the job was planned, or, for a
+        view that came later and never heard of that, since the view first heard the job's
+        state. None until a task is done in that time."""
         f = self.fleet
-        if f is None or self.started_wall is None:
+        if f is None:
             return None
         if f.phase == "done":
             return 0.0
-        total = f.tasks_open + f.tasks_assigned + f.tasks_done
-        if f.tasks_done == 0 or total == 0:
+        if self.started_wall is not None:
+            since, done_then = self.started_wall, 0
+        elif self._first_state is not None:
+            since, done_then = self._first_state
+        else:
             return None
-        elapsed = max(0.0, now - self.started_wall)
-        return elapsed * (total - f.tasks_done) / f.tasks_done
+        total = f.tasks_open + f.tasks_assigned + f.tasks_done
+        done = f.tasks_done - done_then
+        if done <= 0 or total == 0:
+            return None
+        return max(0.0, now - since) * (total - f.tasks_done) / done
 
     def line(self, wall_s: float) -> str:
         """One plain line of the fleet's state, for logs and terminals without a screen."""

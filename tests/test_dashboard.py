@@ -129,6 +129,17 @@ def test_contacts_and_given_up_waypoints_are_events_and_the_eta_follows_the_task
     assert w.snapshot(now=start + 60.0).eta_s == pytest.approx(60.0)
 
 
+def test_a_view_that_never_saw_the_plan_takes_the_pace_since_it_came() -> None:
+    w = _watcher()
+    w.on_fleet("", FleetState(20.0, "cleaning", ["robot-0"], [], [], 2, 6, 2))
+    assert w.snapshot().eta_s is None  # nothing done while it watched
+    assert w._first_state is not None
+    came = w._first_state[0]
+    w.on_fleet("", FleetState(30.0, "cleaning", ["robot-0"], [], [], 1, 5, 4))
+    # 2 tasks in 30 s since it came, 6 to go: 90 s
+    assert w.snapshot(now=came + 30.0).eta_s == pytest.approx(90.0)
+
+
 def test_the_makespan_runs_from_the_first_plan_to_the_job_done() -> None:
     w = _watcher()
     w.on_plan("", Plan(4.0, 1, "t00", np.zeros((2, 2))))
