@@ -111,4 +111,7 @@ def test_slam_beats_noisy_odometry_on_the_first_200_aces_scans():
         result = replay_log(parsed, cfg.slam, scans=_with_odometry(scans, odom))
         slam = trajectory_scores(result.live[:, 1:], reference)
         noisy = trajectory_scores(odom, reference)
-        assert slam["rpe20_m"] < 0.5 * noisy["rpe20_m"], (seed, slam, noisy)
+        # Seeds 0 and 1 give 0.20 and 0.28 m against 0.90 and 0.99 m of the odometry (0.35 m
+        # before the tracking prior followed the motion model).
+        assert slam["rpe20_m"] < 0.35 * noisy["rpe20_m"], (seed, slam, noisy)
+        assert slam["rpe20_m"] < 0.3 and slam["ate_m"] < 0.5 * noisy["ate_m"], (seed, slam, noisy)
