@@ -21,6 +21,7 @@ import math
 import re
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from rich.color import ColorSystem
@@ -177,6 +178,31 @@ def base_layer(snap: FleetSnapshot, frame: MapFrame) -> np.ndarray:
     return chars.reshape(frame.rows, frame.cols)
 
 
+class _Memo:
+    """The last value made from the same objects (by identity) and the same frame: the floor
+    plan and the cleaned area change once a second at most, the view redraws five times, and
+    a large map costs milliseconds to lay out."""
+
+    def __init__(self) -> None:
+        self._objects: tuple[object, ...] | None = None
+        self._frame: MapFrame | None = None
+        self._value: Any = None
+
+    def get(self, objects: tuple[object, ...], frame: MapFrame | None, make: Any) -> Any:
+        if (
+            self._objects is None
+            or frame != self._frame
+            or any(a is not b for a, b in zip(objects, self._objects, strict=True))
+        ):
+            self._value = make()
+            self._objects, self._frame = objects, frame
+        return self._value
+
+
+_BOUNDS = _Memo()
+_BASE = _Memo()
+
+
 def heading_arrow(theta: float) -> str:
     """The arrow nearest to heading ``theta`` (rad, 0 = +x, counter-clockwise)."""
     return ARROWS[round(theta / (math.pi / 4)) % 8]
@@ -190,11 +216,15 @@ def render_map(
 ) -> list[Line]:
     """The floor, its cleaned area, each robot's path ahead and each robot's marker, in at
     most ``width`` × ``height`` characters (see the module docstring)."""
-    bounds = map_bounds(snap)
+    layers = (snap.floor, snap.cleaned)
+    if snap.floor is None and snap.cleaned is None:
+        bounds = map_bounds(snap)
+    else:
+        bounds = _BOUNDS.get(layers, None, lambda: map_bounds(snap))
     if bounds is None or width < 4 or height < 2:
         return [[("(waiting for the floor plan and the robots' poses)", "dim")]]
     frame = map_frame(bounds, width, height)
-    chars = base_layer(snap, frame)
+    chars = _BASE.get(layers, frame, lambda: base_layer(snap, frame)).copy()
     styles = np.empty(chars.shape, dtype=object)
     for ch, style in BASE_STYLES.items():
         styles[chars == ch] = style
