@@ -137,25 +137,10 @@ def _loop(
     from fleet.rundir import RunDirError, is_alive, process_state, read_table
 
     last_table = last_line = -1e9
-    up_gone = False
+    table_error = ""
     while not stop.is_set() and not control.quit.is_set():
         tick = time.monotonic()
         feed.pump()
-        if table is not None and run_dir is not None and tick - last_table >= TABLE_READ_S:
-            last_table = tick
-            try:
-                table = read_table(run_dir)
-            except RunDirError as e:
-                watcher.note("error", str(e))
-            watcher.set_restarts({n: p.restarts for n, p in table.processes.items()})
-            gone = not is_alive(process_state(table.up_pid, table.up_cmdline))
-            if gone and not up_gone:
-                up_gone = True
-                if view is not None:
-                    view.note = "fleet up has exited: the fleet is stopped (q closes the view)"
-                else:
-                    print("fleet up has exited: the fleet is stopped", file=sys.stderr)
-                    return
         if view is not None:
             view.draw()
         else:
@@ -164,6 +149,22 @@ def _loop(
             if tick - last_line >= PLAIN_LINE_S:
                 last_line = tick
                 print(watcher.line(tick - t0), file=sys.stderr, flush=True)
+        if table is not None and run_dir is not None and tick - last_table >= TABLE_READ_S:
+            last_table = tick
+            try:
+                table = read_table(run_dir)
+                table_error = ""
+            except RunDirError as e:
+                if str(e) != table_error:
+                    table_error = str(e)
+                    watcher.note("error", table_error)
+            watcher.set_restarts({n: p.restarts for n, p in table.processes.items()})
+            if not is_alive(process_state(table.up_pid, table.up_cmdline)):
+                if view is None:
+                    print("fleet up has exited: the fleet is stopped", file=sys.stderr)
+                    return
+                view.note = "fleet up has exited: the fleet is stopped (q closes the view)"
+                table = None
         stop.wait(max(0.0, 1.0 / REDRAW_HZ - (time.monotonic() - tick)))
 
 

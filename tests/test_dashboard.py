@@ -294,3 +294,31 @@ def test_a_view_that_attaches_late_starts_with_the_jobs_events_and_no_old_news(
         RobotStatus(7.0, "driving", "t02", 0.2, 2, 9, 1.5, skipped=5),
     )
     assert w.snapshot().events[-1].text.endswith("1 unreachable waypoint(s), 5 in all")
+
+
+@pytest.mark.timeout(60)
+def test_without_a_terminal_fleet_dashboard_prints_plain_lines_until_the_fleet_stops(
+    router: str, tmp_path: Path
+) -> None:
+    from fleet.coordinator.store import JobStore
+
+    store = JobStore(tmp_path / "coordinator.sqlite")
+    store.add_event(1000.0, 5.0, "lost", "robot-1", "t02", "its liveliness token is gone")
+    store.close()
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()  # a `fleet up` that has exited
+    table = RunTable("default", router, gone.pid, "w.yaml", {}, [sys.executable, "-c", "pass"])
+    write_table(tmp_path, table)
+    done = subprocess.run(
+        [sys.executable, "-m", "fleet.cli", "dashboard", "--run-dir", str(tmp_path)],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=50,
+    )
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert any(ln.startswith("event: ") and "lost" in ln and "robot-1" in ln for ln in lines)
+    assert any(" starting sim=" in ln for ln in lines), lines
+    assert "fleet up has exited: the fleet is stopped" in lines
+    assert "\x1b[" not in done.stderr + done.stdout  # no screen drawn
