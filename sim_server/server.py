@@ -41,11 +41,16 @@ IMAGE_PERIOD_S = 2.0
 
 @dataclass
 class AgentLink:
+    """The simulator's view of a robot's agent. ``released_at`` is the sim time at which the
+    agent was last let go (it left, or the coordinator lost it): a command stamped no later
+    than that was sent before, and does not make the agent live again."""
+
     ack: float
     last_wall: float
     alive: bool = True
     answered: bool = False
     scanned: bool = False
+    released_at: float = float("-inf")
 
 
 class SimServer:
@@ -84,6 +89,10 @@ class SimServer:
         with self.lock:
             link = self.links.get(rid)
             if link is None or rid not in self.core.robots:
+                return
+            if not link.alive and msg.stamp <= link.released_at:
+                # sent before the agent was let go, overtaken by its leaving (a dying agent's
+                # last command): taking it as a sign of life would refuse its respawn
                 return
             link.ack = max(link.ack, msg.stamp)
             link.last_wall = time.monotonic()
@@ -133,6 +142,7 @@ class SimServer:
             link = self.links.get(rid)
             if link is not None and link.alive:
                 link.alive = False
+                link.released_at = self.core.t
                 self.core.set_cmd(rid, 0.0, 0.0)
                 log.info("agent %s %s; its robot stops where it is", rid, why)
 
