@@ -15,7 +15,7 @@ from typing import Annotated, Any
 import typer
 
 from fleet.cli_ops import STATE_FILE
-from fleet.cli_processes import ZenohConfigOpt, _bus, _fail
+from fleet.cli_processes import ConfigOpt, ZenohConfigOpt, _bus, _fail, _load
 from fleet.help_text import reflow
 
 REDRAW_HZ = 5.0
@@ -55,6 +55,7 @@ def dashboard(
         ),
     ] = None,
     zenoh_config: ZenohConfigOpt = None,
+    config: ConfigOpt = None,
     plain: Annotated[
         bool,
         typer.Option("--plain", help="Plain log lines even on a terminal (the default without)."),
@@ -93,7 +94,8 @@ def dashboard(
     endpoints = connect or [table.endpoint]  # type: ignore[union-attr]
     name = fleet or (table.fleet if table is not None else DEFAULT_FLEET)
     bus = _bus("dashboard", f"view-{os.getpid()}", endpoints, name, zenoh_config)
-    watcher = FleetWatcher(name)
+    cfg, _ = _load(config)
+    watcher = FleetWatcher(name, cfg.coordinator.heartbeat_timeout_s)
     if run_dir is not None:
         _past_events(watcher, run_dir / STATE_FILE)
     feed = BusFeed(bus, watcher)

@@ -153,7 +153,7 @@ def up(
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
-        watcher = FleetWatcher(DEFAULT_FLEET)
+        watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s)
         feed = BusFeed(bus, watcher, fetch=not headless)
         recorder = RunRecorder(bus)
         out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)

@@ -62,7 +62,8 @@ QUIET_EVENTS = ("awarded", "done", "auction")
 RATE_WINDOW_S = 2.0
 # sim seconds over which a robot's speed is averaged
 SPEED_WINDOW_S = 1.0
-# a robot whose heartbeat is older than this (wall seconds) shows as silent
+# a robot whose heartbeat is older than this (wall seconds) shows as silent; the views pass
+# coordinator.heartbeat_timeout_s, after which the coordinator counts the robot lost
 SILENT_AFTER_S = 1.0
 # ring buffers of the high-rate streams: room for a second of 10 robots at 4x speed
 RING_CAPACITY = 2048
