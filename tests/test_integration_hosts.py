@@ -195,13 +195,14 @@ def _all_running(procs: Processes) -> None:
 
 def _wait_for_rejoin(
     state: Path, robots: list[str], since: float, deadline: float, procs: Processes
-) -> None:
-    """Until each of ``robots`` has been lost and has rejoined after wall time ``since``."""
+) -> float:
+    """Until each of ``robots`` has been lost and has rejoined after wall time ``since``;
+    returns the wall time of the last rejoin."""
     while True:
         events = [e for e in read_events(state) if e["wall"] >= since]
         kinds = {r: [e["kind"] for e in events if e["robot"] == r] for r in robots}
         if all("lost" in k and "rejoined" in k[k.index("lost") :] for k in kinds.values()):
-            return
+            return max(e["wall"] for e in events if e["kind"] == "rejoined")
         assert time.monotonic() < deadline, f"not lost and rejoined: {kinds}\n{procs.logs()}"
         _all_running(procs)
         time.sleep(0.5)
@@ -246,14 +247,17 @@ def test_a_fleet_across_hosts_finishes_through_a_router_restart_and_a_link_down(
         router.kill()
         router.wait()
         time.sleep(DOWN_S)
+        back = time.time()
         procs.start("router", hosts.hub, router_argv)
-
-        _wait_for_rejoin(state, names[2:], killed_wall, deadline, procs)
+        rejoined = _wait_for_rejoin(state, names[2:], killed_wall, deadline, procs)
+        print(f"router down {DOWN_S:g} s: every robot rejoined {rejoined - back:.1f} s after")
         link_down_wall = time.time()
         hosts.set_link("robot-1", up=False)
         time.sleep(DOWN_S)
+        back = time.time()
         hosts.set_link("robot-1", up=True)
-        _wait_for_rejoin(state, ["robot-1"], link_down_wall, deadline, procs)
+        rejoined = _wait_for_rejoin(state, ["robot-1"], link_down_wall, deadline, procs)
+        print(f"link down {DOWN_S:g} s: robot-1 rejoined {rejoined - back:.1f} s after")
 
         while _phase(state) != "done":
             assert time.monotonic() < deadline, f"the job did not finish\n{procs.logs()}"
