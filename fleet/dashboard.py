@@ -76,7 +76,8 @@ FETCH_TIMEOUT_S = 1.0
 class RobotView:
     """What the model knows of one robot. ``pose`` is its true pose (x, y, theta) at sim time
     ``pose_stamp``; ``intent`` the (x, y) points of its path ahead; ``alive`` whether its
-    liveliness token is there (None until heard of)."""
+    liveliness token is there (None until heard of); ``gave_up`` the waypoints it gave up as
+    unreachable over all its plans since the view first heard of it."""
 
     status: RobotStatus | None = None
     pose: tuple[float, float, float] | None = None
@@ -85,6 +86,7 @@ class RobotView:
     intent: np.ndarray | None = None
     heartbeat_wall: float | None = None
     alive: bool | None = None
+    gave_up: int = 0
     recent: deque[tuple[float, float, float]] = field(default_factory=lambda: deque(maxlen=64))
 
 
@@ -101,7 +103,8 @@ class EventLine:
 class RobotRow:
     """One robot as the view shows it. ``liveness`` is alive, silent (no heartbeat for
     ``SILENT_AFTER_S``), lost (the coordinator says so or its liveliness token went) or
-    unknown; ``restarts`` is None when no process table is known."""
+    unknown; ``restarts`` is None when no process table is known; ``gave_up`` counts the
+    waypoints given up over all its plans since the view came."""
 
     rid: str
     liveness: str
@@ -111,7 +114,7 @@ class RobotRow:
     speed: float
     heartbeat_age: float | None
     restarts: int | None
-    skipped: int
+    gave_up: int
     pose: tuple[float, float, float] | None
     intent: np.ndarray | None
 
@@ -231,14 +234,20 @@ class FleetWatcher:
         rid = self.keys.robot_of(key)
         with self.lock:
             robot = self._robot(rid)
-            before = robot.status.skipped if robot.status is not None else m.skipped
-            if robot.status is not None and robot.status.stamp > m.stamp:
+            prev = robot.status
+            if prev is not None and prev.stamp > m.stamp:
                 return
             robot.status = m
-            # a view that came late has no earlier count: what was given up before is not news
-            if m.skipped > before:
-                more = m.skipped - before
-                rest = f"{m.task:<8} {more} unreachable waypoint(s), {m.skipped} in all"
+            if prev is None:
+                # a view that came late: what was given up before it came is not news
+                robot.gave_up = m.skipped
+                return
+            # an agent counts the waypoints it gave up afresh for each plan
+            new_plan = m.plan_id != prev.plan_id or m.skipped < prev.skipped
+            more = m.skipped if new_plan else m.skipped - prev.skipped
+            if more > 0:
+                robot.gave_up += more
+                rest = f"{m.task:<8} {more} unreachable waypoint(s), {robot.gave_up} in all"
                 self._event(time.time(), "gave up", _line(m.stamp, "gave up", rid, rest))
 
     def on_truth(self, key: str, m: TruthPose) -> None:
@@ -380,7 +389,7 @@ class FleetWatcher:
             speed=v.speed,
             heartbeat_age=age,
             restarts=restarts,
-            skipped=s.skipped if s else 0,
+            gave_up=v.gave_up,
             pose=v.pose,
             intent=v.intent,
         )

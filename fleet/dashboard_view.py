@@ -330,7 +330,7 @@ ROBOT_COLUMNS = (
     ("m/s", 5, True),
     ("heartbeat", 9, True),
     ("restarts", 8, True),
-    ("skipped", 7, True),
+    ("gave up", 7, True),
 )
 
 
@@ -354,7 +354,7 @@ def robot_table(snap: FleetSnapshot, selected: str | None = None) -> list[Line]:
             f"{r.speed:4.2f}",
             "—" if r.heartbeat_age is None else f"{r.heartbeat_age:4.1f} s",
             "—" if r.restarts is None else str(r.restarts),
-            str(r.skipped),
+            str(r.gave_up),
         )
         cells = [_cell(v, w, right) for v, (_, w, right) in zip(values, ROBOT_COLUMNS, strict=True)]
         rev = " reverse" if r.rid == selected else ""

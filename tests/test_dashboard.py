@@ -294,6 +294,13 @@ def test_a_view_that_attaches_late_starts_with_the_jobs_events_and_no_old_news(
         RobotStatus(7.0, "driving", "t02", 0.2, 2, 9, 1.5, skipped=5),
     )
     assert w.snapshot().events[-1].text.endswith("1 unreachable waypoint(s), 5 in all")
+    # a new plan: the agent counts from 0 again
+    w.on_status(
+        KEYS.robot("robot-0", "status"),
+        RobotStatus(8.0, "driving", "t03", 0.0, 0, 9, 1.6, skipped=2, plan_id=7),
+    )
+    assert w.snapshot().events[-1].text.endswith("2 unreachable waypoint(s), 7 in all")
+    assert w.snapshot().robots[0].gave_up == 7
 
 
 @pytest.mark.timeout(60)
