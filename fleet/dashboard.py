@@ -423,7 +423,7 @@ class FleetWatcher:
             phase = self.fleet.phase if self.fleet else "starting"
             states = ", ".join(
                 f"{rid}={v.status.state}:{100 * v.status.progress:.0f}%"
-                + (f" ({v.status.skipped} skipped)" if v.status.skipped else "")
+                + (f" ({v.gave_up} waypoints given up)" if v.gave_up else "")
                 for rid, v in sorted(self.robots.items())
                 if v.status is not None
             )
