@@ -12,9 +12,8 @@ from fleet.config import resolve_world
 from fleet.params import load_fleet_config
 from fleet.world import load_world
 from planners.auction import Task, ahead_of, remainder, split_tour
-from planners.auction.tasks import CUT_WINDOW
+from planners.auction.tasks import CUT_WINDOW, task_time
 from planners.coverage import CoverageParams, plan_coverage
-from planners.coverage.metrics import path_time
 from planners.grid import GridMap
 
 PARAMS = CoverageParams()
@@ -36,9 +35,7 @@ def _lanes(x0: float, x1: float, ys: np.ndarray) -> np.ndarray:
 
 
 def _time(path: np.ndarray) -> float:
-    return path_time(
-        path, PARAMS.max_speed, PARAMS.turn_cost_s, PARAMS.turn_angle_deg, PARAMS.simplify_tolerance
-    )[2]
+    return task_time(path, PARAMS)
 
 
 def _joined(tasks: tuple[Task, ...]) -> np.ndarray:
@@ -68,8 +65,9 @@ def test_every_task_but_the_last_takes_about_the_target_time():
         assert (1 - CUT_WINDOW) * target - 6 <= t.time_s <= (1 + CUT_WINDOW) * target + 2
     assert 0 < tasks[-1].time_s <= (1 + CUT_WINDOW) * target + 2
     whole = _time(path)
-    # the turn at each cut belongs to neither task
-    assert whole - PARAMS.turn_cost_s * (len(tasks) - 1) <= sum(t.time_s for t in tasks) <= whole
+    # the turn at each cut (half a turn in place here) belongs to neither task
+    half_turn = np.pi / PARAMS.max_turn_rate + PARAMS.max_turn_rate / PARAMS.max_turn_accel
+    assert whole - half_turn * (len(tasks) - 1) <= sum(t.time_s for t in tasks) <= whole + 1e-9
 
 
 def test_a_path_shorter_than_the_target_is_one_task():
@@ -155,11 +153,13 @@ def test_the_small_world_tour_splits_into_tasks_of_its_cells(small_world):
     tasks = split_tour(path, plan.cell_labels, grid, 30.0, params)
     assert len(tasks) >= 4
     assert np.array_equal(_joined(tasks), path)
-    whole = path_time(
-        path, params.max_speed, params.turn_cost_s, params.turn_angle_deg, params.simplify_tolerance
-    )[2]
+    whole = task_time(path, params)
     total = sum(t.time_s for t in tasks)
-    assert whole - params.turn_cost_s * (len(tasks) - 1) - 1e-9 <= total <= whole + 1e-9
+    # a cut drops the turn in place at it, or, where the path drives through, adds a stop
+    cuts = len(tasks) - 1
+    half_turn = np.pi / params.max_turn_rate + params.max_turn_rate / params.max_turn_accel
+    stop = params.max_speed / params.max_accel
+    assert whole - half_turn * cuts - 1e-9 <= total <= whole + stop * cuts + 1e-9
     labels = set(np.unique(plan.cell_labels[plan.cell_labels > 0]).tolist())
     for t in tasks:
         assert t.cells and set(t.cells) <= labels

@@ -48,6 +48,9 @@ class TaskPlanner:
             overlap=cfg.coordinator.lane_overlap,
             cleaning_width=cfg.robot.cleaning_width,
             max_speed=cfg.robot.max_vel_x,
+            max_accel=cfg.robot.acc_lim_x,
+            max_turn_rate=cfg.robot.max_vel_theta,
+            max_turn_accel=cfg.robot.acc_lim_theta,
         )
         centres = clearance(self.grid) >= self.params.robot_radius
         start = self.grid.world_to_cell(np.array([self.dock]))

@@ -16,10 +16,12 @@ target_s]``, and no later than ``CUT_WINDOW · target_s`` before the end (so the
 never a sliver). The cut goes to the candidate next to the longest hop when that hop is at
 least ``HOP_M``, else (and among equal hops) to the candidate nearest ``T0 + target_s``; with
 no candidate, to the vertex nearest ``T0 + target_s``. Estimated time at a vertex is the
-length so far over ``max_speed`` plus ``turn_cost_s`` per turn before it, turns counted as
-:func:`planners.coverage.metrics.path_time` counts them (vertices of the Ramer–Douglas–Peucker
-simplification turning by more than ``turn_angle_deg``); each task's ``time_s`` is then
-``path_time`` of its own path, so the turn at a cut belongs to neither task.
+robot's driving time so far by :func:`planners.drive_time.vertex_times`: it stops and turns in
+place at the turns :func:`planners.coverage.metrics.path_time` counts (vertices of the
+Ramer–Douglas–Peucker simplification turning by more than ``turn_angle_deg``), within
+``max_turn_rate`` and ``max_turn_accel``, and drives the straight runs between them from rest
+to rest within ``max_speed`` and ``max_accel``; each task's ``time_s`` is then that time of
+its own path, so the turn at a cut belongs to neither task.
 """
 
 from __future__ import annotations
@@ -30,8 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planners.coverage.metrics import capsule, path_time, to_cells
+from planners.coverage.metrics import capsule, to_cells
 from planners.coverage.params import CoverageParams
+from planners.drive_time import vertex_times
 from planners.grid import GridMap
 from planners.polyline import cut_start, heading_changes, simplify
 
@@ -47,8 +50,8 @@ class Task:
 
     ``path`` is (N, 2) world metres, N ≥ 2, read-only; its N − 1 segments are its *pieces*
     (piece j is path[j] → path[j + 1]). ``area_m2`` is the cleanable floor its swath newly
-    covers as planned, ``time_s`` its estimated driving time
-    (:func:`planners.coverage.metrics.path_time`), ``cells`` the ids of the boustrophedon cells
+    covers as planned, ``time_s`` its estimated driving time (stops, turns in place and
+    rest-to-rest runs, see the module docstring), ``cells`` the ids of the boustrophedon cells
     whose floor it sweeps (sorted, unique). A remainder of ``"t07"`` is ``"t07.1"``, then
     ``"t07.2"``.
     """
@@ -110,7 +113,7 @@ def split_tour(
     new_cells, swept_labels, new_labels = _first_sweeps(pts, cell_labels, grid, params)
     area = grid.resolution**2
     hop = np.maximum(seg_len - new_cells * area / params.cleaning_width, 0.0)
-    elapsed = _elapsed(pts, seg_len, params)
+    elapsed = _elapsed(pts, params)
     cuts = _cuts(elapsed, hop, target_s)
     tasks = []
     for k, (a, b) in enumerate(itertools.pairwise(cuts)):
@@ -123,7 +126,7 @@ def split_tour(
                 id=f"{prefix}{k:02d}",
                 path=piece,
                 area_m2=float(new_cells[a:b].sum() * area),
-                time_s=_time(piece, params),
+                time_s=task_time(piece, params),
                 cells=tuple(int(c) for c in cells),
             )
         )
@@ -151,7 +154,7 @@ def remainder(task: Task, swept: np.ndarray, new_id: str, params: CoverageParams
     seg_len = np.hypot(*np.diff(task.path, axis=0).T)
     total = float(seg_len.sum())
     share = float(seg_len[todo].sum()) / total if total > 0 else len(todo) / task.pieces
-    return Task(new_id, path, task.area_m2 * share, _time(path, params), task.cells)
+    return Task(new_id, path, task.area_m2 * share, task_time(path, params), task.cells)
 
 
 def ahead_of(
@@ -184,17 +187,12 @@ def ahead_of(
     rest = cut_start(path, at)
     rest = rest[::-1] if reverse else rest
     share = (total - at) / total
-    return Task(new_id, rest, task.area_m2 * share, _time(rest, params), task.cells)
+    return Task(new_id, rest, task.area_m2 * share, task_time(rest, params), task.cells)
 
 
-def _time(path: np.ndarray, params: CoverageParams) -> float:
-    return path_time(
-        path,
-        params.max_speed,
-        params.turn_cost_s,
-        params.turn_angle_deg,
-        params.simplify_tolerance,
-    )[2]
+def task_time(path: np.ndarray, params: CoverageParams) -> float:
+    """The estimated seconds to drive ``path`` from rest to rest (module docstring)."""
+    return float(_elapsed(np.asarray(path, dtype=float), params)[-1])
 
 
 def _first_sweeps(
@@ -228,26 +226,36 @@ def _first_sweeps(
     return new_cells, swept_labels, new_labels
 
 
-def _elapsed(pts: np.ndarray, seg_len: np.ndarray, params: CoverageParams) -> np.ndarray:
-    """Estimated seconds from the start to each vertex: length over ``max_speed`` plus
-    ``turn_cost_s`` per turn before the vertex (the turns ``path_time`` counts)."""
-    turns = np.zeros(len(pts))
-    turns[1:] = np.cumsum(_turn_marks(pts, params))[:-1]
-    dist = np.concatenate([[0.0], np.cumsum(seg_len)])
-    return dist / params.max_speed + turns * params.turn_cost_s
+def _elapsed(pts: np.ndarray, params: CoverageParams) -> np.ndarray:
+    """Estimated seconds from the start to each vertex (:func:`planners.drive_time.vertex_times`):
+    the robot stops and turns in place at the turns ``path_time`` counts, and drives each
+    straight run between them from rest to rest within ``max_speed`` and ``max_accel``."""
+    stops, angles = _turns(pts, params)
+    return vertex_times(
+        pts,
+        stops,
+        angles,
+        params.max_speed,
+        params.max_accel,
+        params.max_turn_rate,
+        params.max_turn_accel,
+    )
 
 
-def _turn_marks(pts: np.ndarray, params: CoverageParams) -> np.ndarray:
-    """True at the vertices ``path_time`` counts as turns: those of the simplified path whose
-    heading changes by more than ``turn_angle_deg``."""
+def _turns(pts: np.ndarray, params: CoverageParams) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices ``path_time`` counts as turns (those of the simplified path whose heading
+    changes by more than ``turn_angle_deg``) and the heading change at each vertex there."""
     simple = simplify(pts, params.simplify_tolerance)
     idx = _subsequence_indices(pts, simple)
     moved = np.concatenate([[True], np.hypot(*np.diff(simple, axis=0).T) > 1e-9])
     idx, simple = idx[moved], simple[moved]
     marks = np.zeros(len(pts), dtype=bool)
+    angles = np.zeros(len(pts))
     if len(simple) >= 3:
-        marks[idx[1:-1]] = heading_changes(simple) > math.radians(params.turn_angle_deg)
-    return marks
+        change = heading_changes(simple)
+        angles[idx[1:-1]] = change
+        marks[idx[1:-1]] = change > math.radians(params.turn_angle_deg)
+    return marks, angles
 
 
 def _subsequence_indices(pts: np.ndarray, sub: np.ndarray) -> np.ndarray:

@@ -23,7 +23,10 @@ class CoverageParams:
     groups of at most ``max_task_area`` (0: every lane is a task of its own, cut into pieces
     of at most ``max_lane_length``), so the tour can leave a cell part-swept to visit a
     neighbour and come back, and k robots can balance the work finely. Time estimates use
-    ``max_speed`` plus ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``).
+    ``max_speed`` plus ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``); the
+    market's tasks (``planners.auction.split_tour``) are timed by the robot's kinematics
+    instead: a stop and a turn in place at each such turn (``max_turn_rate``,
+    ``max_turn_accel``) and rest-to-rest runs between them (``max_speed``, ``max_accel``).
     """
 
     robot_radius: float = 0.17
@@ -35,6 +38,9 @@ class CoverageParams:
     return_strips: bool = True
     fill_in_target: float = 0.995
     max_speed: float = 0.5
+    max_accel: float = 0.5
+    max_turn_rate: float = 1.0
+    max_turn_accel: float = 1.0
     turn_cost_s: float = 2.0
     turn_angle_deg: float = 45.0
     door_width: float = 1.0
@@ -48,6 +54,9 @@ class CoverageParams:
             "robot_radius",
             "cleaning_width",
             "max_speed",
+            "max_accel",
+            "max_turn_rate",
+            "max_turn_accel",
             "door_width",
             "max_lane_length",
         ):
