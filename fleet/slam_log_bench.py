@@ -65,7 +65,8 @@ def noisy_odometry(reference: np.ndarray, seed: int) -> np.ndarray:
     return out
 
 
-def _with_odometry(scans: Sequence[LaserRecord], odom: np.ndarray) -> list[LaserRecord]:
+def with_odometry(scans: Sequence[LaserRecord], odom: np.ndarray) -> list[LaserRecord]:
+    """The scans with their laser and robot poses replaced by the rows of ``odom``."""
     return [
         replace(s, laser_pose=tuple(map(float, p)), robot_pose=tuple(map(float, p)))
         for s, p in zip(scans, odom, strict=True)
@@ -103,7 +104,7 @@ def run_log_bench(
             parsed,
             cfg.slam,
             range_min=range_min,
-            scans=_with_odometry(scans, odom),
+            scans=with_odometry(scans, odom),
             progress=report,
         )
         timing = write_replay_outputs(result, parsed, out / f"seed-{seed}", cfg.slam, log_path)

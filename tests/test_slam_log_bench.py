@@ -17,7 +17,7 @@ from agents.slam.evaluation import trajectory_scores
 from agents.slam.geometry import relative
 from agents.slam.replay import replay_log
 from fleet.params import load_fleet_config
-from fleet.slam_log_bench import _with_odometry, noisy_odometry
+from fleet.slam_log_bench import noisy_odometry, with_odometry
 
 ACES = (
     Path(__file__).resolve().parents[1].parent
@@ -108,7 +108,7 @@ def test_slam_beats_noisy_odometry_on_the_first_200_aces_scans():
     cfg = load_fleet_config(None)
     for seed in (0, 1):
         odom = noisy_odometry(reference, seed)
-        result = replay_log(parsed, cfg.slam, scans=_with_odometry(scans, odom))
+        result = replay_log(parsed, cfg.slam, scans=with_odometry(scans, odom))
         slam = trajectory_scores(result.live[:, 1:], reference)
         noisy = trajectory_scores(odom, reference)
         # Seeds 0 and 1 give 0.20 and 0.28 m against 0.90 and 0.99 m of the odometry (0.35 m
