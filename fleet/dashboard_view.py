@@ -1,7 +1,7 @@
 """The dashboard's picture of a :class:`~fleet.dashboard.FleetSnapshot`: pure functions from
 the snapshot (and a screen size) to lines of styled text, with no terminal, bus or clock
-behind them. A line is a list of (text, rich style) runs; :func:`plain` and :func:`to_text`
-turn lines into a string or rich text, :class:`AnsiWriter` into terminal output. Building the
+behind them. A line is a list of (text, rich style) runs; :func:`plain` turns lines into a
+string, :class:`AnsiWriter` into terminal output. Building the
 lines by hand instead of through rich's tables keeps a redraw at about a millisecond, so the
 view costs a fraction of what it watches (see ``fleet bench dashboard``).
 
@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 from rich.color import ColorSystem
 from rich.style import Style
-from rich.text import Text
 
 from fleet.colours import robot_colour
 from fleet.dashboard import FleetSnapshot, RobotRow
@@ -434,17 +433,6 @@ def screen(
 def plain(lines: list[Line]) -> str:
     """The lines' characters without styles."""
     return "\n".join("".join(text for text, _ in line).rstrip() for line in lines)
-
-
-def to_text(lines: list[Line]) -> Text:
-    """The lines as rich text."""
-    text = Text()
-    for i, line in enumerate(lines):
-        if i:
-            text.append("\n")
-        for chunk, style in line:
-            text.append(chunk, style=style or None)
-    return text
 
 
 COLOR_SYSTEMS = {
