@@ -41,7 +41,7 @@ def test_loop_window_grows_with_drift_up_to_its_cap_and_resets_on_a_closure():
     assert PARAMS.loop_window_xy < xy[len(xy) // 8] < PARAMS.loop_window_max_xy
     slam._graph.add_pose(np.zeros(3))
     slam._graph.add_pose(np.zeros(3))
-    slam._add_closure(_Closure(1, 0, np.zeros(3), np.zeros(3)))
+    slam._add_closure(_Closure(1, 0, np.zeros(3), np.zeros(3), 1))
     assert slam._loop_windows() == (PARAMS.loop_window_xy, PARAMS.loop_window_theta)
     assert slam.stats().loop_closures == 1
 
@@ -53,10 +53,10 @@ def test_closures_agree_when_they_imply_the_same_rigid_correction():
     shift = np.array([0.5, -0.8, 0.1])  # the trajectory is off by this rigid motion
     other = np.array([0.5, -0.2, 0.1])
     far_turn = np.array([0.5, -0.8, 0.2])
-    first = _Closure(1, 0, np.zeros(3), shift)
-    assert slam._agrees(first, _Closure(2, 0, np.zeros(3), shift.copy()))
-    assert not slam._agrees(first, _Closure(2, 0, np.zeros(3), other))
-    assert not slam._agrees(first, _Closure(2, 0, np.zeros(3), far_turn))
+    first = _Closure(1, 0, np.zeros(3), shift, 1)
+    assert slam._agrees(first, _Closure(2, 0, np.zeros(3), shift.copy(), 2))
+    assert not slam._agrees(first, _Closure(2, 0, np.zeros(3), other, 2))
+    assert not slam._agrees(first, _Closure(2, 0, np.zeros(3), far_turn, 2))
 
 
 def test_gauss_newton_leaves_an_unconstrained_pose_and_solves_the_rest():

@@ -81,6 +81,7 @@ class _Closure:
     submap_graph_id: int
     pose: np.ndarray
     correction: np.ndarray
+    nodes_then: int  # the SLAM's node count when it was found
 
 
 @dataclass(eq=False)
@@ -212,14 +213,21 @@ class Slam:
         capped by the fixed translation_penalty / rotation_penalty, which hold for short steps
         (where the odometry is better than any scan in a featureless corridor)."""
         p = self.params
-        dd = math.hypot(step[0], step[1])
-        sigma_xy = p.motion_xy_per_m * dd + p.motion_xy_floor
-        sigma_theta = p.motion_theta_per_rad * abs(step[2]) + p.motion_theta_per_m * dd
+        sigma_xy, sigma_theta = self._step_sigmas(step)
         t_pen = min(p.translation_penalty, p.prior_weight / sigma_xy**2)
         r_pen = p.rotation_penalty
         if sigma_theta > 0:
             r_pen = min(r_pen, p.prior_weight / sigma_theta**2)
         return t_pen, r_pen
+
+    def _step_sigmas(self, step: np.ndarray) -> tuple[float, float]:
+        """Standard deviations (σ_xy per axis, σ_θ) of the odometry error of one ``step``
+        (dx, dy, dθ) under the linear motion model of ``SlamParams``."""
+        p = self.params
+        dd = math.hypot(step[0], step[1])
+        sigma_xy = p.motion_xy_per_m * dd + p.motion_xy_floor
+        sigma_theta = p.motion_theta_per_rad * abs(step[2]) + p.motion_theta_per_m * dd
+        return sigma_xy, sigma_theta
 
     def trajectory(self) -> np.ndarray:
         """(scans, 3) poses of every processed scan after the latest graph optimization."""
@@ -363,10 +371,8 @@ class Slam:
         """Grow the uncertainty since the last closure by one odometry step (the motion model
         of ``_prior_penalties``; a heading error σ_θ moves the position by σ_θ·dd, first-order
         propagation)."""
-        p = self.params
         dd = math.hypot(step[0], step[1])
-        sigma_xy = p.motion_xy_per_m * dd + p.motion_xy_floor
-        sigma_theta = p.motion_theta_per_rad * abs(step[2]) + p.motion_theta_per_m * dd
+        sigma_xy, sigma_theta = self._step_sigmas(step)
         self._drift_var_xy += sigma_xy**2 + self._drift_var_theta * dd**2
         self._drift_var_theta += sigma_theta**2
 
@@ -394,7 +400,7 @@ class Slam:
         window_xy, window_theta = self._loop_windows()
         radius = p.loop_search_radius + window_xy
         newest_allowed = self._active[0].index - p.loop_min_submap_gap
-        if self._unconfirmed is not None and node_id - self._unconfirmed.node_id > (
+        if self._unconfirmed is not None and self._nodes - self._unconfirmed.nodes_then > (
             p.loop_confirm_nodes
         ):
             self._unconfirmed = None
@@ -424,7 +430,9 @@ class Slam:
             if result.score < p.loop_min_score:
                 continue
             matched = compose(sm_pose, result.pose)
-            closure = _Closure(node_id, s.graph_id, result.pose, compose(matched, inverse(pose)))
+            closure = _Closure(
+                node_id, s.graph_id, result.pose, compose(matched, inverse(pose)), self._nodes
+            )
             off = relative(pose, matched)
             near = math.hypot(off[0], off[1]) <= p.loop_window_xy and abs(off[2]) <= (
                 p.loop_window_theta
