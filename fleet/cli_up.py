@@ -125,10 +125,17 @@ def up(
 
     def on_signal(signum: int, _frame: object) -> None:
         interrupted.append(signal.Signals(signum).name)
+        if signum == signal.SIGHUP:
+            # the terminal is gone (a closed window or SSH session): what would be printed has
+            # nowhere to go, and writing to it would fail before the report is written
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.dup2(devnull, sys.stderr.fileno())
         stop.set()
 
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
+    # a closed terminal stops the fleet as Ctrl-C does: report written, no process left
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, on_signal)
     out = typer.echo
     status = "interrupted"
     bus = None

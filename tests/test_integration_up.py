@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import signal
 from pathlib import Path
 
 import pytest
@@ -97,3 +98,18 @@ def test_until_done_that_times_out_exits_3_with_a_report_and_no_orphans(tmp_path
     assert short["left"] == [], f"orphans: {short['left']}"
     report = json.loads((short["dir"] / "report.json").read_text())
     assert report["status"] == "timeout" and report["makespan_s"] is None
+
+
+def test_a_closed_terminal_stops_the_fleet_with_a_report_and_no_orphans(tmp_path: Path) -> None:
+    """SIGHUP (the terminal or SSH session closed) stops fleet up as Ctrl-C does."""
+    fleet = RunningFleet(tmp_path, str(WORLD), 1, timeout_s=150.0)
+    try:
+        assert fleet.wait(lambda: fleet.events("awarded"), timeout=120), fleet.output
+        fleet.proc.send_signal(signal.SIGHUP)
+        fleet.finish(120.0)
+    finally:
+        fleet.cleanup()
+    assert fleet.proc.returncode == 0, fleet.output
+    assert fleet.left == [], f"orphans: {fleet.left}"
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["status"] == "stopped"
