@@ -31,19 +31,21 @@ def _seeds(text: str) -> list[int]:
     return out
 
 
+WorldsOpt = Annotated[
+    str,
+    typer.Option(
+        "--worlds",
+        "-w",
+        help="Comma-separated worlds: built-in names (home, small), world YAML files, or ROS "
+        "map_server YAML files.",
+    ),
+]
+SeedsOpt = Annotated[str, typer.Option("--seeds", help="Seeds of the runs: 0,1,2 or 0-4 or a mix.")]
+
+
 def bench_fleet(
-    worlds: Annotated[
-        str,
-        typer.Option(
-            "--worlds",
-            "-w",
-            help="Comma-separated worlds: built-in names (home, small), world YAML files, or "
-            "ROS map_server YAML files.",
-        ),
-    ] = "home",
-    seeds: Annotated[
-        str, typer.Option("--seeds", help="Seeds of the runs: 0,1,2 or 0-4 or a mix.")
-    ] = "0-4",
+    worlds: WorldsOpt = "home",
+    seeds: SeedsOpt = "0-4",
     robots: Annotated[int, typer.Option("--robots", "-n", help="Robots in every run.")] = 3,
     speed: Annotated[
         float,
@@ -105,18 +107,8 @@ def bench_fleet(
 
 
 def bench_follow(
-    worlds: Annotated[
-        str,
-        typer.Option(
-            "--worlds",
-            "-w",
-            help="Comma-separated worlds: built-in names (home, small), world YAML files, or "
-            "ROS map_server YAML files.",
-        ),
-    ] = "small,home",
-    seeds: Annotated[
-        str, typer.Option("--seeds", help="Seeds of the runs: 0,1,2 or 0-4 or a mix.")
-    ] = "0-4",
+    worlds: WorldsOpt = "small,home",
+    seeds: SeedsOpt = "0-4",
     pose: Annotated[
         str,
         typer.Option(

@@ -9,51 +9,25 @@ the coordinator's own makes it send the queue again under a newer number.
 
 from __future__ import annotations
 
-import socket
 import threading
-import time
-from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from waits import wait_until
 
-from fleet.bus import Bus, open_router
+from fleet.bus import Bus
 from fleet.config import resolve_world
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
+from fleet.launcher import free_port
 from fleet.params import load_fleet_config
 from fleet.protocol import Award, AwardAck
 from fleet.world import load_world
 from planners.auction import Task
 
 pytestmark = pytest.mark.timeout(60)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait(cond: Callable[[], bool], timeout: float = 5.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return cond()
-
-
-@pytest.fixture(scope="module")
-def endpoint() -> Iterator[str]:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    router = open_router([endpoint])
-    try:
-        yield endpoint
-    finally:
-        router.close()
 
 
 def _coordinator(bus: Bus, store: JobStore) -> Coordinator:
@@ -70,9 +44,9 @@ def _coordinator(bus: Bus, store: JobStore) -> Coordinator:
 
 
 def test_award_numbers_survive_a_restart_and_an_agent_ahead_is_caught_up(
-    endpoint: str, tmp_path: Path
+    router_endpoint: str, tmp_path: Path
 ) -> None:
-    fleet = f"t{_free_port()}"
+    fleet = f"t{free_port()}"
     awards: list[Award] = []
     lock = threading.Lock()
 
@@ -81,8 +55,8 @@ def test_award_numbers_survive_a_restart_and_an_agent_ahead_is_caught_up(
             awards.append(msg)
 
     with (
-        Bus("coordinator", "coordinator", connect=[endpoint], fleet=fleet) as cbus,
-        Bus("agent", "robot-0", connect=[endpoint], fleet=fleet) as abus,
+        Bus("coordinator", "coordinator", connect=[router_endpoint], fleet=fleet) as cbus,
+        Bus("agent", "robot-0", connect=[router_endpoint], fleet=fleet) as abus,
     ):
         abus.subscribe(abus.keys.award("robot-0"), Award, on_award)
         store = JobStore(tmp_path / "job.sqlite")
@@ -94,7 +68,7 @@ def test_award_numbers_survive_a_restart_and_an_agent_ahead_is_caught_up(
             coord._publish_awards()
             return bool(awards)
 
-        assert _wait(send_again), "no award crossed the router"
+        assert wait_until(send_again), "no award crossed the router"
         first = awards[0]
         assert first.tasks == ["t00"] and first.robot == "robot-0"
         sent = coord.job.robots["robot-0"].award_seq
@@ -112,7 +86,7 @@ def test_award_numbers_survive_a_restart_and_an_agent_ahead_is_caught_up(
             awards.clear()
         restarted._on_ack(cbus.keys.ack("robot-0"), AwardAck(0.0, 41, "robot-0"))
         restarted._publish_awards()
-        assert _wait(lambda: any(a.seq > 41 for a in awards)), [a.seq for a in awards]
+        assert wait_until(lambda: any(a.seq > 41 for a in awards)), [a.seq for a in awards]
         newest = max(awards, key=lambda a: a.seq)
         assert newest.tasks == ["t00"]
         again.close()

@@ -4,7 +4,6 @@ drawn headless; and its kill key on a real process with a real signal."""
 from __future__ import annotations
 
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -20,6 +19,7 @@ from fleet.dashboard import BusFeed, FleetWatcher, key_pattern
 from fleet.dashboard_term import DOWN, KILL, QUIT, UP, ViewControl, parse_keys
 from fleet.dashboard_view import LOST_MARK, WALL, heading_arrow, plain, screen
 from fleet.floor_map import pack_grid
+from fleet.launcher import free_port
 from fleet.protocol import (
     Collision,
     FleetEvent,
@@ -159,12 +159,6 @@ def test_keys_from_a_terminal_and_key_patterns_for_the_rates() -> None:
 # ---- a live bus --------------------------------------------------------------------------
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _until(feed: BusFeed, done: Callable[[], bool], timeout: float = 10.0) -> bool:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -177,7 +171,7 @@ def _until(feed: BusFeed, done: Callable[[], bool], timeout: float = 10.0) -> bo
 
 @pytest.fixture
 def router() -> Iterator[str]:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     session = open_router([endpoint])
     try:
         yield endpoint

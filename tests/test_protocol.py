@@ -7,9 +7,7 @@ without losing the next valid message, and liveliness join/leave is observed.
 from __future__ import annotations
 
 import dataclasses
-import socket
 import threading
-import time
 import typing
 import zlib
 from collections.abc import Callable
@@ -21,8 +19,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from waits import wait_until
 
-from fleet.bus import Bus, open_router, validate_endpoint
+from fleet.bus import Bus, validate_endpoint
+from fleet.launcher import free_port
 from fleet.protocol import (
     MESSAGES,
     SCHEMA_VERSION,
@@ -503,34 +503,9 @@ def test_validate_endpoint_accepts_good_endpoints(endpoint: str) -> None:
 # Real bus over a loopback router
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait(cond: Callable[[], bool], timeout: float = 5.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return cond()
-
-
-@pytest.fixture(scope="module")
-def router_endpoint() -> typing.Iterator[str]:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    router = open_router([endpoint])
-    try:
-        yield endpoint
-    finally:
-        router.close()
-
-
 @pytest.mark.timeout(60)
 def test_garbage_is_counted_and_next_message_still_arrives(router_endpoint: str) -> None:
-    fleet = f"t{_free_port()}"
+    fleet = f"t{free_port()}"
     with (
         Bus("sim", "pub", connect=[router_endpoint], fleet=fleet) as pub,
         Bus("agent", "sub", connect=[router_endpoint], fleet=fleet) as sub,
@@ -546,13 +521,15 @@ def test_garbage_is_counted_and_next_message_still_arrives(router_endpoint: str)
 
         sub.subscribe(key, Twist, on_twist)
         # Warm up until the subscription has reached the publisher through the router.
-        assert _wait(lambda: (pub.publish(key, Twist(-1.0, 0.0, 0.0)), bool(got))[1]), (
+        assert wait_until(lambda: (pub.publish(key, Twist(-1.0, 0.0, 0.0)), bool(got))[1]), (
             "no message crossed the router"
         )
         assert sub.decode_errors[key] == 0
         pub.session.put(key, b"\x93not a message")
         pub.publish(key, Twist(7.0, 0.25, -0.5))
-        assert _wait(lambda: any(m.stamp == 7.0 for m in got)), "valid message after garbage lost"
+        assert wait_until(lambda: any(m.stamp == 7.0 for m in got)), (
+            "valid message after garbage lost"
+        )
         assert sub.decode_errors[key] == 1
         last = next(m for m in got if m.stamp == 7.0)
         assert (last.v, last.w) == (0.25, -0.5)
@@ -560,7 +537,7 @@ def test_garbage_is_counted_and_next_message_still_arrives(router_endpoint: str)
 
 @pytest.mark.timeout(60)
 def test_liveliness_join_and_leave(router_endpoint: str) -> None:
-    fleet = f"t{_free_port()}"
+    fleet = f"t{free_port()}"
     joined: list[str] = []
     left: list[str] = []
     with (
@@ -568,12 +545,12 @@ def test_liveliness_join_and_leave(router_endpoint: str) -> None:
         Bus("agent", "early", connect=[router_endpoint], fleet=fleet),
     ):
         watcher.watch_alive("agent", joined.append, left.append)
-        assert _wait(lambda: "early" in joined), f"existing token not reported: {joined}"
+        assert wait_until(lambda: "early" in joined), f"existing token not reported: {joined}"
         late = Bus("agent", "late", connect=[router_endpoint], fleet=fleet)
         try:
-            assert _wait(lambda: "late" in joined), f"join not observed: {joined}"
+            assert wait_until(lambda: "late" in joined), f"join not observed: {joined}"
         finally:
             late.close()
-        assert _wait(lambda: "late" in left), f"leave not observed: {left}"
+        assert wait_until(lambda: "late" in left), f"leave not observed: {left}"
         assert "c" not in joined, "watch_alive('agent') reported another role"
         assert "early" not in left
