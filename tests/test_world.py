@@ -13,6 +13,7 @@ from PIL import Image
 from fleet.config import ConfigError, configs_dir
 from fleet.params import load_fleet_config
 from fleet.world import load_ros_map, load_world
+from planners.grid import clearance, reachable
 
 RADIUS = 0.17
 WORLDS = configs_dir() / "worlds"
@@ -64,6 +65,20 @@ def test_small_world_loads() -> None:
     xmin, ymin, xmax, ymax = world.bounds
     assert xmin == pytest.approx(-0.05) and xmax == pytest.approx(4.05)
     assert ymin == pytest.approx(-0.05) and ymax == pytest.approx(3.05)
+    _assert_spread(world, world.start_poses(3, RADIUS), RADIUS)
+
+
+def test_corridor_world_joins_two_rooms_by_a_passage_one_robot_wide() -> None:
+    world = load_world(WORLDS / "corridor.yaml")
+    assert world.name == "corridor"
+    g = world.grid(0.025)
+    clear = clearance(g)
+    # the corridor's middle: room for one robot centre line, not for two robots side by side
+    row, col = g.world_to_cell(np.array([[4.0, 1.45]]))[0]
+    assert RADIUS < clear[row, col] < 2 * RADIUS
+    left, right = g.world_to_cell(np.array([[1.5, 1.5], [6.5, 1.0]]))
+    reach = reachable(clear >= RADIUS, left[None, :])
+    assert reach[right[0], right[1]]  # a robot gets from one room to the other
     _assert_spread(world, world.start_poses(3, RADIUS), RADIUS)
 
 
