@@ -10,12 +10,12 @@ import numpy as np
 
 from agents.slam.geometry import compose, relative
 from agents.slam.matcher import LikelihoodField
-from agents.slam.params import SlamParams
 from agents.slam.persistence import SavedState
 from agents.slam.relocalize import map_field, relocalize
 from agents.slam.slam import Slam
 from agents.slam.slam_map import SlamMap
 from fleet.protocol import LaserScan, Odometry
+from fleet.slam_params import SlamParams
 
 Pose = tuple[float, float, float]
 

@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from agents.slam.params import SlamParams
 from fleet.config import configs_dir, from_mapping, read_yaml
+from fleet.slam_params import SlamParams
 from planners.coverage.params import CoverageParams
 from planners.dwa import DWAParams
 

@@ -14,8 +14,8 @@ import time
 import numpy as np
 from slam_sim import drifting_odometry, home_segments, loop_route, ring_segments, scan
 
-from agents.slam.params import SlamParams
 from agents.slam.slam import Slam
+from fleet.slam_params import SlamParams
 
 WORLDS = {
     "home": (home_segments, [(1.5, 1.0), (8.5, 1.0), (8.5, 5.0), (1.5, 5.0)], 0.0),

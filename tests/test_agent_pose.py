@@ -10,9 +10,9 @@ from slam_sim import drifting_odometry, loop_route, room_segments, scan
 
 from agents.agent import _map_message
 from agents.pose_source import OdometryPose, SlamPose, odometry_at
-from agents.slam.params import SlamParams
 from agents.slam.slam_map import PatchTracker
 from fleet.protocol import LaserScan, MapPatches, Odometry, decode, encode
+from fleet.slam_params import SlamParams
 
 RATE_HZ = 10.0
 

@@ -10,8 +10,8 @@ import pytest
 from slam_sim import drifting_odometry, loop_route, ring_segments, scan
 
 from agents.slam.geometry import relative
-from agents.slam.params import SlamParams
 from agents.slam.slam import Slam
+from fleet.slam_params import SlamParams
 
 
 def _lap(params: SlamParams) -> tuple[np.ndarray, np.ndarray, Slam]:

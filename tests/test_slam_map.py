@@ -11,10 +11,10 @@ from slam_sim import drifting_odometry, loop_route, occupancy_raster, room_segme
 
 from agents.slam.geometry import compose, relative
 from agents.slam.occupancy import LogOddsGrid
-from agents.slam.params import SlamParams
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam import Slam
 from agents.slam.slam_map import PatchTracker, SlamMap
+from fleet.slam_params import SlamParams
 
 # Walls sit mid-cell (offset 0.02 m): a wall exactly on a cell boundary would be split between
 # two cells by the 1 cm range noise, and the raster would have to pick one of them arbitrarily.

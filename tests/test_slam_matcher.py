@@ -11,7 +11,7 @@ from slam_sim import room_segments, scan
 from agents.slam.geometry import scan_to_points, transform_points, wrap_angle
 from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
 from agents.slam.occupancy import LogOddsGrid
-from agents.slam.params import SlamParams
+from fleet.slam_params import SlamParams
 
 PARAMS = SlamParams()
 

@@ -19,7 +19,6 @@ from slam_sim import box, scan
 from agents.agent import respawn_window
 from agents.pose_source import RelocalizingSlamPose, SlamPose, overlay
 from agents.slam.geometry import wrap_angle
-from agents.slam.params import SlamParams
 from agents.slam.persistence import (
     POSE_FILE,
     STATE_FILE,
@@ -36,6 +35,7 @@ from agents.slam.slam_map import SlamMap
 from fleet.config import resolve_world
 from fleet.params import FleetConfig, load_fleet_config
 from fleet.protocol import LaserScan, Odometry
+from fleet.slam_params import SlamParams
 from fleet.world import load_world
 from sim_server.core import SimCore
 

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from agents.slam.params import SlamParams
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam import Slam, _Closure
+from fleet.slam_params import SlamParams
 
 PARAMS = SlamParams()
 

@@ -22,7 +22,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from agents.slam.occupancy import LogOddsGrid
-from agents.slam.params import SlamParams
+from fleet.slam_params import SlamParams
 
 
 def _window_max(a: np.ndarray, f: int) -> np.ndarray:

@@ -32,8 +32,8 @@ import numpy as np
 from agents.slam.geometry import scan_to_points, wrap_angle
 from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
 from agents.slam.occupancy import LogOddsGrid
-from agents.slam.params import SlamParams
 from agents.slam.slam_map import SlamMap
+from fleet.slam_params import SlamParams
 
 Pose = tuple[float, float, float]
 

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.slam.carmen import CarmenLog, LaserRecord
-from agents.slam.params import SlamParams
 from agents.slam.slam import Pose, Slam
+from fleet.slam_params import SlamParams
 
 
 @dataclass(frozen=True, eq=False)

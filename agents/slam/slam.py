@@ -30,9 +30,9 @@ from agents.slam.geometry import (
 )
 from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
 from agents.slam.occupancy import LogOddsGrid, log_odds
-from agents.slam.params import SlamParams
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
+from fleet.slam_params import SlamParams
 
 Pose = tuple[float, float, float]
 

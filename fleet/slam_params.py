@@ -1,4 +1,5 @@
-"""SLAM tunables: the ``slam:`` section of ``configs/fleet.yaml``."""
+"""SLAM tunables: the ``slam:`` section of ``configs/fleet.yaml``. They live in the spine,
+beside the other sections (fleet.params), so loading the parameters needs no robot software."""
 
 from __future__ import annotations
 
