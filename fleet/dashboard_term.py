@@ -58,7 +58,7 @@ def parse_keys(data: bytes) -> list[str]:
 
 class Actions(Protocol):
     """Kill or respawn a robot's process; each returns what was done, or raises an exception
-    whose message says why it could not be done (see ``fleet.cli_ops.ProcessActions``)."""
+    whose message says why it could not be done (see ``fleet.ops.ProcessActions``)."""
 
     def kill(self, name: str) -> str: ...
 

@@ -247,7 +247,7 @@ def evaluate_replay(log_path: Path, cfg: FleetConfig, out: Path | None) -> dict:
     ms = result.scan_seconds * 1000.0
     stats = result.slam.stats()
     if out is not None:
-        from fleet.cli_slam import write_replay_outputs
+        from fleet.slam_outputs import write_replay_outputs
 
         write_replay_outputs(result, parsed, out, cfg.slam, log_path)
     return {

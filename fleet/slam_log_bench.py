@@ -85,7 +85,7 @@ def run_log_bench(
     trajectory.csv, live.csv, timing.json) and return per-seed figures and their means.
 
     ``progress(label, done, total)`` reports the replay of each seed."""
-    from fleet.cli_slam import write_replay_outputs
+    from fleet.slam_outputs import write_replay_outputs
 
     parsed = read_log(log_path)
     scans = parsed.front_scans

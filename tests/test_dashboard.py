@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from fleet.bus import Bus, open_router
-from fleet.cli_ops import ProcessActions
 from fleet.dashboard import BusFeed, FleetWatcher, key_pattern
 from fleet.dashboard_term import DOWN, KILL, QUIT, UP, ViewControl, parse_keys
 from fleet.dashboard_view import LOST_MARK, WALL, heading_arrow, plain, screen
 from fleet.floor_map import pack_grid
 from fleet.launcher import free_port
+from fleet.ops import ProcessActions
 from fleet.protocol import (
     Collision,
     FleetEvent,
@@ -266,7 +266,7 @@ def test_the_kill_key_sends_the_selected_robots_agent_sigterm(tmp_path: Path) ->
 def test_a_view_that_attaches_late_starts_with_the_jobs_events_and_no_old_news(
     tmp_path: Path,
 ) -> None:
-    from fleet.cli_dashboard import _past_events
+    from fleet.cli.dashboard import _past_events
     from fleet.coordinator.store import JobStore
 
     store = JobStore(tmp_path / "coordinator.sqlite")

@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli_processes import WorldOpt, _fail
+from fleet.cli.common import WorldOpt, _fail
 from fleet.help_text import reflow
 
 

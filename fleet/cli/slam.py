@@ -58,6 +58,7 @@ def replay(
     from fleet.carmen_recorder import truth_path_for
     from fleet.config import ConfigError
     from fleet.params import load_fleet_config
+    from fleet.slam_outputs import score_against_truth, write_replay_outputs
 
     try:
         params = load_fleet_config(config).slam
@@ -341,84 +342,3 @@ def _run_with_progress(run, w, cfg, seconds: float, seed: int, scale: float, out
                 bar.update(task, description="replaying SLAM", completed=seconds)
 
         return run(w, cfg, seconds, seed, scale, out, progress=progress)
-
-
-def score_against_truth(result, parsed, truth_file: Path) -> dict:
-    """Scores of the live and final trajectories and of the log's odometry against a truth file
-    (rows t, x, y, theta; each scan paired with the truth row of its timestamp)."""
-    import numpy as np
-
-    from agents.slam.evaluation import associate, trajectory_scores
-    from fleet.carmen_recorder import read_truth
-
-    truth = read_truth(truth_file)
-    est_i, ref_i = associate(result.trajectory[:, 0], truth[:, 0], max_dt=1e-3)
-    if len(est_i) != len(result.trajectory):
-        missing = len(result.trajectory) - len(est_i)
-        raise ValueError(f"{truth_file}: {missing} scans have no truth row at their time")
-    ref = truth[ref_i]
-    odom = np.array([s.laser_pose for s in parsed.front_scans])[est_i]
-    return {
-        "truth": str(truth_file),
-        **trajectory_scores(result.live[est_i], ref),
-        **trajectory_scores(result.trajectory[est_i], ref, prefix="final_"),
-        **trajectory_scores(odom, ref[:, 1:], prefix="odom_"),
-    }
-
-
-def write_replay_outputs(result, parsed, out: Path, params, log: Path) -> dict:
-    import numpy as np
-    from PIL import Image
-
-    out.mkdir(parents=True, exist_ok=True)
-    np.savetxt(
-        out / "trajectory.csv",
-        result.trajectory,
-        delimiter=",",
-        header="t,x,y,theta",
-        comments="",
-        fmt=["%.6f", "%.4f", "%.4f", "%.5f"],
-    )
-    np.savetxt(
-        out / "live.csv",
-        result.live,
-        delimiter=",",
-        header="t,x,y,theta",
-        comments="",
-        fmt=["%.6f", "%.4f", "%.4f", "%.5f"],
-    )
-    slam_map = result.slam.occupancy()
-    p = slam_map.probabilities()
-    image = np.full(p.shape, 205, dtype=np.uint8)
-    image[p >= params.occupied_threshold] = 0
-    image[p <= params.free_threshold] = 254
-    Image.fromarray(image[::-1]).save(out / "map.png")
-    (out / "map.yaml").write_text(
-        "image: map.png\n"
-        f"resolution: {slam_map.resolution}\n"
-        f"origin: [{slam_map.origin[0]}, {slam_map.origin[1]}, 0.0]\n"
-        "negate: 0\n"
-        f"occupied_thresh: {params.occupied_threshold}\n"
-        f"free_thresh: {params.free_threshold}\n"
-    )
-    ms = result.scan_seconds * 1000.0
-    stats = result.slam.stats()
-    summary = {
-        "log": str(log),
-        "scans": int(ms.size),
-        "log_seconds": result.log_seconds,
-        "processing_seconds": float(result.scan_seconds.sum()),
-        "ms_per_scan_median": float(np.median(ms)),
-        "ms_per_scan_p95": float(np.percentile(ms, 95)),
-        "ms_per_scan_max": float(ms.max()),
-        "replay_speedup": result.speedup,
-        "nodes": stats.nodes,
-        "submaps": stats.submaps,
-        "loop_closures": stats.loop_closures,
-        "optimizations": stats.optimizations,
-        "skipped_messages": dict(parsed.skipped),
-        "truncated_line": parsed.truncated_line,
-        "out": str(out),
-    }
-    (out / "timing.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return summary

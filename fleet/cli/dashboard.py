@@ -14,9 +14,9 @@ from typing import Annotated, Any
 
 import typer
 
-from fleet.cli_ops import STATE_FILE
-from fleet.cli_processes import ConfigOpt, ZenohConfigOpt, _bus, _fail, _load
+from fleet.cli.common import ConfigOpt, ZenohConfigOpt, _bus, _fail, _load
 from fleet.help_text import reflow
+from fleet.ops import STATE_FILE
 
 REDRAW_HZ = 5.0
 PLAIN_LINE_S = 5.0
@@ -78,9 +78,9 @@ def dashboard(
     """
     from rich.console import Console
 
-    from fleet.cli_ops import ProcessActions
     from fleet.dashboard import BusFeed, FleetWatcher
     from fleet.dashboard_term import TerminalView, ViewControl
+    from fleet.ops import ProcessActions
     from fleet.protocol import DEFAULT_FLEET
     from fleet.rundir import RunDirError, RunTable, newest_run_dir, read_table
 

@@ -1,8 +1,7 @@
-"""Commands that run one fleet process each: router, sim, agent, coordinator; and `fleet up`."""
+"""Commands that run one fleet process each: router, sim, agent, coordinator."""
 
 from __future__ import annotations
 
-import signal
 import threading
 from pathlib import Path
 from typing import Annotated
@@ -10,105 +9,19 @@ from typing import Annotated
 import typer
 
 from fleet.bus import DEFAULT_ENDPOINT
+from fleet.cli.common import (
+    ConfigOpt,
+    ConnectOpt,
+    FleetOpt,
+    WorldOpt,
+    ZenohConfigOpt,
+    _bus,
+    _fail,
+    _load,
+    _setup_logging,
+    _stop_on_signals,
+)
 from fleet.protocol import DEFAULT_FLEET
-
-ConnectOpt = Annotated[
-    list[str] | None,
-    typer.Option(
-        "--connect",
-        "-c",
-        help="Zenoh router endpoint to connect to (repeatable), e.g. tcp/192.168.1.5:7447; "
-        "FLEET_CONNECT may hold them, separated by spaces.",
-        envvar="FLEET_CONNECT",
-    ),
-]
-FleetOpt = Annotated[
-    str,
-    typer.Option("--fleet", help="Fleet name: the key prefix fleet/<name>/.", envvar="FLEET_NAME"),
-]
-ConfigOpt = Annotated[
-    Path | None,
-    typer.Option(
-        "--config",
-        help="Parameter file (default: the built-in configs/fleet.yaml).",
-        envvar="FLEET_CONFIG",
-    ),
-]
-ZenohConfigOpt = Annotated[
-    Path | None,
-    typer.Option(
-        "--zenoh-config",
-        help="Zenoh config file (JSON5) under the fleet's own settings, e.g. the TLS files, user "
-        "and password for a secured router that `fleet certs DIR` wrote as DIR/<user>.json5.",
-        envvar="FLEET_ZENOH_CONFIG",
-    ),
-]
-WorldOpt = Annotated[
-    str,
-    typer.Option(
-        "--world",
-        "-w",
-        help="World YAML or ROS map_server YAML, or a built-in world name (home, small).",
-        envvar="FLEET_WORLD",
-    ),
-]
-
-
-def _fail(message: str) -> None:
-    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(2)
-
-
-def _setup_logging(name: str) -> None:
-    import logging
-    import sys
-
-    logging.basicConfig(
-        level=logging.INFO,
-        stream=sys.stderr,
-        format=f"%(asctime)s {name} %(levelname)s %(message)s",
-        datefmt="%H:%M:%S",
-    )
-
-
-def _stop_on_signals(event: threading.Event) -> None:
-    def handler(signum: int, _frame: object) -> None:
-        event.set()
-
-    signal.signal(signal.SIGTERM, handler)
-    signal.signal(signal.SIGINT, handler)
-
-
-def _load(config: Path | None, world: str | None = None):
-    from fleet.config import ConfigError, resolve_world
-    from fleet.params import load_fleet_config
-    from fleet.world import load_world
-
-    try:
-        cfg = load_fleet_config(config)
-        w = load_world(resolve_world(world), cfg.robot.radius) if world is not None else None
-    except ConfigError as e:
-        _fail(str(e))
-    return cfg, w
-
-
-def _bus(
-    role: str,
-    ident: str,
-    connect: list[str] | None,
-    fleet: str,
-    zenoh_config: Path | None = None,
-):
-    from fleet.bus import Bus
-
-    try:
-        return Bus(
-            role, ident, connect or [DEFAULT_ENDPOINT], fleet=fleet, zenoh_config=zenoh_config
-        )
-    except ValueError as e:
-        _fail(str(e))
-    except Exception as e:  # zenoh raises ZError for unreachable routers
-        _fail(f"cannot connect to {connect or [DEFAULT_ENDPOINT]}: {e}")
 
 
 def router(
@@ -326,11 +239,7 @@ def coordinator(
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
-    from fleet import cli_up
-
-    app.command("up")(cli_up.up)
     app.command("router")(router)
     app.command("sim")(sim)
     app.command("agent")(agent)
     app.command("coordinator")(coordinator)
-    bench_app.command("sim")(cli_up.bench_sim)

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli_processes import _fail
+from fleet.cli.common import _fail
 
 
 def report(

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from fleet.cli_processes import ConfigOpt, WorldOpt, _fail, _load
+from fleet.cli.common import ConfigOpt, WorldOpt, _fail, _load
 
 TIMED_OUT_EXIT = 3
 # A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
@@ -284,8 +284,8 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
     closes the view; then, as without a terminal, plain lines."""
     from rich.console import Console
 
-    from fleet.cli_ops import ProcessActions
     from fleet.dashboard_term import TerminalView, ViewControl
+    from fleet.ops import ProcessActions
 
     console = Console(stderr=True)
     control = ViewControl(watcher, ProcessActions(launcher.run_dir))
@@ -424,3 +424,10 @@ def bench_sim(
             f"{result['rtf']}× real time ({result['rtf_cpu']}× per CPU second), "
             f"{result['rays_per_s']:,} rays/s, load average {result['load_avg']}"
         )
+
+
+def register(
+    app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
+) -> None:
+    app.command("up")(up)
+    bench_app.command("sim")(bench_sim)
