@@ -77,3 +77,18 @@ def test_pp_gives_up_once_every_order_failed(solver: str) -> None:
     assert result.details["attempts"] == 2
     assert result.runtime_s < 1.0
     assert solve(instance, "cbs", time_limit_s=5).soc == 11
+
+
+def test_closed_moves_of_a_grid_graph_are_not_taken() -> None:
+    # a 2 x 3 grid whose top row's two right cells are not joined: the way goes round below
+    free = np.ones((2, 3), dtype=bool)
+    open_right = np.array([[True, False], [True, True]])
+    graph = GridGraph(free, open_right=open_right)
+    assert graph.cell((0, 2)) not in graph.neighbours[graph.cell((0, 1))]
+    assert graph.distances(graph.cell((0, 2)))[graph.cell((0, 1))] == 3
+    instance = MapfInstance(free, ((0, 1),), ((0, 2),))
+    result = solve(instance, "sipp-pp", graph=graph)
+    assert result.status == "success"
+    assert result.solution.costs == (3,)
+    with pytest.raises(ValueError):
+        GridGraph(free, open_down=np.ones((2, 3), dtype=bool))

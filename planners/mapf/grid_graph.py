@@ -3,6 +3,10 @@
 Distances are exact 4-connected shortest-path lengths from each goal (a BFS, run in C by
 ``scipy.sparse.csgraph.shortest_path(unweighted=True)`` for many goals at once), the standard
 admissible and consistent heuristic for grid MAPF.
+
+By default every two 4-adjacent free cells are joined; ``open_right`` and ``open_down`` (boolean
+masks of the moves to the right and down neighbour) can close some of those moves, for graphs
+whose cells touch without a way between them (``planners.transit_graph``).
 """
 
 from __future__ import annotations
@@ -21,7 +25,14 @@ UNREACHABLE = 1 << 30
 class GridGraph:
     """Successor lists (wait first, then the free 4-neighbours) and per-goal distance tables."""
 
-    def __init__(self, free: np.ndarray) -> None:
+    def __init__(
+        self,
+        free: np.ndarray,
+        open_right: np.ndarray | None = None,
+        open_down: np.ndarray | None = None,
+    ) -> None:
+        """``open_right`` (rows, cols - 1) and ``open_down`` (rows - 1, cols), when given, say
+        which moves between 4-adjacent free cells exist (both directions); None: all of them."""
         free = np.asarray(free, dtype=bool)
         self.rows, self.cols = free.shape
         self.num_cells = self.rows * self.cols
@@ -29,6 +40,14 @@ class GridGraph:
         idx = np.arange(self.num_cells).reshape(free.shape)
         right = free[:, :-1] & free[:, 1:]
         down = free[:-1, :] & free[1:, :]
+        if open_right is not None:
+            if np.shape(open_right) != right.shape:
+                raise ValueError(f"open_right must have shape {right.shape}")
+            right &= np.asarray(open_right, dtype=bool)
+        if open_down is not None:
+            if np.shape(open_down) != down.shape:
+                raise ValueError(f"open_down must have shape {down.shape}")
+            down &= np.asarray(open_down, dtype=bool)
         a = np.concatenate([idx[:, :-1][right], idx[:-1, :][down]])
         b = np.concatenate([idx[:, 1:][right], idx[1:, :][down]])
         self._adjacency = coo_matrix(
