@@ -1,0 +1,265 @@
+"""Space-time deconfliction of one round of transits on a transit graph.
+
+Input: robots, each with a start and a goal point (world metres) and the time it starts (s).
+Output: per robot timed waypoints (x, y, t) through the cells of a ``TransitGraph`` such that no
+two robots are in one cell at one time and no two swap cells along an edge (the MAPF model of
+Stern et al., SoCS 2019, which ``planners.mapf`` solves and validates).
+
+- **Time.** One MAPF step is the time to drive one cell at ``speed``
+  (``step_s = cell_size / speed``); step 0 is the earliest start of the round. A robot that
+  starts later waits in its start cell until its step ``round((start_time - t0) / step_s)``;
+  its start cell is reserved for it meanwhile.
+- **Cells.** Starts and goals are located on the graph (``TransitGraph.candidates``); robots
+  whose points fall in one cell get the next nearest free cells of their region, so starts and
+  goals are distinct. A robot whose goal is not in its start's component is reported by name
+  and nothing is planned.
+- **Priorities** (prioritized planning, Erdmann and Lozano-Pérez 1987; Silver 2005): first the
+  robots without a transit (start cell = goal cell; they reserve their cell for good), then the
+  robots that start in a narrow passage (a cell with at most two neighbours), then the longer
+  transits (graph distance), then by name. Each robot is planned with SIPP (Phillips and
+  Likhachev, ICRA 2011; ``planners.mapf.sipp``) against the reservations of all higher
+  priorities and the start cells of robots that have not left yet.
+- **Joint fallback.** When a robot finds no path, CBS (``planners.mapf``'s ICBS, optimal) plans
+  all robots of the round jointly under ``cbs_time_limit_s``, every robot starting at the
+  latest start step of the round (until then each waits in its distinct start cell, so the
+  joint plan stays conflict-free). If CBS finds no plan either, the result says so
+  (``status == "failed"``), naming the robot that prioritized planning could not place.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planners.mapf import MapfInstance, solve
+from planners.mapf.deadline import Deadline
+from planners.mapf.grid_graph import UNREACHABLE
+from planners.mapf.low_level import SearchStats
+from planners.mapf.model import SearchTimeout
+from planners.mapf.sipp import sipp
+from planners.mapf.tables import ConstraintTable
+from planners.transit_graph import Cell, TransitGraph
+
+STATUSES = ("success", "unreachable", "failed")
+# a cell with at most this many neighbours is part of a narrow passage (a corridor's chain)
+NARROW_DEGREE = 2
+
+
+@dataclass(frozen=True)
+class TransitRequest:
+    """One robot's transit: from ``start`` to ``goal`` (world x, y in m), leaving at
+    ``start_time`` (s)."""
+
+    name: str
+    start: tuple[float, float]
+    goal: tuple[float, float]
+    start_time: float = 0.0
+
+
+@dataclass(frozen=True)
+class Transit:
+    """One robot's plan: ``cells[s]`` is its cell at step s (it stays in the last one), and
+    ``waypoints`` the (x, y, t) of each arrival and, where it waits, each departure."""
+
+    name: str
+    cells: tuple[Cell, ...]
+    waypoints: tuple[tuple[float, float, float], ...]
+
+
+@dataclass(frozen=True)
+class RoundPlan:
+    """The plan of a round. ``transits`` is empty unless ``status == "success"``.
+
+    ``method`` is ``"pp"`` (prioritized planning) or ``"cbs"`` (the joint fallback);
+    ``unreachable`` names the robots whose goal no way leads to; ``instance`` is the MAPF
+    instance on the graph's cells (for ``planners.mapf.validate``).
+    """
+
+    status: str
+    method: str
+    transits: tuple[Transit, ...]
+    t0: float
+    step_s: float
+    order: tuple[str, ...] = ()
+    unreachable: tuple[str, ...] = ()
+    message: str = ""
+    instance: MapfInstance | None = field(default=None, compare=False)
+    start_steps: tuple[int, ...] = ()
+    runtime_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
+
+
+def _assign(candidates: list[list[Cell]]) -> list[Cell | None]:
+    """The nearest cell of each robot not taken by an earlier robot (None if all are)."""
+    taken: set[Cell] = set()
+    out: list[Cell | None] = []
+    for options in candidates:
+        cell = next((c for c in options if c not in taken), None)
+        if cell is not None:
+            taken.add(cell)
+        out.append(cell)
+    return out
+
+
+def _waypoints(
+    graph: TransitGraph, cells: Sequence[Cell], t0: float, step_s: float
+) -> tuple[tuple[float, float, float], ...]:
+    out = []
+    last = len(cells) - 1
+    for s, cell in enumerate(cells):
+        arrives = s == 0 or cells[s - 1] != cell
+        leaves = s < last and cells[s + 1] != cell
+        if arrives or leaves:
+            x, y = graph.point(cell)
+            out.append((x, y, t0 + s * step_s))
+    return tuple(out)
+
+
+def _trim(path: list[Cell]) -> list[Cell]:
+    end = len(path)
+    while end > 1 and path[end - 2] == path[-1]:
+        end -= 1
+    return path[:end]
+
+
+def plan_round(
+    graph: TransitGraph,
+    requests: Sequence[TransitRequest],
+    speed: float,
+    cbs_time_limit_s: float = 1.0,
+) -> RoundPlan:
+    """Conflict-free timed transits for ``requests`` on ``graph`` at ``speed`` (m/s)."""
+    deadline = Deadline(float("inf"))
+    if speed <= 0:
+        raise ValueError(f"speed must be > 0, got {speed}")
+    names = [r.name for r in requests]
+    if len(set(names)) != len(names):
+        raise ValueError(f"robot names must be distinct, got {names}")
+    step_s = graph.cell_size / speed
+    t0 = min((r.start_time for r in requests), default=0.0)
+    if not requests:
+        return RoundPlan("success", "pp", (), t0, step_s)
+    starts = _assign(graph.candidates(np.array([r.start for r in requests])))
+    goals = _assign(graph.candidates(np.array([r.goal for r in requests])))
+    problems = []
+    for r, s, g in zip(requests, starts, goals, strict=True):
+        if s is None:
+            problems.append(f"{r.name}: no free cell for its start {r.start}")
+        elif g is None:
+            problems.append(f"{r.name}: no free cell for its goal {r.goal}")
+        elif graph.component[s] != graph.component[g]:
+            problems.append(f"{r.name}: its goal {r.goal} cannot be reached from {r.start}")
+    if problems:
+        bad = tuple(p.split(":", 1)[0] for p in problems)
+        return RoundPlan(
+            "unreachable",
+            "none",
+            (),
+            t0,
+            step_s,
+            unreachable=bad,
+            message="; ".join(problems),
+            runtime_s=deadline.elapsed(),
+        )
+    mg = graph.graph
+    start_ids = [mg.cell(s) for s in starts]  # type: ignore[arg-type]
+    goal_ids = [mg.cell(g) for g in goals]  # type: ignore[arg-type]
+    holds = [max(0, round((r.start_time - t0) / step_s)) for r in requests]
+    instance = MapfInstance(graph.usable, tuple(starts), tuple(goals), tuple(names))  # type: ignore[arg-type]
+    mg.precompute(goal_ids)
+    deg = graph.degree()
+    dist = [mg.distances(g)[s] for s, g in zip(start_ids, goal_ids, strict=True)]
+    order = sorted(
+        range(len(requests)),
+        key=lambda i: (
+            start_ids[i] != goal_ids[i],
+            deg[starts[i]] > NARROW_DEGREE,  # type: ignore[index]
+            -dist[i],
+            names[i],
+        ),
+    )
+    paths = _prioritized(graph, start_ids, goal_ids, holds, order, deadline)
+    method = "pp"
+    message = ""
+    if isinstance(paths, int):
+        stuck = names[paths]
+        method = "cbs"
+        result = solve(instance, "cbs", time_limit_s=cbs_time_limit_s, graph=mg)
+        if result.status != "success":
+            return RoundPlan(
+                "failed",
+                "cbs",
+                (),
+                t0,
+                step_s,
+                order=tuple(names[i] for i in order),
+                message=f"prioritized planning found no path for {stuck}; "
+                f"CBS: {result.status} ({result.message})",
+                instance=instance,
+                runtime_s=deadline.elapsed(),
+            )
+        wait = max(holds)
+        paths = [[p[0]] * wait + list(p) for p in result.solution.paths]  # type: ignore[union-attr]
+        holds = [wait] * len(requests)
+        message = f"prioritized planning found no path for {stuck}; CBS planned the round"
+    transits = tuple(
+        Transit(name, tuple(path), _waypoints(graph, path, t0, step_s))
+        for name, path in zip(names, paths, strict=True)
+    )
+    return RoundPlan(
+        "success",
+        method,
+        transits,
+        t0,
+        step_s,
+        order=tuple(names[i] for i in order),
+        message=message,
+        instance=instance,
+        start_steps=tuple(holds),
+        runtime_s=deadline.elapsed(),
+    )
+
+
+def _prioritized(
+    graph: TransitGraph,
+    starts: Sequence[int],
+    goals: Sequence[int],
+    holds: Sequence[int],
+    order: Sequence[int],
+    deadline: Deadline,
+) -> list[list[Cell]] | int:
+    """SIPP for each robot in ``order`` against the higher priorities' reservations; the paths
+    (cells per step), or the index of the first robot that found none."""
+    mg = graph.graph
+    n = mg.num_cells
+    planned: list[list[int]] = []
+    paths: list[list[Cell] | None] = [None] * len(starts)
+    stats = SearchStats()
+    for i in order:
+        if mg.distances(goals[i])[starts[i]] >= UNREACHABLE:
+            return i
+        table = ConstraintTable(n)
+        for path in planned:
+            table.reserve_path(path)
+        for j, start in enumerate(starts):
+            if j != i and paths[j] is None:
+                for t in range(holds[j] + 1):
+                    table.add_vertex(start, t)
+        # a robot that starts later may not leave its start cell before its start step
+        for t in range(1, holds[i] + 1):
+            for nb in mg.neighbours[starts[i]]:
+                table.add_vertex(nb, t)
+        try:
+            path = sipp(mg, starts[i], goals[i], table, deadline, stats)
+        except SearchTimeout:
+            path = None
+        if path is None:
+            return i
+        planned.append(path)
+        paths[i] = _trim([mg.rc(c) for c in path])
+    return paths  # type: ignore[return-value]
