@@ -136,7 +136,33 @@ def test_a_round_no_solver_can_plan_says_so() -> None:
     assert len(cells) == 3
     a, b = graph.point(tuple(cells[0])), graph.point(tuple(cells[-1]))
     requests = [TransitRequest("left", a, b), TransitRequest("right", b, a)]
-    plan = plan_round(graph, requests, SPEED, cbs_time_limit_s=0.2)
+    plan = plan_round(graph, requests, SPEED, joint_time_limit_s=0.2)
     assert plan.status == "failed"
     assert not plan.transits
     assert "prioritized planning found no path for" in plan.message and "CBS" in plan.message
+
+
+def test_a_robot_that_finds_no_path_is_raised_in_priority(corridor: TransitGraph) -> None:
+    # the longer transit goes first by the rule and parks in the corridor for good, so the
+    # robot crossing the other way finds no path until it is planned first
+    requests = [
+        TransitRequest("parker", (0.3, 0.3), (4.0, 1.45)),
+        TransitRequest("crosser", (5.6, 1.45), (2.5, 2.5), 3.0),
+    ]
+    fixed = plan_round(corridor, requests, SPEED, max_reorders=0)
+    assert fixed.method == "cbs" and "crosser" in fixed.message
+    plan = plan_round(corridor, requests, SPEED)
+    assert plan.method == "pp"
+    assert plan.order == ("crosser", "parker")
+    _check(corridor, plan)
+
+
+def test_large_rounds_fall_back_to_ecbs(corridor: TransitGraph) -> None:
+    requests = [
+        TransitRequest("crosser", (1.5, 1.5), (6.5, 1.5)),
+        TransitRequest("parked", (4.0, 1.45), (4.0, 1.45)),
+    ]
+    plan = plan_round(corridor, requests, SPEED, cbs_max_robots=1)
+    assert plan.method == "ecbs"
+    assert "ECBS planned the round" in plan.message
+    _check(corridor, plan)

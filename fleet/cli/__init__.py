@@ -62,6 +62,9 @@ def _register_all() -> None:
     from fleet.cli import fleet_bench
 
     fleet_bench.register(app, plan_app, bench_app, slam_app)
+    from fleet.cli import deconfliction
+
+    deconfliction.register(app, plan_app, bench_app, slam_app)
     from fleet.cli import report
 
     report.register(app, plan_app, bench_app, slam_app)

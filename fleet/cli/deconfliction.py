@@ -1,0 +1,131 @@
+"""``fleet bench deconfliction``: how long planning all transits of a round takes."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import typer
+
+# warehouse-like grid: planners.mapf.generate's shelf map, each of its cells this many metres
+WAREHOUSE_CELL_M = 0.5
+WAREHOUSE_CELLS = 40
+
+
+def register(app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app) -> None:
+    bench_app.command("deconfliction")(bench_deconfliction)
+
+
+def _warehouse(resolution: float):
+    """A GridMap of the generated shelf warehouse (2-deep shelves, 2-wide aisles)."""
+    import numpy as np
+
+    from planners.grid import GridMap
+    from planners.mapf.generate import warehouse_map
+
+    free = warehouse_map(WAREHOUSE_CELLS, WAREHOUSE_CELLS)
+    k = round(WAREHOUSE_CELL_M / resolution)
+    occupied = np.kron(~free, np.ones((k, k), dtype=bool)).astype(bool)
+    occupied[:, :1] = occupied[:, -1:] = occupied[:1, :] = occupied[-1:, :] = True
+    return GridMap(occupied, np.zeros_like(occupied), resolution, (0.0, 0.0))
+
+
+def _round(graph, robots: int, rng, stagger_s: float):
+    """Random distinct start and goal cells in the graph's largest component, start times
+    uniform in [0, stagger_s]."""
+    import numpy as np
+
+    from planners.deconfliction import TransitRequest
+
+    main = np.bincount(graph.component[graph.usable]).argmax()
+    cells = np.argwhere(graph.component == main)
+    starts = cells[rng.permutation(len(cells))[:robots]]
+    goals = cells[rng.permutation(len(cells))[:robots]]
+    return [
+        TransitRequest(
+            f"robot-{i}",
+            graph.point(tuple(s)),
+            graph.point(tuple(g)),
+            float(rng.uniform(0.0, stagger_s)),
+        )
+        for i, (s, g) in enumerate(zip(starts, goals, strict=True))
+    ]
+
+
+def bench_deconfliction(
+    rounds: int = typer.Option(50, min=1, help="Rounds per scenario (seeded: round i, seed i)."),
+    joint_time_limit: float = typer.Option(
+        1.0, help="Seconds the joint fallback (CBS, or ECBS above 10 robots) may take."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+) -> None:
+    """Time planning all transits of a round (planners/deconfliction.py) on a transit graph.
+
+    Scenarios: 6 robots on home (target ≤ 50 ms a round) and 50 robots on a generated warehouse
+    of shelves (target ≤ 1 s). Each round draws random distinct start and goal cells and start
+    times within 2 s, seeded by the round's number. The robot's radius, wall clearance and
+    transit speed come from configs/fleet.yaml. Reports the graph's build time and cells, the
+    median and 95th-percentile planning time per round, how many rounds needed the joint
+    fallback (CBS, or ECBS above 10 robots) and how many failed, and whether every plan passed
+    the MAPF validator.
+    """
+    import numpy as np
+
+    from fleet.config import resolve_world
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
+    from planners.deconfliction import plan_round
+    from planners.mapf import validate
+    from planners.transit_graph import build_transit_graph
+
+    cfg = load_fleet_config()
+    radius, clearance = cfg.robot.radius, cfg.coordinator.wall_clearance
+    speed, resolution = cfg.agent.transit_speed, 0.05
+    scenarios = {
+        "home": (lambda: load_world(resolve_world("home")).grid(resolution), 6, 0.05),
+        "warehouse": (lambda: _warehouse(resolution), 50, 1.0),
+    }
+    results = {}
+    for name, (grid_of, robots, target_s) in scenarios.items():
+        grid = grid_of()
+        t0 = time.perf_counter()
+        graph = build_transit_graph(grid, radius, clearance)
+        build_s = time.perf_counter() - t0
+        times, cbs, ecbs, failed, invalid = [], 0, 0, 0, 0
+        for seed in range(rounds):
+            requests = _round(graph, robots, np.random.default_rng(seed), 2.0)
+            t0 = time.perf_counter()
+            plan = plan_round(graph, requests, speed, joint_time_limit_s=joint_time_limit)
+            times.append(time.perf_counter() - t0)
+            cbs += plan.method == "cbs"
+            ecbs += plan.method == "ecbs"
+            if plan.status != "success":
+                failed += 1
+            elif not validate(plan.instance, [t.cells for t in plan.transits]).valid:
+                invalid += 1
+        results[name] = {
+            "robots": robots,
+            "rounds": rounds,
+            "graph_cells": graph.num_cells,
+            "graph_build_ms": round(build_s * 1e3, 1),
+            "plan_ms_median": round(float(np.median(times)) * 1e3, 2),
+            "plan_ms_p95": round(float(np.percentile(times, 95)) * 1e3, 2),
+            "target_ms": target_s * 1e3,
+            "rounds_cbs": cbs,
+            "rounds_ecbs": ecbs,
+            "rounds_failed": failed,
+            "plans_invalid": invalid,
+        }
+    if as_json:
+        typer.echo(json.dumps(results))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="Deconfliction: planning all transits of a round")
+    table.add_column("metric")
+    for name in results:
+        table.add_column(name, justify="right")
+    for key in next(iter(results.values())):
+        table.add_row(key, *(str(r[key]) for r in results.values()))
+    Console().print(table)
