@@ -20,8 +20,11 @@ Construction, from an occupancy grid (``GridMap``) and a disc robot's radius plu
   fine cells in their union). A corridor one robot wide is thus a chain of single cells, each
   joined only to the next.
 - **Locating.** A world point maps to the usable cell whose point is nearest among the cells in
-  the same connected region of possible centres as the point (a point off every region: the
-  nearest usable cell).
+  the same connected region of possible centres as the point and in that region's largest
+  component of the graph (a point off every region: the nearest usable cell). A region's cells
+  outside that component (a pocket whose only way out runs diagonally or through a cell
+  dropped for spacing) are not located to, so robots of one region can always reach each
+  other's cells.
 
 Every step is numpy / scipy over the whole grid (connected components by
 ``scipy.sparse.csgraph``), built once per floor plan.
@@ -66,6 +69,7 @@ class TransitGraph:
     fine_resolution: float
     fine_region: np.ndarray  # connected region of possible centres per fine cell, -1 elsewhere
     cell_region: np.ndarray  # that region at each usable cell's point, -1 elsewhere
+    primary: np.ndarray  # usable cells in their region's largest component (located to)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -110,7 +114,9 @@ class TransitGraph:
         if len(cells) == 0:
             return [[] for _ in xy]
         pts = self.points[cells[:, 0], cells[:, 1]]
-        regions = self.cell_region[cells[:, 0], cells[:, 1]]
+        regions = np.where(
+            self.primary[cells[:, 0], cells[:, 1]], self.cell_region[cells[:, 0], cells[:, 1]], -2
+        )
         fine = np.floor((xy[:, ::-1] - np.array(self.origin)[::-1]) / self.fine_resolution)
         fine = fine.astype(np.int64)
         rows, cols = self.fine_region.shape
@@ -233,6 +239,18 @@ def build_transit_graph(
 
     fine_region = _components(ok, np.zeros_like(ok, dtype=np.int64)).reshape(ok.shape)
     cell_region = np.where(usable, fine_region.ravel()[rep], -1)
+    primary = np.zeros_like(usable)
+    if usable.any():
+        pairs, counts = np.unique(
+            np.column_stack([cell_region[usable], component[usable]]), axis=0, return_counts=True
+        )
+        ranked = np.lexsort((-counts, pairs[:, 0]))  # per region, its largest component first
+        pairs = pairs[ranked]
+        first = np.ones(len(pairs), dtype=bool)
+        first[1:] = pairs[1:, 0] != pairs[:-1, 0]
+        main = dict(zip(pairs[first, 0].tolist(), pairs[first, 1].tolist(), strict=True))
+        lookup = np.vectorize(lambda r: main.get(int(r), -3))
+        primary[usable] = component[usable] == lookup(cell_region[usable])
     return TransitGraph(
         usable=usable,
         points=points,
@@ -247,4 +265,5 @@ def build_transit_graph(
         fine_resolution=res,
         fine_region=fine_region,
         cell_region=cell_region,
+        primary=primary,
     )

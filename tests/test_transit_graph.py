@@ -99,3 +99,18 @@ def test_the_corridor_world_joins_its_two_rooms_through_the_corridor() -> None:
 
     cut = GridGraph(graph.usable, open_right, graph.open_down)
     assert cut.distances(cut.cell(right))[cut.cell(left)] >= 1 << 30
+
+
+def test_points_of_one_region_locate_to_one_component() -> None:
+    world = load_world(resolve_world("home"))
+    grid = world.grid(RES)
+    graph = build_transit_graph(grid, RADIUS, CLEARANCE)
+    # home has cells no move joins to the rest (their way out runs diagonally); no point of the
+    # floor may be located to them
+    assert (graph.usable & ~graph.primary).any()
+    region = graph.fine_region[: grid.shape[0], : grid.shape[1]]
+    main = np.bincount(region[region >= 0]).argmax()
+    fine = np.argwhere(region == main)[::7]
+    cells = graph.locate(grid.cell_to_world(fine))
+    assert all(c is not None for c in cells)
+    assert len({int(graph.component[c]) for c in cells}) == 1
