@@ -61,3 +61,16 @@ def test_target_conflict_with_a_parked_agent() -> None:
     report = validate(instance, [[(0, 0), (0, 1), (0, 2)], [(0, 1)]])
     assert not report.valid
     assert any("t=1: a and b both in (0, 1)" in e for e in report.errors), report.errors
+
+
+def test_a_move_through_a_closed_edge_is_reported() -> None:
+    instance = MapfInstance(FREE, ((0, 0),), ((0, 1),), ("a",))
+    open_right = np.array([[False, True], [True, True], [True, True]])
+    assert validate(instance, [[(0, 0), (0, 1)]]).valid
+    report = validate(instance, [[(0, 0), (0, 1)]], open_right=open_right)
+    assert any("closed" in e for e in report.errors), report.errors
+    # the way back is closed as well; other moves stay open
+    back = MapfInstance(FREE, ((0, 1),), ((1, 0),), ("a",))
+    assert not validate(back, [[(0, 1), (0, 0), (1, 0)]], open_right=open_right).valid
+    down = np.ones((2, 3), dtype=bool)
+    assert validate(back, [[(0, 1), (0, 0), (1, 0)]], open_down=down).valid

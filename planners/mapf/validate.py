@@ -1,14 +1,17 @@
 """An independent check of any MAPF solution, and its SOC and makespan recomputed.
 
 It shares no code with the solvers: it walks the paths cell by cell (the slow, obvious way) and
-checks bounds, obstacles, unit moves, start and goal, vertex conflicts (including an agent passing
-through a parked agent's goal) and swap conflicts.
+checks bounds, obstacles, unit moves (and, for graphs with closed moves, that the move is open),
+start and goal, vertex conflicts (including an agent passing through a parked agent's goal) and
+swap conflicts.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+
+import numpy as np
 
 from planners.mapf.model import Cell, MapfInstance
 
@@ -35,8 +38,25 @@ def _cost(path: Sequence[Cell]) -> int:
     return t
 
 
-def validate(instance: MapfInstance, paths: Sequence[Sequence[Cell]]) -> ValidationReport:
-    """Check ``paths`` (one per agent, ``(row, col)`` per time step) against ``instance``."""
+def _open(a: Cell, b: Cell, open_right: np.ndarray | None, open_down: np.ndarray | None) -> bool:
+    """Whether the unit move between ``a`` and ``b`` (or a wait) is open."""
+    (r0, c0), (r1, c1) = min(a, b), max(a, b)
+    if r0 == r1 and c1 == c0 + 1 and open_right is not None:
+        return bool(open_right[r0, c0])
+    if c0 == c1 and r1 == r0 + 1 and open_down is not None:
+        return bool(open_down[r0, c0])
+    return True
+
+
+def validate(
+    instance: MapfInstance,
+    paths: Sequence[Sequence[Cell]],
+    open_right: np.ndarray | None = None,
+    open_down: np.ndarray | None = None,
+) -> ValidationReport:
+    """Check ``paths`` (one per agent, ``(row, col)`` per time step) against ``instance``;
+    ``open_right`` / ``open_down`` (as for ``GridGraph``), when given, say which moves to the
+    right / down neighbour and back exist."""
     errors: list[str] = []
     names = instance.names
     rows, cols = instance.shape
@@ -59,6 +79,8 @@ def validate(instance: MapfInstance, paths: Sequence[Sequence[Cell]]) -> Validat
                 errors.append(f"{names[i]}: t={t} cell {(r, c)} is an obstacle")
             if t and abs(r - path[t - 1][0]) + abs(c - path[t - 1][1]) > 1:
                 errors.append(f"{names[i]}: t={t} jumps from {path[t - 1]} to {(r, c)}")
+            elif t and not _open(path[t - 1], (r, c), open_right, open_down):
+                errors.append(f"{names[i]}: t={t} moves from {path[t - 1]} to {(r, c)}, closed")
     if any(not p for p in paths):
         return ValidationReport(tuple(errors[:MAX_ERRORS]), 0, 0)
     horizon = max(len(p) for p in paths)
