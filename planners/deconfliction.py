@@ -12,8 +12,8 @@ Stern et al., SoCS 2019, which ``planners.mapf`` solves and validates).
 - **Cells.** Starts and goals are located on the graph (``TransitGraph.candidates``); robots
   whose points fall in one cell get the next nearest free cells of their region, so starts and
   goals are distinct. Waypoints are the cells' points: a robot drives from its start point to
-  its first cell's point, and from its last cell's point to its goal point, on its own. A robot whose goal is not in its start's component is reported by name
-  and nothing is planned.
+  its first cell's point, and from its last cell's point to its goal point, on its own. A
+  robot whose goal is not in its start's component is reported by name and nothing is planned.
 - **Priorities** (prioritized planning, Erdmann and Lozano-Pérez 1987; Silver 2005): first the
   robots without a transit (start cell = goal cell; they reserve their cell for good), then the
   robots that start in a narrow passage (a cell with at most two neighbours), then the longer
