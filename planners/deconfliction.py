@@ -11,9 +11,10 @@ Stern et al., SoCS 2019, which ``planners.mapf`` solves and validates).
   its start cell is reserved for it meanwhile.
 - **Cells.** Starts and goals are located on the graph (``TransitGraph.candidates``); robots
   whose points fall in one cell get the next nearest free cells of their region, so starts and
-  goals are distinct. Waypoints are the cells' points: a robot drives from its start point to
-  its first cell's point, and from its last cell's point to its goal point, on its own. A
-  robot whose goal is not in its start's component is reported by name and nothing is planned.
+  goals are distinct (a robot whose goal lies in its own start cell keeps that cell). Waypoints
+  are the cells' points: a robot drives from its start point to its first cell's point, and from
+  its last cell's point to its goal point, on its own. A robot whose goal is not in its start's
+  component is reported by name and nothing is planned.
 - **Priorities** (prioritized planning, Erdmann and Lozano-Pérez 1987; Silver 2005): first the
   robots without a transit (start cell = goal cell; they reserve their cell for good), then the
   robots that start in a narrow passage (a cell with at most two neighbours), then the longer
@@ -100,15 +101,22 @@ class RoundPlan:
             raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
 
 
-def _assign(candidates: list[list[Cell]]) -> list[Cell | None]:
-    """The nearest cell of each robot not taken by an earlier robot (None if all are)."""
+def _assign(
+    candidates: list[list[Cell]], keep: Sequence[Cell | None] | None = None
+) -> list[Cell | None]:
+    """The nearest cell of each robot not taken by another (None if all are): robots whose
+    nearest cell is ``keep[i]`` (their start cell, for goals) choose first, then the others in
+    list order."""
+    order = list(range(len(candidates)))
+    if keep is not None:
+        order.sort(key=lambda i: not (candidates[i] and candidates[i][0] == keep[i]))
     taken: set[Cell] = set()
-    out: list[Cell | None] = []
-    for options in candidates:
-        cell = next((c for c in options if c not in taken), None)
+    out: list[Cell | None] = [None] * len(candidates)
+    for i in order:
+        cell = next((c for c in candidates[i] if c not in taken), None)
         if cell is not None:
             taken.add(cell)
-        out.append(cell)
+        out[i] = cell
     return out
 
 
@@ -154,7 +162,7 @@ def plan_round(
     if not requests:
         return RoundPlan("success", "pp", (), t0, step_s)
     starts = _assign(graph.candidates(np.array([r.start for r in requests])))
-    goals = _assign(graph.candidates(np.array([r.goal for r in requests])))
+    goals = _assign(graph.candidates(np.array([r.goal for r in requests])), starts)
     problems = []
     for r, s, g in zip(requests, starts, goals, strict=True):
         if s is None:

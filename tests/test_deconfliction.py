@@ -164,3 +164,21 @@ def test_large_rounds_fall_back_to_ecbs(corridor: TransitGraph) -> None:
     assert plan.method == "ecbs"
     assert "ECBS planned the round" in plan.message
     _check(corridor, plan)
+
+
+def test_a_robot_at_its_goal_keeps_its_cell_when_another_goal_falls_in_it(
+    corridor: TransitGraph,
+) -> None:
+    requests = [
+        TransitRequest("mover", (6.5, 0.7), (1.5, 1.5)),
+        TransitRequest("idle", (1.4, 1.4), (1.4, 1.4)),
+    ]
+    assert (
+        corridor.locate(np.array([r.goal for r in requests]))[0]
+        == corridor.locate(np.array([requests[1].start]))[0]
+    )
+    plan = plan_round(corridor, requests, SPEED)
+    _check(corridor, plan)
+    mover, idle = plan.transits
+    assert len(idle.cells) == 1
+    assert mover.cells[-1] != idle.cells[0]
