@@ -59,6 +59,22 @@ def _fail(message: str) -> None:
     raise typer.Exit(2)
 
 
+def parse_seeds(text: str) -> list[int]:
+    """``--seeds``: ``0,1,2`` or ``0-4`` (inclusive), or a mix (``0-2,7``); exits naming the
+    bad part."""
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        lo, sep, hi = part.partition("-")
+        try:
+            out += list(range(int(lo), int(hi) + 1)) if sep else [int(part)]
+        except ValueError:
+            _fail(f"--seeds: {part!r} is not a seed or a range like 0-4")
+    if not out:
+        _fail("--seeds: no seed given")
+    return out
+
+
 def _setup_logging(name: str) -> None:
     import logging
     import sys

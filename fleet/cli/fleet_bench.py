@@ -12,24 +12,8 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import _fail
+from fleet.cli.common import _fail, parse_seeds
 from fleet.help_text import reflow
-
-
-def _seeds(text: str) -> list[int]:
-    """``0,1,2`` or ``0-4`` (inclusive), or a mix: ``0-2,7``."""
-    out: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        lo, sep, hi = part.partition("-")
-        try:
-            out += list(range(int(lo), int(hi) + 1)) if sep else [int(part)]
-        except ValueError:
-            _fail(f"--seeds: {part!r} is not a seed or a range like 0-4")
-    if not out:
-        _fail("--seeds: no seed given")
-    return out
-
 
 WorldsOpt = Annotated[
     str,
@@ -99,7 +83,7 @@ def bench_fleet(
     def progress(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    result = run_bench(root, chosen, _seeds(seeds), robots, speed, timeout, progress)
+    result = run_bench(root, chosen, parse_seeds(seeds), robots, speed, timeout, progress)
     if as_json:
         print(json.dumps(result))
     else:
@@ -163,7 +147,7 @@ def bench_follow(
         _fail("--worlds: no world given")
     runs = []
     for world in chosen:
-        for seed in _seeds(seeds):
+        for seed in parse_seeds(seeds):
             runs.append(follow_tour(world, cfg, seed, pose, latency))
             print(run_line(runs[-1]), file=sys.stderr, flush=True)
     result = {"pose": pose, "latency_s": latency, "runs": runs, "worlds": summarize(runs)}

@@ -9,6 +9,8 @@ from typing import Annotated
 
 import typer
 
+from fleet.cli.common import parse_seeds
+
 
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
@@ -141,7 +143,9 @@ def bench_slam(
             "(default slam-bench/)."
         ),
     ] = None,
-    seeds: Annotated[str, typer.Option(help="With --log: comma-separated noise seeds.")] = "0,1,2",
+    seeds: Annotated[
+        str, typer.Option(help="With --log: noise seeds, 0,1,2 or 0-4 or a mix.")
+    ] = "0,1,2",
     shift: Annotated[
         float,
         typer.Option(
@@ -240,14 +244,7 @@ def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: b
     from fleet.params import load_fleet_config
     from fleet.slam_log_bench import LOG_TARGETS, run_log_bench
 
-    try:
-        seed_list = [int(s) for s in seeds.split(",") if s.strip()]
-    except ValueError:
-        typer.echo(f"error: --seeds must be comma-separated integers, got {seeds!r}", err=True)
-        raise typer.Exit(2) from None
-    if not seed_list:
-        typer.echo("error: --seeds names no seed", err=True)
-        raise typer.Exit(2)
+    seed_list = parse_seeds(seeds)
     try:
         cfg = load_fleet_config(config)
         with Progress(
