@@ -37,6 +37,7 @@ from fleet.protocol import (
     RobotStatus,
     TruthPose,
 )
+from fleet.rundir import read_json_object
 
 if TYPE_CHECKING:
     from fleet.bus import Bus
@@ -317,16 +318,9 @@ def load_run(run_dir: Path) -> RunData:
 
 
 def _read_report(path: Path) -> dict[str, Any]:
-    try:
-        raw = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ReportError(f"cannot read {path}: {e}") from None
-    except json.JSONDecodeError as e:
-        raise ReportError(f"{path} is not valid JSON: {e}") from None
-    if not isinstance(raw, dict):
-        raise ReportError(f"{path}: expected a JSON object, got {type(raw).__name__}")
+    if not path.exists():
+        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends")
+    raw = read_json_object(path, ReportError)
     for key, kind in REPORT_FIELDS.items():
         if key not in raw:
             raise ReportError(f"{path}: missing field {key}")

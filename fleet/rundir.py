@@ -80,21 +80,30 @@ def write_table(run_dir: Path, table: RunTable) -> Path:
     return path
 
 
+def read_json_object(path: Path, error: type[Exception]) -> dict[str, Any]:
+    """The JSON object in ``path``; ``error`` naming the file if it cannot be read, is not JSON
+    or holds something else than an object."""
+    try:
+        raw = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise error(f"{path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise error(f"cannot read {path}: {e}") from None
+    except json.JSONDecodeError as e:
+        raise error(f"{path} is not valid JSON: {e}") from None
+    if not isinstance(raw, dict):
+        raise error(f"{path}: expected a JSON object, got {type(raw).__name__}")
+    return raw
+
+
 def read_table(run_dir: Path) -> RunTable:
     """Read and check ``run_dir/processes.json``; raises RunDirError naming the file and field."""
     if not run_dir.is_dir():
         raise RunDirError(f"no such run dir: {run_dir}")
     path = run_dir / TABLE_NAME
-    try:
-        raw = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise RunDirError(f"no fleet was started in {run_dir} (no {TABLE_NAME})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise RunDirError(f"cannot read {path}: {e}") from None
-    except json.JSONDecodeError as e:
-        raise RunDirError(f"{path} is not valid JSON: {e}") from None
-    if not isinstance(raw, dict):
-        raise RunDirError(f"{path}: expected a JSON object, got {type(raw).__name__}")
+    if not path.exists():
+        raise RunDirError(f"no fleet was started in {run_dir} (no {TABLE_NAME})")
+    raw = read_json_object(path, RunDirError)
     procs = _field(raw, "processes", dict, path)
     return RunTable(
         fleet=_field(raw, "fleet", str, path),
