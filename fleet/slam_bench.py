@@ -30,6 +30,7 @@ import numpy as np
 
 from fleet.carmen_recorder import CarmenRecorder, read_truth
 from fleet.params import FleetConfig
+from fleet.slam_outputs import per_scan_ms, write_replay_outputs
 from fleet.world import World
 
 # With the fleet.yaml odometry noise, raw odometry over the 10-minute home route ends at about
@@ -247,8 +248,6 @@ def evaluate_replay(log_path: Path, cfg: FleetConfig, out: Path | None) -> dict:
     ms = result.scan_seconds * 1000.0
     stats = result.slam.stats()
     if out is not None:
-        from fleet.slam_outputs import write_replay_outputs
-
         write_replay_outputs(result, parsed, out, cfg.slam, log_path)
     return {
         "ate_rmse_m": ate_rmse(est, ref),
@@ -262,8 +261,7 @@ def evaluate_replay(log_path: Path, cfg: FleetConfig, out: Path | None) -> dict:
         "rpe_1m_rot_deg": math.degrees(rpe_m.rot_mean),
         "odom_rpe_trans_m": odom_rpe.trans_mean,
         "odom_rpe_rot_deg": math.degrees(odom_rpe.rot_mean),
-        "ms_per_scan_median": float(np.median(ms)),
-        "ms_per_scan_p95": float(np.percentile(ms, 95)),
+        **per_scan_ms(ms),
         "replay_speedup": result.speedup,
         "replay_speedup_cpu": result.log_seconds / cpu if cpu > 0 else math.inf,
         "loop_closures": stats.loop_closures,

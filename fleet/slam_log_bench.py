@@ -85,7 +85,7 @@ def run_log_bench(
     trajectory.csv, live.csv, timing.json) and return per-seed figures and their means.
 
     ``progress(label, done, total)`` reports the replay of each seed."""
-    from fleet.slam_outputs import write_replay_outputs
+    from fleet.slam_outputs import per_scan_ms, write_replay_outputs
 
     parsed = read_log(log_path)
     scans = parsed.front_scans
@@ -117,12 +117,8 @@ def run_log_bench(
                 **trajectory_scores(result.live[:, 1:], reference),
                 **trajectory_scores(result.trajectory[:, 1:], reference, prefix="final_"),
                 **trajectory_scores(odom, reference, prefix="odom_"),
-                "ms_per_scan_median": float(np.median(ms)),
-                "ms_per_scan_p95": float(np.percentile(ms, 95)),
-                "ms_per_scan_max": float(ms.max()),
-                "cpu_ms_per_scan_median": float(np.median(cpu_ms)),
-                "cpu_ms_per_scan_p95": float(np.percentile(cpu_ms, 95)),
-                "cpu_ms_per_scan_max": float(cpu_ms.max()),
+                **per_scan_ms(ms),
+                **per_scan_ms(cpu_ms, prefix="cpu_"),
                 "replay_speedup": result.speedup,
                 "loop_closures": stats.loop_closures,
                 "nodes": stats.nodes,

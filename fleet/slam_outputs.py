@@ -7,12 +7,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 
 def score_against_truth(result, parsed, truth_file: Path) -> dict:
     """Scores of the live and final trajectories and of the log's odometry against a truth file
     (rows t, x, y, theta; each scan paired with the truth row of its timestamp)."""
-    import numpy as np
-
     from agents.slam.evaluation import associate, trajectory_scores
     from fleet.carmen_recorder import read_truth
 
@@ -35,7 +35,6 @@ def write_replay_outputs(result, parsed, out: Path, params, log: Path) -> dict:
     """Write a replay's trajectory.csv, live.csv, map.png with map.yaml (ROS map_server
     colours, thresholds from ``params``) and timing.json into ``out``; returns the summary
     that timing.json holds."""
-    import numpy as np
     from PIL import Image
 
     out.mkdir(parents=True, exist_ok=True)
@@ -76,9 +75,7 @@ def write_replay_outputs(result, parsed, out: Path, params, log: Path) -> dict:
         "scans": int(ms.size),
         "log_seconds": result.log_seconds,
         "processing_seconds": float(result.scan_seconds.sum()),
-        "ms_per_scan_median": float(np.median(ms)),
-        "ms_per_scan_p95": float(np.percentile(ms, 95)),
-        "ms_per_scan_max": float(ms.max()),
+        **per_scan_ms(ms),
         "replay_speedup": result.speedup,
         "nodes": stats.nodes,
         "submaps": stats.submaps,
@@ -90,3 +87,12 @@ def write_replay_outputs(result, parsed, out: Path, params, log: Path) -> dict:
     }
     (out / "timing.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def per_scan_ms(ms: np.ndarray, prefix: str = "") -> dict[str, float]:
+    """Median, p95 and max of per-scan times in milliseconds, as ``<prefix>ms_per_scan_*``."""
+    return {
+        f"{prefix}ms_per_scan_median": float(np.median(ms)),
+        f"{prefix}ms_per_scan_p95": float(np.percentile(ms, 95)),
+        f"{prefix}ms_per_scan_max": float(ms.max()),
+    }
