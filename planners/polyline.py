@@ -22,23 +22,30 @@ def simplify(points: np.ndarray, tolerance: float) -> np.ndarray:
     stack = [(0, n - 1)]
     while stack:
         i, j = stack.pop()
-        if j - i < 2:
-            continue
-        a, b = pts[i], pts[j]
-        seg = b - a
-        length = math.hypot(seg[0], seg[1])
-        rel = pts[i + 1 : j] - a
-        if length < 1e-12:
-            dist = np.hypot(rel[:, 0], rel[:, 1])
-        else:
-            dist = np.abs(rel[:, 0] * seg[1] - rel[:, 1] * seg[0]) / length
-        k = int(np.argmax(dist))
-        if dist[k] > tolerance:
-            m = i + 1 + k
+        m = rdp_split(pts, i, j, tolerance)
+        if m >= 0:
             keep[m] = True
             stack.append((i, m))
             stack.append((m, j))
     return pts[keep]
+
+
+def rdp_split(pts: np.ndarray, i: int, j: int, tolerance: float) -> int:
+    """Where the Ramer–Douglas–Peucker simplification splits the stretch ``pts[i..j]``: the
+    interior point farthest from the chord (from ``pts[i]`` if the chord has no length), or -1
+    when none is farther than ``tolerance`` and only the ends are kept."""
+    if j - i < 2:
+        return -1
+    a, b = pts[i], pts[j]
+    seg = b - a
+    length = math.hypot(seg[0], seg[1])
+    rel = pts[i + 1 : j] - a
+    if length < 1e-12:
+        dist = np.hypot(rel[:, 0], rel[:, 1])
+    else:
+        dist = np.abs(rel[:, 0] * seg[1] - rel[:, 1] * seg[0]) / length
+    k = int(np.argmax(dist))
+    return i + 1 + k if dist[k] > tolerance else -1
 
 
 def without_straight_vertices(points: np.ndarray, tolerance_rad: float = 1e-6) -> np.ndarray:
@@ -173,7 +180,7 @@ class TurnCounter:
                 continue
             m = splits.get((i, j))
             if m is None:
-                m = self._split(i, j)
+                m = rdp_split(self._pts, i, j, self.tolerance)
                 if m < 0:
                     memo[i, j] = self._segment(i, j)
                     stack.pop()
@@ -185,22 +192,6 @@ class TurnCounter:
             stack.pop()
             memo[i, j] = self._join(memo[i, m], memo[m, j])
         return memo[first, last]
-
-    def _split(self, i: int, j: int) -> int:
-        """Where :func:`simplify` splits stretch ``(i, j)``, or -1 where it keeps only its ends."""
-        if j - i < 2:
-            return -1
-        pts = self._pts
-        a, b = pts[i], pts[j]
-        seg = b - a
-        length = math.hypot(seg[0], seg[1])
-        rel = pts[i + 1 : j] - a
-        if length < 1e-12:
-            dist = np.hypot(rel[:, 0], rel[:, 1])
-        else:
-            dist = np.abs(rel[:, 0] * seg[1] - rel[:, 1] * seg[0]) / length
-        k = int(np.argmax(dist))
-        return i + 1 + k if dist[k] > self.tolerance else -1
 
     def _segment(self, i: int, j: int) -> _Turns:
         dx, dy = self._pts[j] - self._pts[i]
