@@ -211,3 +211,19 @@ def test_given_up_waypoints_are_counted_across_plans_cuts_and_a_restart() -> Non
     message = resumed.finished_message()
     assert "7 waypoint(s) were given up" in message and "robot-0 4, robot-1 3" in message
     assert "the floor is clean" not in message
+
+
+def test_pieces_given_up_go_back_to_the_market_once(job: Job):
+    job.award("t00", "robot-0", False)
+    job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
+    again = job.give_back("robot-0", "t00")
+    assert again == "t00.1"
+    assert job.tasks["t00"].state == REPLACED and job.tasks["t00"].owner is None
+    rest = job.tasks[again]
+    assert rest.state == OPEN and rest.parent == "t00" and rest.task.pieces == 2
+    # the remainder's own given-up pieces stay given up: its owner is done with it
+    job.award(again, "robot-1", False)
+    job.progress("robot-1", again, np.array([1, 0], dtype=np.uint8))
+    assert job.give_back("robot-1", again) is None
+    assert job.give_back("robot-1", "t01") is None  # not its task
+    assert job.tasks[again].state == ASSIGNED

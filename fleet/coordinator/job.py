@@ -171,6 +171,22 @@ class Job:
                 reopened.append(rec.task.id)
         return reopened, made
 
+    def give_back(self, rid: str, task_id: str) -> str | None:
+        """``rid``'s plan ended with pieces of ``task_id`` unswept (waypoints it gave up, often
+        because a peer stood in the way for a while): a task of the tour goes back to the market
+        once, as the remainder of its unswept pieces (as a lost robot's work does), and that
+        remainder's id is returned; a task that is already a remainder is not, and None says the
+        owner is done with it."""
+        rec = self.tasks.get(task_id)
+        if rec is None or rec.state != ASSIGNED or rec.owner != rid or rec.parent is not None:
+            return None
+        rest = remainder(rec.task, rec.swept, self._next_id(task_id), self.params)
+        if rest is None:
+            return None
+        rec.state, rec.owner = REPLACED, None
+        self.tasks[rest.id] = TaskRecord(rest, parent=task_id)
+        return rest.id
+
     def withdraw_unstarted(self) -> list[str]:
         """The back half of each robot's unstarted queue (never the task it drives) goes back
         to the market, as in work stealing from the far end of a queue: a robot that wins it

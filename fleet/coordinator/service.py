@@ -211,10 +211,15 @@ class Coordinator:
                 rec = self.job.tasks.get(tid)
                 held = rec is not None and rec.state == ASSIGNED and rec.owner == rid
                 if held and (msg.state == "done" or swept.all()):
-                    self.job.finish(rid, tid)
+                    again = None if swept.all() else self.job.give_back(rid, tid)
+                    if again is None:
+                        self.job.finish(rid, tid)
+                        self._event("done", rid, tid, "")
+                    else:
+                        self._event("withdrawn", rid, tid, f"pieces given up: once more as {again}")
+                        self.need_auction = True
                     self.version += 1
-                    self._save_task(tid)
-                    self._event("done", rid, tid, "")
+                    self._save_task(*(t for t in (tid, again) if t is not None))
                     self.wake.set()
 
     def _on_ack(self, key: str, msg: AwardAck) -> None:
