@@ -20,7 +20,9 @@ Stern et al., SoCS 2019, which ``planners.mapf`` solves and validates).
   robots that start in a narrow passage (a cell with at most two neighbours), then the longer
   transits (graph distance), then by name. Each robot is planned with SIPP (Phillips and
   Likhachev, ICRA 2011; ``planners.mapf.sipp``) against the reservations of all higher
-  priorities and the start cells of robots that have not left yet.
+  priorities and the start cells of robots that have not left yet. A reserved cell stays
+  reserved one step after its robot left it: no robot follows another nose to tail, so robots
+  never rotate round a block of cells in one step, and the order of passage below has no cycle.
 - **Joint fallback.** When no order works, all robots of the round are planned jointly under
   ``joint_time_limit_s``: by CBS (``planners.mapf``'s ICBS, optimal) for rounds of at most
   ``cbs_max_robots`` robots, by ECBS with suboptimality bound ``ECBS_W`` (Barer et al. 2014)
@@ -29,15 +31,22 @@ Stern et al., SoCS 2019, which ``planners.mapf`` solves and validates).
   round (until then each waits in its distinct start cell, so the joint plan stays
   conflict-free). If the joint search finds no plan either, the result says so
   (``status == "failed"``), naming the robot that prioritized planning could not place.
+  ``joint_only`` skips the priorities and plans every round jointly. The joint plans may let
+  robots follow each other and rotate; a joint plan whose order of passage has a cycle is
+  refused (``failed``).
+- **Order of passage.** ``edges`` gives each robot the action dependencies of the plan
+  (Hönig et al., RA-L 2019; ``planners.dependencies``): robots that wait for them at the cells'
+  points never share a cell, however late each one is.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from planners.dependencies import Dependency, dependencies, has_cycle, route_of
 from planners.mapf import MapfInstance, solve
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import UNREACHABLE
@@ -81,7 +90,8 @@ class RoundPlan:
 
     ``method`` is ``"pp"`` (prioritized planning), ``"cbs"`` or ``"ecbs"`` (the joint fallback);
     ``unreachable`` names the robots whose goal no way leads to; ``instance`` is the MAPF
-    instance on the graph's cells (for ``planners.mapf.validate``).
+    instance on the graph's cells (for ``planners.mapf.validate``); ``edges`` the order of
+    passage of each robot through the cells it shares with others (``planners.dependencies``).
     """
 
     status: str
@@ -95,6 +105,7 @@ class RoundPlan:
     instance: MapfInstance | None = field(default=None, compare=False)
     start_steps: tuple[int, ...] = ()
     runtime_s: float = 0.0
+    edges: Mapping[str, tuple[Dependency, ...]] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -148,9 +159,11 @@ def plan_round(
     joint_time_limit_s: float = 1.0,
     max_reorders: int = 8,
     cbs_max_robots: int = 10,
+    joint_only: bool = False,
 ) -> RoundPlan:
     """Conflict-free timed transits for ``requests`` on ``graph`` at ``speed`` (m/s);
-    ``max_reorders`` bounds the priority orders tried after the first (see the module)."""
+    ``max_reorders`` bounds the priority orders tried after the first (see the module);
+    ``joint_only`` plans the round jointly without trying priorities first."""
     deadline = Deadline(float("inf"))
     if speed <= 0:
         raise ValueError(f"speed must be > 0, got {speed}")
@@ -200,9 +213,11 @@ def plan_round(
             names[i],
         ),
     )
-    paths = _prioritized(graph, start_ids, goal_ids, holds, order, deadline)
+    paths: list[list[Cell]] | int = (
+        0 if joint_only else _prioritized(graph, start_ids, goal_ids, holds, order, deadline)
+    )
     tried = {tuple(order)}
-    while isinstance(paths, int) and len(tried) <= max_reorders:
+    while not joint_only and isinstance(paths, int) and len(tried) <= max_reorders:
         # the robot that found no path goes first (it keeps its place among the idle ones)
         stuck_robot = paths
         rest = [i for i in order if i != stuck_robot]
@@ -215,7 +230,7 @@ def plan_round(
     method = "pp"
     message = ""
     if isinstance(paths, int):
-        stuck = names[paths]
+        why = "" if joint_only else f"prioritized planning found no path for {names[paths]}; "
         method = "cbs" if len(requests) <= cbs_max_robots else "ecbs"
         result = solve(instance, method, w=ECBS_W, time_limit_s=joint_time_limit_s, graph=mg)
         if result.status != "success":
@@ -226,21 +241,32 @@ def plan_round(
                 t0,
                 step_s,
                 order=tuple(names[i] for i in order),
-                message=f"prioritized planning found no path for {stuck}; "
-                f"{method.upper()}: {result.status} ({result.message})",
+                message=f"{why}{method.upper()}: {result.status} ({result.message})",
                 instance=instance,
                 runtime_s=deadline.elapsed(),
             )
         wait = max(holds)
         paths = [[p[0]] * wait + list(p) for p in result.solution.paths]  # type: ignore[union-attr]
         holds = [wait] * len(requests)
-        message = (
-            f"prioritized planning found no path for {stuck}; {method.upper()} planned the round"
-        )
+        message = f"{why}{method.upper()} planned the round"
+        routes = [route_of(n, _trim(list(p))) for n, p in zip(names, paths, strict=True)]
+        if has_cycle(routes, dependencies(routes)):
+            return RoundPlan(
+                "failed",
+                method,
+                (),
+                t0,
+                step_s,
+                message=f"{message}, but it moves robots round a block of cells in one step, "
+                "an order of passage no delay-tolerant execution can keep",
+                instance=instance,
+                runtime_s=deadline.elapsed(),
+            )
     transits = tuple(
         Transit(name, tuple(path), _waypoints(graph, path, t0, step_s))
         for name, path in zip(names, paths, strict=True)
     )
+    routes = [route_of(t.name, t.cells) for t in transits]
     return RoundPlan(
         "success",
         method,
@@ -252,6 +278,7 @@ def plan_round(
         instance=instance,
         start_steps=tuple(holds),
         runtime_s=deadline.elapsed(),
+        edges=dependencies(routes),
     )
 
 
@@ -276,9 +303,12 @@ def _prioritized(
         table = ConstraintTable(n)
         for path in planned:
             table.reserve_path(path)
+            # and one step after each stay: no robot follows another nose to tail
+            for t in range(len(path) - 1):
+                table.add_vertex(path[t], t + 1)
         for j, start in enumerate(starts):
             if j != i and paths[j] is None:
-                for t in range(holds[j] + 1):
+                for t in range(holds[j] + 2):
                     table.add_vertex(start, t)
         # a robot that starts later may not leave its start cell before its start step
         for t in range(1, holds[i] + 1):

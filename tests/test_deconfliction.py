@@ -182,3 +182,21 @@ def test_a_robot_at_its_goal_keeps_its_cell_when_another_goal_falls_in_it(
     mover, idle = plan.transits
     assert len(idle.cells) == 1
     assert mover.cells[-1] != idle.cells[0]
+
+
+def test_joint_only_plans_the_round_with_cbs_and_gives_the_order_of_passage(
+    corridor: TransitGraph,
+) -> None:
+    requests = _random_round(corridor, 4, 3)
+    plan = plan_round(corridor, requests, SPEED, joint_only=True)
+    _check(corridor, plan)
+    assert plan.method == "cbs"
+    assert set(plan.edges) == {r.name for r in requests}
+    pp = plan_round(corridor, requests, SPEED)
+    assert pp.method == "pp"
+    # a prioritized plan keeps a step between two robots through one cell
+    for t in pp.transits:
+        for other in pp.transits:
+            if other.name != t.name:
+                for s in range(1, min(len(t.cells), len(other.cells))):
+                    assert t.cells[s] != other.cells[s - 1]
