@@ -15,7 +15,9 @@ older than ``stale_after_s`` (sim time) it commands a stop. Paths are followed f
 predicted for when the command will take effect (:func:`agents.follower.predict`), by the
 latency it measures against the sim clock. It reads the other robots' intents:
 while it works it keeps out of the way of those ranked above it, and without work it steps
-aside from anyone's (see :mod:`agents.peers`).
+aside from anyone's (see :mod:`agents.peers`). A transit planned in space and time comes with
+its order of passage: the robot holds at a cell's point until the peers it follows through the
+next cell have left it, as their intents tell (:mod:`agents.passage`).
 """
 
 from __future__ import annotations
@@ -31,8 +33,16 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.follower import FollowState, control_step, keep_clear, predict, scan_points
+from agents.follower import (
+    FollowState,
+    advance,
+    control_step,
+    keep_clear,
+    predict,
+    scan_points,
+)
 from agents.market import MarketClient, swept_pieces
+from agents.passage import PeerProgress, Waits, waiting_for
 from agents.peers import (
     gives_way,
     intent_centres,
@@ -102,6 +112,11 @@ class Agent:
         self.follow: FollowState | None = None
         self.idle = FollowState(np.zeros((0, 2)))
         self.peers: dict[str, np.ndarray] = {}
+        self.peer_progress: dict[str, PeerProgress] = {}
+        self.waits = Waits.none()
+        # (plan, waypoint) the robot holds at, since when (sim s); and ones it stopped holding
+        self._holding: tuple[int, int, float] | None = None
+        self._hold_given_up: set[tuple[int, int]] = set()
         self.plan_id = -1
         self.task = ""
         self.state = "waiting"
@@ -231,6 +246,7 @@ class Agent:
         if rid != self.rid:
             with self.lock:
                 self.peers[rid] = msg.points
+                self.peer_progress[rid] = PeerProgress(msg.plan_id, msg.waypoint, msg.stamp)
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         self.clock = max(self.clock, msg.stamp)
@@ -249,6 +265,7 @@ class Agent:
             self.chain_starts = msg.chain_starts if len(msg.chain) else np.array([msg.sweep_from])
             self.chain_time_s = sum(w.time_s for w in self.market.queue if w.id in self.chain)
             self.follow = FollowState(msg.waypoints) if len(msg.waypoints) else None
+            self.waits = Waits.of(msg)
             self.state = "driving" if self.follow is not None else "done"
         log.info(
             "%s: plan %d (%s) with %d waypoints",
@@ -389,7 +406,7 @@ class Agent:
             velocity = self.velocity
             stale = scan.stamp - self.odom_stamp > a.stale_after_s
             follow = self.follow
-            plan_id, sweep_from = self.plan_id, self.sweep_from
+            plan_id, sweep_from, waits = self.plan_id, self.sweep_from, self.waits
             task = _current_task(self.chain, self.chain_starts, self.follow) or self.task
             planned = plan_id >= 0
             localized = getattr(src, "localized", True)
@@ -432,8 +449,11 @@ class Agent:
                 a,
             )
             v, w = result.v, result.w
+        elif (held := self._hold(follow, pose, plan_id, waits, scan.stamp)) is not None:
+            follow, state, kind = held, "holding", "hold"
         else:
             before = follow
+            planned_transit = bool(len(waits.at)) and follow.index <= sweep_from
             follow, result = control_step(
                 follow,
                 predict(pose, self.command, self.latency_s),
@@ -443,7 +463,8 @@ class Agent:
                 self.cfg.robot.radius,
                 dt,
                 a,
-                self._peer_centres(scan.stamp, everyone=False),
+                # on a transit planned in space and time the plan orders the robots, not rank
+                None if planned_transit else self._peer_centres(scan.stamp, everyone=False),
             )
             with self.lock:
                 if self.follow is not None and self.follow.waypoints is follow.waypoints:
@@ -475,6 +496,48 @@ class Agent:
         self._publish(scan.stamp, pose, v, w, follow, plan_id, task, sweep_from)
         return Twist(scan.stamp, v, w)
 
+    def _hold(
+        self,
+        follow: FollowState,
+        pose: tuple[float, float, float],
+        plan_id: int,
+        waits: Waits,
+        stamp: float,
+    ) -> FollowState | None:
+        """The follower advanced to where the robot stands if it must hold there for a peer
+        (its plan's order of passage, :mod:`agents.passage`); None if it may drive on."""
+        if not len(waits.at):
+            return None
+        a = self.cfg.agent
+        ahead = advance(follow, np.array(pose[:2]), a)
+        key = (plan_id, ahead.index)
+        if ahead.done or key in self._hold_given_up:
+            return None
+        with self.lock:
+            peers = dict(self.peer_progress)
+        names = waiting_for(waits, ahead.index, peers, stamp, a.hold_silent_s)
+        if not names:
+            self._holding = None
+            return None
+        if self._holding is None or self._holding[:2] != key:
+            self._holding = (*key, stamp)
+            log.info("%s holds before waypoint %d for %s", self.rid, ahead.index, ", ".join(names))
+        elif stamp - self._holding[2] > a.hold_max_s:
+            log.warning(
+                "%s gave up holding before waypoint %d after %.0f s: %s not heard to pass",
+                self.rid,
+                ahead.index,
+                a.hold_max_s,
+                ", ".join(names),
+            )
+            self._hold_given_up.add(key)
+            self._holding = None
+            return None
+        with self.lock:
+            if self.follow is not None and self.follow.waypoints is follow.waypoints:
+                self.follow = ahead
+        return ahead
+
     def _peer_centres(self, now: float, everyone: bool) -> np.ndarray:
         """The discs the robots this one gives way to (all of them when it has no work) will
         cover, by their intents; see :mod:`agents.peers`."""
@@ -495,7 +558,7 @@ class Agent:
         """The path ahead at no less than half the top speed while there is one (see
         :func:`agents.peers.path_intent`), else the current command held."""
         horizon = self.cfg.agent.intent_horizon_s
-        if follow is None or follow.done or self.state == "stale":
+        if follow is None or follow.done or self.state in ("stale", "holding"):
             return intent_points(pose, v, w, stamp, horizon)
         ahead = follow.waypoints[follow.index : follow.index + INTENT_WAYPOINTS]
         speed = max(v, 0.5 * self.cfg.dwa.max_vel_x)
@@ -524,7 +587,12 @@ class Agent:
         )
         self.bus.publish(
             k.robot(self.rid, "intent"),
-            Intent(stamp, self._intent(stamp, pose, v, w, follow)),
+            Intent(
+                stamp,
+                self._intent(stamp, pose, v, w, follow),
+                plan_id,
+                follow.index if follow is not None else -1,
+            ),
         )
         if stamp - self._last_status >= 1.0 / a.status_hz or self.state == "done":
             self._last_status = stamp

@@ -5,12 +5,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 from fleet.config import configs_dir, from_mapping, read_yaml
 from fleet.slam_params import SlamParams
 from planners.coverage.params import CoverageParams
 from planners.dwa import DWAParams
+
+# how transits between tasks are kept apart: see fleet.coordinator.transits
+DeconflictionMode = Literal["local", "prioritized", "cbs"]
+DECONFLICTION_MODES: tuple[str, ...] = get_args(DeconflictionMode)
 
 
 @dataclass(frozen=True)
@@ -123,9 +127,13 @@ class AgentParams:
     state_save_s: float = 2.0
     pose_save_s: float = 0.2
     transit_speed: float = 0.25
+    hold_max_s: float = 30.0
+    hold_silent_s: float = 2.0
 
     def validate(self) -> None:
         for name in (
+            "hold_max_s",
+            "hold_silent_s",
             "map_hz",
             "status_hz",
             "heartbeat_hz",
@@ -156,9 +164,11 @@ class CoordinatorParams:
     heartbeat_timeout_s: float = 1.0
     bid_timeout_s: float = 0.5
     objective: Literal["minimax", "minisum"] = "minimax"
+    deconfliction: DeconflictionMode = "local"
+    replan_lag_s: float = 10.0
 
     def validate(self) -> None:
-        for name in ("task_target_s", "heartbeat_timeout_s", "bid_timeout_s"):
+        for name in ("task_target_s", "heartbeat_timeout_s", "bid_timeout_s", "replan_lag_s"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
 

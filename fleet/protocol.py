@@ -28,7 +28,7 @@ SCHEMA_VERSION = 1
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
-TIME_KINDS = ("sweep", "transit", "turn", "yield", "escape", "idle", "other")
+TIME_KINDS = ("sweep", "transit", "turn", "yield", "hold", "escape", "idle", "other")
 
 M = TypeVar("M", bound="Message")
 
@@ -236,11 +236,15 @@ class TruthPose(Message):
 
 @dataclass(frozen=True, eq=False)
 class Intent(Message):
-    """The next seconds of planned trajectory: rows of (t, x, y) with absolute sim times."""
+    """The next seconds of planned trajectory: rows of (t, x, y) with absolute sim times; and
+    how far the robot is along its plan: ``waypoint`` is the index of the waypoint it heads for
+    in plan ``plan_id`` (the plan's length once it is done, -1 without a plan)."""
 
     TYPE: ClassVar[str] = "intent"
     stamp: float
     points: Annotated[np.ndarray, Arr("<f8", (3,))]
+    plan_id: int = -1
+    waypoint: int = -1
 
 
 @dataclass(frozen=True, eq=False)
@@ -291,7 +295,13 @@ class Plan(Message):
     to it); the segments from there on are the pieces of the tasks it sweeps, in the direction
     driven. A plan may chain several tasks of the robot's queue that follow on without a
     transit: ``chain`` names them in order and ``chain_starts`` gives the waypoint where each
-    one's sweep begins (the first is ``sweep_from``; an empty chain means just ``task``)."""
+    one's sweep begins (the first is ``sweep_from``; an empty chain means just ``task``).
+
+    A transit planned in space and time (``fleet up --deconfliction``) runs through points of
+    transit-graph cells (``fleet.coordinator.transits``) and carries its order of passage
+    (``planners.dependencies``): the robot heads for waypoint ``wait_at[i]`` only once robot
+    ``wait_for[i]`` has reached waypoint ``wait_passed[i]`` of its plan ``wait_plan[i]`` (or
+    drives another plan since)."""
 
     TYPE: ClassVar[str] = "plan"
     stamp: float
@@ -301,6 +311,16 @@ class Plan(Message):
     sweep_from: int = 0
     chain: list[str] = field(default_factory=list)
     chain_starts: Annotated[np.ndarray, Arr("<i4")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int32)
+    )
+    wait_at: Annotated[np.ndarray, Arr("<i4")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int32)
+    )
+    wait_for: list[str] = field(default_factory=list)
+    wait_plan: Annotated[np.ndarray, Arr("<i4")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int32)
+    )
+    wait_passed: Annotated[np.ndarray, Arr("<i4")] = field(
         default_factory=lambda: np.zeros(0, dtype=np.int32)
     )
 

@@ -12,16 +12,19 @@ robots cannot deadlock: the edges all point forward in the plan's time, so the g
 
 Here a robot's route is its sequence of distinct cells (waits dropped) with the step at which it
 arrives in each; :func:`dependencies` gives each robot the edges into it, and
-:func:`blocking` says which of them are not yet met for a given progress.
+:func:`blocking` says which of them are not yet met for a given progress. :func:`thin` keeps the
+cell points a robot needs to drive through, and :func:`renumber` carries the edges over to them.
 """
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections import defaultdict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import networkx as nx
+import numpy as np
 
 Cell = tuple[int, int]
 
@@ -122,3 +125,45 @@ def has_cycle(routes: Sequence[Route], edges: Mapping[str, Sequence[Dependency]]
     for name, deps in edges.items():
         graph.add_edges_from(((d.peer, d.passed), (name, d.index)) for d in deps)
     return not nx.is_directed_acyclic_graph(graph)
+
+
+def thin(
+    points: np.ndarray, keep: set[int], clear: Callable[[np.ndarray, np.ndarray], bool]
+) -> list[int]:
+    """The indices of a route's cell points worth driving through: the ends, ``keep``, and
+    those that line of sight needs (greedy string pulling between kept points; ``clear(a, b)``
+    says whether a robot centre may move straight from a to b). The staircase of a 4-connected
+    route becomes straight runs, which the robot drives without a turn in place at every cell."""
+    n = len(points)
+    fixed = sorted({0, n - 1, *(k for k in keep if 0 <= k < n)})
+    out = [0]
+    for stop in fixed[1:]:
+        i = out[-1]
+        while i < stop:
+            j = stop
+            while j > i + 1 and not clear(points[i], points[j]):
+                j -= 1
+            out.append(j)
+            i = j
+    return out
+
+
+def renumber(
+    edges: Mapping[str, Sequence[Dependency]], kept: Mapping[str, Sequence[int]]
+) -> dict[str, tuple[Dependency, ...]]:
+    """The dependencies in the numbering of the thinned routes (``kept[name]``, from
+    :func:`thin`): a robot holds before the first kept point at or after the cell it waits to
+    enter, at a kept point before it; a peer has passed once it has reached its first kept point
+    at or after the cell. Both err on the safe side, and are exact where the cells are kept."""
+
+    def at_or_after(name: str, k: int) -> int:
+        return bisect_left(kept[name], k)
+
+    out = {}
+    for name, deps in edges.items():
+        rows = {}
+        for d in deps:
+            key = (at_or_after(name, d.index), d.peer)
+            rows[key] = max(rows.get(key, -1), at_or_after(d.peer, d.passed))
+        out[name] = tuple(Dependency(i, peer, p) for (i, peer), p in sorted(rows.items()))
+    return out

@@ -53,6 +53,17 @@ WorldOpt = Annotated[
     ),
 ]
 
+DeconflictionOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--deconfliction",
+        help="Transits between tasks: local (robots give way by their intents only), "
+        "prioritized (planned in space and time with priorities, CBS where they fail) or cbs "
+        "(planned jointly); robots keep the plan's order through shared cells. Default: "
+        "coordinator.deconfliction of the config (local).",
+    ),
+]
+
 
 def _fail(message: str) -> None:
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)

@@ -12,6 +12,7 @@ from fleet.bus import DEFAULT_ENDPOINT
 from fleet.cli.common import (
     ConfigOpt,
     ConnectOpt,
+    DeconflictionOpt,
     FleetOpt,
     WorldOpt,
     ZenohConfigOpt,
@@ -204,6 +205,7 @@ def coordinator(
             "changes; a coordinator started on an existing file resumes it.",
         ),
     ] = None,
+    deconfliction: DeconflictionOpt = None,
 ) -> None:
     """Run the coordinator: cuts the floor into tasks, auctions them to the live robots,
     re-auctions the work of a robot that is lost, and sends each robot its plans."""
@@ -212,13 +214,19 @@ def coordinator(
     from fleet.coordinator.planning import TaskPlanner
     from fleet.coordinator.service import Coordinator
     from fleet.coordinator.store import JobStore
+    from fleet.coordinator.transits import TransitPlanner
+    from fleet.params import DECONFLICTION_MODES
 
     if robots < 1:
         _fail("--robots must be >= 1")
     _setup_logging("coordinator")
     cfg, w = _load(config, world)
+    mode = deconfliction or cfg.coordinator.deconfliction
+    if mode not in DECONFLICTION_MODES:
+        _fail(f"--deconfliction must be one of {', '.join(DECONFLICTION_MODES)}, got {mode!r}")
     try:
         planner = TaskPlanner(w, cfg)
+        transits = None if mode == "local" else TransitPlanner(w, cfg, mode, planner.transit.clear)
     except ValueError as e:
         _fail(str(e))
     try:
@@ -226,7 +234,7 @@ def coordinator(
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
-    c = Coordinator(bus, planner, robots, cfg.coordinator, store)
+    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits)
     _stop_on_signals(c.stop)
     try:
         c.run(cfg.coordinator.expected_robots_grace_s)

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from fleet.cli.common import ConfigOpt, WorldOpt, _fail, _load
+from fleet.cli.common import ConfigOpt, DeconflictionOpt, WorldOpt, _fail, _load
 
 TIMED_OUT_EXIT = 3
 # A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
@@ -67,6 +67,7 @@ def up(
     ] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
     config: ConfigOpt = None,
+    deconfliction: DeconflictionOpt = None,
 ) -> None:
     """Run the whole fleet: a Zenoh router, the simulator, the coordinator and N agents, each
     its own process, with a live view; writes report.json, the report pictures (report.png,
@@ -79,6 +80,7 @@ def up(
     from fleet.config import resolve_world
     from fleet.dashboard import BusFeed, FleetWatcher
     from fleet.launcher import Launcher, free_port, wait_for_port
+    from fleet.params import DECONFLICTION_MODES
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
     from fleet.report import (
         ReportError,
@@ -99,6 +101,11 @@ def up(
     if timeout is not None and timeout <= 0:
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
     cfg, w = _load(config, world)
+    if deconfliction is not None and deconfliction not in DECONFLICTION_MODES:
+        _fail(
+            f"--deconfliction must be one of {', '.join(DECONFLICTION_MODES)}, "
+            f"got {deconfliction!r}"
+        )
     try:
         starts = w.start_poses(robots, cfg.robot.radius)
     except ValueError as e:
@@ -149,6 +156,8 @@ def up(
             ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed), *common],
         )
         state = ["--state", str(run_dir / "coordinator.sqlite")]
+        if deconfliction:
+            state += ["--deconfliction", deconfliction]
         launcher.start(
             "coordinator",
             ["coordinator", "--robots", str(robots), "--world", world_path, *common, *state],
@@ -187,7 +196,14 @@ def up(
             makespan,
             wall_s,
             status,
-            {"world": world_path, "robot_count": robots, "speed": speed, "seed": seed, **job},
+            {
+                "world": world_path,
+                "robot_count": robots,
+                "speed": speed,
+                "seed": seed,
+                "deconfliction": deconfliction or cfg.coordinator.deconfliction,
+                **job,
+            },
             skipped,
             time_use,
         )

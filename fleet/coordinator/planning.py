@@ -76,18 +76,28 @@ class TaskPlanner:
         return tasks
 
     def drive(
-        self, from_xy: tuple[float, float], chain: list[tuple[Task, bool]]
+        self,
+        from_xy: tuple[float, float],
+        chain: list[tuple[Task, bool]],
+        transit: np.ndarray | None = None,
     ) -> tuple[np.ndarray, list[int]]:
         """(waypoints, where each task's sweep begins): the transit to the first task, then the
-        sweeps of ``chain`` ((task, reverse) pairs, each beginning where the one before ends)."""
+        sweeps of ``chain`` ((task, reverse) pairs, each beginning where the one before ends).
+        The transit is ``transit`` (points of a transit planned in space and time, kept as they
+        are: the order of passage numbers them), else A* on the floor plan."""
         sweeps = [task.path[::-1] if reverse else task.path for task, reverse in chain]
         start = np.asarray(from_xy, dtype=float)
-        try:
-            leg = self.transit.path(start, sweeps[0][0])
-        except ValueError:
-            log.warning("no transit from %s to task %s on the floor plan", from_xy, chain[0][0].id)
-            leg = np.array([start, sweeps[0][0]])
-        leg = without_straight_vertices(np.asarray(leg, dtype=float))
+        if transit is not None:
+            leg = np.vstack([transit, sweeps[0][:1]])
+        else:
+            try:
+                leg = self.transit.path(start, sweeps[0][0])
+            except ValueError:
+                log.warning(
+                    "no transit from %s to task %s on the floor plan", from_xy, chain[0][0].id
+                )
+                leg = np.array([start, sweeps[0][0]])
+            leg = without_straight_vertices(np.asarray(leg, dtype=float))
         parts = [leg[:-1]]
         starts = []
         at = len(leg) - 1

@@ -1,0 +1,83 @@
+"""A robot's side of a transit planned in space and time: keep the order of passage.
+
+The coordinator plans transits through the cells of a transit graph and sends each with the
+action dependencies of the plan (Hönig et al., RA-L 2019; ``planners.dependencies``): the robot
+heads for waypoint ``at`` only once the peer has reached its waypoint ``passed``. Peers say how
+far they are in their intents (plan id and the waypoint they head for). Exact times are not
+kept: a late robot only makes the ones after it in a cell wait, never meet it there.
+
+A dependency is met when the peer heads for a waypoint past ``passed`` of that plan, drives a
+newer plan (it is done with that transit), dropped the plan, or has been silent for
+``silent_s`` (a dead robot's body stays where it stopped; the DWA and the intents deal with
+it). A peer not heard from yet, or still on an older plan (the round's plan has not reached
+it), is waited for. Holding one waypoint for longer than the agent's ``hold_max_s`` is given
+up, so a lost message never stops a robot for good.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from fleet.protocol import Plan
+
+
+@dataclass(frozen=True)
+class PeerProgress:
+    """What a peer's latest intent said: its plan, the waypoint it heads for, when."""
+
+    plan_id: int
+    waypoint: int
+    stamp: float
+
+
+@dataclass(frozen=True, eq=False)
+class Waits:
+    """A plan's dependencies, one row per (waypoint, peer)."""
+
+    at: np.ndarray
+    peer: tuple[str, ...]
+    plan: np.ndarray
+    passed: np.ndarray
+
+    @classmethod
+    def of(cls, plan: Plan) -> Waits:
+        n = len(plan.wait_at)
+        if not (len(plan.wait_for) == len(plan.wait_plan) == len(plan.wait_passed) == n):
+            raise ValueError(f"plan {plan.plan_id}: its wait_* fields differ in length")
+        return cls(
+            np.asarray(plan.wait_at, dtype=np.int64),
+            tuple(plan.wait_for),
+            np.asarray(plan.wait_plan, dtype=np.int64),
+            np.asarray(plan.wait_passed, dtype=np.int64),
+        )
+
+    @classmethod
+    def none(cls) -> Waits:
+        empty = np.zeros(0, dtype=np.int64)
+        return cls(empty, (), empty, empty)
+
+
+def waiting_for(
+    waits: Waits,
+    index: int,
+    peers: Mapping[str, PeerProgress],
+    now: float,
+    silent_s: float,
+) -> list[str]:
+    """The peers a robot heading for its waypoint ``index`` must still wait for."""
+    out = []
+    for i in np.flatnonzero(waits.at == index):
+        name, plan, passed = waits.peer[i], int(waits.plan[i]), int(waits.passed[i])
+        p = peers.get(name)
+        if p is None:
+            out.append(name)
+            continue
+        if now - p.stamp > silent_s or p.plan_id > plan:
+            continue
+        if p.plan_id == plan and (p.waypoint < 0 or p.waypoint > passed):
+            continue
+        out.append(name)
+    return out
