@@ -11,6 +11,13 @@ meta-agents, optimal for SOC.
   an admissible high-level heuristic; the high level orders nodes by ``SOC + h``.
 - Target reasoning (Li et al., AIJ 2021): a conflict with an agent parked at its goal splits on
   that agent's path length (``constraints``); for the parked agent it is always cardinal.
+- Corridor and rectangle reasoning (Li et al., "Pairwise symmetry reasoning for multi-agent path
+  finding search", AIJ 2021, sections 4 and 5; ``symmetry``): a conflict of two single agents
+  inside a one-lane corridor splits on range constraints at the corridor's ends, a vertex
+  conflict of two agents crossing an open area Manhattan-optimally on barrier constraints along
+  two sides of the rectangle they cross. Each split keeps every solution in one child, so CBS
+  stays optimal; their cardinality comes from the MDDs (``mdd.mdd_blocks``). A corridor split
+  replaces the conflict's plain split; a rectangle split does where it is at least as cardinal.
 - Meta-agents (MA-CBS, Sharon et al., SoCS 2012): when two groups of agents have conflicted
   more than ``MERGE_THRESHOLD`` times in the search (MA-CBS's conflict matrix), they are merged
   into one meta-agent (at most ``MAX_GROUP`` agents, and fewer on large maps, see
@@ -57,16 +64,18 @@ from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
 from planners.mapf.joint import JointSearchLimit, group_plan, joint_astar
 from planners.mapf.low_level import SearchStats, space_time_astar
-from planners.mapf.mdd import mdd_singletons
+from planners.mapf.mdd import mdd_blocks, mdd_singletons
 from planners.mapf.model import InfeasibleInstanceError, path_cost
+from planners.mapf.symmetry import Branch, corridor_branches, rectangle_branches
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 from planners.mapf.vertex_cover import min_vertex_cover
 
 CARDINAL, SEMI_CARDINAL, NON_CARDINAL = 0, 1, 2
 
-# (class, t, a, b, u, v): a conflict with its cardinality class first, so min() picks the best;
-# v is -1 for a vertex conflict, TARGET for a target conflict (a in b's goal u, b parked there)
-Classified = tuple[int, int, int, int, int, int]
+# (class, t, a, b, u, v, branches): a conflict with its cardinality class first, so min() picks
+# the best; v is -1 for a vertex conflict, TARGET for a target conflict (a in b's goal u, b parked
+# there); branches: the two children's constraints of a corridor or rectangle split, else ()
+Classified = tuple[int, int, int, int, int, int, tuple[Branch, ...]]
 
 
 @dataclass(frozen=True)
@@ -81,6 +90,8 @@ class CbsOptions:
     heuristic: str = "cg"
     avoidance_table: bool = True
     target: bool = True
+    corridor: bool = True
+    rectangle: bool = True
     merge_threshold: int = MERGE_THRESHOLD
 
     def __post_init__(self) -> None:
@@ -88,6 +99,8 @@ class CbsOptions:
             raise ValueError(f"heuristic must be 'none' or 'cg', got {self.heuristic!r}")
         if self.heuristic == "cg" and not self.cardinal:
             raise ValueError("the CG heuristic needs cardinal conflict classification")
+        if (self.corridor or self.rectangle) and not self.cardinal:
+            raise ValueError("corridor and rectangle reasoning need cardinal classification")
         if self.merge_threshold < 0:
             raise ValueError(f"merge_threshold must be ≥ 0, got {self.merge_threshold}")
 
@@ -98,23 +111,25 @@ PLAIN_CBS = CbsOptions(
     heuristic="none",
     avoidance_table=False,
     target=False,
+    corridor=False,
+    rectangle=False,
     merge_threshold=0,
 )
 
 
 class _Node:
-    __slots__ = ("conflicts", "constraint", "costs", "h", "mdds", "parent", "paths", "soc")
+    __slots__ = ("branch", "conflicts", "costs", "h", "mdds", "parent", "paths", "soc")
 
     def __init__(
         self,
         parent: _Node | None,
-        constraint: Constraint | None,
+        branch: Branch,
         paths: list[list[int]],
         costs: list[int],
         mdds: dict[int, tuple[int, ...]],
     ) -> None:
         self.parent = parent
-        self.constraint = constraint
+        self.branch = branch
         self.paths = paths
         self.costs = costs
         self.soc = sum(costs)
@@ -152,6 +167,7 @@ class ConflictBasedSearch:
         self._too_big: set[frozenset[int]] = set()
         self._free_cells = int(graph.free.sum())
         self._joint_plans: dict[frozenset[int], list[list[int]]] = {}
+        self._symmetric = options.corridor or options.rectangle
         graph.precompute(self.goals)
 
     def run(self) -> tuple[list[list[int]], int]:
@@ -181,12 +197,12 @@ class ConflictBasedSearch:
                 self._merge(node, a, b)
             pos = positions(node.paths)
             children = []
-            for constraint in split(conflict[1:]):
+            for branch in conflict[6] or [(c,) for c in split(conflict[1:6])]:
                 try:
-                    child = self._child(node, constraint, pos, self._replan_budget(a, b))
+                    child = self._child(node, branch, pos, self._replan_budget(a, b))
                 except JointSearchLimit:
                     self._merge(node, a, b)
-                    child = self._child(node, constraint, pos, None)
+                    child = self._child(node, branch, pos, None)
                 if child is None:
                     continue
                 if (
@@ -291,17 +307,17 @@ class ConflictBasedSearch:
             for i, path in zip(agents, found, strict=True):
                 paths[i] = path
                 planned.append(i)
-        root = _Node(None, None, paths, [path_cost(p) for p in paths], {})
-        root.conflicts = [self._classify(root, c) for c in all_conflicts(paths)]
+        root = _Node(None, (), paths, [path_cost(p) for p in paths], {})
+        pos = positions(paths)
+        root.conflicts = [self._classify(root, c, pos) for c in all_conflicts(paths)]
         root.h = self._heuristic(root)
         return root
 
     @staticmethod
     def _constraints(node: _Node) -> list[Constraint]:
-        out = []
+        out: list[Constraint] = []
         while node.parent is not None:
-            if node.constraint is not None:
-                out.append(node.constraint)
+            out.extend(node.branch)
             node = node.parent
         return out
 
@@ -309,10 +325,11 @@ class ConflictBasedSearch:
         return table_for(self.graph.num_cells, self._constraints(node), agent)
 
     def _child(
-        self, node: _Node, constraint: Constraint, pos: np.ndarray, budget: int | None
+        self, node: _Node, branch: Branch, pos: np.ndarray, budget: int | None
     ) -> _Node | None:
-        child = _Node(node, constraint, list(node.paths), list(node.costs), dict(node.mdds))
-        agents = violators(constraint, pos) if constraint[0] == LENGTH_LE else [constraint[1]]
+        child = _Node(node, branch, list(node.paths), list(node.costs), dict(node.mdds))
+        first = branch[0]
+        agents = violators(first, pos) if first[0] == LENGTH_LE else [first[1]]
         changed = self._replan(child, agents, pos, budget)
         if changed is None:
             return None
@@ -398,7 +415,8 @@ class ConflictBasedSearch:
         for agent in changed:
             new.extend(c for c in conflicts_of(agent, node.paths[agent], pos) if c[2] not in done)
             done.add(agent)
-        node.conflicts = kept + [self._classify(node, c) for c in new]
+        now = positions(node.paths) if new and self._symmetric else pos
+        node.conflicts = kept + [self._classify(node, c, now) for c in new]
         node.h = self._heuristic(node)
 
     def _single(self, agent: int) -> bool:
@@ -428,24 +446,55 @@ class ConflictBasedSearch:
         singles = self._mdd(node, agent)
         return t <= cost and singles[t - 1] == frm and singles[t] == to
 
-    def _classify(self, node: _Node, conflict: Conflict) -> Classified:
+    def _classify(self, node: _Node, conflict: Conflict, pos: np.ndarray) -> Classified:
+        """The conflict with its cardinality class and, where corridor or rectangle reasoning
+        applies, the branches of its symmetric split (``pos``: the node's padded paths)."""
         if self.options.target:
             conflict = as_target(conflict, self.goals, node.costs)
         t, a, b, u, v = conflict
         if not self.options.cardinal:
-            return (NON_CARDINAL, t, a, b, u, v)
+            return (NON_CARDINAL, t, a, b, u, v, ())
         if v == TARGET:
             # l_b > t raises the parked agent's cost; l_b ≤ t bars the mover from u from t on
             ca = t <= node.costs[a] and self._cardinal_for(node, a, t, u, -1)
             cb = self._single(b)
-        else:
-            ca = self._cardinal_for(node, a, t, u, v)
-            cb = (
-                self._cardinal_for(node, b, t, u, -1)
-                if v == -1
-                else self._cardinal_for(node, b, t, v, u)
+            return (2 - ca - cb, t, a, b, u, v, ())
+        ca = self._cardinal_for(node, a, t, u, v)
+        cb = (
+            self._cardinal_for(node, b, t, u, -1)
+            if v == -1
+            else self._cardinal_for(node, b, t, v, u)
+        )
+        plain = 2 - ca - cb
+        if self._symmetric and self._single(a) and self._single(b):
+            if self.options.corridor:
+                tables = (self._table(node, a), self._table(node, b))
+                found = corridor_branches(self.graph, pos, conflict, tables, self.deadline)
+                if found is not None:
+                    return (self._branch_class(node, a, b, found), t, a, b, u, v, found)
+            if self.options.rectangle and v == -1 and plain != CARDINAL:
+                found = rectangle_branches(self.graph, pos, t, a, b, u)
+                if found is not None:
+                    cls = self._branch_class(node, a, b, found)
+                    if cls <= plain:
+                        return (cls, t, a, b, u, v, found)
+        return (plain, t, a, b, u, v, ())
+
+    def _branch_class(self, node: _Node, a: int, b: int, branches: tuple[Branch, ...]) -> int:
+        """Cardinality class of a symmetric split: how many of its two branches leave no path of
+        the agent's current cost (checked on the MDD, so the CG heuristic stays admissible)."""
+        raised = 0
+        for agent, branch in zip((a, b), branches, strict=True):
+            forbidden = {(c[2], c[4]) for c in branch}
+            raised += mdd_blocks(
+                self.graph,
+                self.starts[agent],
+                self.goals[agent],
+                node.costs[agent],
+                self._table(node, agent),
+                forbidden,
             )
-        return (2 - ca - cb, t, a, b, u, v)
+        return 2 - raised
 
     def _heuristic(self, node: _Node) -> int:
         if self.options.heuristic == "none":

@@ -13,6 +13,12 @@ reasoning, Li et al., AIJ 2021; here only between groups that already conflicted
 search restarts (Boyarski et al., IJCAI 2015), as do two groups whose replanning runs past
 ``REPLAN_BUDGET`` joint expansions. A meta-agent is planned optimally by the joint search
 (``joint``), so its cost is its own lower bound and the bound argument above still holds.
+
+Corridor and rectangle reasoning (Li et al., AIJ 2021; ``symmetry``) split a conflict of two
+single agents as in ``cbs``. Their splits keep every solution in one child (neither needs the
+paths to be optimal: the rectangle only needs Manhattan-optimal stretches from the starts, the
+corridor lower bounds on arrival times), so each node's lower bound stays a lower bound on the
+solutions below it, and the bound ``SOC ≤ w · optimum`` holds.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from planners.mapf.constraints import (
     LENGTH_LE,
     MERGE_THRESHOLD,
     REPLAN_BUDGET,
+    TARGET,
     Constraint,
     as_target,
     groups_of,
@@ -43,6 +50,7 @@ from planners.mapf.grid_graph import GridGraph
 from planners.mapf.joint import JointSearchLimit, group_plan, joint_astar
 from planners.mapf.low_level import SearchStats, focal_astar
 from planners.mapf.model import InfeasibleInstanceError, path_cost
+from planners.mapf.symmetry import Branch, corridor_branches, rectangle_branches
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 
 # ECBS splits a target conflict on path lengths only once its two groups have conflicted this
@@ -54,8 +62,8 @@ TARGET_AFTER = 2
 
 class _Node:
     __slots__ = (
+        "branch",
         "conflicts",
-        "constraint",
         "costs",
         "done",
         "lb",
@@ -68,13 +76,13 @@ class _Node:
     def __init__(
         self,
         parent: _Node | None,
-        constraint: Constraint | None,
+        branch: Branch,
         paths: list[list[int]],
         costs: list[int],
         lbs: list[int],
     ) -> None:
         self.parent = parent
-        self.constraint = constraint
+        self.branch = branch
         self.paths = paths
         self.costs = costs
         self.lbs = lbs
@@ -181,11 +189,10 @@ class _Ecbs:
             if count > TARGET_AFTER:
                 conflict = as_target(conflict, self.goals, node.costs)
             pos = positions(node.paths)
-            for constraint in split(conflict):
-                child = _Node(node, constraint, list(node.paths), list(node.costs), list(node.lbs))
-                agents = (
-                    violators(constraint, pos) if constraint[0] == LENGTH_LE else [constraint[1]]
-                )
+            for branch in self._symmetric(node, conflict, pos) or [(c,) for c in split(conflict)]:
+                child = _Node(node, branch, list(node.paths), list(node.costs), list(node.lbs))
+                first = branch[0]
+                agents = violators(first, pos) if first[0] == LENGTH_LE else [first[1]]
                 budget = REPLAN_BUDGET if self._mergeable(a, b) is not None else None
                 try:
                     changed = self._replan(child, agents, pos, budget)
@@ -196,6 +203,30 @@ class _Ecbs:
                     continue
                 self._update_conflicts(child, node.conflicts, changed, pos)
                 push(child)
+
+    @staticmethod
+    def _constraints(node: _Node) -> list[Constraint]:
+        out: list[Constraint] = []
+        anc: _Node | None = node
+        while anc is not None:
+            out.extend(anc.branch)
+            anc = anc.parent
+        return out
+
+    def _symmetric(
+        self, node: _Node, conflict: Conflict, pos: np.ndarray
+    ) -> tuple[Branch, ...] | None:
+        """The corridor or rectangle split of a conflict between two single agents, if any."""
+        t, a, b, u, v = conflict
+        if v == TARGET or self.group.count(self.group[a]) + self.group.count(self.group[b]) > 2:
+            return None
+        n = self.graph.num_cells
+        constraints = self._constraints(node)
+        tables = (table_for(n, constraints, a), table_for(n, constraints, b))
+        found = corridor_branches(self.graph, pos, conflict, tables, self.deadline)
+        if found is None and v == -1:
+            found = rectangle_branches(self.graph, pos, t, a, b, u)
+        return found
 
     def _count(self, a: int, b: int) -> int:
         """Count a conflict between the groups of a and b; how many they have had."""
@@ -268,7 +299,7 @@ class _Ecbs:
                     raise RuntimeError("an agent has no path although its goal is reachable")
                 paths[gid], lbs[gid] = found
             planned.extend(agents)
-        root = _Node(None, None, paths, [path_cost(p) for p in paths], lbs)
+        root = _Node(None, (), paths, [path_cost(p) for p in paths], lbs)
         root.conflicts = all_conflicts(paths)
         return root
 
@@ -279,11 +310,7 @@ class _Ecbs:
         or None if a group has no plan (JointSearchLimit past ``budget`` joint expansions)."""
         n = self.graph.num_cells
         lengths = [len(p) for p in node.paths]
-        constraints = []
-        anc: _Node | None = node
-        while anc is not None and anc.constraint is not None:
-            constraints.append(anc.constraint)
-            anc = anc.parent
+        constraints = self._constraints(node)
         changed: list[int] = []
         for group in groups_of(self.group, agents):
             cat = ConflictAvoidanceTable.from_positions(n, pos, lengths, group)

@@ -53,3 +53,49 @@ def mdd_singletons(
             layer = levels[t]
             alive = {p for c in alive for p in layer[c]}
     return tuple(singles)
+
+
+def mdd_blocks(
+    graph: GridGraph,
+    start: int,
+    goal: int,
+    cost: int,
+    table: ConstraintTable,
+    forbidden: set[tuple[int, int]],
+) -> bool:
+    """Whether every path of cost exactly ``cost`` under ``table`` is in one of the ``forbidden``
+    ``(cell, t)`` vertices, so that forbidding them all raises the agent's cost (a branch of
+    corridor or rectangle reasoning is cardinal for its agent, Li et al., AIJ 2021).
+
+    A forward sweep over the MDD's levels that skips the forbidden vertices; the agent then
+    stays at its goal, so a forbidden goal at any time from ``cost`` on blocks every path.
+    """
+    if any(cell == goal and t >= cost for cell, t in forbidden):
+        return True
+    n = graph.num_cells
+    dist = graph.distances(goal)
+    succ = graph.successors
+    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    if cost == 0 or (start, 0) in forbidden:
+        return cost != 0 or start != goal or (start, 0) in forbidden
+    layer = {start}
+    for t in range(1, cost + 1):
+        budget = cost - t
+        tn = t * n
+        nxt: set[int] = set()
+        for cell in layer:
+            for nc in succ[cell]:
+                if t == cost and (nc != goal or cell == goal):
+                    continue
+                if dist[nc] > budget or tn + nc in vertex or (nc, t) in forbidden:
+                    continue
+                bf = blocked.get(nc)
+                if bf is not None and t >= bf:
+                    continue
+                if nc != cell and (tn + cell) * n + nc in edge:
+                    continue
+                nxt.add(nc)
+        if not nxt:
+            return True
+        layer = nxt
+    return False
