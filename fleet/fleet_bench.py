@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -80,44 +81,61 @@ def world_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+@dataclass(frozen=True)
+class Scenario:
+    """Runs of one kind: ``fleet up`` on ``world`` (a path) with ``robots`` and ``options``,
+    reported under ``name``."""
+
+    name: str
+    world: str
+    robots: int
+    options: tuple[str, ...] = ()
+
+
 def run_bench(
     root: Path,
-    worlds: Sequence[tuple[str, str]],
+    scenarios: Sequence[Scenario],
     seeds: Sequence[int],
-    robots: int,
     speed: float,
     timeout_s: float,
     progress: Callable[[str], None],
 ) -> dict[str, Any]:
-    """``fleet up`` for every (world, seed); ``worlds`` are (name, path) pairs. The result is
-    also written to ``root / bench.json`` after every run, so an interrupted bench keeps what
-    it measured."""
+    """``fleet up`` for every (scenario, seed). The result is also written to
+    ``root / bench.json`` after every run, so an interrupted bench keeps what it measured."""
     root.mkdir(parents=True, exist_ok=True)
     result: dict[str, Any] = {
-        "robots": robots,
+        "robots": {s.name: s.robots for s in scenarios},
         "speed": speed,
         "seeds": list(seeds),
         "root": str(root),
         "runs": [],
         "worlds": {},
     }
-    total = len(worlds) * len(seeds)
-    for name, path in worlds:
+    total = len(scenarios) * len(seeds)
+    for sc in scenarios:
         mine = []
         for seed in seeds:
-            progress(f"[{len(result['runs']) + 1}/{total}] {name} seed {seed} …")
-            run_dir = root / f"{name}-seed{seed}"
-            fleet = RunningFleet(run_dir, path, robots, seed, timeout_s=timeout_s, speed=speed)
+            progress(f"[{len(result['runs']) + 1}/{total}] {sc.name} seed {seed} …")
+            run_dir = root / f"{sc.name.replace('/', '-')}-seed{seed}"
+            fleet = RunningFleet(
+                run_dir,
+                sc.world,
+                sc.robots,
+                seed,
+                timeout_s=timeout_s,
+                speed=speed,
+                options=sc.options,
+            )
             try:
                 report = fleet.finish(timeout=timeout_s + 120.0)
             finally:
                 fleet.cleanup()
-            figures = run_figures(report, name, seed)
+            figures = run_figures(report, sc.name, seed)
             figures["run_dir"] = str(run_dir)
             mine.append(figures)
             result["runs"].append(figures)
             progress("    " + run_line(figures))
-            result["worlds"][name] = world_summary(mine)
+            result["worlds"][sc.name] = world_summary(mine)
             (root / "bench.json").write_text(json.dumps(result, indent=2) + "\n")
     return result
 

@@ -10,7 +10,7 @@ import sqlite3
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -67,7 +67,9 @@ class RunningFleet:
         timeout_s: float = 900.0,
         cwd: Path | None = None,
         speed: float = 0.0,
+        options: Sequence[str] = (),
     ) -> None:
+        """``options``: more options of ``fleet up`` (e.g. ``--deconfliction cbs``)."""
         self.dir = run_dir
         cmd = [
             sys.executable,
@@ -88,6 +90,7 @@ class RunningFleet:
             str(seed),
             "--run-dir",
             str(run_dir),
+            *options,
         ]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=cwd)
         self.children: set[int] = set()

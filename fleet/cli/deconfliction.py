@@ -3,10 +3,17 @@
 from __future__ import annotations
 
 import json
+import sys
 import time
+from pathlib import Path
+from typing import Annotated
 
 import typer
 
+# the fleets' stress worlds: (world, robots)
+STRESS_WORLDS = (("corridor", 3), ("home", 6))
+# wall seconds a fleet run may take before it counts as a deadlock
+FLEET_TIMEOUT_S = 900.0
 # warehouse-like grid: planners.mapf.generate's shelf map, each of its cells this many metres
 WAREHOUSE_CELL_M = 0.5
 WAREHOUSE_CELLS = 40
@@ -58,8 +65,25 @@ def bench_deconfliction(
         1.0, help="Seconds the joint fallback (CBS, or ECBS above 10 robots) may take."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+    fleet_seeds: str = typer.Option(
+        "",
+        "--fleet-seeds",
+        help="Also run whole fleets on the stress worlds (corridor with 3 robots, home with 6) "
+        "under each mode, for these seeds (0-9, or 0,1,2); none by default, as each run takes "
+        "a minute or two.",
+    ),
+    modes: str = typer.Option(
+        "local,prioritized,cbs", help="Comma-separated modes the fleets run under."
+    ),
+    run_root: Annotated[
+        Path | None,
+        typer.Option(
+            "--run-root", help="Where the fleets' run dirs go (default: runs/bench-deconf-<time>)."
+        ),
+    ] = None,
 ) -> None:
-    """Time planning all transits of a round (planners/deconfliction.py) on a transit graph.
+    """Time planning all transits of a round (planners/deconfliction.py) on a transit graph,
+    and with --fleet-seeds run `fleet up --deconfliction MODE` side by side on stress worlds.
 
     Scenarios: 6 robots on home (target ≤ 50 ms a round) and 50 robots on a generated warehouse
     of shelves (target ≤ 1 s). Each round draws random distinct start and goal cells and start
@@ -68,6 +92,11 @@ def bench_deconfliction(
     median and 95th-percentile planning time per round, how many rounds needed the joint
     fallback (CBS, or ECBS above 10 robots) and how many failed, and whether every plan passed
     the MAPF validator, closed moves included.
+
+    Fleets (`--fleet-seeds`): per world and mode, runs finished (a run that did not finish in
+    --timeout is a deadlock), robot–robot and robot–wall contacts, waiting (robot-seconds held
+    before shared cells plus given way to peers), makespan, and waypoints given up; each run's
+    dir keeps its report. Example: `fleet bench deconfliction --fleet-seeds 0-9 --json`.
     """
     import numpy as np
 
@@ -118,6 +147,8 @@ def bench_deconfliction(
             "rounds_failed": failed,
             "plans_invalid": invalid,
         }
+    if fleet_seeds:
+        results["fleets"] = _fleets(fleet_seeds, modes, run_root)
     if as_json:
         typer.echo(json.dumps(results))
         return
@@ -128,6 +159,72 @@ def bench_deconfliction(
     table.add_column("metric")
     for name in results:
         table.add_column(name, justify="right")
-    for key in next(iter(results.values())):
-        table.add_row(key, *(str(r[key]) for r in results.values()))
+    planned = {k: v for k, v in results.items() if k != "fleets"}
+    for key in next(iter(planned.values())):
+        table.add_row(key, *(str(r[key]) for r in planned.values()))
     Console().print(table)
+    if "fleets" in results:
+        fleets = Table(title="Deconfliction: whole fleets (medians over seeds; totals)")
+        for col in (
+            "world / mode",
+            "finished",
+            "robot contacts",
+            "wall contacts",
+            "waiting s",
+            "makespan s",
+            "given up",
+        ):
+            fleets.add_column(col, justify="right")
+        for name, row in results["fleets"].items():
+            fleets.add_row(name, *(str(v) for v in row.values()))
+        Console().print(fleets)
+
+
+def _fleets(seeds: str, modes: str, run_root: Path | None) -> dict[str, dict]:
+    """Whole fleets on the stress worlds under each mode (see the command's help)."""
+    from datetime import datetime
+
+    import numpy as np
+
+    from fleet.cli.common import _fail, parse_seeds
+    from fleet.config import resolve_world
+    from fleet.fleet_bench import Scenario, run_bench
+    from fleet.params import DECONFLICTION_MODES
+
+    chosen = [m.strip() for m in modes.split(",") if m.strip()]
+    bad = [m for m in chosen if m not in DECONFLICTION_MODES]
+    if bad or not chosen:
+        _fail(
+            f"--modes: {', '.join(bad) or 'none given'}; choose from "
+            f"{', '.join(DECONFLICTION_MODES)}"
+        )
+    scenarios = [
+        Scenario(
+            f"{world}-{robots}/{mode}", str(resolve_world(world)), robots, ("--deconfliction", mode)
+        )
+        for world, robots in STRESS_WORLDS
+        for mode in chosen
+    ]
+    root = run_root or Path("runs") / datetime.now().strftime("bench-deconf-%Y%m%d-%H%M%S")
+    result = run_bench(
+        root,
+        scenarios,
+        parse_seeds(seeds),
+        0.0,
+        FLEET_TIMEOUT_S,
+        lambda line: print(line, file=sys.stderr, flush=True),
+    )
+    out = {}
+    for sc in scenarios:
+        runs = [r for r in result["runs"] if r["world"] == sc.name and r["status"] != "no report"]
+        summary = result["worlds"][sc.name]
+        waits = [r["time_s"]["hold"] + r["time_s"]["yield"] for r in runs]
+        out[sc.name] = {
+            "finished": f"{summary['finished']}/{summary['runs']}",
+            "robot_contacts": sum(r["contacts"]["robot_robot"] for r in runs),
+            "wall_contacts": sum(r["contacts"]["robot_wall"] for r in runs),
+            "waiting_s_median": round(float(np.median(waits)), 1) if waits else None,
+            "makespan_s_median": summary["makespan_s"],
+            "given_up": summary["skipped_total"],
+        }
+    return out

@@ -61,7 +61,7 @@ def bench_fleet(
     `fleet bench fleet --worlds ../shared/data/maps/cob_ipa_apartment.yaml --seeds 0-2`.
     """
     from fleet.config import ConfigError, resolve_world
-    from fleet.fleet_bench import run_bench, table_lines
+    from fleet.fleet_bench import Scenario, run_bench, table_lines
 
     if robots < 1:
         _fail("--robots must be >= 1")
@@ -75,7 +75,7 @@ def bench_fleet(
             path = resolve_world(name)
         except ConfigError as e:
             _fail(f"--worlds: {e}")
-        chosen.append((Path(name).stem, str(path)))
+        chosen.append(Scenario(Path(name).stem, str(path), robots))
     if not chosen:
         _fail("--worlds: no world given")
     root = run_root or Path("runs") / datetime.now().strftime("bench-fleet-%Y%m%d-%H%M%S")
@@ -83,7 +83,7 @@ def bench_fleet(
     def progress(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    result = run_bench(root, chosen, parse_seeds(seeds), robots, speed, timeout, progress)
+    result = run_bench(root, chosen, parse_seeds(seeds), speed, timeout, progress)
     if as_json:
         print(json.dumps(result))
     else:
