@@ -18,12 +18,14 @@ Solvers (``SOLVERS``):
   gives up once every order of a small group has failed.
 - ``"sipp-pp"``: the same with SIPP as single-agent planner.
 - ``"cbs"``: ICBS, optimal sum of costs (cardinal conflicts via MDDs, bypass, CG heuristic), with
-  target reasoning (length constraints for agents parked on their goals) and meta-agents (agents
-  that keep conflicting are merged and planned by an optimal joint A* with operator
-  decomposition, ``joint``), so agents that block each other in dead ends are solved quickly.
+  target reasoning (length constraints for agents parked on their goals), corridor and rectangle
+  reasoning (range and barrier constraints, ``symmetry``) and meta-agents (agents that keep
+  conflicting are merged and planned by an optimal joint A* with operator decomposition,
+  ``joint``), so agents that block each other in dead ends are solved quickly.
 - ``"cbs-plain"``: CBS without those improvements, the textbook baseline of ``fleet bench mapf``;
   it can split target conflicts one timestep at a time for a very long while on tiny instances.
-- ``"ecbs"``: ECBS(w), SOC ≤ w · optimum, with the same target reasoning and meta-agents.
+- ``"ecbs"``: ECBS(w), SOC ≤ w · optimum, with the same target, corridor and rectangle reasoning
+  and meta-agents.
 
 Model, formats and checks: ``model`` (costs, feasibility check), ``movingai`` (.map/.scen),
 ``yaml_format`` (libMultiRobotPlanning YAML), ``validate`` (independent solution checker),
