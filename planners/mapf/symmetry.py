@@ -166,11 +166,17 @@ def corridor_branches(
     constraint tables. Branch 0 constrains a, branch 1 constrains b."""
     t, a, b, u, v = conflict
     degree = graph.neighbours
-    if len(degree[u]) == 2:
-        t -= v >= 0  # a swap: a was in u one step before
-    elif v < 0 or len(degree[v]) != 2:
+    if v < 0:
+        if len(degree[u]) != 2:
+            return None
+        at_a = at_b = t
+    elif len(degree[u]) == 2:
+        at_a, at_b = t - 1, t  # a swap: a in u one step before, b in u at t
+    elif len(degree[v]) == 2:
+        at_a, at_b = t, t - 1
+    else:
         return None
-    (ea, ta), (eb, tb) = _entry(graph, pos, a, t), _entry(graph, pos, b, t)
+    (ea, ta), (eb, tb) = _entry(graph, pos, a, at_a), _entry(graph, pos, b, at_b)
     if ea == eb:
         return None
     # a's first move after entering, into the corridor toward b's entry
