@@ -57,6 +57,24 @@ def test_a_head_on_meeting_in_a_corridor_splits_on_its_ends() -> None:
     assert swap == found
 
 
+def test_a_swap_at_the_mouth_of_a_corridor_is_a_corridor_conflict() -> None:
+    graph = GridGraph(_ladder(9))
+    # a comes down column 0 and turns into the corridor at (2, 0) → (2, 1) while b, which
+    # started inside at (2, 3), leaves it the other way: only (2, 1) has two neighbours
+    a = [graph.cell(rc) for rc in ((0, 0), (1, 0))] + _row_path(graph, 2, range(0, 9))
+    b = [*_row_path(graph, 2, range(3, -1, -1)), graph.cell((3, 0)), graph.cell((4, 0))]
+    pos = positions([a, b])
+    tables = (ConstraintTable(graph.num_cells), ConstraintTable(graph.num_cells))
+    swap = (3, 0, 1, graph.cell((2, 0)), graph.cell((2, 1)))
+    found = corridor_branches(graph, pos, swap, tables, Deadline(5))
+    assert found is not None
+    # corridor (2, 0)..(2, 3), k = 3: a reaches (2, 3) at 5 (around: later than b's 3 + 3 + 1),
+    # b reaches (2, 0) at 3 (around: later than a's 5 + 3 + 1)
+    first, second = found
+    assert first == tuple((VERTEX, 0, graph.cell((2, 3)), -1, t) for t in range(5, 7))
+    assert second == tuple((VERTEX, 1, graph.cell((2, 0)), -1, t) for t in range(3, 9))
+
+
 def test_no_corridor_conflict_in_an_open_area_or_one_way() -> None:
     graph = GridGraph(np.ones((3, 5), dtype=bool))
     a = _row_path(graph, 1, range(0, 5))
