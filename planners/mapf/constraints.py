@@ -17,7 +17,8 @@
 A constraint is ``(kind, agent, u, v, t)``: VERTEX forbids ``agent`` in u at t; EDGE forbids the
 move u → v arriving at t; LENGTH_GT requires the cost (path length) of ``agent`` to exceed t
 (u is its goal); LENGTH_LE requires it to be at most t, and forbids every other agent in u from
-t on.
+t on. A child of the search adds a *branch*: one constraint of ``split``, or the several vertex
+constraints of a corridor or rectangle split (``symmetry``).
 """
 
 from __future__ import annotations
