@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import _fail, parse_seeds
+from fleet.cli.common import DeconflictionOpt, _fail, parse_seeds
 from fleet.help_text import reflow
 
 WorldsOpt = Annotated[
@@ -45,6 +45,7 @@ def bench_fleet(
         ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    deconfliction: DeconflictionOpt = None,
 ) -> None:
     """Run `fleet up --headless --until-done` for every world and seed, and report what the
     fleet delivered on the floor, as the simulator measured it.
@@ -75,7 +76,8 @@ def bench_fleet(
             path = resolve_world(name)
         except ConfigError as e:
             _fail(f"--worlds: {e}")
-        chosen.append(Scenario(Path(name).stem, str(path), robots))
+        options = ("--deconfliction", deconfliction) if deconfliction else ()
+        chosen.append(Scenario(Path(name).stem, str(path), robots, options))
     if not chosen:
         _fail("--worlds: no world given")
     root = run_root or Path("runs") / datetime.now().strftime("bench-fleet-%Y%m%d-%H%M%S")
