@@ -453,7 +453,9 @@ class Agent:
             follow, state, kind = held, "holding", "hold"
         else:
             before = follow
-            planned_transit = bool(len(waits.at)) and follow.index <= sweep_from
+            # on a transit planned in space and time the plan orders it against the peers it
+            # waits for (and that wait for it): it gives way by rank to the others only
+            ordered = set(waits.peer) if follow.index <= sweep_from else set()
             follow, result = control_step(
                 follow,
                 predict(pose, self.command, self.latency_s),
@@ -463,8 +465,7 @@ class Agent:
                 self.cfg.robot.radius,
                 dt,
                 a,
-                # on a transit planned in space and time the plan orders the robots, not rank
-                None if planned_transit else self._peer_centres(scan.stamp, everyone=False),
+                self._peer_centres(scan.stamp, everyone=False, skip=ordered),
             )
             with self.lock:
                 if self.follow is not None and self.follow.waypoints is follow.waypoints:
@@ -538,12 +539,16 @@ class Agent:
                 self.follow = ahead
         return ahead
 
-    def _peer_centres(self, now: float, everyone: bool) -> np.ndarray:
-        """The discs the robots this one gives way to (all of them when it has no work) will
-        cover, by their intents; see :mod:`agents.peers`."""
+    def _peer_centres(
+        self, now: float, everyone: bool, skip: set[str] | frozenset[str] = frozenset()
+    ) -> np.ndarray:
+        """The discs the robots this one gives way to (all of them when it has no work, none
+        in ``skip``) will cover, by their intents; see :mod:`agents.peers`."""
         with self.lock:
             intents = [
-                pts for rid, pts in self.peers.items() if everyone or gives_way(self.rid, rid)
+                pts
+                for rid, pts in self.peers.items()
+                if rid not in skip and (everyone or gives_way(self.rid, rid))
             ]
         return intent_centres(intents, now, self.cfg.agent.stale_after_s)
 

@@ -16,12 +16,14 @@ up, so a lost message never stops a robot for good.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from fleet.protocol import Plan
+from planners.dependencies import Dependency, blocking
 
 
 @dataclass(frozen=True)
@@ -67,17 +69,20 @@ def waiting_for(
     now: float,
     silent_s: float,
 ) -> list[str]:
-    """The peers a robot heading for its waypoint ``index`` must still wait for."""
-    out = []
-    for i in np.flatnonzero(waits.at == index):
-        name, plan, passed = waits.peer[i], int(waits.plan[i]), int(waits.passed[i])
+    """The peers a robot heading for its waypoint ``index`` must still wait for: the
+    dependencies still blocking (``planners.dependencies.blocking``) given how far each peer
+    is along the plan the dependency names."""
+    reached: dict[str, float] = {}
+    for name, plan in zip(waits.peer, waits.plan.tolist(), strict=True):
         p = peers.get(name)
         if p is None:
-            out.append(name)
             continue
-        if now - p.stamp > silent_s or p.plan_id > plan:
-            continue
-        if p.plan_id == plan and (p.waypoint < 0 or p.waypoint > passed):
-            continue
-        out.append(name)
-    return out
+        if now - p.stamp > silent_s or p.plan_id > plan or (p.plan_id == plan and p.waypoint < 0):
+            reached[name] = math.inf
+        elif p.plan_id == plan:
+            reached[name] = p.waypoint - 1
+    edges = [
+        Dependency(int(at), name, int(passed))
+        for at, name, passed in zip(waits.at, waits.peer, waits.passed, strict=True)
+    ]
+    return sorted({d.peer for d in blocking(edges, index, reached)})

@@ -106,7 +106,7 @@ def dependencies(routes: Sequence[Route]) -> dict[str, tuple[Dependency, ...]]:
 
 
 def blocking(
-    edges: Sequence[Dependency], index: int, reached: Mapping[str, int]
+    edges: Sequence[Dependency], index: int, reached: Mapping[str, float]
 ) -> list[Dependency]:
     """The edges that keep a robot heading for its ``index``-th cell waiting, given the index of
     the cell each peer has reached (a peer missing from ``reached`` has not started)."""

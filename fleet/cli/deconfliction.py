@@ -75,6 +75,10 @@ def bench_deconfliction(
     modes: str = typer.Option(
         "local,prioritized,cbs", help="Comma-separated modes the fleets run under."
     ),
+    fleet_worlds: str = typer.Option(
+        "corridor,home",
+        help="Comma-separated stress worlds the fleets run on: corridor (3 robots), home (6).",
+    ),
     run_root: Annotated[
         Path | None,
         typer.Option(
@@ -148,7 +152,7 @@ def bench_deconfliction(
             "plans_invalid": invalid,
         }
     if fleet_seeds:
-        results["fleets"] = _fleets(fleet_seeds, modes, run_root)
+        results["fleets"] = _fleets(fleet_seeds, modes, fleet_worlds, run_root)
     if as_json:
         typer.echo(json.dumps(results))
         return
@@ -180,7 +184,7 @@ def bench_deconfliction(
         Console().print(fleets)
 
 
-def _fleets(seeds: str, modes: str, run_root: Path | None) -> dict[str, dict]:
+def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[str, dict]:
     """Whole fleets on the stress worlds under each mode (see the command's help)."""
     from datetime import datetime
 
@@ -198,11 +202,19 @@ def _fleets(seeds: str, modes: str, run_root: Path | None) -> dict[str, dict]:
             f"--modes: {', '.join(bad) or 'none given'}; choose from "
             f"{', '.join(DECONFLICTION_MODES)}"
         )
+    stress = dict(STRESS_WORLDS)
+    names = [w.strip() for w in worlds.split(",") if w.strip()]
+    unknown = [w for w in names if w not in stress]
+    if unknown or not names:
+        _fail(
+            f"--fleet-worlds: {', '.join(unknown) or 'none given'}; choose from {', '.join(stress)}"
+        )
     scenarios = [
         Scenario(
             f"{world}-{robots}/{mode}", str(resolve_world(world)), robots, ("--deconfliction", mode)
         )
         for world, robots in STRESS_WORLDS
+        if world in names
         for mode in chosen
     ]
     root = run_root or Path("runs") / datetime.now().strftime("bench-deconf-%Y%m%d-%H%M%S")
