@@ -62,6 +62,10 @@ class SlamParams:
     loop_window_theta: float = 0.35
     loop_coarse_factor: int = 8
     loop_min_score: float = 0.6
+    # A closure that moves the estimate by more than loop_agree_xy / _theta is kept only if
+    # every candidate beyond those of the best scores at least this much lower: a scan that
+    # fits two places of a submap (slid along a staircase or straight wall) closes no loop.
+    loop_ambiguity_margin: float = 0.1
     loop_min_submap_gap: int = 2  # never close against the newest few submaps
     loop_max_candidates: int = 2
     loop_search_points: int = 90  # the loop-closure search scores this many evenly spaced points
@@ -132,6 +136,7 @@ class SlamParams:
             "reloc_window_theta",
             "reloc_angular_step",
             "reloc_ambiguity_margin",
+            "loop_ambiguity_margin",
             "reloc_distinct_xy",
             "reloc_distinct_theta",
         )

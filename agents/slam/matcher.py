@@ -91,11 +91,17 @@ class LikelihoodField:
 
 @dataclass(frozen=True)
 class MatchResult:
-    """The best pose in the field's frame, its mean likelihood in [0, 1], and its covariance."""
+    """The best pose in the field's frame, its mean likelihood in [0, 1], and its covariance.
+
+    ``rival_gap`` is how much lower (in the search's score) the best *distinct* candidate
+    scored: one more than ``distinct_xy`` away or turned more than ``distinct_theta`` from the
+    best; ``inf`` when no distinct candidate was scored (see ``CorrelativeMatcher.match``).
+    """
 
     pose: np.ndarray
     score: float
     covariance: np.ndarray
+    rival_gap: float = math.inf
 
 
 class CorrelativeMatcher:
@@ -117,6 +123,8 @@ class CorrelativeMatcher:
         search_points: int | None = None,
         penalties: tuple[float, float] | None = None,
         max_coarse: int | None = None,
+        distinct: tuple[float, float] | None = None,
+        rival_margin: float = 0.0,
     ) -> MatchResult:
         """Match ``points`` (N, 2, sensor frame) against ``field`` around ``prior`` (field frame).
 
@@ -128,6 +136,12 @@ class CorrelativeMatcher:
         With ``max_coarse`` at most that many coarse cells (the highest bounds) are searched at
         the fine level: a search for a match that is not there (most loop-closure candidates)
         finds no bound to prune with and would otherwise score most of the window.
+        With ``distinct`` = (metres, radians) the result's ``rival_gap`` is the best score minus
+        that of the best candidate farther than that from it (a second mode: the scan slid along
+        a straight wall, or onto the next step of a wall that the map drew as a staircase);
+        every coarse cell whose bound is within ``rival_margin`` of the best is then scored, so a
+        rival that close is not pruned (the uniqueness test of place recognition, e.g. Olson,
+        "Recognizing places using spectrally clustered local matches", RAS 2009).
         """
         p = self.params
         if penalties is None:
@@ -142,6 +156,8 @@ class CorrelativeMatcher:
         if search_points is not None and n_points > search_points:
             points = points[:: math.ceil(n_points / search_points)]
             margin = 0.0
+        if distinct is not None:
+            margin = max(margin, rival_margin)
         n_xy = math.ceil(window_xy / res - 1e-9)
         n_th = math.ceil(window_theta / p.angular_step - 1e-9)
         d_theta = np.arange(-n_th, n_th + 1) * p.angular_step
@@ -198,10 +214,16 @@ class CorrelativeMatcher:
         cand = cand[np.isfinite(cand[:, 3])]
         top = cand[np.argmax(cand[:, 3])]
         covariance = self._covariance(cand, n_points, res)
+        rival_gap = math.inf
+        if distinct is not None:
+            off = cand[:, :3] - top[:3]
+            far = (np.hypot(off[:, 0], off[:, 1]) > distinct[0]) | (np.abs(off[:, 2]) > distinct[1])
+            if far.any():
+                rival_gap = float(top[3] - cand[far, 3].max())
         start = prior + top[:3]
         pose = self._refine(field, all_points, start, prior, t_pen, r_pen)
         score = float(field.bilinear(*self._transform(pose, all_points))[0].mean())
-        return MatchResult(pose=pose, score=score, covariance=covariance)
+        return MatchResult(pose=pose, score=score, covariance=covariance, rival_gap=rival_gap)
 
     @staticmethod
     def _transform(pose: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -394,7 +394,12 @@ class Slam:
         loop_window_xy / loop_window_theta) is added at once; one further off, found only
         thanks to the grown window, is held until a second match within loop_confirm_nodes
         nodes implies the same rigid correction of the trajectory (a wrong match in a building
-        of similar corridors rarely repeats consistently), then both are added."""
+        of similar corridors rarely repeats consistently), then both are added. A match that
+        moves the estimate by more than loop_agree_xy / loop_agree_theta is dropped when a
+        distinct candidate scores within loop_ambiguity_margin of it: a wall drawn as a
+        staircase (a recorded map's off-axis wall) or a straight wall that the scan sees beyond
+        the submap's end fits the submap one step along it as well, or better, and such
+        closures repeat consistently, so confirmation does not catch them."""
         p = self.params
         pose = self._graph.poses[node_id]
         window_xy, window_theta = self._loop_windows()
@@ -426,14 +431,18 @@ class Slam:
                 penalize=False,
                 search_points=p.loop_search_points,
                 max_coarse=p.loop_max_coarse,
+                distinct=(p.loop_agree_xy, p.loop_agree_theta),
+                rival_margin=p.loop_ambiguity_margin,
             )
             if result.score < p.loop_min_score:
                 continue
             matched = compose(sm_pose, result.pose)
+            off = relative(pose, matched)
+            if result.rival_gap < p.loop_ambiguity_margin and self._surprising(off):
+                continue
             closure = _Closure(
                 node_id, s.graph_id, result.pose, compose(matched, inverse(pose)), self._nodes
             )
-            off = relative(pose, matched)
             near = math.hypot(off[0], off[1]) <= p.loop_window_xy and abs(off[2]) <= (
                 p.loop_window_theta
             )
@@ -445,6 +454,13 @@ class Slam:
                 self._unconfirmed = None
             else:
                 self._unconfirmed = closure
+
+    def _surprising(self, off: np.ndarray) -> bool:
+        """Whether a closure's offset ``off`` from the estimate (dx, dy, dθ in the node's frame)
+        exceeds loop_agree_xy or loop_agree_theta: it would move the robot by more than two
+        closures may disagree by."""
+        p = self.params
+        return math.hypot(off[0], off[1]) > p.loop_agree_xy or abs(off[2]) > p.loop_agree_theta
 
     def _agrees(self, a: _Closure, b: _Closure) -> bool:
         """Whether two closures imply the same rigid correction: moved by each, the later node
