@@ -15,10 +15,11 @@ search restarts (Boyarski et al., IJCAI 2015), as do two groups whose replanning
 (``joint``), so its cost is its own lower bound and the bound argument above still holds.
 
 Corridor and rectangle reasoning (Li et al., AIJ 2021; ``symmetry``) split a conflict of two
-single agents as in ``cbs``. Their splits keep every solution in one child (neither needs the
-paths to be optimal: the rectangle only needs Manhattan-optimal stretches from the starts, the
-corridor lower bounds on arrival times), so each node's lower bound stays a lower bound on the
-solutions below it, and the bound ``SOC ≤ w · optimum`` holds.
+single agents as in ``cbs``, once the two have conflicted more than ``SYMMETRY_AFTER`` times.
+Their splits keep every solution in one child (neither needs the paths to be optimal: the
+rectangle only needs Manhattan-optimal stretches from the starts, the corridor lower bounds on
+arrival times), so each node's lower bound stays a lower bound on the solutions below it, and
+the bound ``SOC ≤ w · optimum`` holds.
 """
 
 from __future__ import annotations
@@ -58,6 +59,9 @@ from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 # on open maps (gen-shelves, k = 170: 0.7 s instead of a timeout), and the length split is
 # what settles the agents that keep meeting at a parked agent's goal
 TARGET_AFTER = 2
+# the same holds for corridor and rectangle splits: always taking them made ECBS time out on
+# gen-random-20pct at k = 160 (0.7 s of CPU when they wait for the third conflict of a pair)
+SYMMETRY_AFTER = 2
 
 
 class _Node:
@@ -189,7 +193,8 @@ class _Ecbs:
             if count > TARGET_AFTER:
                 conflict = as_target(conflict, self.goals, node.costs)
             pos = positions(node.paths)
-            for branch in self._symmetric(node, conflict, pos) or [(c,) for c in split(conflict)]:
+            symmetric = self._symmetric(node, conflict, pos) if count > SYMMETRY_AFTER else None
+            for branch in symmetric or [(c,) for c in split(conflict)]:
                 child = _Node(node, branch, list(node.paths), list(node.costs), list(node.lbs))
                 first = branch[0]
                 agents = violators(first, pos) if first[0] == LENGTH_LE else [first[1]]
