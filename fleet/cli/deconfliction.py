@@ -97,10 +97,11 @@ def bench_deconfliction(
     fallback (CBS, or ECBS above 10 robots) and how many failed, and whether every plan passed
     the MAPF validator, closed moves included.
 
-    Fleets (`--fleet-seeds`): per world and mode, runs finished (a run that did not finish in
-    --timeout is a deadlock), robot–robot and robot–wall contacts, waiting (robot-seconds held
-    before shared cells plus given way to peers), makespan, and waypoints given up; each run's
-    dir keeps its report. Example: `fleet bench deconfliction --fleet-seeds 0-9 --json`.
+    Fleets (`--fleet-seeds`): per world and mode, runs finished (a run that did not finish
+    within 15 minutes of wall time counts as a deadlock), robot–robot and robot–wall contacts,
+    waiting (robot-seconds held before shared cells plus given way to peers), makespan, and
+    waypoints given up; each run's dir keeps its report. Example: `fleet bench deconfliction
+    --fleet-seeds 0-9 --json`.
     """
     import numpy as np
 

@@ -11,9 +11,9 @@ plans every round jointly. Each transit goes out as the points of its cells that
 passage pins or line of sight needs (``planners.dependencies.thin``: a 4-connected staircase of
 cells would be a turn in place at every cell), with its order of passage renumbered to them,
 which the agents keep (``agents.passage``); on such a transit a robot gives way by rank only to
-the peers the plan does not order it against. Robots that sweep are not in the round: their sweeps are
-not planned in time, and the DWA and the intents keep them apart from the transits at close
-range.
+the peers the plan does not order it against. Robots that sweep are not in the round: their
+sweeps are not planned in time, and the DWA and the intents keep them apart from the transits
+at close range.
 
 A round that cannot be planned (a goal no way leads to, or no joint plan in time) is reported,
 and its robots get ``local`` transits.
