@@ -579,3 +579,11 @@ def test_respawns_asked_on_another_thread_are_made_by_the_main_thread() -> None:
     assert seen == [threading.main_thread()]
     with pytest.raises(futures.TimeoutError):
         calls.call(lambda: None, timeout=0.05)
+
+
+def test_up_refuses_a_run_dir_that_holds_an_earlier_run(tmp_path: Path) -> None:
+    (tmp_path / "coordinator.sqlite").write_bytes(b"")
+    result = runner.invoke(app, ["up", "--run-dir", str(tmp_path), "--headless"])
+    assert result.exit_code == 2
+    assert "holds an earlier run" in result.output
+    assert str(tmp_path) in result.output

@@ -112,6 +112,12 @@ def up(
         _fail(str(e))
     world_path = str(resolve_world(world))
     run_dir = run_dir or Path("runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
+    if (run_dir / "coordinator.sqlite").exists():
+        # a coordinator started on it would resume that run's job, finished or not
+        _fail(
+            f"--run-dir {run_dir} holds an earlier run (coordinator.sqlite); choose a new "
+            "directory, or remove that one"
+        )
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as e:
