@@ -65,6 +65,15 @@ DeconflictionOpt = Annotated[
 ]
 
 
+def _check_deconfliction(mode: str | None) -> None:
+    """Exit with status 2 unless ``--deconfliction`` is unset or one of the modes (checked
+    before any process starts; the mode list comes with the parameters, imported only here)."""
+    from fleet.params import DECONFLICTION_MODES
+
+    if mode is not None and mode not in DECONFLICTION_MODES:
+        _fail(f"--deconfliction must be one of {', '.join(DECONFLICTION_MODES)}, got {mode!r}")
+
+
 def _fail(message: str) -> None:
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     raise typer.Exit(2)

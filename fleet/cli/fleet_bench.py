@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import DeconflictionOpt, _fail, parse_seeds
+from fleet.cli.common import DeconflictionOpt, _check_deconfliction, _fail, parse_seeds
 from fleet.help_text import reflow
 
 WorldsOpt = Annotated[
@@ -66,6 +66,7 @@ def bench_fleet(
 
     if robots < 1:
         _fail("--robots must be >= 1")
+    _check_deconfliction(deconfliction)
     if speed < 0 or not math.isfinite(speed):
         _fail(f"--speed must be a finite number >= 0, got {speed}")
     if timeout <= 0:

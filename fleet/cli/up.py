@@ -19,7 +19,14 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from fleet.cli.common import ConfigOpt, DeconflictionOpt, WorldOpt, _fail, _load
+from fleet.cli.common import (
+    ConfigOpt,
+    DeconflictionOpt,
+    WorldOpt,
+    _check_deconfliction,
+    _fail,
+    _load,
+)
 
 TIMED_OUT_EXIT = 3
 # A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
@@ -80,7 +87,6 @@ def up(
     from fleet.config import resolve_world
     from fleet.dashboard import BusFeed, FleetWatcher
     from fleet.launcher import Launcher, free_port, wait_for_port
-    from fleet.params import DECONFLICTION_MODES
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
     from fleet.report import (
         ReportError,
@@ -101,11 +107,7 @@ def up(
     if timeout is not None and timeout <= 0:
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
     cfg, w = _load(config, world)
-    if deconfliction is not None and deconfliction not in DECONFLICTION_MODES:
-        _fail(
-            f"--deconfliction must be one of {', '.join(DECONFLICTION_MODES)}, "
-            f"got {deconfliction!r}"
-        )
+    _check_deconfliction(deconfliction)
     try:
         starts = w.start_poses(robots, cfg.robot.radius)
     except ValueError as e:
