@@ -531,6 +531,9 @@ class Coordinator:
             for rid, chain in fresh.items():
                 self._send_plan(rid, chain, None, {})
             return
+        # without new plans a round is due only on a lag, looked at once per replan_lag_s
+        if not fresh and self.clock - self.last_transit_round < self.params.replan_lag_s:
+            return
         in_transit = self._in_transit()
         if not fresh and not self._lagging(in_transit):
             return
@@ -558,12 +561,10 @@ class Coordinator:
 
     def _lagging(self, in_transit: dict[str, list[TaskRecord]]) -> bool:
         """Whether one robot in transit has fallen ``replan_lag_s`` further behind its schedule
-        than another (at most once per ``replan_lag_s`` of sim time). Robots that are all late
-        alike keep their plans: the order of passage holds whatever the delays, and only a robot
-        that makes the others wait for it costs time."""
+        than another. Robots that are all late alike keep their plans: the order of passage
+        holds whatever the delays, and only a robot that makes the others wait for it costs
+        time."""
         lag_s = self.params.replan_lag_s
-        if self.clock - self.last_transit_round < lag_s:
-            return False
         lags = {}
         for rid in in_transit:
             plan_id, arrivals = self.schedules[rid]
