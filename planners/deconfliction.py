@@ -249,24 +249,24 @@ def plan_round(
         paths = [[p[0]] * wait + list(p) for p in result.solution.paths]  # type: ignore[union-attr]
         holds = [wait] * len(requests)
         message = f"{why}{method.upper()} planned the round"
-        routes = [route_of(n, _trim(list(p))) for n, p in zip(names, paths, strict=True)]
-        if has_cycle(routes, dependencies(routes)):
-            return RoundPlan(
-                "failed",
-                method,
-                (),
-                t0,
-                step_s,
-                message=f"{message}, but it moves robots round a block of cells in one step, "
-                "an order of passage no delay-tolerant execution can keep",
-                instance=instance,
-                runtime_s=deadline.elapsed(),
-            )
     transits = tuple(
         Transit(name, tuple(path), _waypoints(graph, path, t0, step_s))
         for name, path in zip(names, paths, strict=True)
     )
     routes = [route_of(t.name, t.cells) for t in transits]
+    edges = dependencies(routes)
+    if method != "pp" and has_cycle(routes, edges):
+        return RoundPlan(
+            "failed",
+            method,
+            (),
+            t0,
+            step_s,
+            message=f"{message}, but it moves robots round a block of cells in one step, "
+            "an order of passage no delay-tolerant execution can keep",
+            instance=instance,
+            runtime_s=deadline.elapsed(),
+        )
     return RoundPlan(
         "success",
         method,
@@ -278,7 +278,7 @@ def plan_round(
         instance=instance,
         start_steps=tuple(holds),
         runtime_s=deadline.elapsed(),
-        edges=dependencies(routes),
+        edges=edges,
     )
 
 
