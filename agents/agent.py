@@ -466,6 +466,7 @@ class Agent:
                 dt,
                 a,
                 self._peer_centres(scan.stamp, everyone=False, skip=ordered),
+                self.cfg.wall_follow if a.edge_pass else None,
             )
             with self.lock:
                 if self.follow is not None and self.follow.waypoints is follow.waypoints:

@@ -12,6 +12,12 @@ that sweeps the neighbouring lane instead of its own. So, as move_base's planner
 place toward the path first, a robot whose heading is more than ``align_enter`` off the
 direction to its next waypoint stops and turns in place (time-optimal under the angular
 acceleration limit) until it is within ``align_exit``, and only then drives.
+
+Where the segment it is on runs beside a wall at about the wall follower's distance (see
+:func:`wall_beside`), the robot is steered by the wall follower on its scan instead
+(:mod:`planners.wall_follow`): the edge pass of a robot vacuum. DWA's obstacle cost keeps a
+robot a few centimetres farther from a wall than its lane, and its pose estimate is centimetres
+off, so the band along walls went unswept; held to the wall it sees, the brush reaches it.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from agents.peers import rim_points
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, DWAResult, dwa_control, rollout
 from planners.polyline import densify
+from planners.wall_follow import WallFollowParams, to_robot_frame, wall_follow_step
 
 LOCAL_PATH_M = 3.0
 PROGRESS_M = 0.02
@@ -34,6 +41,12 @@ MEDIAN_BEAMS = 5
 ESCAPE_HEADINGS = 36
 ESCAPE_MARGIN_M = 0.02
 ESCAPE_HEADING_TOLERANCE = 0.05
+# wall_beside judges the wall along a segment in bins this long, and over at least this many
+EDGE_BIN_M = 0.05
+EDGE_MIN_BINS = 3
+# the wall follower's command held this long (s) must keep this much (m) beyond the radius
+EDGE_CHECK_S = 0.5
+EDGE_MARGIN_M = 0.005
 
 
 @dataclass(frozen=True)
@@ -50,6 +63,7 @@ class FollowState:
     escape_sign: int = 1
     skipped: int = 0
     yielded_s: float = 0.0
+    edge_side: int = 0
 
     @property
     def done(self) -> bool:
@@ -374,6 +388,96 @@ def keep_clear(
     return state, _held(pose, v, w, params)
 
 
+def wall_beside(
+    state: FollowState,
+    pose: tuple[float, float, float],
+    obstacles: np.ndarray,
+    wall: WallFollowParams,
+    agent: AgentParams,
+) -> int:
+    """The side of the segment the robot is on (+1 left, −1 right) that runs along a wall at
+    about the wall follower's distance, or 0.
+
+    Beside the segment's stretch from ``edge_window`` behind the robot to ``edge_window`` ahead
+    (up to its end), the scan's ``obstacles`` must line the segment at a lateral distance of
+    at most ``wall.distance + edge_slack`` in at least ``edge_cover`` of its 5 cm bins (a
+    wall the plan's lane hugs, not a door or the lane beyond an outside corner), and the robot
+    must be on its way along the segment: heading within ``edge_heading`` of it and at most
+    ``waypoint_tolerance`` beside it (DWA's obstacle cost may have pushed it a decimetre off a
+    lane by a wall; the wall follower brings it back). Of two such sides (a corridor) the
+    nearer wall is taken."""
+    wps, i = state.waypoints, state.index
+    if i == 0 or state.done:
+        return 0
+    start, seg = wps[i - 1], wps[i] - wps[i - 1]
+    length = float(np.hypot(*seg))
+    if length < 1e-9 or len(obstacles) == 0:
+        return 0
+    u = seg / length
+    n = np.array([-u[1], u[0]])
+    xy = np.asarray(pose[:2], dtype=float)
+    along_robot = float((xy - start) @ u)
+    heading_off = abs(math.remainder(pose[2] - math.atan2(u[1], u[0]), 2 * math.pi))
+    if heading_off > agent.edge_heading or abs(float((xy - start) @ n)) > agent.waypoint_tolerance:
+        return 0
+    lo = max(0.0, along_robot - agent.edge_window)
+    hi = min(length, along_robot + agent.edge_window)
+    bins = int((hi - lo) / EDGE_BIN_M)
+    if bins < EDGE_MIN_BINS:
+        return 0
+    rel = np.asarray(obstacles) - start
+    along, beside = rel @ u, rel @ n
+    near = (along >= lo) & (along < lo + bins * EDGE_BIN_M)
+    best, best_gap = 0, math.inf
+    for side in (1, -1):
+        lateral = side * beside
+        on = near & (lateral > 0) & (lateral <= wall.distance + agent.edge_slack)
+        cover = np.unique(((along[on] - lo) / EDGE_BIN_M).astype(int)).size / bins
+        if cover >= agent.edge_cover and float(np.median(lateral[on])) < best_gap:
+            best, best_gap = side, float(np.median(lateral[on]))
+    return best
+
+
+def edge_step(
+    state: FollowState,
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    obstacles: np.ndarray,
+    peers: np.ndarray,
+    wall: WallFollowParams,
+    params: DWAParams,
+    robot_radius: float,
+    dt: float,
+    agent: AgentParams,
+    max_speed: float | None,
+) -> tuple[int, DWAResult | None]:
+    """(side, command) of the wall follower on the segment the robot is on, capped at
+    ``max_speed``; (0, None) where no wall runs beside it (:func:`wall_beside`), where a peer is
+    within ``edge_peer_clear``, where the follower finds no wall on its scan, or where its
+    command held for ``EDGE_CHECK_S`` would bring the robot nearer an obstacle than
+    ``EDGE_MARGIN_M`` beyond its radius (or than it is now): DWA, which checks its rollouts,
+    then drives (the wall follower turns a robot that meets its lane at an angle only within its
+    angular acceleration, a few centimetres closer to the wall first)."""
+    xy = np.asarray(pose[:2], dtype=float)
+    if len(peers) and float(np.hypot(*(peers - xy).T).min()) < agent.edge_peer_clear:
+        return 0, None
+    side = wall_beside(state, pose, obstacles, wall, agent)
+    if not side:
+        return 0, None
+    limits = (params.max_vel_x, params.max_vel_theta, params.acc_lim_x, params.acc_lim_theta)
+    points = to_robot_frame(obstacles, pose)
+    command = wall_follow_step(points, side, velocity, wall, robot_radius, limits, dt, max_speed)
+    if command is None:
+        return 0, None
+    xs, ys, _ = rollout(
+        pose, np.array([command.v]), np.array([command.w]), np.linspace(0.0, EDGE_CHECK_S, 6)
+    )
+    clear, _ = gaps(np.column_stack([xs[0], ys[0]]), obstacles, np.zeros((0, 2)), robot_radius)
+    if clear[1:].min() < min(robot_radius + EDGE_MARGIN_M, clear[0]):
+        return 0, None
+    return side, _held(pose, command.v, command.w, params)
+
+
 def control_step(
     state: FollowState,
     pose: tuple[float, float, float],
@@ -384,6 +488,7 @@ def control_step(
     dt: float,
     agent: AgentParams,
     peers: np.ndarray | None = None,
+    wall: WallFollowParams | None = None,
 ) -> tuple[FollowState, DWAResult | None]:
     """Advance along the path and choose a command; ``None`` when the path is finished.
 
@@ -401,11 +506,18 @@ def control_step(
     (:func:`peer_in_the_way` within DWA's reach, max_vel_x·sim_time) does not count, up to
     ``give_way_max_s`` of it in a row: a robot that gives way to one crossing its path waits
     for it instead of giving up the lane it was about to sweep.
+
+    With ``wall`` (the wall follower's parameters), a segment that runs along a wall
+    (:func:`wall_beside`) is driven by the wall follower on the scan, braking into the
+    segment's end as DWA would, while no peer is within ``edge_peer_clear``: near peers, DWA
+    and its give-way keep the robots apart.
     """
     xy = np.array(pose[:2])
     state = advance(state, xy, agent)
     if state.done:
         return state, None
+    if state.edge_side:
+        state = replace(state, edge_side=0)
     peers = np.zeros((0, 2)) if peers is None else peers
     seen = np.vstack([obstacles, rim_points(peers, robot_radius)]) if len(peers) else obstacles
     if state.escape_m > 0:
@@ -430,7 +542,22 @@ def control_step(
         path = local_path(state, xy)
         result = None
         speed = stop_speed(state, xy, params, agent.along_tolerance)
-        if speed is not None:
+        if wall is not None:
+            side, result = edge_step(
+                state,
+                pose,
+                velocity,
+                obstacles,
+                peers,
+                wall,
+                params,
+                robot_radius,
+                dt,
+                agent,
+                speed,
+            )
+            state = replace(state, edge_side=side)
+        if result is None and speed is not None:
             v_now = velocity[0]
             speed = min(max(speed, v_now - params.acc_lim_x * dt), v_now + params.acc_lim_x * dt)
             fixed = replace(params, min_vel_x=speed, max_vel_x=speed, vx_samples=1)

@@ -2,9 +2,10 @@
 
 Each control step of the path follower (:func:`agents.follower.control_step`) is put in one of
 ``fleet.protocol.TIME_KINDS`` by the follower's state before and after it, so a run's makespan
-splits into time spent sweeping, in transit to a task, turning in place, giving way to a peer,
-escaping a dead end, and idle (no plan, or its plan finished). The agent sums them and reports
-the sums in its status; ``fleet up`` puts them in report.json.
+splits into time spent sweeping, driving beside a wall under the wall follower (edge), in
+transit to a task, turning in place, giving way to a peer, escaping a dead end, and idle (no
+plan, or its plan finished). The agent sums them and reports the sums in its status; ``fleet
+up`` puts them in report.json.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ def step_kind(before: FollowState | None, after: FollowState | None, sweep_from:
         return "turn"
     if after.yielded_s > before.yielded_s:
         return "yield"
+    if after.edge_side:
+        return "edge"
     if after.index <= sweep_from:
         return "transit"
     return "sweep"

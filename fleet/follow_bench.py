@@ -108,6 +108,7 @@ def follow_tour(
                 cfg.robot.radius,
                 dt,
                 cfg.agent,
+                wall=cfg.wall_follow if cfg.agent.edge_pass else None,
             )
             kind = step_kind(before, follow, sweep_from)
             time_use[kind] += dt

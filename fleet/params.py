@@ -11,6 +11,7 @@ from fleet.config import configs_dir, from_mapping, read_yaml
 from fleet.slam_params import SlamParams
 from planners.coverage.params import CoverageParams
 from planners.dwa import DWAParams
+from planners.wall_follow import WallFollowParams
 
 # how transits between tasks are kept apart: see fleet.coordinator.transits
 DeconflictionMode = Literal["local", "prioritized", "cbs"]
@@ -129,9 +130,19 @@ class AgentParams:
     transit_speed: float = 0.25
     hold_max_s: float = 30.0
     hold_silent_s: float = 2.0
+    edge_pass: bool = True
+    edge_slack: float = 0.05
+    edge_window: float = 0.3
+    edge_cover: float = 0.8
+    edge_heading: float = 0.2
+    edge_peer_clear: float = 1.0
 
     def validate(self) -> None:
         for name in (
+            "edge_slack",
+            "edge_window",
+            "edge_heading",
+            "edge_peer_clear",
             "hold_max_s",
             "hold_silent_s",
             "map_hz",
@@ -153,6 +164,8 @@ class AgentParams:
             raise ValueError("need 0 < align_exit <= align_enter <= pi")
         if self.give_way_max_s < 0:
             raise ValueError("give_way_max_s must be >= 0 (0: waiting for a peer counts too)")
+        if not 0 < self.edge_cover <= 1:
+            raise ValueError("edge_cover must be within (0, 1]")
 
 
 @dataclass(frozen=True)
@@ -182,8 +195,16 @@ class FleetConfig:
     agent: AgentParams = field(default_factory=AgentParams)
     coordinator: CoordinatorParams = field(default_factory=CoordinatorParams)
     dwa: DWAParams = field(default_factory=DWAParams)
+    wall_follow: WallFollowParams = field(default_factory=WallFollowParams)
     slam: SlamParams = field(default_factory=SlamParams)
     coverage: CoverageParams = field(default_factory=CoverageParams)
+
+    def validate(self) -> None:
+        if self.wall_follow.distance <= self.robot.radius:
+            raise ValueError(
+                f"wall_follow.distance ({self.wall_follow.distance}) must exceed robot.radius "
+                f"({self.robot.radius}): the robot would drive into the wall it follows"
+            )
 
 
 def default_config_path() -> Path:

@@ -28,7 +28,7 @@ SCHEMA_VERSION = 1
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
-TIME_KINDS = ("sweep", "transit", "turn", "yield", "hold", "escape", "idle", "other")
+TIME_KINDS = ("sweep", "edge", "transit", "turn", "yield", "hold", "escape", "idle", "other")
 
 M = TypeVar("M", bound="Message")
 

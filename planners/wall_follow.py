@@ -19,7 +19,7 @@ a second-order loop in the distance error, e¨ + k_ψ·e˙ + k_ψ·k_r·v·e = 0
 outside corner) the robot circles its end at radius r. Along a wall that goes on, the nearest
 point slides with the robot and needs no feed-forward; it fades in over ``corner_ramp`` as the
 wall ahead runs out, so the turn does not start as a step the angular acceleration limit would
-smear into an overshoot. An inside corner needs no case of its own law: the speed is capped so
+smear into an overshoot. An inside corner is handled apart: the speed is capped so
 that the robot can stop ``front_margin`` short of anything in its corridor ahead, and once the
 wall ahead is nearer than the set distance it turns in place, away from its wall, until the way
 along the new wall is open.

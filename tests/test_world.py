@@ -336,3 +336,18 @@ def test_fleet_config_validate_names_the_section(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
         load_fleet_config(path)
     assert str(path) in str(info.value) and "lidar" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("wall_follow:\n  distance: 0.15\n", "wall_follow.distance"),  # inside the robot
+        ("wall_follow:\n  reach: 0.1\n", "reach"),
+        ("agent:\n  edge_cover: 1.5\n", "edge_cover"),
+    ],
+)
+def test_fleet_config_edge_pass_fields_are_checked(tmp_path: Path, text: str, field: str) -> None:
+    path = _write(tmp_path / "fleet.yaml", text)
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    assert str(path) in str(info.value) and field in str(info.value), str(info.value)
