@@ -33,7 +33,9 @@ def configs_dir() -> Path:
     checkout = Path(__file__).resolve().parents[1] / "configs"
     if (checkout / "fleet.yaml").exists():
         return checkout
-    return Path(str(resources.files("fleet.configs")))
+    # fleet.configs has no __init__.py: files() gives a MultiplexedPath, whose str() is no
+    # path; a file joined to it is a plain one
+    return Path(str(resources.files("fleet.configs").joinpath("fleet.yaml"))).parent
 
 
 def default_world_path() -> Path:
