@@ -4,8 +4,9 @@ Each run is ``fleet up --headless --until-done --speed S`` in its own run dir (t
 one a user gets). Per run: coverage, repetition, makespan, the makespan the coordinator's first
 allocation priced (``plan_estimate_s``) and their ratio, wall time, real-time factor (sim
 seconds per wall second), contacts, waypoints given up, and where the robots' time went (sim
-seconds summed over robots per kind of control step, ``fleet.protocol.TIME_KINDS``). Per world:
-the medians, and the worst run's contacts and given-up waypoints.
+seconds summed over robots per kind of control step, ``fleet.protocol.TIME_KINDS``), and where
+the missed floor lies (report.json's ``missed``: by clearance from walls and furniture). Per
+world: the medians, and the worst run's contacts and given-up waypoints.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from fleet.fleet_runner import RunningFleet
 from fleet.protocol import TIME_KINDS
+from fleet.report import MISSED_BANDS
 
 MEDIAN_KEYS = (
     "coverage",
@@ -58,6 +60,7 @@ def run_figures(report: dict[str, Any] | None, world: str, seed: int) -> dict[st
         "contacts": report["collisions"],
         "skipped_waypoints": sum(s for s in skipped if s is not None),
         "time_s": time_use,
+        "missed": report.get("missed"),
     }
 
 
@@ -78,6 +81,9 @@ def world_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     out["contacts_worst_run"] = max(contacts, default=None)
     out["skipped_total"] = sum(r["skipped_waypoints"] for r in done)
     out["time_s_median"] = {k: _median([r["time_s"][k] for r in done]) for k in TIME_KINDS}
+    out["missed_median"] = {
+        band: _median([(r.get("missed") or {}).get(band) for r in done]) for band in MISSED_BANDS
+    }
     return out
 
 
@@ -154,6 +160,11 @@ def run_line(r: dict[str, Any]) -> str:
         f"×{r['makespan_over_estimate']}), {r['wall_s']} s wall, RTF {r['real_time_factor']}, "
         f"contacts wall {c['robot_wall']} robot {c['robot_robot']}, "
         f"given up {r['skipped_waypoints']}"
+        + (
+            "; missed " + ", ".join(f"{b} {_pct(v)}" for b, v in r["missed"].items())
+            if r.get("missed")
+            else ""
+        )
     )
 
 
@@ -171,5 +182,7 @@ def table_lines(result: dict[str, Any]) -> list[str]:
             f"waypoints given up {s['skipped_total']} in all",
             "  robot-seconds (median over runs, summed over robots): "
             + ", ".join(f"{k} {t[k]}" for k in TIME_KINDS),
+            "  floor missed by clearance from walls and furniture (median, of the cleanable): "
+            + ", ".join(f"{band} {_pct(v)}" for band, v in s["missed_median"].items()),
         ]
     return lines

@@ -38,6 +38,8 @@ from fleet.protocol import (
     TruthPose,
 )
 from fleet.rundir import read_json_object
+from planners.coverage.metrics import missed_by_clearance
+from planners.grid import GridMap, clearance
 
 if TYPE_CHECKING:
     from fleet.bus import Bus
@@ -52,6 +54,10 @@ TRACK_STEP_M = 0.05
 TRACK_COLUMNS = ("sim_s", "robot", "x", "y")
 COVERAGE_COLUMNS = ("sim_s", "coverage", "repetition")
 COLLISION_COLUMNS = ("sim_s", "kind", "robot", "other", "x", "y")
+# report.json's "missed" splits the floor never cleaned by its clearance from walls and
+# furniture: under 0.1 m only a pass hugging them sweeps, beyond 0.3 m it is open floor
+MISSED_BANDS_M = (0.1, 0.3)
+MISSED_BANDS = ("under_0.1m", "0.1_to_0.3m", "over_0.3m")
 # report.json fields the pictures read, and their JSON types
 REPORT_FIELDS: dict[str, type | tuple[type, ...]] = {
     "status": str,
@@ -71,6 +77,28 @@ def time_use_of(status: RobotStatus) -> dict[str, float] | None:
     if len(status.time_s) != len(TIME_KINDS):
         return None
     return {k: round(float(t), 1) for k, t in zip(TIME_KINDS, status.time_s, strict=True)}
+
+
+def missed_breakdown(image: CoverageImage, grid: GridMap) -> dict[str, float] | None:
+    """report.json's ``missed``: the cleanable floor never cleaned, as fractions of the
+    cleanable area, by clearance from walls and furniture (``MISSED_BANDS``; they sum to 1 −
+    coverage). ``grid`` is the world's occupancy at the simulator's cleaning resolution; None
+    when it is not the image's grid."""
+    shape = (image.rows, image.cols)
+    same = (
+        grid.shape == shape
+        and abs(grid.resolution - image.resolution) < 1e-9
+        and np.allclose(grid.origin, (image.origin_x, image.origin_y))
+    )
+    if not same:
+        return None
+    parts = missed_by_clearance(
+        image.visits.reshape(shape),
+        image.cleanable.reshape(shape).astype(bool),
+        clearance(grid),
+        MISSED_BANDS_M,
+    )
+    return {name: round(part, 5) for name, part in zip(MISSED_BANDS, parts, strict=True)}
 
 
 def build_report(

@@ -5,10 +5,11 @@ import itertools
 import math
 
 import numpy as np
+import pytest
 from coverage_maps import grid_of
 
 from planners.coverage import coverage_metrics
-from planners.coverage.metrics import swath
+from planners.coverage.metrics import missed_by_clearance, swath
 
 
 def _open_grid(rows=7, cols=9):
@@ -114,3 +115,17 @@ def test_a_u_turn_between_lanes_cleans_the_corners_once():
     path = np.array([[2.5, 2.5], [9.5, 2.5], [9.5, 5.5], [2.5, 5.5]])
     covered, visits = swath(g, path, 1.5)
     assert visits.max() == 1 and np.array_equal(visits, covered.astype(int))
+
+
+def test_missed_floor_is_split_by_clearance_and_sums_to_what_coverage_misses() -> None:
+    clearance_m = np.array([[0.05, 0.05, 0.2, 0.5], [0.05, 0.2, 0.5, 0.9]])
+    cleanable_cells = np.array([[True, True, True, True], [False, True, True, True]])
+    visits = np.array([[0, 3, 0, 1], [0, 1, 0, 0]])
+    parts = missed_by_clearance(visits, cleanable_cells, clearance_m, (0.1, 0.3))
+    # 7 cleanable cells; missed: one under 0.1 m (the uncleanable one does not count), one at
+    # 0.2 m, two beyond 0.3 m
+    assert parts == pytest.approx([1 / 7, 1 / 7, 2 / 7])
+    covered = ((visits > 0) & cleanable_cells).sum() / cleanable_cells.sum()
+    assert sum(parts) == pytest.approx(1 - covered)
+    with pytest.raises(ValueError, match="one shape"):
+        missed_by_clearance(visits[:1], cleanable_cells, clearance_m, (0.1,))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from fleet.fleet_bench import run_figures, world_summary
@@ -90,3 +91,29 @@ def test_one_robot_drives_the_small_worlds_whole_tour_in_process() -> None:
     assert r["time_s"]["sweep"] > 0.5 * r["plan_estimate_s"] and r["time_over_estimate"] > 1.0
     assert 0 < r["tracking_m"]["mean"] < r["tracking_m"]["p95"] <= r["tracking_m"]["max"]
     assert len(r["given_up_points"]) == r["given_up"]
+
+
+def test_the_missed_floor_is_split_by_clearance_in_the_report_and_the_bench() -> None:
+    from fleet.config import resolve_world
+    from fleet.protocol import CoverageImage
+    from fleet.report import MISSED_BANDS, missed_breakdown
+    from fleet.world import load_world
+
+    grid = load_world(resolve_world("small")).grid(0.05)
+    visits = np.ones(grid.shape, dtype=np.uint16)
+    visits[:, : grid.shape[1] // 2] = 0  # the left half never cleaned
+    cleanable = grid.free.astype(np.uint8)
+    image = CoverageImage(
+        0.0, 0.05, *grid.origin, *grid.shape, visits.reshape(-1), cleanable.reshape(-1)
+    )
+    missed = missed_breakdown(image, grid)
+    assert missed is not None and list(missed) == list(MISSED_BANDS)
+    assert sum(missed.values()) == pytest.approx(
+        (cleanable.astype(bool) & (visits == 0)).sum() / cleanable.sum(), abs=1e-4
+    )
+    assert all(v > 0 for v in missed.values())
+    assert missed_breakdown(image, load_world(resolve_world("small")).grid(0.1)) is None
+    report = _report(150.0, 0, [0]) | {"missed": missed}
+    runs = [run_figures(report, "small", 0), run_figures(report, "small", 1)]
+    assert runs[0]["missed"] == missed
+    assert world_summary(runs)["missed_median"] == pytest.approx(missed, abs=1e-4)

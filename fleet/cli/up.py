@@ -94,6 +94,7 @@ def up(
         build_report,
         job_report,
         load_run,
+        missed_breakdown,
         time_use_of,
         write_json,
     )
@@ -210,6 +211,7 @@ def up(
                 "speed": speed,
                 "seed": seed,
                 "deconfliction": deconfliction or cfg.coordinator.deconfliction,
+                "missed": missed_breakdown(image, w.grid(image.resolution)),
                 **job,
             },
             skipped,

@@ -232,3 +232,24 @@ def _row(covered, visits, clean, n_clean, area, length, turns, t) -> PathMetrics
         est_time_s=float(t),
         covered_area_m2=hit * area,
     )
+
+
+def missed_by_clearance(
+    visits: np.ndarray, cleanable_cells: np.ndarray, clearance_m: np.ndarray, edges: Sequence[float]
+) -> list[float]:
+    """Where the missed floor lies: the cleanable cells never visited (``visits`` == 0), as
+    fractions of all cleanable cells, in bands of their clearance from the nearest obstacle
+    (``clearance_m``, see :func:`planners.grid.clearance`) cut at ``edges`` (m, ascending).
+    len(edges) + 1 fractions, summing to 1 − coverage: a band along walls and furniture that a
+    lane or edge pass close to them sweeps, against gaps in the open floor between lanes."""
+    if not (visits.shape == cleanable_cells.shape == clearance_m.shape):
+        raise ValueError(
+            f"visits {visits.shape}, cleanable {cleanable_cells.shape} and clearance "
+            f"{clearance_m.shape} must be one shape"
+        )
+    total = int(cleanable_cells.sum())
+    if total == 0:
+        return [0.0] * (len(edges) + 1)
+    missed = cleanable_cells & (visits == 0)
+    band = np.digitize(clearance_m[missed], np.asarray(edges, dtype=float))
+    return [float(n) / total for n in np.bincount(band, minlength=len(edges) + 1)]
