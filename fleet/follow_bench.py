@@ -15,7 +15,8 @@ the processes cost, and is deterministic for a seed, so changes to the follower 
 can be judged over many seeds and maps quickly. Per run: coverage and repetition (the
 simulator's grid), sim time against the plan's estimate, contacts (with where they were),
 waypoints given up (with where), the tracking error of the sweep (distance of the true centre
-from the planned segment), and the sim seconds per kind of control step.
+from the planned segment), and the sim seconds per kind of control step; each contact is given
+with the kind of the control step in force when it happened (edge: the wall follower's).
 """
 
 from __future__ import annotations
@@ -81,9 +82,12 @@ def follow_tour(
     given_up: list[tuple[float, float]] = []
     limit = time_factor * estimate + 60.0
     finished_at = None
+    kind = "idle"
     while core.t < limit:
         out = core.step()
-        contacts += [(round(c.stamp, 1), round(c.x, 3), round(c.y, 3)) for c in out.collisions]
+        contacts += [
+            (round(c.stamp, 1), round(c.x, 3), round(c.y, 3), kind) for c in out.collisions
+        ]
         while pending and pending[0][0] <= core.t + 1e-9:
             _, v, w = pending.pop(0)
             core.set_cmd(ROBOT, v, w)

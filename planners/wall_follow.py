@@ -22,7 +22,11 @@ wall ahead runs out, so the turn does not start as a step the angular accelerati
 smear into an overshoot. An inside corner is handled apart: the speed is capped so
 that the robot can stop ``front_margin`` short of anything in its corridor ahead, and once the
 wall ahead is nearer than the set distance it turns in place, away from its wall, until the way
-along the new wall is open.
+along the new wall is open. A wall that steps toward the robot ahead (a staircase of map cells
+along a wall a few degrees off the map's axes) counts for the distance term as soon as it is
+within ``lookahead``, and nearer the wall than the set distance the robot slows in proportion
+to the gap left to contact: the nearest-point law alone meets such a step only once it is the
+nearest point, too late to turn within the angular acceleration limit.
 
 Everything is a pure function of the scan points and the velocity; no pose estimate is used.
 """
@@ -37,6 +41,9 @@ import numpy as np
 # Returns scattered about their fitted line by more than this (rms, m) are no straight wall:
 # about twice the median-filtered scan's noise.
 LINE_RMS_M = 0.015
+# Nearer the wall than the set distance, the speed falls in proportion to the gap left to
+# contact, to this share of it at most: time to steer out before a step of the wall ahead.
+CLOSE_SPEED = 0.3
 # What lies within this angle (rad) of straight ahead is in the robot's way, not beside it.
 FRONT_SECTOR = math.pi / 4
 
@@ -53,7 +60,8 @@ class WallFollowParams:
     outside corner, braked down to at ``acc_lim_x`` as the wall ahead runs out; ``fit_radius``:
     the wall's line is fitted to the returns this near (m) its nearest one; ``wall_band``:
     returns within this (m) of that line's tangent count as the wall going on, up to
-    ``horizon`` (m) ahead."""
+    ``horizon`` (m) ahead; ``lookahead``: the wall up to this far (m) ahead counts for the
+    distance term where it is nearer than the set distance."""
 
     distance: float = 0.195
     speed: float = 0.2
@@ -68,6 +76,7 @@ class WallFollowParams:
     corner_speed: float = 0.1
     wall_band: float = 0.03
     horizon: float = 1.0
+    lookahead: float = 0.3
 
     def validate(self) -> None:
         for name in (
@@ -83,6 +92,7 @@ class WallFollowParams:
             "corner_speed",
             "wall_band",
             "horizon",
+            "lookahead",
         ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
@@ -161,6 +171,21 @@ def wall_extent(
     return float(along[on].max()) if on.any() else 0.0
 
 
+def wall_ahead(points: np.ndarray, side: int, distance: float, lookahead: float) -> float:
+    """The least distance (m) beside the robot's heading line of the ``points`` (robot frame)
+    on the ``side`` up to ``lookahead`` ahead that are nearer that line than ``distance``, but
+    not nearer than half of it (what lies nearer is in the robot's way, see
+    :func:`front_gap`); inf when there are none. A wall that steps toward the robot ahead (a
+    map's staircase of cells along a wall a few degrees off its axes) is steered away from
+    before the robot reaches the step, not when the step is already its nearest point."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    beside = side * pts[:, 1]
+    ahead = (
+        (pts[:, 0] > 0) & (pts[:, 0] <= lookahead) & (beside >= distance / 2) & (beside < distance)
+    )
+    return float(beside[ahead].min()) if ahead.any() else math.inf
+
+
 def front_gap(points: np.ndarray, robot_radius: float, sector: float = FRONT_SECTOR) -> float:
     """Free distance (m) straight ahead before the robot's disc touches one of ``points``
     (robot frame): the least x − √(R² − y²) over the points in its corridor |y| < R, x > 0,
@@ -197,7 +222,8 @@ def wall_follow_step(
     cruising speed, ``max_speed``, the speed from which the robot can still stop
     ``front_margin`` short of the nearest point in its corridor ahead (√(2·a·gap)) and the one
     from which it can brake to ``corner_speed`` where the wall ends, scaled by the cosine of
-    the heading error, all within the acceleration limits.
+    the heading error and, nearer the wall than the set distance, by the share of the gap to
+    contact left (at least ``CLOSE_SPEED``), all within the acceleration limits.
     None when no wall point lies within ``reach`` on that side.
     """
     if side not in (-1, 1):
@@ -211,9 +237,10 @@ def wall_follow_step(
     r = float(math.hypot(p[0], p[1]))
     bearing = math.atan2(p[1], p[0])
     toward = -side * math.remainder(bearing - side * math.pi / 2, 2 * math.pi)
+    nearest = min(r, wall_ahead(points, side, params.distance, params.lookahead))
     wanted = max(
         -params.max_approach,
-        min(params.max_approach, math.atan(params.gain_distance * (r - params.distance))),
+        min(params.max_approach, math.atan(params.gain_distance * (nearest - params.distance))),
     )
     error = wanted - toward
     gap = front_gap(points, robot_radius) - params.front_margin
@@ -223,6 +250,7 @@ def wall_follow_step(
     if max_speed is not None:
         v = min(v, max_speed)
     v *= max(0.0, math.cos(min(abs(error), math.pi / 2)))
+    v *= min(1.0, max(CLOSE_SPEED, (nearest - robot_radius) / (params.distance - robot_radius)))
     v0, w0 = velocity
     v = min(max(v, v0 - acc_v * dt), v0 + acc_v * dt)
     v = max(v, 0.0)

@@ -97,6 +97,20 @@ def test_turns_out_of_an_inside_corner_without_touching_it(side: int) -> None:
     assert abs(rows[-1, 1] - (3.0 - PARAMS.distance)) <= TOLERANCE
 
 
+@pytest.mark.parametrize("rise", [0.05, -0.05])
+def test_a_staircase_wall_is_followed_without_contact(rise: float) -> None:
+    """A wall a few degrees off a map's axes, as the recorded apartment draws it: a 5 cm step
+    every 0.7 m, toward the robot or away from it. The steps toward it are steered away from
+    before they are reached (the nearest-point law alone ran 1.9 cm into the first one)."""
+    steps = []
+    for k in range(8):
+        x, y = -1.0 + 0.7 * k, rise * k
+        steps += [[x, y, x + 0.7, y], [x + 0.7, y, x + 0.7, y + rise]]
+    rows = _drive(np.array(steps), (-0.9, PARAMS.distance, 0.0), -1, 20.0, 0)
+    assert rows[:, 4].min() > RADIUS + 0.01
+    assert rows[-1, 1] > 1.0
+
+
 def test_no_wall_near_is_no_command() -> None:
     far = np.array([[2.0, -2.0], [2.1, -2.0]])
     assert wall_follow_step(far, -1, (0.2, 0.0), PARAMS, RADIUS, LIMITS, DT) is None
