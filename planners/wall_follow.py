@@ -44,6 +44,9 @@ LINE_RMS_M = 0.015
 # Nearer the wall than the set distance, the speed falls in proportion to the gap left to
 # contact, to this share of it at most: time to steer out before a step of the wall ahead.
 CLOSE_SPEED = 0.3
+# Returns ahead nearer than the set distance are a wall stepping toward the robot when they
+# run this far (m) along its heading; a wall across its way has them all at one x.
+STEP_RUN_M = 0.05
 # What lies within this angle (rad) of straight ahead is in the robot's way, not beside it.
 FRONT_SECTOR = math.pi / 4
 
@@ -175,15 +178,19 @@ def wall_ahead(points: np.ndarray, side: int, distance: float, lookahead: float)
     """The least distance (m) beside the robot's heading line of the ``points`` (robot frame)
     on the ``side`` up to ``lookahead`` ahead that are nearer that line than ``distance``, but
     not nearer than half of it (what lies nearer is in the robot's way, see
-    :func:`front_gap`); inf when there are none. A wall that steps toward the robot ahead (a
-    map's staircase of cells along a wall a few degrees off its axes) is steered away from
-    before the robot reaches the step, not when the step is already its nearest point."""
+    :func:`front_gap`), where they run along the heading for ``STEP_RUN_M`` at least; inf
+    otherwise. A wall that steps toward the robot ahead (a map's staircase of cells along a
+    wall a few degrees off its axes) is steered away from before the robot reaches the step,
+    not when the step is already its nearest point; a wall across the way ahead (the end of a
+    lane) is left to :func:`front_gap`, so the robot keeps to its wall up to that corner."""
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     beside = side * pts[:, 1]
     ahead = (
         (pts[:, 0] > 0) & (pts[:, 0] <= lookahead) & (beside >= distance / 2) & (beside < distance)
     )
-    return float(beside[ahead].min()) if ahead.any() else math.inf
+    if not ahead.any() or np.ptp(pts[ahead, 0]) < STEP_RUN_M:
+        return math.inf
+    return float(beside[ahead].min())
 
 
 def front_gap(points: np.ndarray, robot_radius: float, sector: float = FRONT_SECTOR) -> float:
