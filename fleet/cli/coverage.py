@@ -79,14 +79,6 @@ def plan_coverage_cmd(
         bool | None,
         typer.Option("--edge-pass/--no-edge-pass", help="Also drive once around every cell."),
     ] = None,
-    wall_sides: Annotated[
-        bool | None,
-        typer.Option(
-            "--wall-sides/--no-wall-sides",
-            help="Also drive along the walls each cell's lanes end at (the scallops between "
-            "lane ends). Default: coverage.wall_sides in configs/fleet.yaml.",
-        ),
-    ] = None,
     coverage_target: Annotated[
         float | None,
         typer.Option(
@@ -148,8 +140,6 @@ def plan_coverage_cmd(
         params = dataclasses.replace(params, method=method)
     if edge_pass is not None:
         params = dataclasses.replace(params, edge_pass=edge_pass)
-    if wall_sides is not None:
-        params = dataclasses.replace(params, wall_sides=wall_sides)
     if coverage_target is not None:
         params = dataclasses.replace(params, fill_in_target=coverage_target)
     if start:

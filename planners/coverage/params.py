@@ -16,8 +16,6 @@ class CoverageParams:
     metre first, until the sweeps and passes cover a little more than ``fill_in_target`` of
     the cleanable area; the final pruning then drops the tasks that cost the most driving per
     cell while at least ``fill_in_target`` stays covered (1.0: every pass, nothing lost).
-    With ``edge_pass`` every cell is also driven round once; with ``wall_sides`` only along
-    the walls its lanes end at (``planners.coverage.tasks.wall_side_tasks``).
     With ``return_strips`` a dead-end room may get a lane along the wall where its lanes end
     (and lanes across its usual axis), so the way back to its door is sweeping rather than a
     transit. Rooms are separated at openings narrower than ``door_width``; a room smaller than
@@ -36,7 +34,6 @@ class CoverageParams:
     overlap: float = 0.0
     method: Literal["bcd", "spiral"] = "bcd"
     edge_pass: bool = False
-    wall_sides: bool = False
     fill_in: bool = True
     return_strips: bool = True
     fill_in_target: float = 0.995

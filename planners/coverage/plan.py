@@ -31,7 +31,6 @@ from planners.coverage.tasks import (
     edge_task,
     spiral_task,
     strip_task,
-    wall_side_tasks,
 )
 from planners.coverage.tour import (
     TaskEnds,
@@ -268,30 +267,24 @@ def _room_options(grid, mask, clean_mask, room, base, angle, step, hw, params, s
     # stacked cells always merge: the lattice, clamp lanes and fill-in take their shoulders
     labels, cells = decompose(rot, max_step=max(rot.shape))
     lanes, shoulders = room_lanes(cells, rot, resample(grid, clean_mask, frame), labels, step, hw)
-    plain = _cell_tasks(room, base, cells, rot, lanes, shoulders, None, frame, params)
+    plain = _cell_tasks(room, base, cells, lanes, shoulders, None, frame, params)
     out = [_RoomOption(plain, frame, labels, len(cells))]
     if strips:
         for high in (False, True):
             clipped, strips = return_strips(lanes, rot, step, high)
             if any(strips):
-                ts = _cell_tasks(room, base, cells, rot, clipped, shoulders, strips, frame, params)
+                ts = _cell_tasks(room, base, cells, clipped, shoulders, strips, frame, params)
                 out.append(_RoomOption(ts, frame, labels, len(cells)))
     return out
 
 
-def _cell_tasks(
-    room, base, cells, centres, lanes, shoulders, strips, frame, params
-) -> list[SweepTask]:
-    """The room's tasks: per cell its edge pass, spiral or lanes, passes along its lane-end
-    walls, shoulder lanes and strips (``centres``: the room's robot-centre mask in the lanes'
-    frame)."""
+def _cell_tasks(room, base, cells, lanes, shoulders, strips, frame, params) -> list[SweepTask]:
+    """The room's tasks: per cell its edge pass, spiral or lanes, shoulder lanes and strips."""
     tasks: list[SweepTask] = []
     for k, cell in enumerate(cells, start=1):
         cid = base + k
         if params.edge_pass:
             tasks.append(edge_task(room, cid, cell, frame, params))
-        if params.wall_sides and params.method == "bcd":
-            tasks.extend(wall_side_tasks(room, cid, cell, centres, frame, params))
         if params.method == "spiral":
             tasks.append(spiral_task(room, cid, cell, frame, params))
             continue

@@ -137,44 +137,6 @@ def edge_task(
     return SweepTask(room, cell_id, (world,), 0.0, t)
 
 
-def wall_side_tasks(
-    room: int,
-    cell_id: int,
-    cell: MonotoneCell,
-    centres: np.ndarray,
-    frame: RotatedFrame,
-    params: CoverageParams,
-) -> list[SweepTask]:
-    """Passes along the walls a cell's lanes end at: its lane-end sides (the columns ``left``
-    and ``right`` of its rows, in the lanes' frame), where the cell beyond is no robot-centre
-    cell of the room (``centres``, that frame's mask: a wall or furniture, or a door, not a
-    neighbouring cell), in stretches of at least two lane spacings.
-
-    A boustrophedon lane ends a robot radius from that wall and the turn to the next lane runs
-    along it only every other gap between lanes, so without such a pass half the scallops
-    between lane ends stay; the path follower drives it beside the wall with the wall follower.
-    """
-    res = frame.resolution
-    rows = cell.row0 + np.arange(cell.rows)
-    min_rows = max(2, math.ceil(2 * params.lane_spacing / res))
-    tasks = []
-    for cols, outward in ((cell.left, -1), (cell.right, 1)):
-        beyond = cols + outward
-        inside = (beyond >= 0) & (beyond < centres.shape[1])
-        open_beyond = np.zeros(len(rows), dtype=bool)
-        open_beyond[inside] = centres[rows[inside], beyond[inside]]
-        walled = ~open_beyond
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], walled.astype(np.int8), [0]])))
-        for a, b in zip(edges[::2], edges[1::2], strict=True):
-            if b - a < min_rows:
-                continue
-            rc = np.column_stack([rows[a:b], cols[a:b]]).astype(float)
-            world = _to_world(frame, rc, params)
-            _, _, t = path_time(world, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
-            tasks.append(SweepTask(room, cell_id, (world,), 0.0, t))
-    return tasks
-
-
 def _ring(rows: np.ndarray, left: np.ndarray, right: np.ndarray, step: int, shift: float):
     """One spiral ring: bottom edge, up the right side, top edge, down the left side to the
     row where the next ring begins."""
