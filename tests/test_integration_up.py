@@ -69,7 +69,8 @@ def _explained(run_dir: Path) -> str:
 def test_small_world_is_cleaned_without_contact(run: dict) -> None:
     report = json.loads((run["dir"] / "report.json").read_text())
     assert run["rc"] == 0 and report["status"] == "done", run["output"]
-    assert report["coverage"] >= 0.95, _explained(run["dir"])
+    # three robots with the edge pass: 97.2-97.9 % over seeds 0-4 (BENCHMARKS.md, the edge pass)
+    assert report["coverage"] >= 0.96, _explained(run["dir"])
     assert report["collisions"] == {"robot_wall": 0, "robot_robot": 0}, _explained(run["dir"])
     for r in report["robots"].values():
         assert r["wall_collisions"] == 0 and r["robot_collisions"] == 0, _explained(run["dir"])
@@ -89,7 +90,7 @@ def test_one_agent_on_slam_completes_its_path_without_collision(tmp_path: Path) 
     # pocket between the dock and the wall from the wrong side and skips its tip.
     assert robot["skipped_waypoints"] <= 1, (one["dir"] / "robot-0.log").read_text()
     assert robot["wall_collisions"] == 0 and report["collisions"]["robot_wall"] == 0
-    assert report["coverage"] >= 0.95, _explained(one["dir"])
+    assert report["coverage"] >= 0.96, _explained(one["dir"])
 
 
 def test_until_done_that_times_out_exits_3_with_a_report_and_no_orphans(tmp_path: Path) -> None:
