@@ -433,8 +433,8 @@ def wall_beside(
         lateral = side * beside
         on = near & (lateral > 0) & (lateral <= wall.distance + agent.edge_slack)
         cover = np.unique(((along[on] - lo) / EDGE_BIN_M).astype(int)).size / bins
-        if cover >= agent.edge_cover and float(np.median(lateral[on])) < best_gap:
-            best, best_gap = side, float(np.median(lateral[on]))
+        if cover >= agent.edge_cover and (gap := float(np.median(lateral[on]))) < best_gap:
+            best, best_gap = side, gap
     return best
 
 
