@@ -257,7 +257,8 @@ def wall_follow_step(
     if max_speed is not None:
         v = min(v, max_speed)
     v *= max(0.0, math.cos(min(abs(error), math.pi / 2)))
-    v *= min(1.0, max(CLOSE_SPEED, (nearest - robot_radius) / (params.distance - robot_radius)))
+    room = max(params.distance - robot_radius, 1e-3)
+    v *= min(1.0, max(CLOSE_SPEED, (nearest - robot_radius) / room))
     v0, w0 = velocity
     v = min(max(v, v0 - acc_v * dt), v0 + acc_v * dt)
     v = max(v, 0.0)

@@ -39,7 +39,8 @@ def _distance_to(segments: np.ndarray, xy: np.ndarray) -> float:
 def _drive(
     segments: np.ndarray, pose: tuple[float, float, float], side: int, seconds: float, seed: int
 ) -> np.ndarray:
-    """Rows (t, x, y, θ, distance to the nearest wall) of the robot under the wall follower."""
+    """Rows (t, x, y, θ, distance to the nearest wall, whether the follower saw the wall end
+    ahead) of the robot under the wall follower."""
     rng = np.random.default_rng(seed)
     increment = 2 * math.pi / BEAMS
     angles = -math.pi + increment * np.arange(BEAMS)
@@ -56,7 +57,7 @@ def _drive(
         velocity = (command.v, command.w)
         xs, ys, ths = rollout(pose, np.array([command.v]), np.array([command.w]), np.array([DT]))
         pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))
-        rows.append((k * DT, *pose, _distance_to(segments, np.array(pose[:2]))))
+        rows.append((k * DT, *pose, _distance_to(segments, np.array(pose[:2])), command.ends))
     return np.array(rows)
 
 
@@ -69,6 +70,7 @@ def test_keeps_its_distance_along_a_straight_wall(side: int, seed: int) -> None:
     settled = rows[rows[:, 0] >= SETTLE_S, 4]
     assert np.abs(settled - PARAMS.distance).max() <= TOLERANCE
     assert rows[-1, 1] > 1.5  # it drove on, it did not stop beside the wall
+    assert not rows[:, 5].any()  # the wall never ended
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -82,6 +84,7 @@ def test_rounds_an_outside_corner_at_its_distance(side: int, seed: int) -> None:
     settled = rows[rows[:, 0] >= SETTLE_S, 4]
     assert np.abs(settled - PARAMS.distance).max() <= TOLERANCE
     assert -side * rows[-1, 2] < -1.0  # turned the corner and followed the box's side down
+    assert rows[:, 5].any()  # it saw the wall end, and circled the corner
     assert rows[:, 1].max() < 1.5 + PARAMS.distance + TOLERANCE
 
 
