@@ -109,13 +109,10 @@ class WallFollowParams:
 
 @dataclass(frozen=True)
 class WallFollowCommand:
-    """The command, and what it was computed from: ``range_m`` and ``bearing`` of the nearest
-    wall point, and whether the wall ``ends`` ahead (an outside corner being rounded)."""
+    """The command, and whether the wall ``ends`` ahead (an outside corner being rounded)."""
 
     v: float
     w: float
-    range_m: float
-    bearing: float
     ends: bool
 
 
@@ -269,4 +266,4 @@ def wall_follow_step(
         w = -side * w_max  # an inside corner: the wall ahead is nearer than the set distance
     w = min(max(w, w0 - acc_w * dt), w0 + acc_w * dt)
     w = min(max(w, -w_max), w_max)
-    return WallFollowCommand(v, w, r, bearing, ends)
+    return WallFollowCommand(v, w, ends)
