@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from fleet.bus import Bus
-from fleet.carmen_recorder import CarmenRecorder
 from fleet.params import FleetConfig
 from fleet.protocol import (
     Clock,
@@ -33,6 +32,7 @@ from fleet.protocol import (
 )
 from fleet.world import World
 from sim_server.core import SimCore
+from sim_server.recorder import CarmenRecorder
 
 log = logging.getLogger("sim")
 

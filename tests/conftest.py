@@ -7,7 +7,7 @@ from collections.abc import Iterator
 import pytest
 
 from fleet.bus import open_router
-from fleet.launcher import free_port
+from fleet.supervisor.launcher import free_port
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""A real `fleet up` for integration tests: :class:`fleet.fleet_runner.RunningFleet` with
+"""A real `fleet up` for integration tests: :class:`fleet.supervisor.runner.RunningFleet` with
 test-failing waits and verbs, and everything a failed run needs to be understood from CI's
 output alone."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
-from fleet.fleet_runner import RunningFleet
+from fleet.supervisor.runner import RunningFleet
 
 WORLDS = Path(__file__).resolve().parents[1] / "configs" / "worlds"
 

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.slam.carmen import CarmenLog, LaserRecord
 from agents.slam.slam import Pose, Slam
+from fleet.carmen import CarmenLog, LaserRecord
 from fleet.slam_params import SlamParams
 
 

@@ -71,7 +71,7 @@ def _register_all() -> None:
     from fleet.cli import certs
 
     certs.register(app, plan_app, bench_app, slam_app)
-    from fleet.help_text import reflow_commands
+    from fleet.cli.help_text import reflow_commands
 
     reflow_commands(app)
 

@@ -50,7 +50,7 @@ def certs(
     `fleet agent --id robot-0 --connect tls/ROUTER:7447 --zenoh-config DIR/robot-0.json5`.
     configs/zenoh/router-secure.json5 is the same router config for three robots with DIR=lab.
     """
-    from fleet.lab_security import LabError, make_lab
+    from fleet.security import LabError, make_lab
 
     try:
         lab = make_lab(lab_dir, robots, host or (), days)

@@ -15,8 +15,8 @@ from typing import Annotated, Any
 import typer
 
 from fleet.cli.common import ConfigOpt, ZenohConfigOpt, _bus, _fail, _load
-from fleet.help_text import reflow
-from fleet.ops import STATE_FILE
+from fleet.cli.help_text import reflow
+from fleet.supervisor.ops import STATE_FILE
 
 REDRAW_HZ = 5.0
 PLAIN_LINE_S = 5.0
@@ -78,11 +78,11 @@ def dashboard(
     """
     from rich.console import Console
 
-    from fleet.dashboard import BusFeed, FleetWatcher
-    from fleet.dashboard_term import TerminalView, ViewControl
-    from fleet.ops import ProcessActions
+    from fleet.dashboard.model import BusFeed, FleetWatcher
+    from fleet.dashboard.term import TerminalView, ViewControl
     from fleet.protocol import DEFAULT_FLEET
     from fleet.rundir import RunDirError, RunTable, newest_run_dir, read_table
+    from fleet.supervisor.ops import ProcessActions
 
     table: RunTable | None = None
     if not connect or run_dir is not None:
@@ -173,9 +173,9 @@ def _loop(
 def _past_events(watcher: Any, state: Path) -> None:
     """The job's events so far, from the coordinator's state file, so a view that attaches
     late starts with them (read before subscribing: a few may be missed, none shown twice)."""
-    from fleet.dashboard import EVENTS_KEPT
-    from fleet.fleet_runner import read_events
+    from fleet.dashboard.model import EVENTS_KEPT
     from fleet.protocol import FleetEvent
+    from fleet.supervisor.runner import read_events
 
     for e in read_events(state)[-EVENTS_KEPT:]:
         watcher.on_event(
@@ -213,9 +213,9 @@ def bench_dashboard(
     import io
 
     from fleet.bus import Bus
-    from fleet.dashboard import BusFeed, FleetWatcher
-    from fleet.dashboard_view import AnsiWriter, screen
-    from fleet.launcher import free_port, wait_for_port
+    from fleet.dashboard.model import BusFeed, FleetWatcher
+    from fleet.dashboard.view import AnsiWriter, screen
+    from fleet.supervisor.launcher import free_port, wait_for_port
 
     if not 1 <= robots <= 64 or speed <= 0 or seconds <= 0 or width < 40 or height < 15:
         _fail("--robots must be 1-64, --speed and --seconds > 0, --width >= 40, --height >= 15")
@@ -229,7 +229,7 @@ def bench_dashboard(
         if not wait_for_port("127.0.0.1", port, 15.0):
             _fail("the Zenoh router did not start")
         code = (
-            "import sys; from fleet.dashboard_bench import run; "
+            "import sys; from fleet.bench.dashboard import run; "
             "run(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4])"
         )
         procs.append(

@@ -191,9 +191,9 @@ def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[
 
     import numpy as np
 
+    from fleet.bench.fleet import Scenario, run_bench
     from fleet.cli.common import _fail, parse_seeds
     from fleet.config import resolve_world
-    from fleet.fleet_bench import Scenario, run_bench
     from fleet.params import DECONFLICTION_MODES
 
     chosen = [m.strip() for m in modes.split(",") if m.strip()]

@@ -13,7 +13,7 @@ from typing import Annotated
 import typer
 
 from fleet.cli.common import DeconflictionOpt, _check_deconfliction, _fail, parse_seeds
-from fleet.help_text import reflow
+from fleet.cli.help_text import reflow
 
 WorldsOpt = Annotated[
     str,
@@ -61,8 +61,8 @@ def bench_fleet(
     `fleet bench fleet --worlds small,home --seeds 0,1 --json`;
     `fleet bench fleet --worlds ../shared/data/maps/cob_ipa_apartment.yaml --seeds 0-2`.
     """
+    from fleet.bench.fleet import Scenario, run_bench, table_lines
     from fleet.config import ConfigError, resolve_world
-    from fleet.fleet_bench import Scenario, run_bench, table_lines
 
     if robots < 1:
         _fail("--robots must be >= 1")
@@ -128,8 +128,8 @@ def bench_follow(
     Examples: `fleet bench follow`; `fleet bench follow --worlds home --seeds 0-9 --json`;
     `fleet bench follow --worlds ../shared/data/maps/cob_ipa_apartment.yaml --pose truth`.
     """
+    from fleet.bench.follow import follow_tour, run_line, summarize
     from fleet.config import ConfigError, resolve_world
-    from fleet.follow_bench import follow_tour, run_line, summarize
     from fleet.params import load_fleet_config
     from fleet.world import load_world
 

@@ -47,7 +47,7 @@ def bench_lidar(
     from rich.console import Console
     from rich.table import Table
 
-    from sim_server.lidar_bench import furnished_scene, map_scene, rays_per_second
+    from fleet.bench.lidar import furnished_scene, map_scene, rays_per_second
 
     runs = [
         ("1x150", furnished_scene(150, 1), False),

@@ -19,15 +19,7 @@ from typing import Annotated, Any
 import typer
 
 from fleet.cli.common import _fail
-from fleet.help_text import reflow
-from fleet.ops import (
-    STATE_FILE,
-    OpsError,
-    Sig,
-    _up_state,
-    ask_respawn,
-    send_signal,
-)
+from fleet.cli.help_text import reflow
 from fleet.rundir import (
     RunDirError,
     RunTable,
@@ -35,6 +27,14 @@ from fleet.rundir import (
     newest_run_dir,
     process_state,
     read_table,
+)
+from fleet.supervisor.ops import (
+    STATE_FILE,
+    OpsError,
+    Sig,
+    _up_state,
+    ask_respawn,
+    send_signal,
 )
 
 REPORT_FILE = "report.json"

@@ -97,7 +97,7 @@ def sim(
     cfg, w = _load(config, world)
     recorder = None
     if record_carmen is not None:
-        from fleet.carmen_recorder import CarmenRecorder
+        from sim_server.recorder import CarmenRecorder
 
         try:
             recorder = CarmenRecorder(record_carmen, record_robot, comment=f"world {w.name}")

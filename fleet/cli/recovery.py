@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from fleet.cli.common import WorldOpt, _fail
-from fleet.help_text import reflow
+from fleet.cli.help_text import reflow
 
 
 def bench_recovery(
@@ -53,8 +53,8 @@ def bench_recovery(
     Examples: `fleet bench recovery --world small --kills 10`;
     `fleet bench recovery --world home --kills 0 --json` (scenarios only).
     """
+    from fleet.bench.recovery import run_bench, table_lines
     from fleet.config import ConfigError, resolve_world
-    from fleet.recovery_bench import run_bench, table_lines
 
     if robots < 2:
         _fail("--robots must be >= 2: a lost robot's work needs another robot to go to")

@@ -33,8 +33,8 @@ def report(
     Example: `fleet report runs/20250101-120000`. A missing or damaged file is named in the
     error (exit status 2).
     """
-    from fleet.report import ReportError, load_run
-    from fleet.report_figures import render_report
+    from fleet.report.figures import render_report
+    from fleet.report.summary import ReportError, load_run
 
     try:
         data = load_run(run_dir)

@@ -1,5 +1,5 @@
 """``fleet slam replay``: run the agents' SLAM offline on a CARMEN log and write its results;
-``fleet bench slam``: SLAM accuracy and speed on a simulated route (driver in fleet.slam_bench)."""
+``fleet bench slam``: SLAM accuracy and speed on a simulated route (driver in fleet.bench.slam)."""
 
 from __future__ import annotations
 
@@ -55,12 +55,12 @@ def replay(
 
     Example: fleet slam replay intel.gfs.log.gz --out /tmp/intel
     """
-    from agents.slam.carmen import CarmenParseError, read_log
     from agents.slam.replay import replay_log
-    from fleet.carmen_recorder import truth_path_for
+    from fleet.bench.slam_outputs import score_against_truth, write_replay_outputs
+    from fleet.carmen import CarmenParseError, read_log
     from fleet.config import ConfigError
     from fleet.params import load_fleet_config
-    from fleet.slam_outputs import score_against_truth, write_replay_outputs
+    from sim_server.recorder import truth_path_for
 
     try:
         params = load_fleet_config(config).slam
@@ -186,9 +186,9 @@ def bench_slam(
         _bench_log(log, seeds, out or Path("slam-bench"), config, as_json)
         return
 
+    from fleet.bench.slam import DEFAULT_ODOM_NOISE_SCALE, run_slam_bench, shift_world
     from fleet.config import ConfigError, resolve_world
     from fleet.params import load_fleet_config
-    from fleet.slam_bench import DEFAULT_ODOM_NOISE_SCALE, run_slam_bench, shift_world
     from fleet.world import load_world
 
     scale = DEFAULT_ODOM_NOISE_SCALE if odom_noise_scale is None else odom_noise_scale
@@ -234,15 +234,15 @@ def bench_slam(
 
 
 def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: bool) -> None:
-    """``fleet bench slam --log``: run :func:`fleet.slam_log_bench.run_log_bench` with a
+    """``fleet bench slam --log``: run :func:`fleet.bench.slam_log.run_log_bench` with a
     progress bar per seed on stderr, then print JSON or a table."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from agents.slam.carmen import CarmenParseError
+    from fleet.bench.slam_log import LOG_TARGETS, run_log_bench
+    from fleet.carmen import CarmenParseError
     from fleet.config import ConfigError
     from fleet.params import load_fleet_config
-    from fleet.slam_log_bench import LOG_TARGETS, run_log_bench
 
     seed_list = parse_seeds(seeds)
     try:

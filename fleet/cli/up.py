@@ -42,9 +42,9 @@ REDRAW_S = 0.2
 FATAL_PROCESSES = ("router", "sim")
 
 if TYPE_CHECKING:
-    from fleet.launcher import Launcher
     from fleet.protocol import OpsReply, OpsRequest
     from fleet.rundir import ProcessRecord
+    from fleet.supervisor.launcher import Launcher
 
 
 def up(
@@ -85,10 +85,10 @@ def up(
     """
     from fleet.bus import Bus
     from fleet.config import resolve_world
-    from fleet.dashboard import BusFeed, FleetWatcher
-    from fleet.launcher import Launcher, free_port, wait_for_port
+    from fleet.dashboard.model import BusFeed, FleetWatcher
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
-    from fleet.report import (
+    from fleet.report.figures import render_report
+    from fleet.report.summary import (
         ReportError,
         RunRecorder,
         build_report,
@@ -98,8 +98,8 @@ def up(
         time_use_of,
         write_json,
     )
-    from fleet.report_figures import render_report
     from fleet.rundir import RunTable, cmdline, write_table
+    from fleet.supervisor.launcher import Launcher, free_port, wait_for_port
 
     if not 1 <= robots <= MAX_ROBOTS:
         _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
@@ -310,8 +310,8 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
     closes the view; then, as without a terminal, plain lines."""
     from rich.console import Console
 
-    from fleet.dashboard_term import TerminalView, ViewControl
-    from fleet.ops import ProcessActions
+    from fleet.dashboard.term import TerminalView, ViewControl
+    from fleet.supervisor.ops import ProcessActions
 
     console = Console(stderr=True)
     control = ViewControl(watcher, ProcessActions(launcher.run_dir))

@@ -1,0 +1,270 @@
+"""`fleet bench recovery`: how fast the fleet notices a lost robot and auctions its work again,
+and what failures cost the job — measured on real fleets (`fleet up`, real signals).
+
+Latency trials: in runs of ``fleet up``, a robot at a time is SIGKILLed (then respawned) or
+SIGSTOPped (then continued), alternately. Detection is the Unix time of the coordinator's
+``lost`` event minus the time the signal was sent; reassignment, the time from ``lost`` to the
+last ``reassigned`` event of the work it had (none when it held none).
+
+Scenarios, each a whole run on the same world and seed: no failure; robot-1 SIGKILLed at a
+third of the no-failure makespan (sim time); the same, then respawned; the coordinator
+SIGKILLed at a third and restarted.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import json
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fleet.bus import Bus
+from fleet.protocol import Clock
+from fleet.supervisor.runner import RunningFleet, read_events
+
+SETTLE_S = 1.0
+DETECT_TIMEOUT_S = 10.0
+REJOIN_TIMEOUT_S = 60.0
+
+
+class SimClock:
+    """The run's sim time, from its clock messages."""
+
+    def __init__(self, fleet: RunningFleet) -> None:
+        fleet.wait(lambda: (fleet.dir / "processes.json").exists(), 30.0)
+        table = fleet.table()
+        self.t = 0.0
+        self._lock = threading.Lock()
+        self.bus = Bus("dashboard", f"bench-{id(self)}", [table["endpoint"]], table["fleet"])
+        self.bus.subscribe(self.bus.keys.clock(), Clock, self._on_clock)
+
+    def _on_clock(self, _key: str, msg: Clock) -> None:
+        with self._lock:
+            self.t = max(self.t, msg.stamp)
+
+    def close(self) -> None:
+        self.bus.close()
+
+
+def _after(events: list[dict], seq: int, kind: str, robot: str | None = None) -> list[dict]:
+    return [
+        e
+        for e in events
+        if e["seq"] > seq and e["kind"] == kind and (robot is None or e["robot"] == robot)
+    ]
+
+
+def _trial(fleet: RunningFleet, victim: str, hang: bool) -> dict[str, Any] | None:
+    """One loss and recovery of ``victim``; None when the run ended first."""
+    before = max((e["seq"] for e in fleet.events()), default=0)
+    sent = fleet.signal(victim, signal.SIGSTOP if hang else signal.SIGKILL)
+
+    def lost() -> list[dict]:
+        return _after(fleet.events(), before, "lost", victim)
+
+    if not fleet.wait(lost, DETECT_TIMEOUT_S):
+        return None
+    event = lost()[0]
+    reopened = {e["task"] for e in _after(fleet.events(), event["seq"], "reopened", victim)}
+
+    def reassigned() -> list[dict]:
+        return [
+            e for e in _after(fleet.events(), event["seq"], "reassigned") if e["task"] in reopened
+        ]
+
+    fleet.wait(lambda: len({e["task"] for e in reassigned()}) >= len(reopened), DETECT_TIMEOUT_S)
+    done = reassigned()
+    if hang:
+        fleet.signal(victim, signal.SIGCONT)
+    else:
+        fleet.verb("respawn", victim)
+    rejoined = fleet.wait(
+        lambda: _after(fleet.events(), event["seq"], "rejoined", victim), REJOIN_TIMEOUT_S
+    )
+    return {
+        "signal": "STOP" if hang else "KILL",
+        "robot": victim,
+        "detection_s": round(event["wall"] - sent, 4),
+        "tasks_reopened": len(reopened),
+        "reassignment_s": round(max(e["wall"] for e in done) - event["wall"], 4) if done else None,
+        "all_reassigned": len({e["task"] for e in done}) == len(reopened),
+        "rejoined": rejoined,
+    }
+
+
+def latency_trials(
+    root: Path, world: str, robots: int, seed: int, kills: int, progress: Callable[[str], None]
+) -> list[dict[str, Any]]:
+    """``kills`` SIGKILL trials and as many SIGSTOP ones, over as many runs as it takes."""
+    trials: list[dict[str, Any]] = []
+    victims = itertools.cycle([f"robot-{i}" for i in range(robots)])
+    for run in itertools.count():
+        if sum(t["signal"] == "KILL" for t in trials) >= kills:
+            break
+        fleet = RunningFleet(root / f"latency-{run}", world, robots, seed)
+        try:
+            fleet.wait(lambda fleet=fleet: fleet.events("auction"), 120.0)
+            while fleet.proc.poll() is None and len(trials) < 2 * kills:
+                time.sleep(SETTLE_S)
+                hang = len(trials) % 2 == 1
+                result = _trial(fleet, next(victims), hang)
+                if result is None:
+                    break
+                trials.append(result)
+                progress(
+                    f"trial {len(trials)}/{2 * kills}: SIG{result['signal']} {result['robot']}: "
+                    f"detected in {result['detection_s']:.3f} s"
+                )
+        finally:
+            fleet.cleanup()
+    return trials
+
+
+def _quantiles(values: list[float]) -> dict[str, float | None]:
+    if not values:
+        return {"n": 0, "median": None, "p95": None, "max": None}
+    a = np.asarray(values)
+    return {
+        "n": len(values),
+        "median": round(float(np.median(a)), 4),
+        "p95": round(float(np.percentile(a, 95)), 4),
+        "max": round(float(a.max()), 4),
+    }
+
+
+def summarize(trials: list[dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for sig in ("KILL", "STOP"):
+        mine = [t for t in trials if t["signal"] == sig]
+        out[f"detection_{sig.lower()}_s"] = _quantiles([t["detection_s"] for t in mine])
+    out["reassignment_s"] = _quantiles(
+        [t["reassignment_s"] for t in trials if t["reassignment_s"] is not None]
+    )
+    out["rejoined"] = sum(t["rejoined"] for t in trials)
+    out["trials"] = len(trials)
+    return out
+
+
+def _scenario(
+    root: Path, name: str, world: str, robots: int, seed: int, at_s: float | None
+) -> dict[str, Any]:
+    """One whole run; with ``at_s`` the scenario's failure is made at that sim time."""
+    fleet = RunningFleet(root / name, world, robots, seed)
+    clock = None
+    failure: dict[str, Any] = {}
+    try:
+        if at_s is not None:
+            clock = SimClock(fleet)
+            fleet.wait(lambda: clock.t >= at_s, 900.0, poll=0.02)
+            victim = "coordinator" if name == "coordinator-restart" else "robot-1"
+            before = max((e["seq"] for e in fleet.events()), default=0)
+            failure = {"victim": victim, "sim_s": round(clock.t, 2)}
+            fleet.signal(victim, signal.SIGKILL)
+            if name == "kill-respawn":
+                fleet.wait(lambda: _after(fleet.events(), before, "lost", victim), 10.0)
+                fleet.verb("respawn", victim)
+            elif name == "coordinator-restart":
+                time.sleep(2.0)
+                fleet.verb("respawn", victim)
+        report = fleet.finish() or {}
+    finally:
+        fleet.cleanup()
+        if clock is not None:
+            clock.close()
+    events = fleet.events()
+    result = {
+        "scenario": name,
+        "status": report.get("status"),
+        "coverage": report.get("coverage"),
+        "repetition": report.get("repetition"),
+        "makespan_s": report.get("makespan_s"),
+        "wall_s": report.get("wall_s"),
+        "collisions": report.get("collisions"),
+        "overlaps": report.get("overlaps"),
+        **failure,
+    }
+    if name == "kill-respawn":
+        rejoin = next((e for e in events if e["kind"] == "rejoined"), None)
+        result["respawned_robot_tasks_done"] = (
+            len(_after(events, rejoin["seq"], "done", "robot-1")) if rejoin else 0
+        )
+    return result
+
+
+def auction_ms_per_lot(root: Path) -> dict[str, float | None]:
+    """From every run's ``auction`` events: wall milliseconds per lot sold."""
+    per_lot = []
+    for state in root.glob("*/coordinator.sqlite"):
+        for e in read_events(state):
+            if e["kind"] == "auction":
+                lots, _, rest = e["detail"].partition(" lots in ")
+                with contextlib.suppress(ValueError):
+                    per_lot.append(float(rest.split()[0]) / int(lots))
+    return _quantiles(per_lot)
+
+
+def run_bench(
+    root: Path,
+    world: str,
+    robots: int,
+    seed: int,
+    kills: int,
+    scenarios: bool,
+    progress: Callable[[str], None],
+) -> dict[str, Any]:
+    root.mkdir(parents=True, exist_ok=True)
+    result: dict[str, Any] = {"world": world, "robots": robots, "seed": seed, "root": str(root)}
+    if kills > 0:
+        trials = latency_trials(root, world, robots, seed, kills, progress)
+        result["latency"] = summarize(trials)
+        result["trials"] = trials
+    if scenarios:
+        progress("scenario: no failure")
+        base = _scenario(root, "no-failure", world, robots, seed, None)
+        runs = [base]
+        makespan = base["makespan_s"]
+        if makespan:
+            for name in ("kill", "kill-respawn", "coordinator-restart"):
+                progress(f"scenario: {name} at {makespan / 3:.0f} s sim")
+                runs.append(_scenario(root, name, world, robots, seed, makespan / 3))
+            for r in runs[1:]:
+                if r["makespan_s"]:
+                    r["makespan_ratio"] = round(r["makespan_s"] / makespan, 3)
+        result["scenarios"] = runs
+    result["auction_ms_per_lot"] = auction_ms_per_lot(root)
+    (root / "bench.json").write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def table_lines(result: dict[str, Any]) -> list[str]:
+    lines = []
+    lat = result.get("latency")
+    if lat:
+        for key in ("detection_kill_s", "detection_stop_s", "reassignment_s"):
+            q = lat[key]
+            lines.append(
+                f"{key:<18} n={q['n']:<3} median {q['median']} s  p95 {q['p95']} s  "
+                f"max {q['max']} s"
+            )
+        lines.append(f"rejoined after {lat['rejoined']} of {lat['trials']} trials")
+    for r in result.get("scenarios", []):
+        lines.append(
+            f"{r['scenario']:<20} {r['status']}: coverage {r['coverage']}, makespan "
+            f"{r['makespan_s']} s (×{r.get('makespan_ratio', 1.0)}), collisions "
+            f"{r['collisions']}, overlaps {r['overlaps']}"
+            + (
+                f", respawned robot finished {r['respawned_robot_tasks_done']} tasks"
+                if "respawned_robot_tasks_done" in r
+                else ""
+            )
+        )
+    q = result["auction_ms_per_lot"]
+    lines.append(f"auction: median {q['median']} ms per lot sold, p95 {q['p95']} (n={q['n']})")
+    return lines

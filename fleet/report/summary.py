@@ -1,0 +1,421 @@
+"""The end-of-run report: ``report.json`` (numbers) and the data its pictures are drawn from.
+
+The job part (``events``, ``tasks``) comes from the coordinator's state file: every event with
+its sim and wall time, and per task its owners over time, rebuilt from the events.
+
+``fleet up`` also writes, beside ``report.json``, what the pictures (``fleet.report.figures``)
+need, so ``fleet report RUN_DIR`` can draw them again from the run dir alone:
+
+* ``coverage.npz``: the simulator's final cleaning grid (visits and cleanable cells, row 0 at
+  ``origin_y``), its resolution and origin in metres, and the brush width;
+* ``tracks.csv``: ``sim_s,robot,x,y``, each robot's true position every ``TRACK_STEP_M``;
+* ``coverage.csv``: ``sim_s,coverage,repetition``, the fleet's cleaning over time;
+* ``collisions.csv``: ``sim_s,kind,robot,other,x,y``, every contact.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import sqlite3
+import threading
+import zipfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fleet.protocol import (
+    TIME_KINDS,
+    Collision,
+    CoverageImage,
+    CoverageSummary,
+    RobotStatus,
+    TruthPose,
+)
+from fleet.rundir import read_json_object
+from fleet.supervisor.runner import read_events
+from planners.coverage.metrics import missed_by_clearance
+from planners.grid import GridMap, clearance
+
+if TYPE_CHECKING:
+    from fleet.bus import Bus
+
+REPORT_FILE = "report.json"
+GRID_FILE = "coverage.npz"
+TRACKS_FILE = "tracks.csv"
+COVERAGE_FILE = "coverage.csv"
+COLLISIONS_FILE = "collisions.csv"
+# a robot's track keeps a true position when it is this far from the last one kept
+TRACK_STEP_M = 0.05
+TRACK_COLUMNS = ("sim_s", "robot", "x", "y")
+COVERAGE_COLUMNS = ("sim_s", "coverage", "repetition")
+COLLISION_COLUMNS = ("sim_s", "kind", "robot", "other", "x", "y")
+# report.json's "missed" splits the floor never cleaned by its clearance from walls and
+# furniture: under 0.1 m only a pass hugging them sweeps, beyond 0.3 m it is open floor
+MISSED_BANDS_M = (0.1, 0.3)
+MISSED_BANDS = ("under_0.1m", "0.1_to_0.3m", "over_0.3m")
+# report.json fields the pictures read, and their JSON types
+REPORT_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "status": str,
+    "coverage": (int, float),
+    "repetition": (int, float),
+    "sim_time_s": (int, float),
+    "wall_s": (int, float),
+    "cleanable_m2": (int, float),
+    "collisions": dict,
+    "robots": dict,
+}
+
+
+def time_use_of(status: RobotStatus) -> dict[str, float] | None:
+    """An agent's reported seconds per kind of control step, by name (None from an agent that
+    does not report them)."""
+    if len(status.time_s) != len(TIME_KINDS):
+        return None
+    return {k: round(float(t), 1) for k, t in zip(TIME_KINDS, status.time_s, strict=True)}
+
+
+def missed_breakdown(image: CoverageImage, grid: GridMap) -> dict[str, float] | None:
+    """report.json's ``missed``: the cleanable floor never cleaned, as fractions of the
+    cleanable area, by clearance from walls and furniture (``MISSED_BANDS``; they sum to 1 −
+    coverage). ``grid`` is the world's occupancy at the simulator's cleaning resolution; None
+    when it is not the image's grid."""
+    shape = (image.rows, image.cols)
+    same = (
+        grid.shape == shape
+        and abs(grid.resolution - image.resolution) < 1e-9
+        and np.allclose(grid.origin, (image.origin_x, image.origin_y))
+    )
+    if not same:
+        return None
+    parts = missed_by_clearance(
+        image.visits.reshape(shape),
+        image.cleanable.reshape(shape).astype(bool),
+        clearance(grid),
+        MISSED_BANDS_M,
+    )
+    return {name: round(part, 5) for name, part in zip(MISSED_BANDS, parts, strict=True)}
+
+
+def build_report(
+    summary: CoverageSummary,
+    makespan_s: float | None,
+    wall_s: float,
+    status: str,
+    extra: dict[str, Any],
+    skipped: Mapping[str, int] | None = None,
+    time_use: Mapping[str, Mapping[str, float]] | None = None,
+) -> dict[str, Any]:
+    """The report as a JSON-ready dict. ``makespan_s`` is None when the job did not finish;
+    ``skipped`` holds the waypoints each agent last reported giving up on, and ``time_use`` the
+    sim seconds it last reported per kind of control step (``fleet.protocol.TIME_KINDS``);
+    None where unknown."""
+    skipped = skipped or {}
+    time_use = time_use or {}
+    robots = {
+        rid: {
+            "path_length_m": round(float(summary.path_length_m[i]), 3),
+            "turns": int(summary.turns[i]),
+            "wall_collisions": int(summary.wall_collisions[i]),
+            "robot_collisions": int(summary.robot_collisions[i]),
+            "skipped_waypoints": skipped.get(rid),
+            "time_s": time_use.get(rid),
+        }
+        for i, rid in enumerate(summary.robots)
+    }
+    return {
+        "status": status,
+        "coverage": round(summary.coverage, 5),
+        "repetition": round(summary.repetition, 5),
+        "makespan_s": round(makespan_s, 2) if makespan_s is not None else None,
+        "sim_time_s": round(summary.stamp, 2),
+        "wall_s": round(wall_s, 2),
+        "cleanable_m2": round(summary.cleanable_m2, 3),
+        "collisions": {
+            "robot_wall": int(summary.wall_collisions.sum()),
+            # each robot–robot contact is counted on both robots
+            "robot_robot": int(summary.robot_collisions.sum()) // 2,
+        },
+        "robots": robots,
+        **extra,
+    }
+
+
+def job_report(state: Path) -> dict[str, Any]:
+    """``events`` and ``tasks`` from the coordinator's SQLite ``state`` (read-only). A task's
+    ``owners`` are [robot, from, to] in sim seconds (``to`` None while it still held it at the
+    end): a hold begins with an award and ends when the task is done, withdrawn, or its owner
+    is lost. ``overlaps`` lists tasks held by two robots at once (it should stay empty);
+    ``rejected_bids`` counts the bids the auctions ignored, by why (late, duplicate,
+    malformed, not in the market); ``plan_estimate_s`` is the makespan the first allocation
+    priced (the longest of the winners' committed times), None if it never completed;
+    ``given_up_waypoints`` the waypoints each robot gave up over all its plans, as the
+    coordinator counted them (robots that gave up none are left out)."""
+    if not state.exists():
+        return {
+            "events": None,
+            "tasks": None,
+            "overlaps": None,
+            "rejected_bids": None,
+            "plan_estimate_s": None,
+            "given_up_waypoints": None,
+        }
+    db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
+    try:
+        meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
+        tasks = {
+            tid: {
+                "id": tid,
+                "parent": parent,
+                "area_m2": round(area, 3),
+                "time_s": round(t_s, 1),
+                "state": st,
+                "owners": [],
+            }
+            for tid, parent, area, t_s, st in db.execute(
+                "SELECT id, parent, area_m2, time_s, state FROM tasks ORDER BY rowid"
+            )
+        }
+    finally:
+        db.close()
+    events = [{k: v for k, v in e.items() if k != "seq"} for e in read_events(state)]
+    held: dict[str, list[Any]] = {}
+    for e in events:
+        kind, robot, task, sim = e["kind"], e["robot"], e["task"], round(e["sim"], 2)
+        if kind in ("awarded", "reassigned") and task in tasks:
+            hold = [robot, sim, None]
+            tasks[task]["owners"].append(hold)
+            held[task] = hold
+        elif kind in ("done", "withdrawn") and task in held:
+            held.pop(task)[2] = sim
+        elif kind == "lost":
+            for tid in [t for t, h in held.items() if h[0] == robot]:
+                held.pop(tid)[2] = sim
+    overlaps = [
+        tid
+        for tid, t in tasks.items()
+        if any(
+            a[2] is None or a[2] > b[1] for a, b in zip(t["owners"], t["owners"][1:], strict=False)
+        )
+    ]
+    return {
+        "events": events,
+        "tasks": list(tasks.values()),
+        "overlaps": overlaps,
+        "rejected_bids": json.loads(meta.get("rejected_bids", "{}")),
+        "plan_estimate_s": json.loads(meta.get("estimate_s", "null")),
+        "given_up_waypoints": json.loads(meta.get("given_up_waypoints", "{}")).get("by_robot", {}),
+    }
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write atomically: a crash mid-write never leaves a truncated report."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+class ReportError(Exception):
+    """A run dir the report cannot be drawn from; the message names the file and field."""
+
+
+class RunRecorder:
+    """Records, during a run, what the report pictures need and the live view does not keep:
+    true tracks with their sim times, the fleet's coverage over time, and the contacts."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.lock = threading.Lock()
+        self.tracks: dict[str, list[tuple[float, float, float]]] = {}
+        self.coverage: list[tuple[float, float, float]] = []
+        self.collisions: list[Collision] = []
+        self._robot_of = bus.keys.robot_of
+        bus.subscribe(bus.keys.all_robots("truth"), TruthPose, self._on_truth)
+        bus.subscribe(bus.keys.coverage(), CoverageSummary, self._on_coverage)
+        bus.subscribe(bus.keys.collisions(), Collision, self._on_collision)
+
+    def _on_truth(self, key: str, m: TruthPose) -> None:
+        with self.lock:
+            track = self.tracks.setdefault(self._robot_of(key), [])
+            if not track or abs(track[-1][1] - m.x) + abs(track[-1][2] - m.y) >= TRACK_STEP_M:
+                track.append((m.stamp, m.x, m.y))
+
+    def _on_coverage(self, _key: str, m: CoverageSummary) -> None:
+        with self.lock:
+            if not self.coverage or m.stamp > self.coverage[-1][0]:
+                self.coverage.append((m.stamp, m.coverage, m.repetition))
+
+    def _on_collision(self, _key: str, m: Collision) -> None:
+        with self.lock:
+            self.collisions.append(m)
+
+    def write(self, run_dir: Path, image: CoverageImage, cleaning_width_m: float) -> None:
+        """Write the grid, tracks, coverage and collision files into ``run_dir``."""
+        with self.lock:
+            tracks = [(t, rid, x, y) for rid, tr in sorted(self.tracks.items()) for t, x, y in tr]
+            coverage = list(self.coverage)
+            collisions = [(c.stamp, c.kind, c.robot, c.other, c.x, c.y) for c in self.collisions]
+        write_grid(run_dir / GRID_FILE, image, cleaning_width_m)
+        _write_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS, tracks)
+        _write_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS, coverage)
+        _write_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS, collisions)
+
+
+def write_grid(path: Path, image: CoverageImage, cleaning_width_m: float) -> None:
+    """The cleaning grid as ``coverage.npz`` (see the module docstring)."""
+    shape = (image.rows, image.cols)
+    with path.open("wb") as f:
+        np.savez_compressed(
+            f,
+            visits=image.visits.reshape(shape),
+            cleanable=image.cleanable.reshape(shape).astype(bool),
+            resolution=image.resolution,
+            origin=np.array([image.origin_x, image.origin_y]),
+            cleaning_width_m=cleaning_width_m,
+        )
+
+
+def _write_csv(path: Path, header: tuple[str, ...], rows: list[tuple[Any, ...]]) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with tmp.open("w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(header)
+        out.writerows([round(v, 4) if isinstance(v, float) else v for v in row] for row in rows)
+    os.replace(tmp, path)
+
+
+@dataclass
+class RunData:
+    """Everything the report pictures are drawn from, read back from a run dir."""
+
+    run_dir: Path
+    report: dict[str, Any]
+    visits: np.ndarray
+    cleanable: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    cleaning_width_m: float
+    tracks: dict[str, np.ndarray] = field(default_factory=dict)
+    coverage: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    collisions: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def robots(self) -> list[str]:
+        """Every robot of the run: those in report.json and those with a track."""
+        return sorted(set(self.report["robots"]) | set(self.tracks))
+
+    @property
+    def events(self) -> list[dict[str, Any]]:
+        return self.report.get("events") or []
+
+
+def load_run(run_dir: Path) -> RunData:
+    """Read a run dir written by ``fleet up``; raises ReportError naming the file and field."""
+    if not run_dir.is_dir():
+        raise ReportError(f"no such run dir: {run_dir}")
+    report = _read_report(run_dir / REPORT_FILE)
+    grid = _read_grid(run_dir / GRID_FILE)
+    tracks: dict[str, list[tuple[float, float, float]]] = {}
+    for line, row in _read_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS):
+        t, x, y = (_number(row, k, run_dir / TRACKS_FILE, line) for k in ("sim_s", "x", "y"))
+        tracks.setdefault(row["robot"], []).append((t, x, y))
+    coverage = [
+        tuple(_number(row, k, run_dir / COVERAGE_FILE, line) for k in COVERAGE_COLUMNS)
+        for line, row in _read_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS)
+    ]
+    collisions = []
+    for line, row in _read_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS):
+        path = run_dir / COLLISIONS_FILE
+        collisions.append(
+            {
+                **row,
+                **{k: _number(row, k, path, line) for k in ("sim_s", "x", "y")},
+            }
+        )
+    return RunData(
+        run_dir=run_dir,
+        report=report,
+        tracks={rid: np.array(tr, dtype=float) for rid, tr in tracks.items()},
+        coverage=np.array(coverage, dtype=float).reshape(-1, 3),
+        collisions=collisions,
+        **grid,
+    )
+
+
+def _read_report(path: Path) -> dict[str, Any]:
+    if not path.exists():
+        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends")
+    raw = read_json_object(path, ReportError)
+    for key, kind in REPORT_FIELDS.items():
+        if key not in raw:
+            raise ReportError(f"{path}: missing field {key}")
+        if not isinstance(raw[key], kind) or isinstance(raw[key], bool):
+            raise ReportError(f"{path}: field {key} has the wrong type: {raw[key]!r}")
+    events = raw.get("events")
+    if events is not None and not (
+        isinstance(events, list)
+        and all(isinstance(e, dict) and {"sim", "kind", "robot"} <= e.keys() for e in events)
+    ):
+        raise ReportError(f"{path}: field events must be a list of {{sim, kind, robot, ...}}")
+    return raw
+
+
+def _read_grid(path: Path) -> dict[str, Any]:
+    try:
+        with np.load(path) as npz:
+            visits = np.asarray(npz["visits"])
+            cleanable = np.asarray(npz["cleanable"]).astype(bool)
+            resolution = float(npz["resolution"])
+            origin = np.asarray(npz["origin"], dtype=float)
+            width = float(npz["cleaning_width_m"])
+    except FileNotFoundError:
+        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends") from None
+    except KeyError as e:
+        raise ReportError(f"{path}: missing array {e.args[0]}") from None
+    except (OSError, ValueError, TypeError, zipfile.BadZipFile) as e:
+        raise ReportError(f"{path} is not a readable cleaning grid: {e}") from None
+    if visits.ndim != 2 or visits.shape != cleanable.shape:
+        raise ReportError(
+            f"{path}: visits {visits.shape} and cleanable {cleanable.shape} must be one 2-D shape"
+        )
+    if not resolution > 0 or origin.shape != (2,) or not width > 0:
+        raise ReportError(f"{path}: resolution and cleaning_width_m must be > 0, origin x, y")
+    return {
+        "visits": visits.astype(np.int64),
+        "cleanable": cleanable,
+        "resolution": resolution,
+        "origin": (float(origin[0]), float(origin[1])),
+        "cleaning_width_m": width,
+    }
+
+
+def _read_csv(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
+    """The rows of a CSV file with ``columns`` as its header, each with its line number."""
+    try:
+        with path.open(newline="") as f:
+            rows = list(csv.reader(f))
+    except FileNotFoundError:
+        raise ReportError(f"{path} does not exist: `fleet up` writes it when a run ends") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise ReportError(f"cannot read {path}: {e}") from None
+    if not rows or tuple(rows[0]) != columns:
+        raise ReportError(f"{path}: line 1 must be the header {','.join(columns)}")
+    out = []
+    for line, row in enumerate(rows[1:], start=2):
+        if len(row) != len(columns):
+            raise ReportError(f"{path}:{line}: expected {len(columns)} fields, got {len(row)}")
+        out.append((line, dict(zip(columns, row, strict=True))))
+    return out
+
+
+def _number(row: dict[str, str], key: str, path: Path, line: int) -> float:
+    try:
+        value = float(row[key])
+    except ValueError:
+        raise ReportError(f"{path}:{line}: field {key} is not a number: {row[key]!r}") from None
+    if not np.isfinite(value):
+        raise ReportError(f"{path}:{line}: field {key} is not finite: {row[key]!r}")
+    return value

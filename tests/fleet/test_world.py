@@ -1,0 +1,353 @@
+"""World loading: the built-in worlds, a real ROS map, and errors that name file and field."""
+
+from __future__ import annotations
+
+import math
+from itertools import combinations
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from fleet.config import ConfigError, configs_dir
+from fleet.params import load_fleet_config
+from fleet.world import load_ros_map, load_world
+from planners.grid import clearance, reachable
+
+RADIUS = 0.17
+WORLDS = configs_dir() / "worlds"
+SHARED = Path(__file__).resolve().parents[3] / "shared"
+APARTMENT = SHARED / "data" / "maps" / "cob_ipa_apartment.yaml"
+
+
+def _free_area(world, resolution: float = 0.05) -> float:
+    return float(world.grid(resolution).free.sum()) * resolution**2
+
+
+def _assert_spread(world, poses: list[tuple[float, float, float]], radius: float) -> None:
+    xy = np.array([p[:2] for p in poses])
+    assert np.all(world.clearance(xy) >= radius), world.clearance(xy)
+    for a, b in combinations(xy, 2):
+        assert math.dist(a, b) >= 2 * radius
+
+
+# ---------------------------------------------------------------------------------------------
+# Built-in worlds and a real ROS map
+
+
+def test_home_world_loads() -> None:
+    world = load_world(WORLDS / "home.yaml")
+    assert world.name == "home"
+    assert 45.0 <= _free_area(world) <= 70.0
+    names = [f.name for f in world.furniture]
+    assert "dock" in names
+    assert len(names) - 1 >= 6
+    assert len(world.starts) == 3
+    assert world.dock is not None
+
+
+def test_home_start_poses_extend_the_listed_starts() -> None:
+    world = load_world(WORLDS / "home.yaml")
+    poses = world.start_poses(6, RADIUS)
+    assert len(poses) == 6
+    assert poses[:3] == list(world.starts)
+    _assert_spread(world, poses, RADIUS)
+
+
+def test_small_world_loads() -> None:
+    world = load_world(WORLDS / "small.yaml")
+    assert world.name == "small"
+    # 4 m × 3 m inside the wall centre lines, minus half walls and the 0.8 × 0.6 m table.
+    assert 10.0 <= _free_area(world) <= 12.0
+    assert [f.name for f in world.furniture] == ["table", "dock"]
+    assert len(world.starts) == 3
+    xmin, ymin, xmax, ymax = world.bounds
+    assert xmin == pytest.approx(-0.05) and xmax == pytest.approx(4.05)
+    assert ymin == pytest.approx(-0.05) and ymax == pytest.approx(3.05)
+    _assert_spread(world, world.start_poses(3, RADIUS), RADIUS)
+
+
+def test_corridor_world_joins_two_rooms_by_a_passage_one_robot_wide() -> None:
+    world = load_world(WORLDS / "corridor.yaml")
+    assert world.name == "corridor"
+    g = world.grid(0.025)
+    clear = clearance(g)
+    # the corridor's middle: room for one robot centre line, not for two robots side by side
+    row, col = g.world_to_cell(np.array([[4.0, 1.45]]))[0]
+    assert RADIUS < clear[row, col] < 2 * RADIUS
+    left, right = g.world_to_cell(np.array([[1.5, 1.5], [6.5, 1.0]]))
+    reach = reachable(clear >= RADIUS, left[None, :])
+    assert reach[right[0], right[1]]  # a robot gets from one room to the other
+    _assert_spread(world, world.start_poses(3, RADIUS), RADIUS)
+
+
+def test_grid_marks_furniture_occupied_and_room_free() -> None:
+    world = load_world(WORLDS / "small.yaml")
+    g = world.grid(0.05)
+    table, middle_of_floor, wall = (2.4, 1.6), (1.0, 2.0), (4.0, 1.5)
+    cells = g.world_to_cell(np.array([table, middle_of_floor, wall]))
+    assert g.occupied[cells[0, 0], cells[0, 1]]
+    assert not g.occupied[cells[1, 0], cells[1, 1]]
+    assert g.occupied[cells[2, 0], cells[2, 1]]
+
+
+@pytest.fixture(scope="module")
+def apartment():
+    if not APARTMENT.exists():
+        pytest.skip(f"{APARTMENT} is absent (the shared data set is not installed)")
+    return load_world(APARTMENT)
+
+
+def test_ros_map_loads_with_its_free_area(apartment) -> None:
+    assert apartment.map_grid is not None
+    assert _free_area(apartment) == pytest.approx(310.0, rel=0.10)
+    grid = load_ros_map(APARTMENT)
+    assert grid.resolution == pytest.approx(0.05)
+    assert grid.origin == pytest.approx((-19.2, -19.2))
+    assert float(grid.free.sum()) * 0.05**2 == pytest.approx(310.0, rel=0.10)
+    assert grid.unknown.any() and grid.occupied.any()
+
+
+def test_ros_map_start_poses_are_free(apartment) -> None:
+    poses = apartment.start_poses(4, RADIUS)
+    assert len(poses) == 4
+    _assert_spread(apartment, poses, RADIUS)
+    g = apartment.grid(0.05)
+    cells = g.world_to_cell(np.array([p[:2] for p in poses]))
+    assert g.free[cells[:, 0], cells[:, 1]].all()
+
+
+# ---------------------------------------------------------------------------------------------
+# Errors
+
+
+SMALL_ROOM = """\
+name: room
+walls:
+  - [0.0, 0.0, 3.0, 0.0]
+  - [3.0, 0.0, 3.0, 2.0]
+  - [3.0, 2.0, 0.0, 2.0]
+  - [0.0, 2.0, 0.0, 0.0]
+"""
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def _error(path: Path) -> str:
+    with pytest.raises(ConfigError) as info:
+        load_world(path)
+    return str(info.value)
+
+
+def _pgm(path: Path, pixels: np.ndarray) -> None:
+    Image.fromarray(pixels.astype(np.uint8), mode="L").save(path)
+
+
+def _ros_yaml(path: Path, image: str = "map.pgm", **extra: object) -> Path:
+    fields = {
+        "image": image,
+        "resolution": 0.05,
+        "origin": "[0.0, 0.0, 0.0]",
+        "negate": 0,
+        "occupied_thresh": 0.65,
+        "free_thresh": 0.196,
+        **extra,
+    }
+    return _write(path, "".join(f"{k}: {v}\n" for k, v in fields.items()))
+
+
+def _room_pixels() -> np.ndarray:
+    """A 40 × 60 cell room: black border, white floor."""
+    px = np.full((40, 60), 254)
+    px[:2, :] = px[-2:, :] = px[:, :2] = px[:, -2:] = 0
+    return px
+
+
+def test_valid_temp_world_loads(tmp_path: Path) -> None:
+    """The base of the error cases below is itself valid."""
+    world = load_world(
+        _write(tmp_path / "room.yaml", SMALL_ROOM + "starts:\n  - [1.0, 1.0, 0.0]\n")
+    )
+    assert world.starts == ((1.0, 1.0, 0.0),)
+    _pgm(tmp_path / "map.pgm", _room_pixels())
+    assert load_world(_ros_yaml(tmp_path / "map.yaml")).map_grid.free.any()
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    path = tmp_path / "nowhere.yaml"
+    msg = _error(path)
+    assert str(path) in msg and "not found" in msg
+
+
+def test_bad_yaml_names_the_line(tmp_path: Path) -> None:
+    path = _write(tmp_path / "bad.yaml", "name: x\nwalls:\n  - [0, 0, 1, 0\nstarts: []\n")
+    msg = _error(path)
+    assert str(path) in msg
+    assert "line 4" in msg or "line 3" in msg, msg
+
+
+def test_unknown_top_level_field(tmp_path: Path) -> None:
+    path = _write(tmp_path / "w.yaml", SMALL_ROOM + "colour: blue\n")
+    msg = _error(path)
+    assert str(path) in msg and "colour" in msg
+
+
+def test_unknown_furniture_field(tmp_path: Path) -> None:
+    path = _write(
+        tmp_path / "w.yaml",
+        SMALL_ROOM + "furniture:\n  - {name: t, center: [1, 1], size: [0.5, 0.5], height: 1}\n",
+    )
+    msg = _error(path)
+    assert str(path) in msg and "furniture[0]" in msg and "height" in msg
+
+
+def test_start_inside_a_wall(tmp_path: Path) -> None:
+    path = _write(
+        tmp_path / "w.yaml", SMALL_ROOM + "starts:\n  - [1.0, 1.0, 0]\n  - [3.0, 1.0, 0]\n"
+    )
+    msg = _error(path)
+    assert str(path) in msg and "starts[1]" in msg
+
+
+def test_start_inside_furniture(tmp_path: Path) -> None:
+    path = _write(
+        tmp_path / "w.yaml",
+        SMALL_ROOM
+        + "furniture:\n  - {center: [1.5, 1.0], size: [0.6, 0.6]}\nstarts:\n  - [1.6, 1.1, 0]\n",
+    )
+    msg = _error(path)
+    assert str(path) in msg and "starts[0]" in msg
+
+
+def test_start_out_of_bounds(tmp_path: Path) -> None:
+    path = _write(
+        tmp_path / "w.yaml", SMALL_ROOM + "starts:\n  - [1.0, 1.0, 0]\n  - [7.0, 1.0, 0]\n"
+    )
+    msg = _error(path)
+    assert str(path) in msg and "starts[1]" in msg and "outside" in msg
+
+
+def test_overlapping_starts(tmp_path: Path) -> None:
+    path = _write(
+        tmp_path / "w.yaml", SMALL_ROOM + "starts:\n  - [1.0, 1.0, 0]\n  - [1.2, 1.0, 0]\n"
+    )
+    msg = _error(path)
+    assert str(path) in msg and "starts[1]" in msg and "starts[0]" in msg
+
+
+def test_start_with_two_numbers(tmp_path: Path) -> None:
+    path = _write(tmp_path / "w.yaml", SMALL_ROOM + "starts:\n  - [1.0, 1.0]\n")
+    msg = _error(path)
+    assert str(path) in msg and "starts[0]" in msg
+
+
+def test_ros_map_image_missing(tmp_path: Path) -> None:
+    path = _ros_yaml(tmp_path / "map.yaml", image="gone.pgm")
+    msg = _error(path)
+    assert str(path) in msg and "image" in msg and "gone.pgm" in msg
+
+
+def test_ros_map_thresholds_in_wrong_order(tmp_path: Path) -> None:
+    _pgm(tmp_path / "map.pgm", _room_pixels())
+    path = _ros_yaml(tmp_path / "map.yaml", occupied_thresh=0.3, free_thresh=0.3)
+    msg = _error(path)
+    assert str(path) in msg and "free_thresh" in msg and "occupied_thresh" in msg
+
+
+def test_ros_map_without_free_cell(tmp_path: Path) -> None:
+    _pgm(tmp_path / "map.pgm", np.zeros((20, 20)))
+    path = _ros_yaml(tmp_path / "map.yaml")
+    msg = _error(path)
+    assert str(path) in msg and "image" in msg and "free" in msg
+    with pytest.raises(ConfigError, match="free"):
+        load_ros_map(path)
+
+
+def test_ros_map_unknown_field(tmp_path: Path) -> None:
+    _pgm(tmp_path / "map.pgm", _room_pixels())
+    msg = _error(_ros_yaml(tmp_path / "map.yaml", rotation=0))
+    assert "map.yaml" in msg and "rotation" in msg
+
+
+def test_world_pointing_at_missing_ros_map(tmp_path: Path) -> None:
+    path = _write(tmp_path / "w.yaml", "name: w\nmap: maps/absent.yaml\n")
+    msg = _error(path)
+    assert str(path) in msg, msg
+    assert "map" in msg and "absent.yaml" in msg
+
+
+def test_world_on_a_ros_map_checks_its_starts(tmp_path: Path) -> None:
+    _pgm(tmp_path / "map.pgm", _room_pixels())
+    _ros_yaml(tmp_path / "map.yaml")
+    good = load_world(_write(tmp_path / "ok.yaml", "map: map.yaml\nstarts:\n  - [1.5, 1.0, 0]\n"))
+    assert good.map_grid is not None and good.starts == ((1.5, 1.0, 0.0),)
+    path = _write(tmp_path / "w.yaml", "map: map.yaml\nstarts:\n  - [0.02, 1.0, 0]\n")
+    msg = _error(path)
+    assert str(path) in msg and "starts[0]" in msg
+
+
+# ---------------------------------------------------------------------------------------------
+# fleet.yaml
+
+
+def test_fleet_config_loads_default() -> None:
+    cfg = load_fleet_config()
+    assert cfg.robot.radius > 0 and cfg.lidar.rate_hz == pytest.approx(10.0)
+
+
+def test_fleet_config_unknown_field(tmp_path: Path) -> None:
+    path = _write(tmp_path / "fleet.yaml", "robot:\n  radius: 0.2\nlidar:\n  beamz: 10\n")
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    msg = str(info.value)
+    assert str(path) in msg and "lidar" in msg and "beamz" in msg
+
+
+def test_fleet_config_unknown_section(tmp_path: Path) -> None:
+    path = _write(tmp_path / "fleet.yaml", "robots:\n  radius: 0.2\n")
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    assert str(path) in str(info.value) and "robots" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("sim:\n  physics_hz: fast\n", "sim.physics_hz"),
+        ("lidar:\n  beams: 36.5\n", "lidar.beams"),
+        ("robot:\n  radius: true\n", "robot.radius"),
+        ("odometry:\n  rate_hz: [50]\n", "odometry.rate_hz"),
+    ],
+)
+def test_fleet_config_wrong_type_names_dotted_field(tmp_path: Path, text: str, field: str) -> None:
+    path = _write(tmp_path / "fleet.yaml", text)
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    msg = str(info.value)
+    assert str(path) in msg and field in msg, msg
+
+
+def test_fleet_config_validate_names_the_section(tmp_path: Path) -> None:
+    path = _write(tmp_path / "fleet.yaml", "lidar:\n  range_min: 5.0\n  range_max: 1.0\n")
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    assert str(path) in str(info.value) and "lidar" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("wall_follow:\n  distance: 0.15\n", "wall_follow.distance"),  # inside the robot
+        ("wall_follow:\n  reach: 0.1\n", "reach"),
+        ("agent:\n  edge_cover: 1.5\n", "edge_cover"),
+    ],
+)
+def test_fleet_config_edge_pass_fields_are_checked(tmp_path: Path, text: str, field: str) -> None:
+    path = _write(tmp_path / "fleet.yaml", text)
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    assert str(path) in str(info.value) and field in str(info.value), str(info.value)
