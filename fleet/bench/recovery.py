@@ -17,7 +17,6 @@ import contextlib
 import itertools
 import json
 import signal
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -25,32 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from fleet.bus import Bus
-from fleet.protocol import Clock
-from fleet.supervisor.runner import RunningFleet, read_events
+from fleet.supervisor.runner import RunningFleet, SimClock, read_events
 
 SETTLE_S = 1.0
 DETECT_TIMEOUT_S = 10.0
 REJOIN_TIMEOUT_S = 60.0
-
-
-class SimClock:
-    """The run's sim time, from its clock messages."""
-
-    def __init__(self, fleet: RunningFleet) -> None:
-        fleet.wait(lambda: (fleet.dir / "processes.json").exists(), 30.0)
-        table = fleet.table()
-        self.t = 0.0
-        self._lock = threading.Lock()
-        self.bus = Bus("dashboard", f"bench-{id(self)}", [table["endpoint"]], table["fleet"])
-        self.bus.subscribe(self.bus.keys.clock(), Clock, self._on_clock)
-
-    def _on_clock(self, _key: str, msg: Clock) -> None:
-        with self._lock:
-            self.t = max(self.t, msg.stamp)
-
-    def close(self) -> None:
-        self.bus.close()
 
 
 def _after(events: list[dict], seq: int, kind: str, robot: str | None = None) -> list[dict]:
@@ -218,16 +196,24 @@ def run_bench(
     kills: int,
     scenarios: bool,
     progress: Callable[[str], None],
+    sweep_moments: int = 0,
+    respawn_after_s: float | None = None,
 ) -> dict[str, Any]:
+    """Latency trials, the four scenarios and, with ``sweep_moments``, robot-1 killed at that
+    many moments of the no-failure run (:mod:`fleet.bench.kill_sweep`)."""
+    from fleet.bench.kill_sweep import sweep
+
     root.mkdir(parents=True, exist_ok=True)
     result: dict[str, Any] = {"world": world, "robots": robots, "seed": seed, "root": str(root)}
     if kills > 0:
         trials = latency_trials(root, world, robots, seed, kills, progress)
         result["latency"] = summarize(trials)
         result["trials"] = trials
-    if scenarios:
+    base = None
+    if scenarios or sweep_moments:
         progress("scenario: no failure")
         base = _scenario(root, "no-failure", world, robots, seed, None)
+    if scenarios and base is not None:
         runs = [base]
         makespan = base["makespan_s"]
         if makespan:
@@ -238,6 +224,11 @@ def run_bench(
                 if r["makespan_s"]:
                     r["makespan_ratio"] = round(r["makespan_s"] / makespan, 3)
         result["scenarios"] = runs
+    if sweep_moments and base is not None and base["makespan_s"]:
+        result["no_failure"] = base
+        result["sweep"] = sweep(
+            root, world, robots, seed, sweep_moments, respawn_after_s, base, progress
+        )
     result["auction_ms_per_lot"] = auction_ms_per_lot(root)
     (root / "bench.json").write_text(json.dumps(result, indent=2) + "\n")
     return result
@@ -265,6 +256,10 @@ def table_lines(result: dict[str, Any]) -> list[str]:
                 else ""
             )
         )
+    if "sweep" in result:
+        from fleet.bench.kill_sweep import sweep_lines
+
+        lines += sweep_lines(result["sweep"])
     q = result["auction_ms_per_lot"]
     lines.append(f"auction: median {q['median']} ms per lot sold, p95 {q['p95']} (n={q['n']})")
     return lines

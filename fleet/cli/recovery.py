@@ -34,6 +34,21 @@ def bench_recovery(
             "killed and respawned; coordinator killed and restarted).",
         ),
     ] = True,
+    sweep: Annotated[
+        int,
+        typer.Option(
+            "--sweep",
+            help="Also kill robot-1 at this many moments spread over the no-failure run's "
+            "makespan, one run each, and report each moment (0: none; 10 is the usual).",
+        ),
+    ] = 0,
+    respawn_after: Annotated[
+        float | None,
+        typer.Option(
+            "--respawn-after",
+            help="With --sweep: respawn robot-1 this many sim seconds after each kill.",
+        ),
+    ] = None,
     run_root: Annotated[
         Path | None,
         typer.Option(
@@ -50,8 +65,16 @@ def bench_recovery(
     per scenario the coverage, makespan (and its ratio to the no-failure run), contacts and
     tasks held twice. Progress goes to stderr; everything is also written to RUN_ROOT/bench.json.
 
+    With `--sweep N`, robot-1 is killed at N moments spread over the job (k / (N + 1) of the
+    no-failure makespan), one run each: wherever its body stays, in the way or not. Per moment:
+    status, coverage, coverage of the floor not under the body, makespan against the
+    no-failure run, contacts, waypoints given up, the robots' escape time and the
+    coordinator's stuck events; `--respawn-after S` respawns it S sim seconds after its death.
+
     Examples: `fleet bench recovery --world small --kills 10`;
-    `fleet bench recovery --world home --kills 0 --json` (scenarios only).
+    `fleet bench recovery --world home --kills 0 --json` (scenarios only);
+    `fleet bench recovery --world small --kills 0 --no-scenarios --sweep 10` (kill anywhere);
+    `... --sweep 10 --respawn-after 3`.
     """
     from fleet.bench.recovery import run_bench, table_lines
     from fleet.config import ConfigError, resolve_world
@@ -60,6 +83,10 @@ def bench_recovery(
         _fail("--robots must be >= 2: a lost robot's work needs another robot to go to")
     if kills < 0:
         _fail("--kills must be >= 0")
+    if sweep < 0:
+        _fail("--sweep must be >= 0")
+    if respawn_after is not None and (sweep == 0 or respawn_after < 0):
+        _fail("--respawn-after needs --sweep N and a time >= 0")
     try:
         world_path = str(resolve_world(world))
     except ConfigError as e:
@@ -69,7 +96,9 @@ def bench_recovery(
     def progress(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    result = run_bench(root, world_path, robots, seed, kills, scenarios, progress)
+    result = run_bench(
+        root, world_path, robots, seed, kills, scenarios, progress, sweep, respawn_after
+    )
     if as_json:
         print(json.dumps(result))
     else:

@@ -9,11 +9,14 @@ import signal
 import sqlite3
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from fleet.bus import Bus
+from fleet.protocol import Clock
 from fleet.rundir import RunDirError, process_state, read_table
 
 EVENT_COLUMNS = ("seq", "wall", "sim", "kind", "robot", "task", "detail")
@@ -166,3 +169,22 @@ class RunningFleet:
             os.kill(p, signal.SIGKILL)
         self.left += left
         return left
+
+
+class SimClock:
+    """The run's sim time, from its clock messages."""
+
+    def __init__(self, fleet: RunningFleet) -> None:
+        fleet.wait(lambda: (fleet.dir / "processes.json").exists(), 30.0)
+        table = fleet.table()
+        self.t = 0.0
+        self._lock = threading.Lock()
+        self.bus = Bus("dashboard", f"bench-{id(self)}", [table["endpoint"]], table["fleet"])
+        self.bus.subscribe(self.bus.keys.clock(), Clock, self._on_clock)
+
+    def _on_clock(self, _key: str, msg: Clock) -> None:
+        with self._lock:
+            self.t = max(self.t, msg.stamp)
+
+    def close(self) -> None:
+        self.bus.close()
