@@ -58,6 +58,7 @@ from agents.time_use import step_kind
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
+from fleet.plan_chain import chain_of, chain_starts, current_task
 from fleet.protocol import (
     TIME_KINDS,
     Award,
@@ -261,8 +262,8 @@ class Agent:
             self.plan_id = msg.plan_id
             self.task = msg.task
             self.sweep_from = msg.sweep_from
-            self.chain = list(msg.chain) or [msg.task]
-            self.chain_starts = msg.chain_starts if len(msg.chain) else np.array([msg.sweep_from])
+            self.chain = chain_of(msg)
+            self.chain_starts = chain_starts(msg)
             self.chain_time_s = sum(w.time_s for w in self.market.queue if w.id in self.chain)
             self.follow = FollowState(msg.waypoints) if len(msg.waypoints) else None
             self.waits = Waits.of(msg)
@@ -282,8 +283,8 @@ class Agent:
         if follow is None or len(msg.waypoints) >= len(follow.waypoints):
             return
         self.follow = dataclasses.replace(follow, waypoints=msg.waypoints)
-        self.chain = list(msg.chain) or [msg.task]
-        self.chain_starts = msg.chain_starts if len(msg.chain) else np.array([msg.sweep_from])
+        self.chain = chain_of(msg)
+        self.chain_starts = chain_starts(msg)
         self.chain_time_s = sum(w.time_s for w in self.market.queue if w.id in self.chain)
         log.info("%s: plan %d now ends after %s", self.rid, msg.plan_id, self.chain[-1])
 
@@ -407,7 +408,8 @@ class Agent:
             stale = scan.stamp - self.odom_stamp > a.stale_after_s
             follow = self.follow
             plan_id, sweep_from, waits = self.plan_id, self.sweep_from, self.waits
-            task = _current_task(self.chain, self.chain_starts, self.follow) or self.task
+            heading_for = None if follow is None else follow.index
+            task = current_task(self.chain, self.chain_starts, heading_for) or self.task
             planned = plan_id >= 0
             localized = getattr(src, "localized", True)
             failed = getattr(src, "failed", False)
@@ -705,12 +707,3 @@ def _map_message(stamp: float, seq: int, tile: int, update: MapUpdate) -> MapPat
         tile,
         [(p.row, p.col, p.data) for p in update.patches],
     )
-
-
-def _current_task(chain: list[str], starts: np.ndarray, follow: FollowState | None) -> str:
-    """The task of a chained plan the robot is sweeping: the last one whose sweep it has
-    begun (the first while it drives the transit)."""
-    if not chain or follow is None:
-        return ""
-    begun = int(np.searchsorted(starts, follow.index - 1, side="right"))
-    return chain[min(max(begun - 1, 0), len(chain) - 1)]

@@ -24,6 +24,7 @@ import numpy as np
 
 from agents.follower import FollowState
 from agents.slam.slam_map import SlamMap
+from fleet import plan_chain
 from fleet.protocol import Award, Bid, TaskCall
 from planners import auction
 from planners.grid import GridMap, dilate
@@ -140,15 +141,10 @@ class MarketClient:
 
 
 def swept_pieces(follow: FollowState | None, sweep_from: int) -> np.ndarray:
-    """0/1 per piece of the task a plan sweeps (segment ``sweep_from + j`` → ``+ j + 1`` of the
-    plan): swept once the robot has reached the piece's far waypoint."""
+    """0/1 per piece of the plan ``follow`` drives (:func:`fleet.plan_chain.swept_pieces`)."""
     if follow is None:
         return np.zeros(0, dtype=np.uint8)
-    n = len(follow.waypoints) - 1 - sweep_from
-    if n <= 0:
-        return np.zeros(0, dtype=np.uint8)
-    far = sweep_from + 1 + np.arange(n)
-    return (far < follow.index).astype(np.uint8)
+    return plan_chain.swept_pieces(len(follow.waypoints), sweep_from, follow.index)
 
 
 def _length(points: np.ndarray) -> float:

@@ -41,6 +41,14 @@ from fleet.coordinator.store import JobStore
 from fleet.coordinator.transits import PlannedTransit, TransitPlanner
 from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
+from fleet.plan_chain import (
+    chain_length,
+    chain_of,
+    chain_pieces,
+    cut_plan,
+    driven_ends,
+    piece_count,
+)
 from fleet.protocol import (
     Award,
     AwardAck,
@@ -59,8 +67,6 @@ from planners import auction
 log = logging.getLogger("coordinator")
 
 LOOP_S = 0.05
-# queued tasks whose ends meet within this go into one plan: the robot drives on between them
-CHAIN_M = 0.01
 STATE_PERIOD_S = 0.5
 RESEND_S = 0.5
 PERSIST_ROBOTS_S = 1.0
@@ -210,10 +216,9 @@ class Coordinator:
             plan = self.plans.get(rid)
             if plan is None or msg.plan_id != plan.plan_id or r.liveness == LOST:
                 return
-            pieces = len(plan.waypoints) - 1 - plan.sweep_from
-            if len(msg.swept) != pieces:
+            if len(msg.swept) != piece_count(len(plan.waypoints), plan.sweep_from):
                 return
-            for tid, (a, b) in _chain_pieces(plan, pieces):
+            for tid, (a, b) in chain_pieces(plan):
                 swept = msg.swept[a:b]
                 if self.job.progress(rid, tid, swept):
                     self._save_task(tid)
@@ -279,7 +284,7 @@ class Coordinator:
         with self.lock:
             plan = self.plans.get(req.sender)
             current = self.job.current(req.sender)
-        if plan is None or current is None or current.task.id not in _chain_of(plan):
+        if plan is None or current is None or current.task.id not in chain_of(plan):
             raise LookupError(f"no plan for {req.sender} now")
         return plan
 
@@ -328,10 +333,10 @@ class Coordinator:
             self._event("withdrawn", "", tid, "back to the market")
         self._save_task(*withdrawn)
         for rid, plan in list(self.plans.items()):
-            chain = _chain_of(plan)
+            chain = chain_of(plan)
             cut = next((j for j, t in enumerate(chain) if t in withdrawn), None)
             if cut is not None and cut > 0:
-                self.plans[rid] = plan = _cut_plan(plan, cut)
+                self.plans[rid] = plan = cut_plan(plan, cut)
                 if self.store is not None:
                     self.store.save_plan(rid, plan)
                 self.bus.publish(self.keys.plan(rid), plan, control=True)
@@ -357,10 +362,7 @@ class Coordinator:
                     # a restarted coordinator must number on from here: an agent ignores an
                     # award numbered at or below one it has taken
                     self.store.save_robots([r])
-            ends = [
-                (t.task.exit, t.task.entry) if t.reverse else (t.task.entry, t.task.exit)
-                for t in queue
-            ]
+            ends = [driven_ends(t.task, t.reverse) for t in queue]
             msg = Award(
                 self.clock,
                 r.award_seq,
@@ -519,14 +521,9 @@ class Coordinator:
             plan = self.plans.get(rid)
             if not queue or r.acked_seq < r.award_seq:
                 continue
-            if plan is not None and queue[0].task.id in _chain_of(plan):
+            if plan is not None and queue[0].task.id in chain_of(plan):
                 continue
-            chain = [queue[0]]
-            for rec in queue[1:]:
-                if math.dist(_driven_end(chain[-1]), _driven_start(rec)) > CHAIN_M:
-                    break
-                chain.append(rec)
-            fresh[rid] = chain
+            fresh[rid] = queue[: chain_length([(rec.task, rec.reverse) for rec in queue])]
         if self.transits is None:
             for rid, chain in fresh.items():
                 self._send_plan(rid, chain, None, {})
@@ -554,7 +551,7 @@ class Coordinator:
                 continue
             at = self.progress_of.get(rid)
             if at is None or at[0] != plan_id or at[1] < plan.sweep_from:
-                chain = [self.job.tasks[t] for t in _chain_of(plan)]
+                chain = [self.job.tasks[t] for t in chain_of(plan)]
                 if all(rec.state == ASSIGNED and rec.owner == rid for rec in chain):
                     out[rid] = chain
         return out
@@ -591,7 +588,10 @@ class Coordinator:
             and rid not in moving
             and (r.liveness == LOST or (r.ready and self.job.current(rid) is None))
         }
-        goals = {rid: _driven_start(chain[0]) for rid, chain in moving.items()}
+        goals = {
+            rid: _xy(driven_ends(chain[0].task, chain[0].reverse)[0])
+            for rid, chain in moving.items()
+        }
         froms = {rid: self.job.robots[rid].xy for rid in moving}
         t0 = time.perf_counter()
         plan, transits = self.transits.plan(
@@ -752,40 +752,8 @@ class Coordinator:
         self.bus.publish(self.keys.coord_state(), state, control=True)
 
 
-def _chain_of(plan: Plan) -> list[str]:
-    return list(plan.chain) or [plan.task]
-
-
-def _chain_pieces(plan: Plan, pieces: int) -> list[tuple[str, tuple[int, int]]]:
-    """Each task of the plan with the slice of the plan's pieces that sweeps it."""
-    chain = _chain_of(plan)
-    starts = [int(s) - plan.sweep_from for s in plan.chain_starts] or [0]
-    ends = [*starts[1:], pieces]
-    return [(t, (a, b)) for t, a, b in zip(chain, starts, ends, strict=True)]
-
-
-def _driven_start(rec: TaskRecord) -> tuple[float, float]:
-    xy = rec.task.exit if rec.reverse else rec.task.entry
-    return float(xy[0]), float(xy[1])
-
-
-def _driven_end(rec: TaskRecord) -> tuple[float, float]:
-    xy = rec.task.entry if rec.reverse else rec.task.exit
-    return float(xy[0]), float(xy[1])
-
-
-def _cut_plan(plan: Plan, j: int) -> Plan:
-    """The plan up to the start of its ``j``-th chained task (same id: the robot drives on)."""
-    end = int(plan.chain_starts[j])
-    return Plan(
-        plan.stamp,
-        plan.plan_id,
-        plan.task,
-        plan.waypoints[: end + 1],
-        plan.sweep_from,
-        list(plan.chain[:j]),
-        plan.chain_starts[:j],
-    )
+def _xy(point: np.ndarray) -> tuple[float, float]:
+    return float(point[0]), float(point[1])
 
 
 def _tour_key(task_id: str) -> tuple[int, ...]:
