@@ -36,6 +36,7 @@ import numpy as np
 
 from fleet.bus import Bus
 from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, GivenUpWaypoints, Job, TaskRecord
+from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
 from fleet.coordinator.transits import PlannedTransit, TransitPlanner
@@ -53,7 +54,6 @@ from fleet.protocol import (
     Award,
     AwardAck,
     Bid,
-    FleetEvent,
     FleetState,
     Heartbeat,
     Plan,
@@ -99,6 +99,7 @@ class Coordinator:
         self.stop = threading.Event()
         self.wake = threading.Event()
         self.job = Job(planner.params)
+        self.journal = Journal(self.job, store, self.keys, bus.publish)
         self.plans: dict[str, Plan] = {}
         self.transits = transits
         # robot -> (plan id, planned sim time of reaching each transit waypoint)
@@ -110,7 +111,6 @@ class Coordinator:
         self.renumbered: set[str] = set()  # robots whose queue goes out again under a new number
         self.last_award_sent: dict[str, float] = {}
         self.phase = "gathering"
-        self.clock = 0.0
         self.plan_seq = 0
         self.round_seq = 0
         self.rejected: Counter[str] = Counter()
@@ -149,7 +149,7 @@ class Coordinator:
         self.plan_seq = int(meta.get("plan_seq", 0))
         self.round_seq = int(meta.get("round_seq", 0))
         self.phase = str(meta.get("phase", "cleaning"))
-        self.clock = float(meta.get("clock", 0.0))
+        self.journal.clock = float(meta.get("clock", 0.0))
         self.rejected.update(meta.get("rejected_bids", {}))  # type: ignore[arg-type]
         self.given_up = GivenUpWaypoints.from_json(meta.get("given_up_waypoints"))
         now = time.time()
@@ -166,14 +166,14 @@ class Coordinator:
             ", ".join(f"{v} {k}" for k, v in self.job.counts().items()),
             self.phase,
         )
-        self._event("resumed", "", "", f"{len(self.job.tasks)} tasks")
+        self.journal.event("resumed", "", "", f"{len(self.job.tasks)} tasks")
 
     # ---- bus callbacks ------------------------------------------------------------------
 
     def _on_pose(self, key: str, msg: PoseEstimate) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            self.clock = max(self.clock, msg.stamp)
+            self.journal.heard(msg.stamp)
             self.job.robot(rid).xy = (msg.x, msg.y)
 
     def _on_heartbeat(self, key: str, msg: Heartbeat) -> None:
@@ -185,7 +185,7 @@ class Coordinator:
             r.ready = msg.ready
             if r.liveness == LOST:
                 r.liveness = REJOINED
-                self._event("rejoined", rid, "", "heard from again; bids afresh")
+                self.journal.event("rejoined", rid, "", "heard from again; bids afresh")
                 self._rebalance()
             elif r.ready and not was_ready and self.phase != "gathering":
                 self._rebalance()
@@ -198,7 +198,7 @@ class Coordinator:
             if known and r.liveness == LOST:
                 r.restarts += 1
             elif not known:
-                self._event("joined", rid, "", "")
+                self.journal.event("joined", rid, "", "")
 
     def _on_leave(self, rid: str) -> None:
         with self.lock:
@@ -221,19 +221,21 @@ class Coordinator:
             for tid, (a, b) in chain_pieces(plan):
                 swept = msg.swept[a:b]
                 if self.job.progress(rid, tid, swept):
-                    self._save_task(tid)
+                    self.journal.save_tasks(tid)
                 rec = self.job.tasks.get(tid)
                 held = rec is not None and rec.state == ASSIGNED and rec.owner == rid
                 if held and (msg.state == "done" or swept.all()):
                     again = None if swept.all() else self.job.give_back(rid, tid)
                     if again is None:
                         self.job.finish(rid, tid)
-                        self._event("done", rid, tid, "")
+                        self.journal.event("done", rid, tid, "")
                     else:
-                        self._event("withdrawn", rid, tid, f"pieces given up: once more as {again}")
+                        self.journal.event(
+                            "withdrawn", rid, tid, f"pieces given up: once more as {again}"
+                        )
                         self.need_auction = True
                     self.version += 1
-                    self._save_task(*(t for t in (tid, again) if t is not None))
+                    self.journal.save_tasks(*(t for t in (tid, again) if t is not None))
                     self.wake.set()
 
     def _on_ack(self, key: str, msg: AwardAck) -> None:
@@ -290,31 +292,17 @@ class Coordinator:
 
     # ---- job changes (called with self.lock held) ---------------------------------------
 
-    def _event(self, kind: str, robot: str, task: str, detail: str) -> None:
-        wall = time.time()
-        if kind in ("lost", "rejoined", "reassigned", "withdrawn", "resumed"):
-            log.info("%s %s %s %s", kind, robot, task, detail)
-        if self.store is not None:
-            self.store.add_event(wall, self.clock, kind, robot, task, detail)
-        self.bus.publish(
-            self.keys.events(), FleetEvent(self.clock, wall, kind, robot, task, detail), True
-        )
-
-    def _save_task(self, *ids: str) -> None:
-        if self.store is not None:
-            self.store.save_tasks([self.job.tasks[i] for i in ids])
-
     def _lose(self, rid: str, why: str) -> None:
         reopened, made = self.job.lose(rid)
         self.version += 1
-        self._event("lost", rid, "", why)
+        self.journal.event("lost", rid, "", why)
         now = time.monotonic()
         self.lost_at.update(dict.fromkeys(reopened, now))
         self.region_sale += reopened
         for tid in reopened:
-            self._event("reopened", rid, tid, "remainder" if tid in made else "unstarted")
+            self.journal.event("reopened", rid, tid, "remainder" if tid in made else "unstarted")
         changed = [r.task.id for r in self.job.tasks.values() if r.owner is None]
-        self._save_task(*changed)
+        self.journal.save_tasks(*changed)
         self.plans.pop(rid, None)
         self.schedules.pop(rid, None)
         self._publish_awards()
@@ -330,15 +318,14 @@ class Coordinator:
         self.balanced_version = self.version
         withdrawn = self.job.withdraw_unstarted()
         for tid in withdrawn:
-            self._event("withdrawn", "", tid, "back to the market")
-        self._save_task(*withdrawn)
+            self.journal.event("withdrawn", "", tid, "back to the market")
+        self.journal.save_tasks(*withdrawn)
         for rid, plan in list(self.plans.items()):
             chain = chain_of(plan)
             cut = next((j for j, t in enumerate(chain) if t in withdrawn), None)
             if cut is not None and cut > 0:
                 self.plans[rid] = plan = cut_plan(plan, cut)
-                if self.store is not None:
-                    self.store.save_plan(rid, plan)
+                self.journal.save_plan(rid, plan)
                 self.bus.publish(self.keys.plan(rid), plan, control=True)
         self._publish_awards()
         self.need_auction = True
@@ -358,13 +345,12 @@ class Coordinator:
             if changed:
                 r.award_seq += 1
                 self.sent[rid] = ids
-                if self.store is not None:
-                    # a restarted coordinator must number on from here: an agent ignores an
-                    # award numbered at or below one it has taken
-                    self.store.save_robots([r])
+                # a restarted coordinator must number on from here: an agent ignores an
+                # award numbered at or below one it has taken
+                self.journal.save_robots([r])
             ends = [driven_ends(t.task, t.reverse) for t in queue]
             msg = Award(
-                self.clock,
+                self.journal.clock,
                 r.award_seq,
                 rid,
                 list(ids),
@@ -443,7 +429,7 @@ class Coordinator:
             ms = 1e3 * (time.monotonic() - t0)
             log.info("auction: %d lots sold in %.0f ms", awarded, ms)
             with self.lock:
-                self._event("auction", "", "", f"{awarded} lots in {ms:.0f} ms")
+                self.journal.event("auction", "", "", f"{awarded} lots in {ms:.0f} ms")
 
     def _round_of_bids(
         self, lots: dict[str, auction.Lot], bidders: frozenset[str]
@@ -456,7 +442,13 @@ class Coordinator:
             self._bids = {}
         for lot in lots.values():
             call = TaskCall(
-                self.clock, rnd.number, lot.id, *lot.entry, *lot.exit, lot.time_s, lot.area_m2
+                self.journal.clock,
+                rnd.number,
+                lot.id,
+                *lot.entry,
+                *lot.exit,
+                lot.time_s,
+                lot.area_m2,
             )
             self.bus.publish(self.keys.task(lot.id), call, control=True)
         deadline = time.monotonic() + self.params.bid_timeout_s
@@ -474,9 +466,8 @@ class Coordinator:
         """The job's makespan as the first allocation prices it: the longest of the winners'
         committed times (travel from where each stood, and the cleaning time of what it won)."""
         log.info("the first allocation's makespan estimate: %.1f s", makespan_s)
-        self._event("estimated", "", "", f"makespan {makespan_s:.1f} s")
-        if self.store is not None:
-            self.store.set_meta(estimate_s=round(makespan_s, 2))
+        self.journal.event("estimated", "", "", f"makespan {makespan_s:.1f} s")
+        self.journal.set_meta(estimate_s=round(makespan_s, 2))
 
     def _sell(self, lot: auction.Lot, best: auction.Bid, live: list[Bid]) -> None:
         """Award ``lot``'s tasks to the winner (in the order it drives them), log the round."""
@@ -485,27 +476,26 @@ class Coordinator:
             self.job.award(tid, best.robot, best.reverse)
             lost_at = self.lost_at.pop(tid, None)
             if lost_at is None:
-                self._event("awarded", best.robot, tid, f"{lot.id}: {best.total_s:.1f} s")
+                self.journal.event("awarded", best.robot, tid, f"{lot.id}: {best.total_s:.1f} s")
             else:
                 after = time.monotonic() - lost_at
-                self._event("reassigned", best.robot, tid, f"{after:.3f} s after the loss")
-        self._save_task(*order)
-        if self.store is not None:
-            self.store.add_bids(
-                [
-                    (
-                        self.round_seq,
-                        b.task,
-                        b.robot,
-                        b.marginal_s,
-                        b.total_s,
-                        int(b.reverse),
-                        int(b.task == best.task and b.robot == best.robot),
-                    )
-                    for b in live
-                ]
-            )
-            self.store.set_meta(round_seq=self.round_seq)
+                self.journal.event("reassigned", best.robot, tid, f"{after:.3f} s after the loss")
+        self.journal.save_tasks(*order)
+        self.journal.add_bids(
+            [
+                (
+                    self.round_seq,
+                    b.task,
+                    b.robot,
+                    b.marginal_s,
+                    b.total_s,
+                    int(b.reverse),
+                    int(b.task == best.task and b.robot == best.robot),
+                )
+                for b in live
+            ]
+        )
+        self.journal.set_meta(round_seq=self.round_seq)
         self._publish_awards()
 
     def _dispatch(self) -> None:
@@ -529,7 +519,7 @@ class Coordinator:
                 self._send_plan(rid, chain, None, {})
             return
         # without new plans a round is due only on a lag, looked at once per replan_lag_s
-        if not fresh and self.clock - self.last_transit_round < self.params.replan_lag_s:
+        if not fresh and self.journal.clock - self.last_transit_round < self.params.replan_lag_s:
             return
         in_transit = self._in_transit()
         if not fresh and not self._lagging(in_transit):
@@ -567,11 +557,11 @@ class Coordinator:
             plan_id, arrivals = self.schedules[rid]
             at = self.progress_of.get(rid)
             if at is not None and at[0] == plan_id and 0 < at[1] < len(arrivals):
-                lags[rid] = self.clock - arrivals[at[1]]
+                lags[rid] = self.journal.clock - arrivals[at[1]]
         if len(lags) < 2 or max(lags.values()) - min(lags.values()) <= lag_s:
             return False
         late = max(lags, key=lags.__getitem__)
-        self._event(
+        self.journal.event(
             "behind", late, "", f"{lags[late] - min(lags.values()):.1f} s behind the others"
         )
         return True
@@ -580,7 +570,7 @@ class Coordinator:
         """One round of transits: ``moving`` robots to the start of their chains, around the
         robots that stand (no work, or lost); {} (local transits) if the round fails."""
         assert self.transits is not None
-        self.last_transit_round = self.clock
+        self.last_transit_round = self.journal.clock
         parked = {
             rid: r.xy
             for rid, r in self.job.robots.items()
@@ -595,19 +585,21 @@ class Coordinator:
         froms = {rid: self.job.robots[rid].xy for rid in moving}
         t0 = time.perf_counter()
         plan, transits = self.transits.plan(
-            self.clock, {rid: (froms[rid], goals[rid]) for rid in moving}, parked
+            self.journal.clock, {rid: (froms[rid], goals[rid]) for rid in moving}, parked
         )
         ms = 1e3 * (time.perf_counter() - t0)
         if plan.status == "unreachable":
             for rid in plan.unreachable:
                 task = moving[rid][0].task.id if rid in moving else ""
-                self._event("unreachable", rid, task, plan.message)
+                self.journal.event("unreachable", rid, task, plan.message)
             log.warning("transits not planned: %s; local transits instead", plan.message)
         elif plan.status != "success":
-            self._event("transits", "", "", f"failed: {plan.message}; local transits instead")
+            self.journal.event(
+                "transits", "", "", f"failed: {plan.message}; local transits instead"
+            )
             log.warning("transits not planned: %s; local transits instead", plan.message)
         else:
-            self._event(
+            self.journal.event(
                 "transits",
                 "",
                 "",
@@ -632,7 +624,7 @@ class Coordinator:
         self.plan_seq = max(self.plan_seq + 1, ids.get(rid, 0))
         waits = transit.waits if transit is not None else ()
         plan = Plan(
-            self.clock,
+            self.journal.clock,
             self.plan_seq,
             chain[0].task.id,
             waypoints,
@@ -649,9 +641,8 @@ class Coordinator:
             self.schedules[rid] = (plan.plan_id, transit.arrivals_s)
         else:
             self.schedules.pop(rid, None)
-        if self.store is not None:
-            self.store.save_plan(rid, plan)
-            self.store.set_meta(plan_seq=self.plan_seq)
+        self.journal.save_plan(rid, plan)
+        self.journal.set_meta(plan_seq=self.plan_seq)
         self.bus.publish(self.keys.plan(rid), plan, control=True)
 
     def _check_heartbeats(self) -> None:
@@ -685,8 +676,7 @@ class Coordinator:
                     if self._gathered(time.monotonic() - gather_start, grace_s):
                         self.phase = "auction"
                         self.need_auction = True
-                        if self.store is not None:
-                            self.store.set_meta(phase=self.phase)
+                        self.journal.set_meta(phase=self.phase)
                 else:
                     self._check_heartbeats()
                     idle = [rid for rid in self.job.market() if self.job.current(rid) is None]
@@ -704,9 +694,8 @@ class Coordinator:
                     if self.job.finished and self.phase != "done":
                         self.phase = "done"
                         log.info(self.given_up.finished_message())
-                        self._event("finished", "", "", "")
-                        if self.store is not None:
-                            self.store.set_meta(phase=self.phase)
+                        self.journal.event("finished", "", "", "")
+                        self.journal.set_meta(phase=self.phase)
                     elif self.phase == "auction" and not self.job.open_tasks():
                         self.phase = "cleaning"
                 now = time.monotonic()
@@ -717,7 +706,7 @@ class Coordinator:
                         rejected = dict(self.rejected)
                     self.store.set_meta(
                         phase=self.phase,
-                        clock=self.clock,
+                        clock=self.journal.clock,
                         rejected_bids=rejected,
                         given_up_waypoints=self.given_up.to_json(),
                     )
@@ -731,16 +720,15 @@ class Coordinator:
         log.info("planned %d tasks in %.2f s", len(tasks), time.perf_counter() - t0)
         with self.lock:
             self.job.add_tasks(tasks)
-            if self.store is not None:
-                self.store.save_tasks(list(self.job.tasks.values()))
-                self.store.set_meta(expected_robots=self.expected)
-            self._event("planned", "", "", f"{len(tasks)} tasks")
+            self.journal.save_tasks(*self.job.tasks)
+            self.journal.set_meta(expected_robots=self.expected)
+            self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
         counts = self.job.counts()
         robots = sorted(self.job.robots)
         state = FleetState(
-            self.clock,
+            self.journal.clock,
             self.phase,
             robots,
             sorted(r for r in robots if self.job.current(r) is None),
