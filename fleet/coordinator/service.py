@@ -29,12 +29,11 @@ import logging
 import math
 import threading
 import time
-from collections import Counter
-from dataclasses import dataclass
 
 import numpy as np
 
 from fleet.bus import Bus
+from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, GivenUpWaypoints, Job, TaskRecord
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
@@ -60,7 +59,6 @@ from fleet.protocol import (
     PoseEstimate,
     Request,
     RobotStatus,
-    TaskCall,
 )
 from planners import auction
 
@@ -70,13 +68,6 @@ LOOP_S = 0.05
 STATE_PERIOD_S = 0.5
 RESEND_S = 0.5
 PERSIST_ROBOTS_S = 1.0
-
-
-@dataclass
-class _Round:
-    number: int
-    tasks: frozenset[str]
-    bidders: frozenset[str]
 
 
 class Coordinator:
@@ -99,7 +90,11 @@ class Coordinator:
         self.stop = threading.Event()
         self.wake = threading.Event()
         self.job = Job(planner.params)
-        self.journal = Journal(self.job, store, self.keys, bus.publish)
+        resumed = self._load(store)
+        meta = resumed or {}
+        self.journal = Journal(
+            self.job, store, self.keys, bus.publish, float(meta.get("clock", 0.0))
+        )
         self.plans: dict[str, Plan] = {}
         self.transits = transits
         # robot -> (plan id, planned sim time of reaching each transit waypoint)
@@ -112,8 +107,6 @@ class Coordinator:
         self.last_award_sent: dict[str, float] = {}
         self.phase = "gathering"
         self.plan_seq = 0
-        self.round_seq = 0
-        self.rejected: Counter[str] = Counter()
         self.given_up = GivenUpWaypoints()
         self.need_auction = False
         self.lost_at: dict[str, float] = {}
@@ -123,15 +116,22 @@ class Coordinator:
         # withdrawn tasks back must not be asked again and again
         self.version = 0
         self.balanced_version = -1
-        self._round: _Round | None = None
-        self._bids: dict[tuple[str, str], Bid] = {}
-        self._bids_cond = threading.Condition()
-        if store is not None:
-            self._resume(store)
+        self.auctioneer = Auctioneer(
+            self.keys,
+            bus.publish,
+            params,
+            self._sell,
+            self.stop,
+            int(meta.get("round_seq", 0)),
+            meta.get("rejected_bids", {}),  # type: ignore[arg-type]
+        )
+        if resumed is not None:
+            assert store is not None
+            self._resume(store, resumed)
         bus.subscribe(self.keys.all_robots("pose"), PoseEstimate, self._on_pose)
         bus.subscribe(self.keys.all_robots("status"), RobotStatus, self._on_status)
         bus.subscribe(self.keys.all_robots("heartbeat"), Heartbeat, self._on_heartbeat)
-        bus.subscribe(self.keys.all_bids(), Bid, self._on_bid)
+        bus.subscribe(self.keys.all_bids(), Bid, self.auctioneer.on_bid)
         bus.subscribe(self.keys.ack("*"), AwardAck, self._on_ack)
         bus.serve(self.keys.plan("*"), Request, self._on_plan_query)
         floor = pack_grid(planner.grid)
@@ -140,17 +140,17 @@ class Coordinator:
 
     # ---- restart ------------------------------------------------------------------------
 
-    def _resume(self, store: JobStore) -> None:
+    def _load(self, store: JobStore | None) -> dict[str, object] | None:
+        """Fill the job from ``store``; its counters if it holds a job to resume, else None."""
+        if store is None:
+            return None
         store.load_job(self.job)
-        if not self.job.tasks:
-            return
-        meta = store.meta()
+        return store.meta() if self.job.tasks else None
+
+    def _resume(self, store: JobStore, meta: dict[str, object]) -> None:
         self.plans = store.plans()
         self.plan_seq = int(meta.get("plan_seq", 0))
-        self.round_seq = int(meta.get("round_seq", 0))
         self.phase = str(meta.get("phase", "cleaning"))
-        self.journal.clock = float(meta.get("clock", 0.0))
-        self.rejected.update(meta.get("rejected_bids", {}))  # type: ignore[arg-type]
         self.given_up = GivenUpWaypoints.from_json(meta.get("given_up_waypoints"))
         now = time.time()
         for rid, r in self.job.robots.items():
@@ -259,28 +259,6 @@ class Coordinator:
                 r.award_seq = msg.seq
                 self.renumbered.add(rid)
             self.wake.set()
-
-    def _on_bid(self, key: str, msg: Bid) -> None:
-        rid = self.keys.robot_of(key)
-        ok_numbers = all(math.isfinite(v) and v >= 0 for v in (msg.marginal_s, msg.total_s))
-        with self._bids_cond:
-            rnd = self._round
-            if msg.robot != rid or not ok_numbers or key != self.keys.bid(msg.task, msg.robot):
-                why = "malformed"
-            elif rnd is None or msg.round != rnd.number or msg.task not in rnd.tasks:
-                why = "late"
-            elif rid not in rnd.bidders:
-                why = "not in the market"
-            elif (msg.task, rid) in self._bids:
-                why = "duplicate"
-            else:
-                self._bids[(msg.task, rid)] = msg
-                self._bids_cond.notify_all()
-                return
-            self.rejected[why] += 1
-            n = self.rejected[why]
-        if n == 1 or n % 100 == 0:
-            log.warning("ignored a %s bid from %s on %s (%d so far)", why, rid, msg.task, n)
 
     def _on_plan_query(self, req: Request) -> Plan:
         with self.lock:
@@ -399,28 +377,13 @@ class Coordinator:
                 bidders = frozenset(self.job.market())
             if not lots or not bidders:
                 break
-            bids = self._round_of_bids(lots, bidders)
+            rnd = self.auctioneer.call(self.journal.clock, lots, bidders)
             with self.lock:
-                market = set(self.job.market())
-                live = [b for b in bids.values() if b.robot in market]
-                best = auction.winner(
-                    (
-                        auction.Bid(b.task, b.robot, b.marginal_s, b.total_s, b.reverse)
-                        for b in live
-                    ),
-                    self.params.objective,
-                )
-                if best is None:
-                    log.warning(
-                        "auction round %d: no bids from %s within %.1f s",
-                        self.round_seq,
-                        ", ".join(sorted(bidders)),
-                        self.params.bid_timeout_s,
-                    )
-                    break
-                self._sell(lots[best.task], best, live)
-                committed.append(best.total_s)
-                awarded += 1
+                sale = self.auctioneer.award(rnd, set(self.job.market()))
+            if sale is None:
+                break
+            committed.append(sale.best.total_s)
+            awarded += 1
         if first and committed:
             with self.lock:
                 if not self.job.open_tasks():
@@ -431,37 +394,6 @@ class Coordinator:
             with self.lock:
                 self.journal.event("auction", "", "", f"{awarded} lots in {ms:.0f} ms")
 
-    def _round_of_bids(
-        self, lots: dict[str, auction.Lot], bidders: frozenset[str]
-    ) -> dict[tuple[str, str], Bid]:
-        """Call every lot; the bids that came within ``bid_timeout_s`` (all, usually sooner)."""
-        self.round_seq += 1
-        rnd = _Round(self.round_seq, frozenset(lots), bidders)
-        with self._bids_cond:
-            self._round = rnd
-            self._bids = {}
-        for lot in lots.values():
-            call = TaskCall(
-                self.journal.clock,
-                rnd.number,
-                lot.id,
-                *lot.entry,
-                *lot.exit,
-                lot.time_s,
-                lot.area_m2,
-            )
-            self.bus.publish(self.keys.task(lot.id), call, control=True)
-        deadline = time.monotonic() + self.params.bid_timeout_s
-        want = len(lots) * len(bidders)
-        with self._bids_cond:
-            while len(self._bids) < want and not self.stop.is_set():
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    break
-                self._bids_cond.wait(left)
-            self._round = None
-            return dict(self._bids)
-
     def _estimate(self, makespan_s: float) -> None:
         """The job's makespan as the first allocation prices it: the longest of the winners'
         committed times (travel from where each stood, and the cleaning time of what it won)."""
@@ -469,8 +401,10 @@ class Coordinator:
         self.journal.event("estimated", "", "", f"makespan {makespan_s:.1f} s")
         self.journal.set_meta(estimate_s=round(makespan_s, 2))
 
-    def _sell(self, lot: auction.Lot, best: auction.Bid, live: list[Bid]) -> None:
-        """Award ``lot``'s tasks to the winner (in the order it drives them), log the round."""
+    def _sell(self, sale: Sale) -> None:
+        """The auctioneer's result: award the lot's tasks to the winner (in the order it drives
+        them), log the round, send the winner its queue."""
+        lot, best = sale.lot, sale.best
         order = lot.tasks[::-1] if best.reverse else lot.tasks
         for tid in order:
             self.job.award(tid, best.robot, best.reverse)
@@ -484,7 +418,7 @@ class Coordinator:
         self.journal.add_bids(
             [
                 (
-                    self.round_seq,
+                    sale.round,
                     b.task,
                     b.robot,
                     b.marginal_s,
@@ -492,10 +426,10 @@ class Coordinator:
                     int(b.reverse),
                     int(b.task == best.task and b.robot == best.robot),
                 )
-                for b in live
+                for b in sale.bids
             ]
         )
-        self.journal.set_meta(round_seq=self.round_seq)
+        self.journal.set_meta(round_seq=sale.round)
         self._publish_awards()
 
     def _dispatch(self) -> None:
@@ -702,12 +636,10 @@ class Coordinator:
                 if self.store is not None and now - last_robots > PERSIST_ROBOTS_S:
                     last_robots = now
                     self.store.save_robots(list(self.job.robots.values()))
-                    with self._bids_cond:
-                        rejected = dict(self.rejected)
                     self.store.set_meta(
                         phase=self.phase,
                         clock=self.journal.clock,
-                        rejected_bids=rejected,
+                        rejected_bids=self.auctioneer.rejected(),
                         given_up_waypoints=self.given_up.to_json(),
                     )
                 if now - last_state > STATE_PERIOD_S:

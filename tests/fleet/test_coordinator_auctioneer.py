@@ -1,0 +1,174 @@
+"""The auctioneer without a bus: its publish function is a stand-in that answers each call by
+handing the robots' bids to the auctioneer's bid handler, as the bus's thread would."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from fleet.coordinator.auctioneer import Auctioneer, Sale
+from fleet.params import CoordinatorParams
+from fleet.protocol import Bid, Keys, Message, TaskCall
+from planners import auction
+
+KEYS = Keys("test")
+Prices = dict[tuple[str, str], tuple[float, float]]  # (lot, robot) -> (marginal_s, total_s)
+
+
+class Bidders:
+    """The bidders: each answers a call with its price for the lot, if it has one; then
+    ``also`` sees the call."""
+
+    def __init__(
+        self,
+        prices: Prices,
+        objective: str = "minimax",
+        timeout_s: float = 5.0,
+        also: Callable[[TaskCall], None] = lambda _call: None,
+    ) -> None:
+        self.prices = prices
+        self.also = also
+        self.calls: list[tuple[str, TaskCall, bool]] = []
+        self.sales: list[Sale] = []
+        params = CoordinatorParams(bid_timeout_s=timeout_s, objective=objective)  # type: ignore[arg-type]
+        self.auctioneer = Auctioneer(KEYS, self.publish, params, self.sales.append)
+
+    def publish(self, key: str, msg: Message, control: bool) -> None:
+        assert isinstance(msg, TaskCall)
+        self.calls.append((key, msg, control))
+        for (lot, robot), (marginal, total) in self.prices.items():
+            if lot == msg.task:
+                self.auctioneer.on_bid(
+                    KEYS.bid(lot, robot), Bid(0.0, msg.round, lot, robot, marginal, total, False)
+                )
+        self.also(msg)
+
+    def sell(
+        self, lots: list[str], bidders: set[str], market: set[str] | None = None
+    ) -> Sale | None:
+        rnd = self.auctioneer.call(0.0, {lot: _lot(lot) for lot in lots}, frozenset(bidders))
+        return self.auctioneer.award(rnd, bidders if market is None else market)
+
+
+def _lot(lot: str) -> auction.Lot:
+    return auction.Lot(lot, (lot,), np.zeros(2), np.ones(2), 1.0, 1.0)
+
+
+def _bid(lot: str, robot: str, round_: int = 1, marginal: float = 1.0, total: float = 1.0) -> Bid:
+    return Bid(0.0, round_, lot, robot, marginal, total, False)
+
+
+PRICES: Prices = {
+    ("t01", "robot-0"): (5.0, 50.0),
+    ("t01", "robot-1"): (20.0, 30.0),  # the lowest total: MiniMax's winner
+    ("t01", "robot-2"): (25.0, 35.0),
+    ("t02", "robot-0"): (10.0, 60.0),
+    ("t02", "robot-1"): (8.0, 31.0),
+    ("t02", "robot-2"): (3.0, 40.0),  # the lowest marginal: MiniSum's winner
+}
+ROBOTS = {"robot-0", "robot-1", "robot-2"}
+
+
+@pytest.mark.parametrize(
+    ("objective", "lot", "robot"), [("minimax", "t01", "robot-1"), ("minisum", "t02", "robot-2")]
+)
+def test_the_best_bid_by_the_objective_wins_and_is_reported(
+    objective: str, lot: str, robot: str
+) -> None:
+    m = Bidders(PRICES, objective)
+    sale = m.sell(["t01", "t02"], ROBOTS)
+    assert sale is not None and m.sales == [sale]
+    assert (sale.best.task, sale.best.robot) == (lot, robot)
+    assert (sale.best.marginal_s, sale.best.total_s) == PRICES[(lot, robot)]
+    assert sale.lot.id == lot and sale.round == 1
+    assert len(sale.bids) == len(PRICES)
+    # every lot was called once, on its own key, as control traffic, in round 1
+    assert sorted((key, c.task, c.round, control) for key, c, control in m.calls) == [
+        (KEYS.task("t01"), "t01", 1, True),
+        (KEYS.task("t02"), "t02", 1, True),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("objective", "prices", "winner"),
+    [
+        # equal totals: the lower marginal wins
+        ("minimax", {("t01", "robot-0"): (9.0, 30.0), ("t01", "robot-1"): (7.0, 30.0)}, "robot-1"),
+        # equal totals and marginals: the lower robot id
+        ("minimax", {("t01", "robot-1"): (7.0, 30.0), ("t01", "robot-0"): (7.0, 30.0)}, "robot-0"),
+        # equal marginals under MiniSum: the lower robot id, whatever the totals
+        ("minisum", {("t01", "robot-1"): (7.0, 10.0), ("t01", "robot-0"): (7.0, 90.0)}, "robot-0"),
+    ],
+)
+def test_ties_are_broken_by_marginal_then_robot_id(
+    objective: str, prices: Prices, winner: str
+) -> None:
+    sale = Bidders(prices, objective).sell(["t01"], {"robot-0", "robot-1"})
+    assert sale is not None and sale.best.robot == winner
+
+
+def test_equal_bids_of_one_robot_go_to_the_lower_task_id() -> None:
+    prices = {("t02", "robot-0"): (7.0, 30.0), ("t01", "robot-0"): (7.0, 30.0)}
+    sale = Bidders(prices).sell(["t02", "t01"], {"robot-0"})
+    assert sale is not None and sale.best.task == "t01"
+
+
+def test_a_robot_that_left_the_market_during_the_round_does_not_win() -> None:
+    m = Bidders(PRICES)
+    sale = m.sell(["t01", "t02"], ROBOTS, market={"robot-0", "robot-2"})
+    assert sale is not None and (sale.best.task, sale.best.robot) == ("t01", "robot-2")
+    assert {b.robot for b in sale.bids} == {"robot-0", "robot-2"}
+    assert m.sell(["t01", "t02"], ROBOTS, market=set()) is None
+    assert m.sales == [sale]
+
+
+def test_each_kind_of_bad_bid_is_counted_and_ignored() -> None:
+    def bad(msg: TaskCall) -> None:
+        """Bad bids arriving while the round is open, after robot-0's good one."""
+        bids: list[tuple[str, Bid]] = [
+            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-0")),  # sent under another's key
+            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1", marginal=math.nan)),
+            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1", total=-1.0)),
+            (KEYS.bid("t02", "robot-1"), _bid("t01", "robot-1")),  # key names another lot
+            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1", round_=msg.round - 1)),
+            (KEYS.bid("t09", "robot-1"), _bid("t09", "robot-1")),  # a lot not called
+            (KEYS.bid("t01", "robot-9"), _bid("t01", "robot-9", marginal=0.0, total=0.0)),
+            (KEYS.bid("t01", "robot-0"), _bid("t01", "robot-0", marginal=0.0, total=0.0)),
+        ]
+        for key, bid in bids:
+            m.auctioneer.on_bid(key, bid)
+
+    good = (4.0, 40.0)
+    m = Bidders({("t01", "robot-0"): good}, timeout_s=0.2, also=bad)
+    a = m.auctioneer
+    a.on_bid(KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1"))  # no round open
+    sale = m.sell(["t01"], {"robot-0", "robot-1"})
+    a.on_bid(KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1"))  # the round has closed
+    assert a.rejected() == {"malformed": 4, "late": 4, "not in the market": 1, "duplicate": 1}
+    # the first bid of robot-0 stands, and robot-1's silence did not stop the round's sale
+    assert sale is not None and sale.best.robot == "robot-0"
+    assert (sale.best.marginal_s, sale.best.total_s) == good
+    assert len(sale.bids) == 1
+
+
+def test_a_round_waits_for_a_silent_bidder_only_until_the_bid_timeout() -> None:
+    m = Bidders({("t01", "robot-0"): (4.0, 40.0)}, timeout_s=0.3)
+    t0 = time.monotonic()
+    assert m.sell(["t01"], {"robot-0"}) is not None
+    assert time.monotonic() - t0 < 0.25  # every bidder bid: no wait
+    t0 = time.monotonic()
+    sale = m.sell(["t01"], {"robot-0", "robot-1"})
+    assert time.monotonic() - t0 >= 0.3
+    assert sale is not None and sale.round == 2
+
+
+def test_a_resumed_auctioneer_numbers_on_and_keeps_its_counts() -> None:
+    params = CoordinatorParams(bid_timeout_s=0.05)
+    a = Auctioneer(KEYS, lambda *_: None, params, lambda _: None, None, 41, {"late": 3})
+    a.on_bid(KEYS.bid("t01", "robot-0"), _bid("t01", "robot-0"))
+    assert a.call(0.0, {"t01": _lot("t01")}, frozenset({"robot-0"})).number == 42
+    assert a.rejected() == {"late": 4}
