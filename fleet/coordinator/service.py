@@ -26,7 +26,6 @@ boundary for all).
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 
@@ -34,18 +33,16 @@ import numpy as np
 
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer, Sale
-from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, GivenUpWaypoints, Job, TaskRecord
+from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, GivenUpWaypoints, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
-from fleet.coordinator.transits import PlannedTransit, TransitPlanner
+from fleet.coordinator.transits import TransitPlanner
 from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
 from fleet.plan_chain import (
-    chain_length,
-    chain_of,
     chain_pieces,
-    cut_plan,
     driven_ends,
     piece_count,
 )
@@ -95,18 +92,13 @@ class Coordinator:
         self.journal = Journal(
             self.job, store, self.keys, bus.publish, float(meta.get("clock", 0.0))
         )
-        self.plans: dict[str, Plan] = {}
-        self.transits = transits
-        # robot -> (plan id, planned sim time of reaching each transit waypoint)
-        self.schedules: dict[str, tuple[int, np.ndarray]] = {}
-        # robot -> (plan id, waypoint it heads for), from its status
-        self.progress_of: dict[str, tuple[int, int]] = {}
-        self.last_transit_round = -math.inf
+        self.dispatcher = Dispatcher(
+            self.journal, planner, transits, params, self.keys, bus.publish
+        )
         self.sent: dict[str, tuple[str, ...]] = {}
         self.renumbered: set[str] = set()  # robots whose queue goes out again under a new number
         self.last_award_sent: dict[str, float] = {}
         self.phase = "gathering"
-        self.plan_seq = 0
         self.given_up = GivenUpWaypoints()
         self.need_auction = False
         self.lost_at: dict[str, float] = {}
@@ -148,8 +140,7 @@ class Coordinator:
         return store.meta() if self.job.tasks else None
 
     def _resume(self, store: JobStore, meta: dict[str, object]) -> None:
-        self.plans = store.plans()
-        self.plan_seq = int(meta.get("plan_seq", 0))
+        self.dispatcher.resume(store.plans(), int(meta.get("plan_seq", 0)))
         self.phase = str(meta.get("phase", "cleaning"))
         self.given_up = GivenUpWaypoints.from_json(meta.get("given_up_waypoints"))
         now = time.time()
@@ -210,10 +201,10 @@ class Coordinator:
         with self.lock:
             r = self.job.robot(rid)
             r.state, r.task, r.progress = msg.state, msg.task, msg.progress
-            self.progress_of[rid] = (msg.plan_id, msg.waypoint)
+            self.dispatcher.heard(rid, msg.plan_id, msg.waypoint)
             if msg.plan_id >= 0 and self.given_up.report(rid, msg.plan_id, msg.skipped):
                 log.warning("%s has given up %d waypoint(s)", rid, self.given_up.by_robot[rid])
-            plan = self.plans.get(rid)
+            plan = self.dispatcher.plans.get(rid)
             if plan is None or msg.plan_id != plan.plan_id or r.liveness == LOST:
                 return
             if len(msg.swept) != piece_count(len(plan.waypoints), plan.sweep_from):
@@ -262,9 +253,8 @@ class Coordinator:
 
     def _on_plan_query(self, req: Request) -> Plan:
         with self.lock:
-            plan = self.plans.get(req.sender)
-            current = self.job.current(req.sender)
-        if plan is None or current is None or current.task.id not in chain_of(plan):
+            plan = self.dispatcher.current(req.sender)
+        if plan is None:
             raise LookupError(f"no plan for {req.sender} now")
         return plan
 
@@ -281,8 +271,7 @@ class Coordinator:
             self.journal.event("reopened", rid, tid, "remainder" if tid in made else "unstarted")
         changed = [r.task.id for r in self.job.tasks.values() if r.owner is None]
         self.journal.save_tasks(*changed)
-        self.plans.pop(rid, None)
-        self.schedules.pop(rid, None)
+        self.dispatcher.forget(rid)
         self._publish_awards()
         self.need_auction = True
         self.wake.set()
@@ -298,13 +287,7 @@ class Coordinator:
         for tid in withdrawn:
             self.journal.event("withdrawn", "", tid, "back to the market")
         self.journal.save_tasks(*withdrawn)
-        for rid, plan in list(self.plans.items()):
-            chain = chain_of(plan)
-            cut = next((j for j, t in enumerate(chain) if t in withdrawn), None)
-            if cut is not None and cut > 0:
-                self.plans[rid] = plan = cut_plan(plan, cut)
-                self.journal.save_plan(rid, plan)
-                self.bus.publish(self.keys.plan(rid), plan, control=True)
+        self.dispatcher.cut(withdrawn)
         self._publish_awards()
         self.need_auction = True
         self.wake.set()
@@ -432,153 +415,6 @@ class Coordinator:
         self.journal.set_meta(round_seq=sale.round)
         self._publish_awards()
 
-    def _dispatch(self) -> None:
-        """Send a plan to every robot whose current task has none yet (once it has the award).
-        With deconfliction, the transits of those robots and of the robots still in transit
-        are planned together in space and time (:mod:`fleet.coordinator.transits`), and so are
-        the transits of a round in which a robot fell ``replan_lag_s`` behind."""
-        fresh: dict[str, list[TaskRecord]] = {}
-        for rid, r in self.job.robots.items():
-            if r.liveness == LOST or r.xy is None:
-                continue
-            queue = self.job.queue(rid)
-            plan = self.plans.get(rid)
-            if not queue or r.acked_seq < r.award_seq:
-                continue
-            if plan is not None and queue[0].task.id in chain_of(plan):
-                continue
-            fresh[rid] = queue[: chain_length([(rec.task, rec.reverse) for rec in queue])]
-        if self.transits is None:
-            for rid, chain in fresh.items():
-                self._send_plan(rid, chain, None, {})
-            return
-        # without new plans a round is due only on a lag, looked at once per replan_lag_s
-        if not fresh and self.journal.clock - self.last_transit_round < self.params.replan_lag_s:
-            return
-        in_transit = self._in_transit()
-        if not fresh and not self._lagging(in_transit):
-            return
-        moving = {**in_transit, **fresh}
-        transits = self._plan_transits(moving)
-        ids = {rid: self.plan_seq + 1 + i for i, rid in enumerate(sorted(moving))}
-        for rid in sorted(moving):
-            if rid in fresh or rid in transits:
-                self._send_plan(rid, moving[rid], transits.get(rid), ids)
-
-    def _in_transit(self) -> dict[str, list[TaskRecord]]:
-        """The robots driving a planned transit, with their chains: by their last status, or
-        sent one so recently that no status of it has come yet."""
-        out = {}
-        for rid, (plan_id, _arrivals) in self.schedules.items():
-            plan, r = self.plans.get(rid), self.job.robots[rid]
-            if plan is None or plan.plan_id != plan_id or r.liveness == LOST:
-                continue
-            at = self.progress_of.get(rid)
-            if at is None or at[0] != plan_id or at[1] < plan.sweep_from:
-                chain = [self.job.tasks[t] for t in chain_of(plan)]
-                if all(rec.state == ASSIGNED and rec.owner == rid for rec in chain):
-                    out[rid] = chain
-        return out
-
-    def _lagging(self, in_transit: dict[str, list[TaskRecord]]) -> bool:
-        """Whether one robot in transit has fallen ``replan_lag_s`` further behind its schedule
-        than another. Robots that are all late alike keep their plans: the order of passage
-        holds whatever the delays, and only a robot that makes the others wait for it costs
-        time."""
-        lag_s = self.params.replan_lag_s
-        lags = {}
-        for rid in in_transit:
-            plan_id, arrivals = self.schedules[rid]
-            at = self.progress_of.get(rid)
-            if at is not None and at[0] == plan_id and 0 < at[1] < len(arrivals):
-                lags[rid] = self.journal.clock - arrivals[at[1]]
-        if len(lags) < 2 or max(lags.values()) - min(lags.values()) <= lag_s:
-            return False
-        late = max(lags, key=lags.__getitem__)
-        self.journal.event(
-            "behind", late, "", f"{lags[late] - min(lags.values()):.1f} s behind the others"
-        )
-        return True
-
-    def _plan_transits(self, moving: dict[str, list[TaskRecord]]) -> dict[str, PlannedTransit]:
-        """One round of transits: ``moving`` robots to the start of their chains, around the
-        robots that stand (no work, or lost); {} (local transits) if the round fails."""
-        assert self.transits is not None
-        self.last_transit_round = self.journal.clock
-        parked = {
-            rid: r.xy
-            for rid, r in self.job.robots.items()
-            if r.xy is not None
-            and rid not in moving
-            and (r.liveness == LOST or (r.ready and self.job.current(rid) is None))
-        }
-        goals = {
-            rid: _xy(driven_ends(chain[0].task, chain[0].reverse)[0])
-            for rid, chain in moving.items()
-        }
-        froms = {rid: self.job.robots[rid].xy for rid in moving}
-        t0 = time.perf_counter()
-        plan, transits = self.transits.plan(
-            self.journal.clock, {rid: (froms[rid], goals[rid]) for rid in moving}, parked
-        )
-        ms = 1e3 * (time.perf_counter() - t0)
-        if plan.status == "unreachable":
-            for rid in plan.unreachable:
-                task = moving[rid][0].task.id if rid in moving else ""
-                self.journal.event("unreachable", rid, task, plan.message)
-            log.warning("transits not planned: %s; local transits instead", plan.message)
-        elif plan.status != "success":
-            self.journal.event(
-                "transits", "", "", f"failed: {plan.message}; local transits instead"
-            )
-            log.warning("transits not planned: %s; local transits instead", plan.message)
-        else:
-            self.journal.event(
-                "transits",
-                "",
-                "",
-                f"{len(moving)} robots by {plan.method} in {ms:.0f} ms, {len(parked)} standing",
-            )
-        return transits
-
-    def _send_plan(
-        self,
-        rid: str,
-        chain: list[TaskRecord],
-        transit: PlannedTransit | None,
-        ids: dict[str, int],
-    ) -> None:
-        """Plan ``rid``'s drive through ``chain`` (by ``transit`` if planned in space and
-        time, its waits naming the peers' new plans by ``ids``) and send it."""
-        r = self.job.robots[rid]
-        assert r.xy is not None
-        pairs = [(rec.task, rec.reverse) for rec in chain]
-        points = transit.waypoints if transit is not None else None
-        waypoints, starts = self.planner.drive(r.xy, pairs, points)
-        self.plan_seq = max(self.plan_seq + 1, ids.get(rid, 0))
-        waits = transit.waits if transit is not None else ()
-        plan = Plan(
-            self.journal.clock,
-            self.plan_seq,
-            chain[0].task.id,
-            waypoints,
-            starts[0],
-            [rec.task.id for rec in chain],
-            np.array(starts, dtype=np.int32),
-            np.array([w[0] for w in waits], dtype=np.int32),
-            [w[1] for w in waits],
-            np.array([ids[w[1]] for w in waits], dtype=np.int32),
-            np.array([w[2] for w in waits], dtype=np.int32),
-        )
-        self.plans[rid] = plan
-        if transit is not None:
-            self.schedules[rid] = (plan.plan_id, transit.arrivals_s)
-        else:
-            self.schedules.pop(rid, None)
-        self.journal.save_plan(rid, plan)
-        self.journal.set_meta(plan_seq=self.plan_seq)
-        self.bus.publish(self.keys.plan(rid), plan, control=True)
-
     def _check_heartbeats(self) -> None:
         now = time.time()
         for rid, r in list(self.job.robots.items()):
@@ -624,7 +460,7 @@ class Coordinator:
             with self.lock:
                 if self.phase != "gathering":
                     self._publish_awards()
-                    self._dispatch()
+                    self.dispatcher.dispatch()
                     if self.job.finished and self.phase != "done":
                         self.phase = "done"
                         log.info(self.given_up.finished_message())
@@ -670,10 +506,6 @@ class Coordinator:
             counts["done"],
         )
         self.bus.publish(self.keys.coord_state(), state, control=True)
-
-
-def _xy(point: np.ndarray) -> tuple[float, float]:
-    return float(point[0]), float(point[1])
 
 
 def _tour_key(task_id: str) -> tuple[int, ...]:

@@ -1,0 +1,255 @@
+"""The dispatcher: each robot's plan, and the transits between tasks.
+
+A robot gets a plan once it has acknowledged the award of its current task: the transit from
+its reported pose to that task, then the task's sweep and those of the queued tasks that follow
+on without a transit (:mod:`fleet.plan_chain`), as one plan on ``coord/plan/<robot>``
+(:meth:`fleet.coordinator.planning.TaskPlanner.drive`), so a robot drives its region without
+stopping. When tasks are withdrawn from a queue, the plan that chains them is cut short under
+the same id. A robot that is lost loses its plan.
+
+Transits in space and time (``coordinator.deconfliction`` ``prioritized`` or ``cbs``,
+:mod:`fleet.coordinator.transits`): whenever plans go out, the transits of the robots getting
+them and of those still in transit are planned together, around the robots that stand (no work,
+or lost: their bodies stay). Each such plan keeps its schedule (the planned sim time of reaching
+each transit waypoint), and as the robots report their progress a round is planned again when
+one falls ``replan_lag_s`` further behind its schedule than another. A round that cannot be
+planned falls back to local transits (A* on the floor plan).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from fleet.coordinator.job import ASSIGNED, LOST, TaskRecord
+from fleet.coordinator.journal import Journal, Publish
+from fleet.coordinator.planning import TaskPlanner
+from fleet.coordinator.transits import PlannedTransit, TransitPlanner
+from fleet.params import CoordinatorParams
+from fleet.plan_chain import chain_length, chain_of, cut_plan, driven_ends
+from fleet.protocol import Keys, Plan
+
+log = logging.getLogger("coordinator")
+
+
+class Dispatcher:
+    """The plans sent, their schedules, and the robots' progress along them."""
+
+    def __init__(
+        self,
+        journal: Journal,
+        planner: TaskPlanner,
+        transits: TransitPlanner | None,
+        params: CoordinatorParams,
+        keys: Keys,
+        publish: Publish,
+    ) -> None:
+        """``transits`` None: local transits only."""
+        self.journal = journal
+        self.job = journal.job
+        self.planner = planner
+        self.transits = transits
+        self.params = params
+        self.keys = keys
+        self.publish = publish
+        self.plans: dict[str, Plan] = {}
+        self.plan_seq = 0
+        # robot -> (plan id, planned sim time of reaching each transit waypoint)
+        self.schedules: dict[str, tuple[int, np.ndarray]] = {}
+        # robot -> (plan id, waypoint it heads for), from its status
+        self.progress_of: dict[str, tuple[int, int]] = {}
+        self.last_transit_round = -math.inf
+
+    def resume(self, plans: dict[str, Plan], plan_seq: int) -> None:
+        """Serve the plans a restarted coordinator's store holds, and number on from there."""
+        self.plans = plans
+        self.plan_seq = plan_seq
+
+    def heard(self, rid: str, plan_id: int, waypoint: int) -> None:
+        """``rid`` reports it drives plan ``plan_id``, heading for ``waypoint``."""
+        self.progress_of[rid] = (plan_id, waypoint)
+
+    def current(self, rid: str) -> Plan | None:
+        """The plan ``rid`` should drive now: its last one, if that drives its current task."""
+        plan = self.plans.get(rid)
+        current = self.job.current(rid)
+        if plan is None or current is None or current.task.id not in chain_of(plan):
+            return None
+        return plan
+
+    def forget(self, rid: str) -> None:
+        """``rid`` is lost: it drives no plan."""
+        self.plans.pop(rid, None)
+        self.schedules.pop(rid, None)
+
+    def cut(self, withdrawn: list[str]) -> None:
+        """Cut each plan before the first of its tasks in ``withdrawn``, under the same plan id,
+        so its robot drives on to there without a stop (a plan whose first task is withdrawn
+        stays as it is: a robot keeps the task it drives)."""
+        for rid, plan in list(self.plans.items()):
+            chain = chain_of(plan)
+            cut = next((j for j, t in enumerate(chain) if t in withdrawn), None)
+            if cut is not None and cut > 0:
+                self.plans[rid] = plan = cut_plan(plan, cut)
+                self.journal.save_plan(rid, plan)
+                self.publish(self.keys.plan(rid), plan, True)
+
+    def dispatch(self) -> None:
+        """Send a plan to every robot whose current task has none yet (once it has the award).
+        With deconfliction, the transits of those robots and of the robots still in transit
+        are planned together in space and time (:mod:`fleet.coordinator.transits`), and so are
+        the transits of a round in which a robot fell ``replan_lag_s`` behind."""
+        fresh = self._unplanned()
+        if self.transits is None:
+            for rid, chain in fresh.items():
+                self._send_plan(rid, chain, None, {})
+            return
+        # without new plans a round is due only on a lag, looked at once per replan_lag_s
+        if not fresh and self.journal.clock - self.last_transit_round < self.params.replan_lag_s:
+            return
+        in_transit = self._in_transit()
+        if not fresh and not self._lagging(in_transit):
+            return
+        moving = {**in_transit, **fresh}
+        transits = self._plan_transits(moving)
+        ids = {rid: self.plan_seq + 1 + i for i, rid in enumerate(sorted(moving))}
+        for rid in sorted(moving):
+            if rid in fresh or rid in transits:
+                self._send_plan(rid, moving[rid], transits.get(rid), ids)
+
+    def _unplanned(self) -> dict[str, list[TaskRecord]]:
+        """The robots whose current task no plan drives yet, once they have acknowledged its
+        award, each with the run of its queue one plan chains."""
+        out = {}
+        for rid, r in self.job.robots.items():
+            if r.liveness == LOST or r.xy is None:
+                continue
+            queue = self.job.queue(rid)
+            plan = self.plans.get(rid)
+            if not queue or r.acked_seq < r.award_seq:
+                continue
+            if plan is not None and queue[0].task.id in chain_of(plan):
+                continue
+            out[rid] = queue[: chain_length([(rec.task, rec.reverse) for rec in queue])]
+        return out
+
+    def _in_transit(self) -> dict[str, list[TaskRecord]]:
+        """The robots driving a planned transit, with their chains: by their last status, or
+        sent one so recently that no status of it has come yet."""
+        out = {}
+        for rid, (plan_id, _arrivals) in self.schedules.items():
+            plan, r = self.plans.get(rid), self.job.robots[rid]
+            if plan is None or plan.plan_id != plan_id or r.liveness == LOST:
+                continue
+            at = self.progress_of.get(rid)
+            if at is None or at[0] != plan_id or at[1] < plan.sweep_from:
+                chain = [self.job.tasks[t] for t in chain_of(plan)]
+                if all(rec.state == ASSIGNED and rec.owner == rid for rec in chain):
+                    out[rid] = chain
+        return out
+
+    def _lagging(self, in_transit: dict[str, list[TaskRecord]]) -> bool:
+        """Whether one robot in transit has fallen ``replan_lag_s`` further behind its schedule
+        than another. Robots that are all late alike keep their plans: the order of passage
+        holds whatever the delays, and only a robot that makes the others wait for it costs
+        time."""
+        lag_s = self.params.replan_lag_s
+        lags = {}
+        for rid in in_transit:
+            plan_id, arrivals = self.schedules[rid]
+            at = self.progress_of.get(rid)
+            if at is not None and at[0] == plan_id and 0 < at[1] < len(arrivals):
+                lags[rid] = self.journal.clock - arrivals[at[1]]
+        if len(lags) < 2 or max(lags.values()) - min(lags.values()) <= lag_s:
+            return False
+        late = max(lags, key=lags.__getitem__)
+        self.journal.event(
+            "behind", late, "", f"{lags[late] - min(lags.values()):.1f} s behind the others"
+        )
+        return True
+
+    def _plan_transits(self, moving: dict[str, list[TaskRecord]]) -> dict[str, PlannedTransit]:
+        """One round of transits: ``moving`` robots to the start of their chains, around the
+        robots that stand (no work, or lost); {} (local transits) if the round fails."""
+        assert self.transits is not None
+        self.last_transit_round = self.journal.clock
+        parked = {
+            rid: r.xy
+            for rid, r in self.job.robots.items()
+            if r.xy is not None
+            and rid not in moving
+            and (r.liveness == LOST or (r.ready and self.job.current(rid) is None))
+        }
+        goals = {
+            rid: _xy(driven_ends(chain[0].task, chain[0].reverse)[0])
+            for rid, chain in moving.items()
+        }
+        froms = {rid: self.job.robots[rid].xy for rid in moving}
+        t0 = time.perf_counter()
+        plan, transits = self.transits.plan(
+            self.journal.clock, {rid: (froms[rid], goals[rid]) for rid in moving}, parked
+        )
+        ms = 1e3 * (time.perf_counter() - t0)
+        if plan.status == "unreachable":
+            for rid in plan.unreachable:
+                task = moving[rid][0].task.id if rid in moving else ""
+                self.journal.event("unreachable", rid, task, plan.message)
+            log.warning("transits not planned: %s; local transits instead", plan.message)
+        elif plan.status != "success":
+            self.journal.event(
+                "transits", "", "", f"failed: {plan.message}; local transits instead"
+            )
+            log.warning("transits not planned: %s; local transits instead", plan.message)
+        else:
+            self.journal.event(
+                "transits",
+                "",
+                "",
+                f"{len(moving)} robots by {plan.method} in {ms:.0f} ms, {len(parked)} standing",
+            )
+        return transits
+
+    def _send_plan(
+        self,
+        rid: str,
+        chain: list[TaskRecord],
+        transit: PlannedTransit | None,
+        ids: dict[str, int],
+    ) -> None:
+        """Plan ``rid``'s drive through ``chain`` (by ``transit`` if planned in space and
+        time, its waits naming the peers' new plans by ``ids``) and send it."""
+        r = self.job.robots[rid]
+        assert r.xy is not None
+        pairs = [(rec.task, rec.reverse) for rec in chain]
+        points = transit.waypoints if transit is not None else None
+        waypoints, starts = self.planner.drive(r.xy, pairs, points)
+        self.plan_seq = max(self.plan_seq + 1, ids.get(rid, 0))
+        waits = transit.waits if transit is not None else ()
+        plan = Plan(
+            self.journal.clock,
+            self.plan_seq,
+            chain[0].task.id,
+            waypoints,
+            starts[0],
+            [rec.task.id for rec in chain],
+            np.array(starts, dtype=np.int32),
+            np.array([w[0] for w in waits], dtype=np.int32),
+            [w[1] for w in waits],
+            np.array([ids[w[1]] for w in waits], dtype=np.int32),
+            np.array([w[2] for w in waits], dtype=np.int32),
+        )
+        self.plans[rid] = plan
+        if transit is not None:
+            self.schedules[rid] = (plan.plan_id, transit.arrivals_s)
+        else:
+            self.schedules.pop(rid, None)
+        self.journal.save_plan(rid, plan)
+        self.journal.set_meta(plan_seq=self.plan_seq)
+        self.publish(self.keys.plan(rid), plan, True)
+
+
+def _xy(point: np.ndarray) -> tuple[float, float]:
+    return float(point[0]), float(point[1])
