@@ -29,10 +29,9 @@ import logging
 import threading
 import time
 
-import numpy as np
-
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer, Sale
+from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, GivenUpWaypoints, Job
 from fleet.coordinator.journal import Journal
@@ -43,11 +42,9 @@ from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
 from fleet.plan_chain import (
     chain_pieces,
-    driven_ends,
     piece_count,
 )
 from fleet.protocol import (
-    Award,
     AwardAck,
     Bid,
     FleetState,
@@ -95,9 +92,7 @@ class Coordinator:
         self.dispatcher = Dispatcher(
             self.journal, planner, transits, params, self.keys, bus.publish
         )
-        self.sent: dict[str, tuple[str, ...]] = {}
-        self.renumbered: set[str] = set()  # robots whose queue goes out again under a new number
-        self.last_award_sent: dict[str, float] = {}
+        self.awards = Awards(self.journal, self.keys, bus.publish)
         self.phase = "gathering"
         self.given_up = GivenUpWaypoints()
         self.need_auction = False
@@ -144,12 +139,12 @@ class Coordinator:
         self.phase = str(meta.get("phase", "cleaning"))
         self.given_up = GivenUpWaypoints.from_json(meta.get("given_up_waypoints"))
         now = time.time()
-        for rid, r in self.job.robots.items():
+        for r in self.job.robots.values():
             # robots are heard from again within a heartbeat; until then none counts as silent,
             # and those in the market stay there (their first heartbeat is no news to rebalance)
             r.heartbeat_wall = now
             r.ready = r.liveness != LOST
-            self.sent[rid] = tuple(t.task.id for t in self.job.queue(rid))
+        self.awards.resume()
         self.need_auction = bool(self.job.open_tasks())
         log.info(
             "resumed the job from %s: %s, phase %s",
@@ -232,24 +227,8 @@ class Coordinator:
     def _on_ack(self, key: str, msg: AwardAck) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            r = self.job.robots.get(rid)
-            if r is None or msg.robot != rid:
-                return
-            if msg.seq <= r.award_seq:
-                r.acked_seq = max(r.acked_seq, msg.seq)
-            else:
-                # the agent took an award numbered past ours (ours were lost in a restart):
-                # number on from its and send the queue again
-                log.warning(
-                    "%s acknowledged award %d, past our %d; sending its queue again as %d",
-                    rid,
-                    msg.seq,
-                    r.award_seq,
-                    msg.seq + 1,
-                )
-                r.award_seq = msg.seq
-                self.renumbered.add(rid)
-            self.wake.set()
+            if self.awards.acked(rid, msg):
+                self.wake.set()
 
     def _on_plan_query(self, req: Request) -> Plan:
         with self.lock:
@@ -272,7 +251,7 @@ class Coordinator:
         changed = [r.task.id for r in self.job.tasks.values() if r.owner is None]
         self.journal.save_tasks(*changed)
         self.dispatcher.forget(rid)
-        self._publish_awards()
+        self.awards.send()
         self.need_auction = True
         self.wake.set()
 
@@ -288,39 +267,9 @@ class Coordinator:
             self.journal.event("withdrawn", "", tid, "back to the market")
         self.journal.save_tasks(*withdrawn)
         self.dispatcher.cut(withdrawn)
-        self._publish_awards()
+        self.awards.send()
         self.need_auction = True
         self.wake.set()
-
-    def _publish_awards(self) -> None:
-        """Send each robot its queue when it changed (or is unacknowledged and due again)."""
-        now = time.monotonic()
-        for rid, r in self.job.robots.items():
-            queue = self.job.queue(rid)
-            ids = tuple(t.task.id for t in queue)
-            changed = ids != self.sent.get(rid, ()) or rid in self.renumbered
-            self.renumbered.discard(rid)
-            due = r.acked_seq < r.award_seq and now - self.last_award_sent.get(rid, 0) > RESEND_S
-            if not (changed or due):
-                continue
-            if changed:
-                r.award_seq += 1
-                self.sent[rid] = ids
-                # a restarted coordinator must number on from here: an agent ignores an
-                # award numbered at or below one it has taken
-                self.journal.save_robots([r])
-            ends = [driven_ends(t.task, t.reverse) for t in queue]
-            msg = Award(
-                self.journal.clock,
-                r.award_seq,
-                rid,
-                list(ids),
-                np.array([e for e, _ in ends], dtype=float).reshape(-1, 2),
-                np.array([x for _, x in ends], dtype=float).reshape(-1, 2),
-                np.array([t.task.time_s for t in queue], dtype=float),
-            )
-            self.last_award_sent[rid] = now
-            self.bus.publish(self.keys.award(rid), msg, control=True)
 
     # ---- the market ---------------------------------------------------------------------
 
@@ -413,7 +362,7 @@ class Coordinator:
             ]
         )
         self.journal.set_meta(round_seq=sale.round)
-        self._publish_awards()
+        self.awards.send()
 
     def _check_heartbeats(self) -> None:
         now = time.time()
@@ -459,7 +408,7 @@ class Coordinator:
                 self._auction()
             with self.lock:
                 if self.phase != "gathering":
-                    self._publish_awards()
+                    self.awards.send()
                     self.dispatcher.dispatch()
                     if self.job.finished and self.phase != "done":
                         self.phase = "done"

@@ -64,8 +64,8 @@ def test_award_numbers_survive_a_restart_and_an_agent_ahead_is_caught_up(
 
         def send_again() -> bool:
             """Send the queue under a new number until one has crossed the router."""
-            coord.sent.pop("robot-0", None)
-            coord._publish_awards()
+            coord.awards.sent.pop("robot-0", None)
+            coord.awards.send()
             return bool(awards)
 
         assert wait_until(send_again), "no award crossed the router"
@@ -85,7 +85,7 @@ def test_award_numbers_survive_a_restart_and_an_agent_ahead_is_caught_up(
         with lock:
             awards.clear()
         restarted._on_ack(cbus.keys.ack("robot-0"), AwardAck(0.0, 41, "robot-0"))
-        restarted._publish_awards()
+        restarted.awards.send()
         assert wait_until(lambda: any(a.seq > 41 for a in awards)), [a.seq for a in awards]
         newest = max(awards, key=lambda a: a.seq)
         assert newest.tasks == ["t00"]
