@@ -1,0 +1,236 @@
+"""The market's side of the job: what goes on sale, and what a sale, a swept task, a lost robot
+or an idle one changes.
+
+Sequential single-item auctions (Koenig et al. 2006, :mod:`fleet.coordinator.auctioneer`): the
+auction runs rounds until nothing is open or no robot bids, one lot sold per round. Runs of the
+tour are sold as regions, one per robot in the market (``planners.auction.regions``): all tasks
+in the first allocation, and the work a lost robot leaves; everything else task by task. The
+winner's whole queue goes out as its award (:mod:`fleet.coordinator.awards`). The first
+allocation's makespan (the longest of the winners' committed times) is the job's estimate.
+
+A task is done when its pieces are swept; a plan that ends with pieces of a tour task unswept
+(waypoints given up) gives them back to the market once, as a remainder (``Job.give_back``).
+
+Recovery: a lost robot's unswept remainder and its unstarted tasks are auctioned again at once,
+as regions. A robot heard from again rejoins with an empty queue and bids afresh; whenever a
+robot in the market runs out of work while others hold unstarted tasks, the back half of each
+queue is withdrawn and auctioned again (a task boundary for all).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+from fleet.coordinator.auctioneer import Auctioneer, Sale
+from fleet.coordinator.awards import Awards
+from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.job import ASSIGNED, LOST
+from fleet.coordinator.journal import Journal
+from fleet.plan_chain import chain_pieces, piece_count
+from fleet.protocol import Plan, RobotStatus
+from planners import auction
+
+log = logging.getLogger("coordinator")
+
+
+class Market:
+    """The job's changes the market makes; each method but :meth:`auction` is called with
+    ``lock`` held, and :meth:`sell` by the auctioneer, under ``lock`` too."""
+
+    def __init__(
+        self,
+        journal: Journal,
+        awards: Awards,
+        dispatcher: Dispatcher,
+        lock: threading.RLock,
+        wake: threading.Event,
+        stop: threading.Event,
+    ) -> None:
+        """``wake`` is set when the job changed and the main loop should look again; ``stop``
+        ends an auction between rounds."""
+        self.journal = journal
+        self.job = journal.job
+        self.awards = awards
+        self.dispatcher = dispatcher
+        self.lock = lock
+        self.wake = wake
+        self.stop = stop
+        self.need_auction = False
+        self.lost_at: dict[str, float] = {}
+        # tasks to sell as regions in the next auction: a lost robot's run of the tour
+        self.region_sale: list[str] = []
+        # the idle-robot rebalance runs once per change of who works: a robot that wins its
+        # withdrawn tasks back must not be asked again and again
+        self.version = 0
+        self.balanced_version = -1
+
+    # ---- selling --------------------------------------------------------------------------
+
+    def auction(self, auctioneer: Auctioneer) -> None:
+        """Sequential single-item auctions over the bus until nothing is open or no robot bids.
+
+        Runs of the tour are sold as regions, one per robot in the market
+        (``planners.auction.regions``): all tasks in the first allocation, and the work a lost
+        robot leaves; everything else task by task."""
+        t0 = time.monotonic()
+        committed: list[float] = []
+        with self.lock:
+            first = all(r.state == "open" for r in self.job.tasks.values())
+            if first:
+                self.region_sale = list(self.job.tasks)
+            for_sale = sorted(
+                (t for t in self.region_sale if self.job.tasks[t].state == "open"), key=_tour_key
+            )
+            self.region_sale = []
+            bidders = self.job.market()
+            runs = [self.job.tasks[t].task for t in for_sale]
+        regions = auction.regions(runs, len(bidders)) if bidders else ()
+        while not self.stop.is_set():
+            with self.lock:
+                self.need_auction = False
+                lots = self._lots(regions)
+                round_bidders = frozenset(self.job.market())
+            if not lots or not round_bidders:
+                break
+            rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
+            with self.lock:
+                sale = auctioneer.award(rnd, set(self.job.market()))
+            if sale is None:
+                break
+            committed.append(sale.best.total_s)
+        if first and committed:
+            with self.lock:
+                if not self.job.open_tasks():
+                    self._estimate(max(committed))
+        if committed:
+            ms = 1e3 * (time.monotonic() - t0)
+            log.info("auction: %d lots sold in %.0f ms", len(committed), ms)
+            with self.lock:
+                self.journal.event("auction", "", "", f"{len(committed)} lots in {ms:.0f} ms")
+
+    def sell(self, sale: Sale) -> None:
+        """The auctioneer's result: award the lot's tasks to the winner (in the order it drives
+        them), log the round, send the winner its queue."""
+        lot, best = sale.lot, sale.best
+        order = lot.tasks[::-1] if best.reverse else lot.tasks
+        for tid in order:
+            self.job.award(tid, best.robot, best.reverse)
+            lost_at = self.lost_at.pop(tid, None)
+            if lost_at is None:
+                self.journal.event("awarded", best.robot, tid, f"{lot.id}: {best.total_s:.1f} s")
+            else:
+                after = time.monotonic() - lost_at
+                self.journal.event("reassigned", best.robot, tid, f"{after:.3f} s after the loss")
+        self.journal.save_tasks(*order)
+        self.journal.add_bids(
+            [
+                (
+                    sale.round,
+                    b.task,
+                    b.robot,
+                    b.marginal_s,
+                    b.total_s,
+                    int(b.reverse),
+                    int(b.task == best.task and b.robot == best.robot),
+                )
+                for b in sale.bids
+            ]
+        )
+        self.journal.set_meta(round_seq=sale.round)
+        self.awards.send()
+
+    def _lots(self, regions: tuple[auction.Lot, ...]) -> dict[str, auction.Lot]:
+        """What the next round sells: the regions none of whose tasks is sold yet, then every
+        open task on its own."""
+        open_ids = {r.task.id for r in self.job.open_tasks()}
+        unsold = {lot.id: lot for lot in regions if set(lot.tasks) <= open_ids}
+        if unsold:
+            return unsold
+        return {tid: auction.task_lot(self.job.tasks[tid].task) for tid in open_ids}
+
+    def _estimate(self, makespan_s: float) -> None:
+        """The job's makespan as the first allocation prices it: the longest of the winners'
+        committed times (travel from where each stood, and the cleaning time of what it won)."""
+        log.info("the first allocation's makespan estimate: %.1f s", makespan_s)
+        self.journal.event("estimated", "", "", f"makespan {makespan_s:.1f} s")
+        self.journal.set_meta(estimate_s=round(makespan_s, 2))
+
+    # ---- the job's changes ----------------------------------------------------------------
+
+    def swept(self, rid: str, msg: RobotStatus, plan: Plan | None) -> None:
+        """Take the pieces ``rid`` reports swept of ``plan``, the plan it was last sent: a task
+        of its chain all swept is done; one whose plan ended with pieces unswept is done, or
+        given back as a remainder once."""
+        if plan is None or msg.plan_id != plan.plan_id or self.job.robots[rid].liveness == LOST:
+            return
+        if len(msg.swept) != piece_count(len(plan.waypoints), plan.sweep_from):
+            return
+        for tid, (a, b) in chain_pieces(plan):
+            swept = msg.swept[a:b]
+            if self.job.progress(rid, tid, swept):
+                self.journal.save_tasks(tid)
+            rec = self.job.tasks.get(tid)
+            held = rec is not None and rec.state == ASSIGNED and rec.owner == rid
+            if held and (msg.state == "done" or swept.all()):
+                again = None if swept.all() else self.job.give_back(rid, tid)
+                if again is None:
+                    self.job.finish(rid, tid)
+                    self.journal.event("done", rid, tid, "")
+                else:
+                    self.journal.event(
+                        "withdrawn", rid, tid, f"pieces given up: once more as {again}"
+                    )
+                    self.need_auction = True
+                self.version += 1
+                self.journal.save_tasks(*(t for t in (tid, again) if t is not None))
+                self.wake.set()
+
+    def lose(self, rid: str, why: str) -> None:
+        """``rid`` is lost: its unswept remainder and unstarted tasks go on sale at once, as
+        regions; it drives no plan."""
+        reopened, made = self.job.lose(rid)
+        self.version += 1
+        self.journal.event("lost", rid, "", why)
+        now = time.monotonic()
+        self.lost_at.update(dict.fromkeys(reopened, now))
+        self.region_sale += reopened
+        for tid in reopened:
+            self.journal.event("reopened", rid, tid, "remainder" if tid in made else "unstarted")
+        changed = [r.task.id for r in self.job.tasks.values() if r.owner is None]
+        self.journal.save_tasks(*changed)
+        self.dispatcher.forget(rid)
+        self.awards.send()
+        self.need_auction = True
+        self.wake.set()
+
+    def serve_idle(self) -> bool:
+        """When a robot in the market has no work while others hold queued tasks, rebalance
+        (once per change of who works); whether an auction is due for the idle robots."""
+        idle = [rid for rid in self.job.market() if self.job.current(rid) is None]
+        queued = any(len(self.job.queue(rid)) > 1 for rid in self.job.robots)
+        if idle and queued and self.version != self.balanced_version:
+            self.rebalance()
+        return bool(idle and self.job.open_tasks())
+
+    def rebalance(self) -> None:
+        """Withdraw the unstarted tasks for a new auction. A robot keeps the task it drives; its
+        plan is cut before the first task it gave up, under the same plan id, so it drives on
+        to there without a stop. (A robot that has just entered the next task of its plan when
+        the cut arrives stops there; it has swept a piece or two of a task now sold again.)"""
+        self.version += 1
+        self.balanced_version = self.version
+        withdrawn = self.job.withdraw_unstarted()
+        for tid in withdrawn:
+            self.journal.event("withdrawn", "", tid, "back to the market")
+        self.journal.save_tasks(*withdrawn)
+        self.dispatcher.cut(withdrawn)
+        self.awards.send()
+        self.need_auction = True
+        self.wake.set()
+
+
+def _tour_key(task_id: str) -> tuple[int, ...]:
+    """Where a task lies along the tour: "t07" → (7,), its remainder "t07.1" → (7, 1)."""
+    return tuple(int(part) for part in task_id.lstrip("t").split("."))
