@@ -156,14 +156,17 @@ def test_each_kind_of_bad_bid_is_counted_and_ignored() -> None:
 
 
 def test_a_round_waits_for_a_silent_bidder_only_until_the_bid_timeout() -> None:
-    m = Bidders({("t01", "robot-0"): (4.0, 40.0)}, timeout_s=0.3)
+    # every bidder bid: the round closes at once, far short of a minute's timeout (the bound
+    # is loose on purpose: a busy machine must not fail it)
+    m = Bidders({("t01", "robot-0"): (4.0, 40.0)}, timeout_s=60.0)
     t0 = time.monotonic()
     assert m.sell(["t01"], {"robot-0"}) is not None
-    assert time.monotonic() - t0 < 0.25  # every bidder bid: no wait
+    assert time.monotonic() - t0 < 30.0
+    m = Bidders({("t01", "robot-0"): (4.0, 40.0)}, timeout_s=0.3)
     t0 = time.monotonic()
     sale = m.sell(["t01"], {"robot-0", "robot-1"})
     assert time.monotonic() - t0 >= 0.3
-    assert sale is not None and sale.round == 2
+    assert sale is not None and sale.round == 1
 
 
 def test_a_resumed_auctioneer_numbers_on_and_keeps_its_counts() -> None:
