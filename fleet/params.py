@@ -179,11 +179,21 @@ class CoordinatorParams:
     objective: Literal["minimax", "minisum"] = "minimax"
     deconfliction: DeconflictionMode = "local"
     replan_lag_s: float = 10.0
+    body_margin: float = 0.05
+    stall_s: float = 30.0
 
     def validate(self) -> None:
-        for name in ("task_target_s", "heartbeat_timeout_s", "bid_timeout_s", "replan_lag_s"):
+        for name in (
+            "task_target_s",
+            "heartbeat_timeout_s",
+            "bid_timeout_s",
+            "replan_lag_s",
+            "stall_s",
+        ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
+        if self.body_margin < 0:
+            raise ValueError("body_margin must be >= 0")
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from typing import Annotated, Any, ClassVar, TypeVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
@@ -422,9 +422,10 @@ class OpsReply(Message):
 
 @dataclass(frozen=True, eq=False)
 class FleetState(Message):
-    """The coordinator's view of the job: its phase (gathering, auction, cleaning, done), the
-    robots it plans for, those with no work left, those lost, and how many tasks are open
-    (not held by a live robot), assigned and done."""
+    """The coordinator's view of the job: its phase (gathering, auction, cleaning, done, or
+    incomplete: finished with work no robot could reach), the robots it plans for, those with
+    no work left, those lost, and how many tasks are open (not held by a live robot),
+    assigned, done and left out (blocked by a lost robot's body, or unreachable)."""
 
     TYPE: ClassVar[str] = "fleet_state"
     stamp: float
@@ -435,6 +436,7 @@ class FleetState(Message):
     tasks_open: int = 0
     tasks_assigned: int = 0
     tasks_done: int = 0
+    tasks_left_out: int = 0
 
 
 @dataclass(frozen=True, eq=False)

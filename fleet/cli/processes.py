@@ -213,7 +213,7 @@ def coordinator(
 
     from fleet.coordinator.planning import TaskPlanner
     from fleet.coordinator.service import Coordinator
-    from fleet.coordinator.store import JobStore
+    from fleet.coordinator.store import JobStore, StoreError
     from fleet.coordinator.transits import TransitPlanner
 
     if robots < 1:
@@ -228,6 +228,8 @@ def coordinator(
         _fail(str(e))
     try:
         store = JobStore(state) if state is not None else None
+    except StoreError as e:
+        _fail(str(e))
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)

@@ -17,6 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
+import numpy as np
 import typer
 
 from fleet.cli.common import (
@@ -29,6 +30,8 @@ from fleet.cli.common import (
 )
 
 TIMED_OUT_EXIT = 3
+# the job finished, but with work no robot could reach (report.json's left_out)
+INCOMPLETE_EXIT = 4
 # A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
 # answer for the report.
 REPORT_WAIT_S = 30.0
@@ -80,12 +83,17 @@ def up(
     its own process, with a live view; writes report.json, the report pictures (report.png,
     coverage.png and SVGs of both) and the data they are drawn from at the end.
 
+    A job that finishes with work no robot could reach (behind the body of a robot that died
+    in the way, or tried by every robot in vain) ends `incomplete`: the end message and
+    report.json's `left_out` name each piece and its area, report.png marks them, and the
+    exit status is 4. With `--until-done`, a run stopped by `--timeout` exits with 3.
+
     Examples: `fleet up --robots 3` (the home, until Ctrl-C);
     `fleet up --robots 2 --world small --headless --until-done --timeout 300`.
     """
     from fleet.bus import Bus
     from fleet.config import resolve_world
-    from fleet.dashboard.model import BusFeed, FleetWatcher
+    from fleet.dashboard.model import FINISHED_PHASES, BusFeed, FleetWatcher
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
     from fleet.report.figures import render_report
     from fleet.report.summary import (
@@ -192,7 +200,7 @@ def up(
         image = bus.request(
             bus.keys.coverage_image(), Request("up"), CoverageImage, timeout=REPORT_WAIT_S
         )
-        makespan = watcher.makespan() if status == "done" else None
+        makespan = watcher.makespan() if status in FINISHED_PHASES else None
         with watcher.lock:
             skipped = {rid: v.status.skipped for rid, v in watcher.robots.items() if v.status}
             time_use = {rid: time_use_of(v.status) for rid, v in watcher.robots.items() if v.status}
@@ -227,6 +235,18 @@ def up(
             f"{run_dir / 'report.json'}, {run_dir / 'report.png'}",
             err=True,
         )
+        for piece in report.get("left_out") or []:
+            x, y = np.mean(piece["path"], axis=0)
+            why = (
+                f"behind {piece['blocked_by']}'s body"
+                if piece["blocked_by"]
+                else f"tried by {', '.join(piece['tried'])}"
+            )
+            out(
+                f"  not reached: {piece['id']}, {piece['area_m2']:.2f} m² around "
+                f"({x:.1f}, {y:.1f}) ({why})",
+                err=True,
+            )
     except (TimeoutError, RuntimeError, ReportError) as e:
         typer.secho(
             f"error: could not collect the report: {e}; logs in {run_dir}/", fg="red", err=True
@@ -238,6 +258,8 @@ def up(
         launcher.stop_all()
     if status == "timeout" and until_done:
         raise typer.Exit(TIMED_OUT_EXIT)
+    if status == "incomplete":
+        raise typer.Exit(INCOMPLETE_EXIT)
     if status not in ("done", "stopped", "timeout"):
         raise typer.Exit(1 if status != "interrupted" else 130)
 
@@ -372,10 +394,10 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
                     )
             watcher.set_restarts({n: r.restarts for n, r in launcher.records.items()})
             if until_done and watcher.done:
-                return "done"
+                return watcher.phase
             if timeout is not None and wall > timeout:
                 return "timeout"
-        return "done" if watcher.done else "stopped"
+        return watcher.phase if watcher.done else "stopped"
     finally:
         if view is not None:
             view.stop()

@@ -128,10 +128,20 @@ class Auctioneer:
             self._open = None
         return rnd
 
-    def award(self, rnd: Round, market: Collection[str]) -> Sale | None:
-        """The round's best bid among those of robots still in ``market`` wins: the sale, also
-        reported to ``on_sale``; None (and a warning) if no such robot bid."""
-        live = [b for b in rnd.bids.values() if b.robot in market]
+    def award(
+        self,
+        rnd: Round,
+        market: Collection[str],
+        allowed: Callable[[auction.Lot, str], bool] | None = None,
+    ) -> Sale | None:
+        """The round's best bid among those of robots still in ``market`` (and, with
+        ``allowed``, that may win the lot they bid on) wins: the sale, also reported to
+        ``on_sale``; None (and a warning) if no such robot bid."""
+        live = [
+            b
+            for b in rnd.bids.values()
+            if b.robot in market and (allowed is None or allowed(rnd.lots[b.task], b.robot))
+        ]
         best = auction.winner(
             (auction.Bid(b.task, b.robot, b.marginal_s, b.total_s, b.reverse) for b in live),
             self.params.objective,

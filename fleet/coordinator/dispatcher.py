@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -62,6 +63,8 @@ class Dispatcher:
         # robot -> (plan id, waypoint it heads for), from its status
         self.progress_of: dict[str, tuple[int, int]] = {}
         self.last_transit_round = -math.inf
+        # told when no transit takes a robot to its task: (robot, task, why)
+        self.on_unreachable: Callable[[str, str, str], None] = lambda *_: None
 
     def resume(self, plans: dict[str, Plan], plan_seq: int) -> None:
         """Serve the plans a restarted coordinator's store holds, and number on from there."""
@@ -87,12 +90,14 @@ class Dispatcher:
 
     def cut(self, withdrawn: list[str]) -> None:
         """Cut each plan before the first of its tasks in ``withdrawn``, under the same plan id,
-        so its robot drives on to there without a stop (a plan whose first task is withdrawn
-        stays as it is: a robot keeps the task it drives)."""
+        so its robot drives on to there without a stop; a plan whose first task is withdrawn is
+        dropped (its robot stops when its award no longer holds the task)."""
         for rid, plan in list(self.plans.items()):
             chain = chain_of(plan)
             cut = next((j for j, t in enumerate(chain) if t in withdrawn), None)
-            if cut is not None and cut > 0:
+            if cut == 0:
+                self.forget(rid)
+            elif cut is not None:
                 self.plans[rid] = plan = cut_plan(plan, cut)
                 self.journal.save_plan(rid, plan)
                 self.publish(self.keys.plan(rid), plan, True)
@@ -225,7 +230,11 @@ class Dispatcher:
         assert r.xy is not None
         pairs = [(rec.task, rec.reverse) for rec in chain]
         points = transit.waypoints if transit is not None else None
-        waypoints, starts = self.planner.drive(r.xy, pairs, points)
+        try:
+            waypoints, starts = self.planner.drive(r.xy, pairs, points)
+        except ValueError as e:
+            self.on_unreachable(rid, chain[0].task.id, str(e))
+            return
         self.plan_seq = max(self.plan_seq + 1, ids.get(rid, 0))
         waits = transit.waits if transit is not None else ()
         plan = Plan(

@@ -10,7 +10,13 @@ is unit-tested without processes:
   how an idle robot wins work back from busy ones.
 - A lost robot keeps nothing: the unswept remainder of the task it was driving becomes a new
   open task (``t07`` → ``t07.1``), its unstarted tasks open again (``lose``). No task is ever in
-  two queues.
+  two queues. So does a robot that is alive but stuck (``release``).
+- Work no robot can do is never counted done. A task that ends with pieces unswept goes back to
+  the market as its remainder, remembering who tried it (``tried``); once every robot in the
+  market has tried a task, it is ``unreachable``. A task or stretch of one that lies under or
+  behind a lost robot's body is ``blocked`` by that body (``replace``). Both open again when
+  the world changes: a body goes, or a robot joins (``reopen``). The job is finished when no
+  task is open or assigned, and ``incomplete`` when it finished with work left out.
 """
 
 from __future__ import annotations
@@ -20,9 +26,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planners.auction import Task, ahead_of, remainder
+from planners.auction.detour import part_of
 from planners.coverage.params import CoverageParams
 
 OPEN, ASSIGNED, DONE, REPLACED = "open", "assigned", "done", "replaced"
+BLOCKED, UNREACHABLE = "blocked", "unreachable"
+# states of work that is over: done, or left out for good unless the world changes
+SETTLED = (DONE, REPLACED, BLOCKED, UNREACHABLE)
+LEFT_OUT = (BLOCKED, UNREACHABLE)
 ALIVE, LOST, REJOINED = "alive", "lost", "rejoined"
 
 
@@ -35,6 +46,10 @@ class TaskRecord:
     reverse: bool = False
     parent: str | None = None
     swept: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    # robots that drove it and left pieces unswept, or could not get to it
+    tried: frozenset[str] = frozenset()
+    # the lost robot whose body lies in its way (state blocked)
+    blocked_by: str | None = None
 
     def __post_init__(self) -> None:
         if len(self.swept) != self.task.pieces:
@@ -90,7 +105,7 @@ class Job:
         return q[0] if q else None
 
     def counts(self) -> dict[str, int]:
-        out = {OPEN: 0, ASSIGNED: 0, DONE: 0}
+        out = {OPEN: 0, ASSIGNED: 0, DONE: 0, BLOCKED: 0, UNREACHABLE: 0}
         for r in self.tasks.values():
             if r.state in out:
                 out[r.state] += 1
@@ -98,7 +113,16 @@ class Job:
 
     @property
     def finished(self) -> bool:
-        return bool(self.tasks) and all(r.state in (DONE, REPLACED) for r in self.tasks.values())
+        """No task is open or assigned: every one is done, or left out."""
+        return bool(self.tasks) and all(r.state in SETTLED for r in self.tasks.values())
+
+    def left_out(self) -> list[TaskRecord]:
+        """The tasks no robot could do: blocked by a body, or unreachable."""
+        return [r for r in self.tasks.values() if r.state in LEFT_OUT]
+
+    @property
+    def incomplete(self) -> bool:
+        return self.finished and bool(self.left_out())
 
     def market(self) -> list[str]:
         """Robots that may bid: not lost, localized, with a known pose."""
@@ -173,19 +197,120 @@ class Job:
 
     def give_back(self, rid: str, task_id: str) -> str | None:
         """``rid``'s plan ended with pieces of ``task_id`` unswept (waypoints it gave up, often
-        because a peer stood in the way for a while): a task of the tour goes back to the market
-        once, as the remainder of its unswept pieces (as a lost robot's work does), and that
-        remainder's id is returned; a task that is already a remainder is not, and None says the
-        owner is done with it."""
+        because a peer stood in the way for a while, or because no robot of its size gets
+        there): the remainder of its unswept pieces goes back to the market, remembering that
+        ``rid`` tried it, and its id is returned; None when nothing is left unswept."""
         rec = self.tasks.get(task_id)
-        if rec is None or rec.state != ASSIGNED or rec.owner != rid or rec.parent is not None:
+        if rec is None or rec.state != ASSIGNED or rec.owner != rid:
             return None
         rest = remainder(rec.task, rec.swept, self._next_id(task_id), self.params)
         if rest is None:
             return None
         rec.state, rec.owner = REPLACED, None
-        self.tasks[rest.id] = TaskRecord(rest, parent=task_id)
+        self.tasks[rest.id] = TaskRecord(rest, parent=task_id, tried=rec.tried | {rid})
         return rest.id
+
+    def release(self, rid: str) -> list[str]:
+        """``rid`` is alive but makes no progress: the unswept remainder of the task it drives
+        goes back to the market as a new task that it has tried, its unstarted tasks open
+        again; the tasks opened are returned."""
+        reopened = []
+        for i, rec in enumerate(self.queue(rid)):
+            if i == 0 and rec.started:
+                rest = self.give_back(rid, rec.task.id)
+                if rest is None:
+                    self.finish(rid, rec.task.id)
+                else:
+                    reopened.append(rest)
+            else:
+                rec.state, rec.owner, rec.reverse = OPEN, None, False
+                if i == 0:
+                    rec.tried = rec.tried | {rid}
+                reopened.append(rec.task.id)
+        return reopened
+
+    def take_back(self, task_id: str) -> list[str]:
+        """Take ``task_id`` and the tasks queued after it back from its owner: each opens
+        again, or, if its owner has swept part of it, its remainder does (a new task; the
+        owner has not tried it and failed, it was taken from it); the ids opened, none when
+        ``task_id`` is not assigned."""
+        rec = self.tasks.get(task_id)
+        if rec is None or rec.state != ASSIGNED or rec.owner is None:
+            return []
+        out = []
+        for later in self.queue(rec.owner):
+            if later.position < rec.position:
+                continue
+            if later.started:
+                rest = remainder(later.task, later.swept, self._next_id(later.task.id), self.params)
+                if rest is None:
+                    later.state = DONE
+                    continue
+                later.state, later.owner = REPLACED, None
+                self.tasks[rest.id] = TaskRecord(rest, parent=later.task.id, tried=later.tried)
+                out.append(rest.id)
+            else:
+                later.state, later.owner, later.reverse = OPEN, None, False
+                out.append(later.task.id)
+        return out
+
+    def replace(
+        self,
+        task_id: str,
+        parts: tuple[np.ndarray, ...],
+        blocked: tuple[np.ndarray, ...],
+        body: str,
+    ) -> tuple[list[str], list[str]]:
+        """``task_id`` (open) cannot be driven as planned since ``body`` lies in its way: it
+        is replaced by tasks driving ``parts`` (open: the drivable runs of its path, joined
+        round the body where they can be) and ``blocked`` (the stretches under or behind the
+        body, blocked by it), each (N, 2); (the open ids, the blocked ids)."""
+        rec = self.tasks[task_id]
+        if rec.state != OPEN:
+            raise ValueError(f"task {task_id} is {rec.state}, not open")
+        rec.state = REPLACED
+        made: tuple[list[str], list[str]] = ([], [])
+        for paths, state, ids in ((parts, OPEN, made[0]), (blocked, BLOCKED, made[1])):
+            for path in paths:
+                if len(path) < 2:
+                    continue
+                task = part_of(rec.task, path, self._next_id(task_id), self.params)
+                self.tasks[task.id] = TaskRecord(
+                    task,
+                    state,
+                    parent=task_id,
+                    tried=rec.tried if state == OPEN else frozenset(),
+                    blocked_by=body if state == BLOCKED else None,
+                )
+                ids.append(task.id)
+        return made
+
+    def settle_unreachable(self) -> list[str]:
+        """Open tasks every robot in the market has tried become unreachable; their ids."""
+        market = set(self.market())
+        out = []
+        for rec in self.open_tasks():
+            if market and market <= rec.tried:
+                rec.state = UNREACHABLE
+                out.append(rec.task.id)
+        return out
+
+    def reopen(self, body: str | None = None) -> list[str]:
+        """The world changed: the tasks ``body`` blocked (with ``body`` given), and the
+        unreachable tasks some robot in the market has not tried, open again; their ids."""
+        market = set(self.market())
+        out = []
+        for rec in self.tasks.values():
+            freed = rec.state == BLOCKED and body is not None and rec.blocked_by == body
+            retry = rec.state == UNREACHABLE and not market <= rec.tried
+            if freed or retry:
+                rec.state, rec.blocked_by = OPEN, None
+                out.append(rec.task.id)
+        return out
+
+    def next_id(self, task_id: str) -> str:
+        """A fresh id for a task made from ``task_id``: "t07" → "t07.1", "t07.1" → "t07.2"."""
+        return self._next_id(task_id)
 
     def withdraw_unstarted(self) -> list[str]:
         """The back half of each robot's unstarted queue (never the task it drives) goes back

@@ -15,24 +15,55 @@ Recovery: a lost robot's unswept remainder and its unstarted tasks are auctioned
 as regions. A robot heard from again rejoins with an empty queue and bids afresh; whenever a
 robot in the market runs out of work while others hold unstarted tasks, the back half of each
 queue is withdrawn and auctioned again (a task boundary for all).
+
+Bodies: a lost robot's body stays where it stopped (its last reported pose), and everyone plans
+around it: every task whose path comes near it is taken back and replaced by the runs of its
+path a robot can drive, joined round the body where a transit gets round it
+(:func:`planners.bodies.reroute`), and by the stretches under or behind it, which are
+``blocked`` until the body goes (its robot heard from again). Transits are planned round it too.
+
+Progress, not only liveliness: a robot that reaches no waypoint of its plan for
+``coordinator.stall_s`` sim seconds (holding for a peer at a shared cell aside) is stuck: the
+unswept remainder of its task goes back to the market as work it has tried, and its unstarted
+tasks with it; it stays in the market with no work (it waits) and may win other work, whose
+plan starts with a transit planned from where it stands. A robot that no transit takes to its
+task gives the task back the same way. No robot wins a task it has tried; a task every robot
+in the market has tried is ``unreachable``, never counted done (see the job's rules in
+:mod:`fleet.coordinator.job`).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
+from dataclasses import dataclass
+
+import numpy as np
 
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import ASSIGNED, LOST
+from fleet.coordinator.job import ASSIGNED, LOST, OPEN
 from fleet.coordinator.journal import Journal
 from fleet.plan_chain import chain_pieces, piece_count
 from fleet.protocol import Plan, RobotStatus
 from planners import auction
 
 log = logging.getLogger("coordinator")
+# robot states in which reaching no waypoint is no sign of being stuck
+WAITING_STATES = ("holding", "done", "waiting", "localizing", "unlocalized")
+
+
+@dataclass
+class Progress:
+    """How far a robot has got along its plan: waypoints reached (not given up), and since
+    when (sim s) that count has stood."""
+
+    plan_id: int
+    reached: int
+    since: float
 
 
 class Market:
@@ -65,6 +96,10 @@ class Market:
         # withdrawn tasks back must not be asked again and again
         self.version = 0
         self.balanced_version = -1
+        # lost robots' bodies, where they last reported themselves
+        self.bodies: dict[str, tuple[float, float]] = {}
+        self.progress: dict[str, Progress] = {}
+        self.stall_s = math.inf
 
     # ---- selling --------------------------------------------------------------------------
 
@@ -90,13 +125,14 @@ class Market:
         while not self.stop.is_set():
             with self.lock:
                 self.need_auction = False
+                self._settle()
                 lots = self._lots(regions)
                 round_bidders = frozenset(self.job.market())
             if not lots or not round_bidders:
                 break
             rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
             with self.lock:
-                sale = auctioneer.award(rnd, set(self.job.market()))
+                sale = auctioneer.award(rnd, set(self.job.market()), self._untried)
             if sale is None:
                 break
             committed.append(sale.best.total_s)
@@ -140,6 +176,23 @@ class Market:
         )
         self.journal.set_meta(round_seq=sale.round)
         self.awards.send()
+
+    def _untried(self, lot: auction.Lot, robot: str) -> bool:
+        """Whether ``robot`` may win ``lot``: it has tried none of its tasks."""
+        return not any(robot in self.job.tasks[t].tried for t in lot.tasks)
+
+    def _settle(self) -> None:
+        """Open tasks every robot in the market has tried are unreachable, and said so."""
+        for tid in self.job.settle_unreachable():
+            rec = self.job.tasks[tid]
+            self.journal.event(
+                "unreachable",
+                "",
+                tid,
+                f"{rec.task.area_m2:.2f} m² tried by {', '.join(sorted(rec.tried))}: no robot "
+                "gets it swept",
+            )
+            self.journal.save_tasks(tid)
 
     def _lots(self, regions: tuple[auction.Lot, ...]) -> dict[str, auction.Lot]:
         """What the next round sells: the regions none of whose tasks is sold yet, then every
@@ -201,9 +254,124 @@ class Market:
         changed = [r.task.id for r in self.job.tasks.values() if r.owner is None]
         self.journal.save_tasks(*changed)
         self.dispatcher.forget(rid)
+        self.progress.pop(rid, None)
+        xy = self.job.robots[rid].xy
+        if xy is not None:
+            self.bodies[rid] = xy
+            self.journal.event(
+                "body", rid, "", f"its body stands at ({xy[0]:.2f}, {xy[1]:.2f}); planned around"
+            )
+            self._plan_around_bodies(rid)
         self.awards.send()
         self.need_auction = True
         self.wake.set()
+
+    def rejoined(self, rid: str) -> None:
+        """``rid`` is heard from again: its body is a robot again, so the work it blocked opens
+        again, and so does the work no robot could reach (one more robot may)."""
+        if self.bodies.pop(rid, None) is not None:
+            self.dispatcher.planner.set_bodies(self._body_centres())
+            self.journal.event("body", rid, "", "its robot is back: no longer planned around")
+        reopened = self.job.reopen(rid)
+        for tid in reopened:
+            self.journal.event("reopened", rid, tid, "the way is free again")
+        self.journal.save_tasks(*reopened)
+        self.rebalance()
+
+    def _body_centres(self) -> np.ndarray:
+        return np.array(list(self.bodies.values()), dtype=float).reshape(-1, 2)
+
+    def _plan_around_bodies(self, body: str) -> None:
+        """Take back every task whose path comes near a body (its owner's queue from there
+        on), and replace it by what a robot can drive round the bodies and what they block."""
+        planner = self.dispatcher.planner
+        planner.set_bodies(self._body_centres())
+        near = [
+            rec.task.id
+            for rec in self.job.tasks.values()
+            if rec.state in (OPEN, ASSIGNED) and planner.near_bodies(rec.task.path)
+        ]
+        taken: list[str] = []
+        for tid in near:
+            rec = self.job.tasks[tid]
+            if rec.state != ASSIGNED or rec.owner is None:
+                continue
+            owner = rec.owner
+            for later in self.job.queue(owner):
+                if later.position >= rec.position:
+                    self.journal.event("withdrawn", owner, later.task.id, f"near {body}'s body")
+            taken += self.job.take_back(tid)
+        self.dispatcher.cut(taken)
+        opened = [t for t in dict.fromkeys([*near, *taken]) if self.job.tasks[t].state == OPEN]
+        for tid in opened:
+            rec = self.job.tasks[tid]
+            if not planner.near_bodies(rec.task.path):
+                continue
+            way = planner.reroute(rec.task.path)
+            if not way.changed:
+                continue
+            parts, blocked = self.job.replace(tid, way.paths, way.dropped, body)
+            area = sum(self.job.tasks[t].task.area_m2 for t in blocked)
+            self.journal.event(
+                "rerouted",
+                body,
+                tid,
+                f"round the body: {len(parts)} part(s) {' '.join(parts)}, {area:.2f} m² blocked",
+            )
+            self.journal.save_tasks(tid, *parts, *blocked)
+            if tid in self.region_sale:
+                at = self.region_sale.index(tid)
+                self.region_sale[at : at + 1] = parts
+        self.journal.save_tasks(*taken)
+        self.version += 1
+
+    # ---- progress ---------------------------------------------------------------------------
+
+    def observe(self, rid: str, msg: RobotStatus) -> None:
+        """Take a status report for the stall watch: waypoints reached on its plan."""
+        reached = msg.waypoint - msg.skipped
+        p = self.progress.get(rid)
+        if (
+            p is None
+            or p.plan_id != msg.plan_id
+            or reached > p.reached
+            or msg.state in WAITING_STATES
+        ):
+            self.progress[rid] = Progress(msg.plan_id, reached, self.journal.clock)
+
+    def check_stalls(self) -> None:
+        """Robots with work that have reached no waypoint for ``stall_s``: stuck."""
+        now = self.journal.clock
+        for rid, p in list(self.progress.items()):
+            r = self.job.robots.get(rid)
+            plan = self.dispatcher.plans.get(rid)
+            if r is None or r.liveness == LOST or self.job.current(rid) is None:
+                continue
+            if plan is None or plan.plan_id != p.plan_id or now - p.since < self.stall_s:
+                continue
+            self.stuck(rid, f"reached no waypoint of its plan for {now - p.since:.0f} s")
+
+    def stuck(self, rid: str, why: str) -> None:
+        """``rid`` is alive but gets nowhere: its work goes back to the market (what it was
+        driving as tried by it), and it waits for other work, planned from where it stands."""
+        reopened = self.job.release(rid)
+        self.journal.event("stuck", rid, "", f"{why}; its work goes back to the market")
+        for tid in reopened:
+            self.journal.event("reopened", rid, tid, "from a stuck robot")
+        parents = [p for t in reopened if (p := self.job.tasks[t].parent) is not None]
+        self.journal.save_tasks(*reopened, *parents)
+        self.dispatcher.forget(rid)
+        self.progress.pop(rid, None)
+        self.version += 1
+        self.awards.send()
+        self.need_auction = True
+        self.wake.set()
+
+    def cannot_reach(self, rid: str, task_id: str, why: str) -> None:
+        """No transit takes ``rid`` to ``task_id``: it gives its work back as a stuck robot
+        does, and never wins that task again."""
+        self.journal.event("unreachable", rid, task_id, why)
+        self.stuck(rid, f"no way to {task_id}")
 
     def serve_idle(self) -> bool:
         """When a robot in the market has no work while others hold queued tasks, rebalance

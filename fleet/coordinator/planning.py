@@ -22,10 +22,11 @@ import numpy as np
 from fleet.params import FleetConfig
 from fleet.world import World
 from planners.auction import Task, split_tour
+from planners.bodies import Rerouted, reroute, with_bodies
 from planners.coverage import plan_coverage
 from planners.coverage.transit import Transit
 from planners.grid import clearance, reachable
-from planners.polyline import without_straight_vertices
+from planners.polyline import densify, without_straight_vertices
 
 PLAN_RESOLUTION = 0.025
 
@@ -54,7 +55,11 @@ class TaskPlanner:
         )
         centres = clearance(self.grid) >= self.params.robot_radius
         start = self.grid.world_to_cell(np.array([self.dock]))
-        self.transit = Transit(self.grid, reachable(centres, start))
+        self.reachable = reachable(centres, start)
+        self.transit = Transit(self.grid, self.reachable)
+        # a lost robot's body: its radius, and the error of the pose it last reported
+        self.body_radius = cfg.robot.radius + cfg.coordinator.body_margin
+        self.bodies = np.zeros((0, 2))
 
     def tasks(self) -> tuple[Task, ...]:
         result = plan_coverage(self.grid, [self.dock], self.params)
@@ -84,19 +89,14 @@ class TaskPlanner:
         """(waypoints, where each task's sweep begins): the transit to the first task, then the
         sweeps of ``chain`` ((task, reverse) pairs, each beginning where the one before ends).
         The transit is ``transit`` (points of a transit planned in space and time, kept as they
-        are: the order of passage numbers them), else A* on the floor plan."""
+        are: the order of passage numbers them), else A* on the floor plan around the bodies
+        of lost robots; ValueError when there is no way from ``from_xy`` to the first task."""
         sweeps = [task.path[::-1] if reverse else task.path for task, reverse in chain]
         start = np.asarray(from_xy, dtype=float)
         if transit is not None:
             leg = np.vstack([transit, sweeps[0][:1]])
         else:
-            try:
-                leg = self.transit.path(start, sweeps[0][0])
-            except ValueError:
-                log.warning(
-                    "no transit from %s to task %s on the floor plan", from_xy, chain[0][0].id
-                )
-                leg = np.array([start, sweeps[0][0]])
+            leg = self.transit.path(start, sweeps[0][0])
             leg = without_straight_vertices(np.asarray(leg, dtype=float))
         parts = [leg[:-1]]
         starts = []
@@ -106,3 +106,28 @@ class TaskPlanner:
             parts.append(sweep if len(parts) == 1 else sweep[1:])
             at += len(sweep) - 1
         return np.vstack(parts), starts
+
+    # ---- bodies of lost robots --------------------------------------------------------------
+
+    def set_bodies(self, bodies: np.ndarray) -> None:
+        """Plan around the bodies of lost robots, centred at ``bodies`` ((K, 2) world metres,
+        from their last reported poses): transits from now on, and :meth:`reroute`."""
+        self.bodies = np.asarray(bodies, dtype=float).reshape(-1, 2)
+        grid = with_bodies(self.grid, self.bodies, self.body_radius)
+        free = (clearance(grid) >= self.params.robot_radius) & self.reachable
+        self.transit = Transit(self.grid, free)
+
+    def near_bodies(self, path: np.ndarray) -> bool:
+        """Whether a robot centre driving ``path`` comes near enough a body to touch it."""
+        if not len(self.bodies):
+            return False
+        reach = self.body_radius + self.params.robot_radius + self.grid.resolution
+        pts = densify(np.asarray(path, dtype=float), self.grid.resolution)
+        gaps = np.hypot(*(pts[:, None, :] - self.bodies[None, :, :]).transpose(2, 0, 1))
+        return bool(gaps.min() < reach)
+
+    def reroute(self, path: np.ndarray) -> Rerouted:
+        """``path`` repaired round the bodies (:func:`planners.bodies.reroute`): the runs a
+        robot can drive, joined round a body where a transit gets round it, and the stretches
+        under or behind it."""
+        return reroute(path, self.transit.free, self.grid, self.grid.resolution)

@@ -1,7 +1,8 @@
 """The coordinator process: owns the job — who cleans what — and runs the market.
 
 Phases: ``gathering`` (waiting for the expected robots to be ready), ``auction`` (the first
-allocation), ``cleaning``, ``done`` (every task done). This shell wires the parts to the bus
+allocation), ``cleaning``, ``done`` (every task done) or ``incomplete`` (every task done but
+some no robot could reach, named in the ``finished`` event). This shell wires the parts to the bus
 and runs the main loop; each part has one job:
 
 - :class:`fleet.coordinator.job.Job`: the job's state and rules (tasks, owners, swept pieces,
@@ -29,7 +30,16 @@ from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import ASSIGNED, LOST, REJOINED, GivenUpWaypoints, Job
+from fleet.coordinator.job import (
+    ASSIGNED,
+    BLOCKED,
+    LOST,
+    REJOINED,
+    UNREACHABLE,
+    GivenUpWaypoints,
+    Job,
+    TaskRecord,
+)
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
@@ -91,6 +101,8 @@ class Coordinator:
         self.market = Market(
             self.journal, self.awards, self.dispatcher, self.lock, self.wake, self.stop
         )
+        self.market.stall_s = params.stall_s
+        self.dispatcher.on_unreachable = self.market.cannot_reach
         self.auctioneer = Auctioneer(
             self.keys,
             bus.publish,
@@ -161,7 +173,7 @@ class Coordinator:
             if r.liveness == LOST:
                 r.liveness = REJOINED
                 self.journal.event("rejoined", rid, "", "heard from again; bids afresh")
-                self.market.rebalance()
+                self.market.rejoined(rid)
             elif r.ready and not was_ready and self.phase != "gathering":
                 self.market.rebalance()
 
@@ -189,6 +201,7 @@ class Coordinator:
             if msg.plan_id >= 0 and self.given_up.report(rid, msg.plan_id, msg.skipped):
                 log.warning("%s has given up %d waypoint(s)", rid, self.given_up.by_robot[rid])
             self.market.swept(rid, msg, self.dispatcher.plans.get(rid))
+            self.market.observe(rid, msg)
 
     def _on_ack(self, key: str, msg: AwardAck) -> None:
         rid = self.keys.robot_of(key)
@@ -239,6 +252,7 @@ class Coordinator:
                         self.journal.set_meta(phase=self.phase)
                 else:
                     self._check_heartbeats()
+                    self.market.check_stalls()
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
             if self.phase != "gathering" and auction_due:
@@ -258,10 +272,17 @@ class Coordinator:
         """Send the awards and plans due, and move the phase on."""
         self.awards.send()
         self.dispatcher.dispatch()
-        if self.job.finished and self.phase != "done":
-            self.phase = "done"
+        if self.job.finished and self.phase not in ("done", "incomplete"):
+            left = self.job.left_out()
+            self.phase = "incomplete" if left else "done"
             log.info(self.given_up.finished_message())
-            self.journal.event("finished", "", "", "")
+            detail = ""
+            if left:
+                area = sum(r.task.area_m2 for r in left)
+                detail = f"incomplete: {area:.2f} m² in {len(left)} task(s) no robot could reach: "
+                detail += ", ".join(_left_out(r) for r in left)
+                log.warning("the job ends %s", detail)
+            self.journal.event("finished", "", "", detail)
             self.journal.set_meta(phase=self.phase)
         elif self.phase == "auction" and not self.job.open_tasks():
             self.phase = "cleaning"
@@ -298,5 +319,13 @@ class Coordinator:
             counts["open"],
             counts[ASSIGNED],
             counts["done"],
+            counts[BLOCKED] + counts[UNREACHABLE],
         )
         self.bus.publish(self.keys.coord_state(), state, control=True)
+
+
+def _left_out(rec: TaskRecord) -> str:
+    """A task left out, for the end message: its id, area, where it lies and why."""
+    x, y = rec.task.path.mean(axis=0)
+    why = f"behind {rec.blocked_by}'s body" if rec.blocked_by else "tried by every robot"
+    return f"{rec.task.id} ({rec.task.area_m2:.2f} m² at ({x:.1f}, {y:.1f}), {why})"

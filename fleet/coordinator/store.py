@@ -4,7 +4,9 @@ Tables: ``meta`` (phase, counters), ``tasks`` (path, cells, state, owner, queue 
 direction, swept pieces), ``robots`` (liveness, last report, heartbeat, restarts, award
 sequence numbers), ``plans`` (the plan each robot drives, so a restarted coordinator serves the
 same plan id and the robot keeps driving), ``events`` and ``bids`` (the auction log). WAL
-journal, so ``fleet status`` reads while the coordinator writes.
+journal, so ``fleet status`` reads while the coordinator writes. The file names the version
+of its layout (``meta.store_version``); a file of another layout is refused, naming the file
+and both versions, never resumed as if it were this one.
 """
 
 from __future__ import annotations
@@ -20,12 +22,13 @@ from fleet.coordinator.job import Job, RobotRecord, TaskRecord
 from fleet.protocol import Plan
 from planners.auction import Task
 
+STORE_VERSION = 2
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
 CREATE TABLE IF NOT EXISTS tasks (
     id TEXT PRIMARY KEY, parent TEXT, area_m2 REAL, time_s REAL, path BLOB, cells TEXT,
     state TEXT, owner TEXT, position INTEGER, reverse INTEGER, swept BLOB,
-    created_wall REAL, done_wall REAL);
+    created_wall REAL, done_wall REAL, tried TEXT, blocked_by TEXT);
 CREATE TABLE IF NOT EXISTS robots (
     id TEXT PRIMARY KEY, liveness TEXT, state TEXT, task TEXT, progress REAL,
     heartbeat_wall REAL, restarts INTEGER, award_seq INTEGER, acked_seq INTEGER, x REAL, y REAL);
@@ -41,6 +44,10 @@ CREATE TABLE IF NOT EXISTS bids (
 """
 
 
+class StoreError(ValueError):
+    """A state file that cannot be resumed; the message names the file and why."""
+
+
 class JobStore:
     """One SQLite file; every ``save_*`` commits, so a SIGKILL loses at most the change in
     flight."""
@@ -52,6 +59,17 @@ class JobStore:
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(SCHEMA)
+        version = self.db.execute("SELECT value FROM meta WHERE key = 'store_version'").fetchone()
+        has_tasks = self.db.execute("SELECT 1 FROM tasks LIMIT 1").fetchone() is not None
+        if version is None and not has_tasks:
+            self.set_meta(store_version=STORE_VERSION)
+        elif version is None or json.loads(version[0]) != STORE_VERSION:
+            found = "none" if version is None else json.loads(version[0])
+            self.db.close()
+            raise StoreError(
+                f"{path}: a job state file of layout version {found}, not {STORE_VERSION}: "
+                "it was written by another version of fleet; start the job with a new state file"
+            )
 
     def close(self) -> None:
         self.db.close()
@@ -82,14 +100,17 @@ class JobStore:
                 np.asarray(r.swept, dtype=np.uint8).tobytes(),
                 now,
                 now if r.state == "done" else None,
+                json.dumps(sorted(r.tried)),
+                r.blocked_by,
             )
             for r in records
         ]
         with self.db:
             self.db.executemany(
-                "INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?) ON CONFLICT(id) DO UPDATE "
-                "SET state=excluded.state, owner=excluded.owner, position=excluded.position, "
-                "reverse=excluded.reverse, swept=excluded.swept, "
+                "INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?) ON CONFLICT(id) DO "
+                "UPDATE SET state=excluded.state, owner=excluded.owner, "
+                "position=excluded.position, reverse=excluded.reverse, swept=excluded.swept, "
+                "tried=excluded.tried, blocked_by=excluded.blocked_by, "
                 "done_wall=COALESCE(tasks.done_wall, excluded.done_wall)",
                 rows,
             )
@@ -157,9 +178,9 @@ class JobStore:
         are heard from again)."""
         for row in self.db.execute(
             "SELECT id, parent, area_m2, time_s, path, cells, state, owner, position, reverse, "
-            "swept FROM tasks ORDER BY rowid"
+            "swept, tried, blocked_by FROM tasks ORDER BY rowid"
         ):
-            tid, parent, area, t_s, path, cells, state, owner, pos, rev, swept = row
+            tid, parent, area, t_s, path, cells, state, owner, pos, rev, swept, tried, by = row
             task = Task(
                 tid,
                 np.frombuffer(path, dtype="<f8").reshape(-1, 2).copy(),
@@ -175,6 +196,8 @@ class JobStore:
                 bool(rev),
                 parent,
                 np.frombuffer(swept, dtype=np.uint8).astype(bool),
+                frozenset(json.loads(tried or "[]")),
+                by,
             )
         for row in self.db.execute(
             "SELECT id, liveness, state, task, progress, heartbeat_wall, restarts, award_seq, "

@@ -58,6 +58,8 @@ log = logging.getLogger(__name__)
 EVENTS_KEPT = 200
 # routine events the view does not list; every event is in report.json
 QUIET_EVENTS = ("awarded", "done", "auction")
+# the coordinator's phases of a finished job: incomplete names work no robot could reach
+FINISHED_PHASES = ("done", "incomplete")
 # wall seconds over which message rates are averaged
 RATE_WINDOW_S = 2.0
 # sim seconds over which a robot's speed is averaged
@@ -138,6 +140,7 @@ class FleetSnapshot:
     cleaned: CoverageImage | None
     collisions: int
     note: str = ""
+    left_out: int = 0
 
 
 class RateMeter:
@@ -227,7 +230,7 @@ class FleetWatcher:
                 self._first_state = (time.time(), m.tasks_done)
             for rid in m.robots:
                 self._robot(rid)
-            if m.phase == "done" and self.finished_at is None:
+            if m.phase in FINISHED_PHASES and self.finished_at is None:
                 self.finished_at = m.stamp
 
     def on_status(self, key: str, m: RobotStatus) -> None:
@@ -331,8 +334,14 @@ class FleetWatcher:
 
     @property
     def done(self) -> bool:
+        """Whether the job is finished: every task done, or done but for work left out."""
         with self.lock:
-            return self.fleet is not None and self.fleet.phase == "done"
+            return self.fleet is not None and self.fleet.phase in FINISHED_PHASES
+
+    @property
+    def phase(self) -> str:
+        with self.lock:
+            return self.fleet.phase if self.fleet is not None else "starting"
 
     def makespan(self) -> float | None:
         """Sim seconds from the first plan given to the job done; None until it is."""
@@ -366,6 +375,7 @@ class FleetWatcher:
                 floor=self.floor,
                 cleaned=self.cleaned,
                 collisions=len(self.collisions),
+                left_out=f.tasks_left_out if f else 0,
             )
 
     def _row(self, rid: str, v: RobotView, lost: bool, now: float) -> RobotRow:
@@ -402,7 +412,7 @@ class FleetWatcher:
         f = self.fleet
         if f is None:
             return None
-        if f.phase == "done":
+        if f.phase in FINISHED_PHASES:
             return 0.0
         if self.started_wall is not None:
             since, done_then = self.started_wall, 0
@@ -431,6 +441,7 @@ class FleetWatcher:
             f = self.fleet
             tasks = (
                 f" tasks {f.tasks_open} open, {f.tasks_assigned} assigned, {f.tasks_done} done"
+                + (f", {f.tasks_left_out} left out" if f.tasks_left_out else "")
                 if f
                 else ""
             )

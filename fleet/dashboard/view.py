@@ -304,10 +304,13 @@ def header(snap: FleetSnapshot) -> Line:
     parts = [f"fleet {snap.fleet}", snap.phase]
     parts.append(f"coverage {progress_bar(cov)} {100 * cov:4.1f} %")
     if snap.eta_s is not None:
-        parts.append("done" if snap.phase == "done" else f"ETA {duration(snap.eta_s)}")
+        finished = snap.phase in ("done", "incomplete")
+        parts.append(snap.phase if finished else f"ETA {duration(snap.eta_s)}")
     if snap.tasks is not None:
         o, a, d = snap.tasks
-        parts.append(f"tasks {d}/{o + a + d} done")
+        parts.append(f"tasks {d}/{o + a + d + snap.left_out} done")
+    if snap.left_out:
+        parts.append(f"{snap.left_out} out of reach")
     parts.append(f"sim {snap.sim_time:.1f} s")
     if snap.repetition is not None:
         parts.append(f"repetition {100 * snap.repetition:.1f} %")

@@ -35,6 +35,8 @@ MIN_MAP_HEIGHT_IN = 4.0
 PASS_COLOURS = ("#c7e9c0", "#74c476", "#31a354", "#006d2c")
 MISSED_COLOUR = "#e34a33"
 BLOCKED_COLOUR = "#4d4d4d"
+# the paths of work no robot could reach (report.json's left_out), dashed over the floor
+LEFT_OUT_COLOUR = "#000000"
 SCALE_BAR_COLOUR = "#000000"
 # the scale bar is the longest of these not longer than this share of the floor's width
 SCALE_BAR_LENGTHS_M = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
@@ -154,6 +156,13 @@ def map_figure(data: RunData) -> tuple[Figure, float]:
         text.set_gid(f"label-{rid}")
     for c in data.collisions:
         ax.plot(c["x"], c["y"], marker="x", ms=8, mew=2, color="black")
+    left_out = data.report.get("left_out") or []
+    for piece in left_out:
+        path = np.asarray(piece["path"], dtype=float).reshape(-1, 2)
+        line = ax.plot(
+            path[:, 0], path[:, 1], color=LEFT_OUT_COLOUR, lw=2.2, ls=(0, (3, 2)), zorder=4
+        )[0]
+        line.set_gid(f"left-out-{piece['id']}")
     bar_m = scale_bar_length(width_m)
     bar_y = y0 - 0.55 * margin
     bar = Rectangle(
@@ -191,6 +200,18 @@ def map_figure(data: RunData) -> tuple[Figure, float]:
         )
     if data.collisions:
         handles.append(Line2D([], [], ls="", marker="x", mew=2, color="black", label="contact"))
+    if left_out:
+        area = sum(p["area_m2"] for p in left_out)
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color=LEFT_OUT_COLOUR,
+                lw=2.2,
+                ls=(0, (3, 2)),
+                label=f"not reached ({area:.2f} m²)",
+            )
+        )
     legend = fig.legend(
         handles=handles, loc="upper left", bbox_to_anchor=(map_frac + 0.01, 0.9), fontsize=8
     )
@@ -234,6 +255,8 @@ def _figures_text(data: RunData) -> str:
     lost = sum(e["kind"] == "lost" for e in events)
     if events:
         lines.append(f"robots lost   {lost}")
+    if r.get("left_out"):
+        lines.append(f"not reached   {r['left_out_m2']:6.2f} m²")
     return "\n".join(lines)
 
 

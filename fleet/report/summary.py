@@ -58,6 +58,8 @@ COLLISION_COLUMNS = ("sim_s", "kind", "robot", "other", "x", "y")
 # furniture: under 0.1 m only a pass hugging them sweeps, beyond 0.3 m it is open floor
 MISSED_BANDS_M = (0.1, 0.3)
 MISSED_BANDS = ("under_0.1m", "0.1_to_0.3m", "over_0.3m")
+# the coordinator's task states of work no robot could do (fleet.coordinator.job.LEFT_OUT)
+LEFT_OUT_STATES = ("blocked", "unreachable")
 # report.json fields the pictures read, and their JSON types
 REPORT_FIELDS: dict[str, type | tuple[type, ...]] = {
     "status": str,
@@ -154,7 +156,10 @@ def job_report(state: Path) -> dict[str, Any]:
     malformed, not in the market); ``plan_estimate_s`` is the makespan the first allocation
     priced (the longest of the winners' committed times), None if it never completed;
     ``given_up_waypoints`` the waypoints each robot gave up over all its plans, as the
-    coordinator counted them (robots that gave up none are left out)."""
+    coordinator counted them (robots that gave up none are left out); ``left_out`` the work no
+    robot could do (state ``blocked``: under or behind the body of ``blocked_by``; or
+    ``unreachable``: every robot in ``tried`` tried it), each with its area and path, and
+    ``left_out_m2`` their area."""
     if not state.exists():
         return {
             "events": None,
@@ -163,25 +168,41 @@ def job_report(state: Path) -> dict[str, Any]:
             "rejected_bids": None,
             "plan_estimate_s": None,
             "given_up_waypoints": None,
+            "left_out": None,
+            "left_out_m2": None,
         }
     db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
     try:
         meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
-        tasks = {
-            tid: {
-                "id": tid,
-                "parent": parent,
-                "area_m2": round(area, 3),
-                "time_s": round(t_s, 1),
-                "state": st,
-                "owners": [],
-            }
-            for tid, parent, area, t_s, st in db.execute(
-                "SELECT id, parent, area_m2, time_s, state FROM tasks ORDER BY rowid"
-            )
-        }
+        rows = db.execute(
+            "SELECT id, parent, area_m2, time_s, state, path, tried, blocked_by FROM tasks "
+            "ORDER BY rowid"
+        ).fetchall()
     finally:
         db.close()
+    tasks = {
+        tid: {
+            "id": tid,
+            "parent": parent,
+            "area_m2": round(area, 3),
+            "time_s": round(t_s, 1),
+            "state": st,
+            "owners": [],
+        }
+        for tid, parent, area, t_s, st, *_ in rows
+    }
+    left_out = [
+        {
+            "id": tid,
+            "state": st,
+            "area_m2": round(area, 3),
+            "blocked_by": by,
+            "tried": json.loads(tried or "[]"),
+            "path": np.frombuffer(path, dtype="<f8").reshape(-1, 2).round(3).tolist(),
+        }
+        for tid, _, area, _, st, path, tried, by in rows
+        if st in LEFT_OUT_STATES
+    ]
     events = [{k: v for k, v in e.items() if k != "seq"} for e in read_events(state)]
     held: dict[str, list[Any]] = {}
     for e in events:
@@ -192,7 +213,7 @@ def job_report(state: Path) -> dict[str, Any]:
             held[task] = hold
         elif kind in ("done", "withdrawn") and task in held:
             held.pop(task)[2] = sim
-        elif kind == "lost":
+        elif kind in ("lost", "stuck"):
             for tid in [t for t, h in held.items() if h[0] == robot]:
                 held.pop(tid)[2] = sim
     overlaps = [
@@ -209,6 +230,8 @@ def job_report(state: Path) -> dict[str, Any]:
         "rejected_bids": json.loads(meta.get("rejected_bids", "{}")),
         "plan_estimate_s": json.loads(meta.get("estimate_s", "null")),
         "given_up_waypoints": json.loads(meta.get("given_up_waypoints", "{}")).get("by_robot", {}),
+        "left_out": left_out,
+        "left_out_m2": round(sum(t["area_m2"] for t in left_out), 3),
     }
 
 

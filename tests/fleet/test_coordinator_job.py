@@ -8,7 +8,17 @@ import json
 import numpy as np
 import pytest
 
-from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, GivenUpWaypoints, Job
+from fleet.coordinator.job import (
+    ASSIGNED,
+    BLOCKED,
+    DONE,
+    LOST,
+    OPEN,
+    REPLACED,
+    UNREACHABLE,
+    GivenUpWaypoints,
+    Job,
+)
 from fleet.coordinator.store import JobStore
 from fleet.protocol import Plan
 from fleet.supervisor.runner import read_events
@@ -37,7 +47,7 @@ def test_awards_build_each_robots_queue_in_order(job: Job):
     job.award("t01", "robot-1", False)
     assert [r.task.id for r in job.queue("robot-0")] == ["t00", "t02"]
     assert job.current("robot-1").task.id == "t01"
-    assert job.counts() == {OPEN: 1, ASSIGNED: 3, DONE: 0}
+    assert job.counts() == {OPEN: 1, ASSIGNED: 3, DONE: 0, BLOCKED: 0, UNREACHABLE: 0}
     with pytest.raises(ValueError, match="not open"):
         job.award("t00", "robot-1", False)
 
@@ -126,6 +136,9 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     job.progress("robot-0", "t00", np.array([1, 0, 0, 0], dtype=np.uint8))
     job.award("t01", "robot-1", False)
     job.robots["robot-1"].award_seq = 3
+    job.replace("t02", (np.array([[20.0, 0.0], [21.0, 0.0]]),), (), "robot-2")
+    job.tasks["t02.1"].tried = frozenset({"robot-1"})
+    job.replace("t03", (), (np.array([[30.0, 0.0], [31.0, 0.0]]),), "robot-2")
     store = JobStore(tmp_path / "job.sqlite")
     store.save_tasks(list(job.tasks.values()))
     store.save_robots(list(job.robots.values()))
@@ -146,10 +159,32 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     assert np.array_equal(t00.task.path, job.tasks["t00"].task.path)
     assert again.robots["robot-1"].award_seq == 3
     assert not again.robots["robot-1"].ready
+    assert again.tasks["t02.1"].tried == {"robot-1"}
+    assert again.tasks["t03.1"].state == BLOCKED and again.tasks["t03.1"].blocked_by == "robot-2"
     assert store.plans()["robot-0"] == plan
-    assert store.meta() == {"phase": "cleaning", "plan_seq": 7}
+    assert store.meta() == {"phase": "cleaning", "plan_seq": 7, "store_version": 2}
     assert [e["kind"] for e in read_events(tmp_path / "job.sqlite")] == ["awarded"]
     store.close()
+
+
+def test_a_state_file_of_another_layout_is_refused(tmp_path):
+    import sqlite3
+
+    from fleet.coordinator.store import StoreError
+
+    path = tmp_path / "old.sqlite"
+    db = sqlite3.connect(path)
+    db.executescript(
+        "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT);"
+        "CREATE TABLE tasks (id TEXT PRIMARY KEY, parent TEXT, area_m2 REAL, time_s REAL,"
+        " path BLOB, cells TEXT, state TEXT, owner TEXT, position INTEGER, reverse INTEGER,"
+        " swept BLOB, created_wall REAL, done_wall REAL);"
+        "INSERT INTO tasks (id, state) VALUES ('t00', 'open');"
+    )
+    db.commit()
+    db.close()
+    with pytest.raises(StoreError, match=r"old\.sqlite.*layout version none, not 2"):
+        JobStore(path)
 
 
 def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_path):
@@ -213,7 +248,7 @@ def test_given_up_waypoints_are_counted_across_plans_cuts_and_a_restart() -> Non
     assert "the floor is clean" not in message
 
 
-def test_pieces_given_up_go_back_to_the_market_once(job: Job):
+def test_pieces_given_up_go_back_until_every_robot_has_tried_them(job: Job):
     job.award("t00", "robot-0", False)
     job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
     again = job.give_back("robot-0", "t00")
@@ -221,9 +256,49 @@ def test_pieces_given_up_go_back_to_the_market_once(job: Job):
     assert job.tasks["t00"].state == REPLACED and job.tasks["t00"].owner is None
     rest = job.tasks[again]
     assert rest.state == OPEN and rest.parent == "t00" and rest.task.pieces == 2
-    # the remainder's own given-up pieces stay given up: its owner is done with it
+    assert rest.tried == {"robot-0"}
+    assert job.settle_unreachable() == []  # robot-1 has not tried it
+    # robot-1 leaves pieces of it unswept too: every robot in the market has tried it now
     job.award(again, "robot-1", False)
     job.progress("robot-1", again, np.array([1, 0], dtype=np.uint8))
-    assert job.give_back("robot-1", again) is None
+    last = job.give_back("robot-1", again)
+    assert last is not None and job.tasks[last].tried == {"robot-0", "robot-1"}
     assert job.give_back("robot-1", "t01") is None  # not its task
-    assert job.tasks[again].state == ASSIGNED
+    assert job.settle_unreachable() == [last]
+    assert job.tasks[last].state == UNREACHABLE
+    # never counted done: the job finishes incomplete, with the piece named
+    for tid in ("t01", "t02", "t03"):
+        job.award(tid, "robot-0", False)
+        job.finish("robot-0", tid)
+    assert job.finished and job.incomplete
+    assert [r.task.id for r in job.left_out()] == [last]
+    # a robot that joins has not tried it: it opens again
+    r = job.robot("robot-2")
+    r.ready, r.xy = True, (0.0, 0.0)
+    assert job.reopen() == [last] and job.tasks[last].state == OPEN
+    assert not job.finished
+
+
+def test_a_stuck_robot_gives_back_its_work(job: Job):
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-0", False)
+    job.progress("robot-0", "t00", np.array([1, 0, 0, 0], dtype=np.uint8))
+    reopened = job.release("robot-0")
+    assert reopened == ["t00.1", "t01"]
+    assert job.queue("robot-0") == []
+    assert job.tasks["t00.1"].tried == {"robot-0"} and job.tasks["t01"].tried == frozenset()
+    assert job.robots["robot-0"].in_market  # alive: it may win other work
+
+
+def test_a_task_in_the_way_of_a_body_is_replaced_by_its_parts(job: Job):
+    parts = (np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([[3.0, 0.0], [4.0, 0.0]]))
+    blocked = (np.array([[1.0, 0.0], [3.0, 0.0]]),)
+    open_ids, blocked_ids = job.replace("t00", parts, blocked, "robot-2")
+    assert open_ids == ["t00.1", "t00.2"] and blocked_ids == ["t00.3"]
+    assert job.tasks["t00"].state == REPLACED
+    assert [job.tasks[t].state for t in open_ids] == [OPEN, OPEN]
+    stuck = job.tasks["t00.3"]
+    assert stuck.state == BLOCKED and stuck.blocked_by == "robot-2"
+    assert stuck.task.area_m2 == pytest.approx(2.0)  # half the length of a 4 m² task
+    assert job.reopen("robot-1") == []  # another body
+    assert job.reopen("robot-2") == ["t00.3"] and stuck.state == OPEN

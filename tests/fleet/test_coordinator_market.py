@@ -22,6 +22,7 @@ from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import Award, Bid, FleetEvent, Keys, Message, Plan, RobotStatus, TaskCall
 from fleet.world import load_world
 from planners.auction import Task
+from planners.polyline import densify
 from planners.coverage.params import CoverageParams
 
 KEYS = Keys("test")
@@ -100,7 +101,8 @@ def test_a_lost_robots_remainder_and_unstarted_tasks_go_back_on_sale_as_regions(
         job.award(tid, "robot-1", False)
     c.awards.send()
     job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
-    job.robots["robot-0"].xy = (2.5, 0.05)
+    # its pose never heard: no body to plan round (test_a_body_in_the_way_is_planned_round)
+    job.robots["robot-0"].xy = None
     plan = Plan(0.0, 1, "t00", np.zeros((2, 2)), 0)
     c.dispatcher.plans["robot-0"] = plan
 
@@ -135,7 +137,7 @@ def test_a_lost_robots_remainder_and_unstarted_tasks_go_back_on_sale_as_regions(
     assert sorted(t for _, t, _ in c.events("reassigned")) == ["t00.1", "t01", "t02"]
 
 
-def test_a_chain_swept_to_its_end_is_done_and_a_task_left_unswept_goes_back_once(
+def test_a_chain_swept_to_its_end_is_done_and_a_task_left_unswept_goes_back_as_tried(
     planner: TaskPlanner,
 ) -> None:
     c = Coordinator(planner, ["robot-0"])
@@ -162,3 +164,109 @@ def test_a_chain_swept_to_its_end_is_done_and_a_task_left_unswept_goes_back_once
     assert c.events("withdrawn") == [("robot-0", "t01", "pieces given up: once more as t01.1")]
     assert c.market.need_auction
     assert [r.task.id for r in job.queue("robot-0")] == ["t02"]
+    # robot-0, the only robot, has tried it: nobody is left to sell it to, and it is named
+    assert job.tasks["t01.1"].tried == {"robot-0"}
+    c.bidding = {"robot-0": 1.0}
+    c.market.auction(c.auctioneer)
+    assert job.tasks["t01.1"].state == "unreachable"
+    assert all("t01.1" not in s.lot.tasks for s in c.sales)
+    assert [t for _, t, _ in c.events("unreachable")] == ["t01.1"]
+
+
+
+def _lane(tid: str, y: float, x0: float = 0.4, x1: float = 3.6) -> Task:
+    path = np.column_stack([np.linspace(x0, x1, 9), np.full(9, y)])
+    return Task(tid, path, 0.3 * (x1 - x0), 2.0 * (x1 - x0), (1,))
+
+
+def test_a_body_in_the_way_is_planned_round_and_its_floor_is_blocked(
+    planner: TaskPlanner,
+) -> None:
+    """Three lanes across the small world's open floor (below its table); robot-1 dies on the
+    middle one. Everyone's plan is made round its body: the lanes near it are taken back from
+    their owner and replaced by what can be driven round it, and the stretch under it is
+    blocked until robot-1 is heard from again."""
+    c = Coordinator(planner, ["robot-0", "robot-1", "robot-2"])
+    job = c.job
+    job.tasks.clear()
+    job.add_tasks((_lane("t00", 0.6), _lane("t01", 0.85), _lane("t02", 1.1)))
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-0", False)
+    job.award("t02", "robot-2", False)
+    job.robots["robot-0"].xy = (0.4, 0.6)
+    job.robots["robot-1"].xy = (2.0, 0.85)
+    c.dispatcher.plans["robot-0"] = Plan(0.0, 1, "t00", job.tasks["t00"].task.path, 0)
+    try:
+        c.market.lose("robot-1", "its liveliness token is gone")
+        assert c.events("body")[0][:2] == ("robot-1", "")
+        # robot-0's lanes both pass the body: taken back with the plan, the robot stops
+        assert job.queue("robot-0") == [] and "robot-0" not in c.dispatcher.plans
+        assert job.tasks["t00"].state == REPLACED and job.tasks["t01"].state == REPLACED
+        # t02 passes 0.25 m from the body: robot-2 loses it too, and gets its parts back
+        assert job.tasks["t02"].state == REPLACED
+        made = {t: r for t, r in job.tasks.items() if r.parent in ("t00", "t01", "t02")}
+        blocked = [r for r in made.values() if r.state == "blocked"]
+        assert blocked and all(r.blocked_by == "robot-1" for r in blocked)
+        drivable = [r for r in made.values() if r.state == OPEN]
+        reach = planner.body_radius + planner.params.robot_radius - planner.grid.resolution
+        for rec in drivable:
+            pts = densify(rec.task.path, 0.01)
+            assert np.hypot(*(pts - [2.0, 0.85]).T).min() >= reach
+        # the middle lane cannot be driven past the body on its own line: two parts, or one
+        # part round it; either way nothing of the open work comes near the body
+        assert sum(r.task.area_m2 for r in blocked) < job.tasks["t01"].task.area_m2
+        # robot-1 is back: its body no longer blocks anything
+        c.market.rejoined("robot-1")
+        assert all(r.state == OPEN for r in blocked)
+        assert not planner.near_bodies(np.array([[2.0, 0.85], [2.01, 0.85]]))
+    finally:
+        planner.set_bodies(np.zeros((0, 2)))
+
+
+def test_a_stuck_robots_work_is_sold_to_an_idle_one(planner: TaskPlanner) -> None:
+    """robot-0 is alive and reports its plan, but reaches no waypoint of it for stall_s while
+    it escapes and gives them up one by one: its work goes back on sale, and although it bids
+    lowest, idle robot-1 wins what robot-0 was driving."""
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.market.stall_s = 30.0
+    job = c.job
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-0", False)
+    job.progress("robot-0", "t00", np.array([1, 0, 0, 0], dtype=np.uint8))
+    c.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", job.tasks["t00"].task.path, 0)
+
+    def report(at: float, waypoint: int, skipped: int, state: str = "blocked") -> None:
+        c.journal.heard(at)
+        c.market.observe(
+            "robot-0", RobotStatus(at, state, "t00", 0.2, waypoint, 5, 0.0, 0, skipped, 7)
+        )
+        c.market.check_stalls()
+
+    report(10.0, 2, 0, "driving")
+    report(25.0, 3, 1)  # a waypoint given up is no progress
+    report(35.0, 4, 2)
+    assert c.events("stuck") == []  # holding or not, 30 s have not passed since 10 s
+    report(40.5, 5, 3)
+    assert [r for r, _, _ in c.events("stuck")] == ["robot-0"]
+    assert job.queue("robot-0") == [] and "robot-0" not in c.dispatcher.plans
+    rest = next(t for t, r in job.tasks.items() if r.parent == "t00")
+    assert job.tasks[rest].tried == {"robot-0"} and job.tasks["t01"].state == OPEN
+
+    c.bidding = {"robot-0": 1.0, "robot-1": 30.0}
+    c.market.auction(c.auctioneer)
+    assert job.tasks[rest].owner == "robot-1"
+    assert job.tasks["t01"].owner in ("robot-0", "robot-1")
+
+
+def test_holding_for_a_peer_is_not_being_stuck(planner: TaskPlanner) -> None:
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.market.stall_s = 30.0
+    c.job.award("t00", "robot-0", False)
+    c.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", c.job.tasks["t00"].task.path, 0)
+    for at in range(0, 100, 5):
+        c.journal.heard(float(at))
+        c.market.observe(
+            "robot-0", RobotStatus(at, "holding", "t00", 0.2, 2, 5, 0.0, 0, 0, 7)
+        )
+        c.market.check_stalls()
+    assert c.events("stuck") == []
