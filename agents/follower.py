@@ -64,6 +64,8 @@ class FollowState:
     skipped: int = 0
     yielded_s: float = 0.0
     edge_side: int = 0
+    # waypoints given up farther than agent.swept_within from them: their pieces are unswept
+    missed: tuple[int, ...] = ()
 
     @property
     def done(self) -> bool:
@@ -94,7 +96,9 @@ def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowSta
                     i += 1
                     continue
         break
-    return FollowState(wps, i, skipped=state.skipped) if i != state.index else state
+    if i == state.index:
+        return state
+    return FollowState(wps, i, skipped=state.skipped, missed=state.missed)
 
 
 def _ahead(start: np.ndarray, waypoints: np.ndarray, horizon_m: float) -> np.ndarray:
@@ -580,5 +584,10 @@ def control_step(
     ):
         return replace(state, yielded_s=state.yielded_s + dt), result
     if state.stalled_s + dt >= agent.give_up_after_s:
-        return FollowState(state.waypoints, state.index + 1, skipped=state.skipped + 1), result
+        short = state.best_dist > agent.swept_within
+        missed = (*state.missed, state.index) if short else state.missed
+        gave_up = FollowState(
+            state.waypoints, state.index + 1, skipped=state.skipped + 1, missed=missed
+        )
+        return gave_up, result
     return replace(state, stalled_s=state.stalled_s + dt), result

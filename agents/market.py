@@ -144,7 +144,7 @@ def swept_pieces(follow: FollowState | None, sweep_from: int) -> np.ndarray:
     """0/1 per piece of the plan ``follow`` drives (:func:`fleet.plan_chain.swept_pieces`)."""
     if follow is None:
         return np.zeros(0, dtype=np.uint8)
-    return plan_chain.swept_pieces(len(follow.waypoints), sweep_from, follow.index)
+    return plan_chain.swept_pieces(len(follow.waypoints), sweep_from, follow.index, follow.missed)
 
 
 def _length(points: np.ndarray) -> float:

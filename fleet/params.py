@@ -115,6 +115,7 @@ class AgentParams:
     along_tolerance: float = 0.03
     goal_tolerance: float = 0.05
     give_up_after_s: float = 3.0
+    swept_within: float = 0.1
     give_way_max_s: float = 20.0
     align_enter: float = 0.6
     align_exit: float = 0.1
@@ -153,6 +154,7 @@ class AgentParams:
             "transit_speed",
             "stale_after_s",
             "give_up_after_s",
+            "swept_within",
             "align_exit",
             "escape_after_s",
             "escape_distance",

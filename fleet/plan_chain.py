@@ -65,14 +65,17 @@ def chain_pieces(plan: Plan) -> list[tuple[str, tuple[int, int]]]:
     return [(t, (a, b)) for t, a, b in zip(chain_of(plan), starts, ends, strict=True)]
 
 
-def swept_pieces(waypoints: int, sweep_from: int, heading_for: int) -> np.ndarray:
+def swept_pieces(
+    waypoints: int, sweep_from: int, heading_for: int, missed: Sequence[int] = ()
+) -> np.ndarray:
     """0/1 per piece of a plan of ``waypoints`` waypoints, for a robot heading for waypoint
-    ``heading_for``: swept once it has reached the piece's far waypoint."""
+    ``heading_for``: swept once it has reached the piece's far waypoint, unless that waypoint
+    is one of ``missed`` (given up short of it)."""
     n = piece_count(waypoints, sweep_from)
     if n <= 0:
         return np.zeros(0, dtype=np.uint8)
     far = sweep_from + 1 + np.arange(n)
-    return (far < heading_for).astype(np.uint8)
+    return ((far < heading_for) & ~np.isin(far, np.asarray(missed, dtype=int))).astype(np.uint8)
 
 
 def current_task(chain: Sequence[str], starts: np.ndarray, heading_for: int | None) -> str:

@@ -22,8 +22,8 @@ from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import Award, Bid, FleetEvent, Keys, Message, Plan, RobotStatus, TaskCall
 from fleet.world import load_world
 from planners.auction import Task
-from planners.polyline import densify
 from planners.coverage.params import CoverageParams
+from planners.polyline import densify
 
 KEYS = Keys("test")
 PIECES = 4
@@ -173,7 +173,6 @@ def test_a_chain_swept_to_its_end_is_done_and_a_task_left_unswept_goes_back_as_t
     assert [t for _, t, _ in c.events("unreachable")] == ["t01.1"]
 
 
-
 def _lane(tid: str, y: float, x0: float = 0.4, x1: float = 3.6) -> Task:
     path = np.column_stack([np.linspace(x0, x1, 9), np.full(9, y)])
     return Task(tid, path, 0.3 * (x1 - x0), 2.0 * (x1 - x0), (1,))
@@ -265,8 +264,6 @@ def test_holding_for_a_peer_is_not_being_stuck(planner: TaskPlanner) -> None:
     c.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", c.job.tasks["t00"].task.path, 0)
     for at in range(0, 100, 5):
         c.journal.heard(float(at))
-        c.market.observe(
-            "robot-0", RobotStatus(at, "holding", "t00", 0.2, 2, 5, 0.0, 0, 0, 7)
-        )
+        c.market.observe("robot-0", RobotStatus(at, "holding", "t00", 0.2, 2, 5, 0.0, 0, 0, 7))
         c.market.check_stalls()
     assert c.events("stuck") == []

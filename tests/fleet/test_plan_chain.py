@@ -77,3 +77,10 @@ def test_queued_tasks_chain_while_each_begins_where_the_one_before_ends() -> Non
     assert chain_length([(a, False), (b, False), (c, False)]) == 1
     assert chain_length([(a, False), (far, False), (c, False)]) == 1
     assert chain_length([]) == 0
+
+
+def test_a_piece_whose_far_waypoint_was_given_up_short_is_not_swept() -> None:
+    # 6 waypoints, sweep from 1: pieces end at waypoints 2..5; heading for 5, 3 given up short
+    swept = swept_pieces(6, 1, 5, missed=(3,))
+    assert swept.tolist() == [1, 0, 1, 0]
+    assert swept_pieces(6, 1, 5).tolist() == [1, 1, 1, 0]
