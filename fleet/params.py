@@ -181,8 +181,9 @@ class CoordinatorParams:
     objective: Literal["minimax", "minisum"] = "minimax"
     deconfliction: DeconflictionMode = "local"
     replan_lag_s: float = 10.0
-    body_margin: float = 0.05
+    body_margin: float = 0.1
     stall_s: float = 30.0
+    stall_progress_m: float = 0.1
 
     def validate(self) -> None:
         for name in (
@@ -191,6 +192,7 @@ class CoordinatorParams:
             "bid_timeout_s",
             "replan_lag_s",
             "stall_s",
+            "stall_progress_m",
         ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")

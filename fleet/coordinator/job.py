@@ -21,6 +21,8 @@ is unit-tested without processes:
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -258,31 +260,35 @@ class Job:
         self,
         task_id: str,
         parts: tuple[np.ndarray, ...],
-        blocked: tuple[np.ndarray, ...],
+        blocked: Sequence[tuple[np.ndarray, float]],
         body: str,
     ) -> tuple[list[str], list[str]]:
         """``task_id`` (open) cannot be driven as planned since ``body`` lies in its way: it
         is replaced by tasks driving ``parts`` (open: the drivable runs of its path, joined
-        round the body where they can be) and ``blocked`` (the stretches under or behind the
-        body, blocked by it), each (N, 2); (the open ids, the blocked ids)."""
+        round the body where they can be) and by ``blocked`` (the stretches under or behind the
+        body, blocked by it, each with the area of floor it puts out of reach), paths (N, 2);
+        (the open ids, the blocked ids)."""
         rec = self.tasks[task_id]
         if rec.state != OPEN:
             raise ValueError(f"task {task_id} is {rec.state}, not open")
         rec.state = REPLACED
         made: tuple[list[str], list[str]] = ([], [])
-        for paths, state, ids in ((parts, OPEN, made[0]), (blocked, BLOCKED, made[1])):
-            for path in paths:
-                if len(path) < 2:
-                    continue
-                task = part_of(rec.task, path, self._next_id(task_id), self.params)
-                self.tasks[task.id] = TaskRecord(
-                    task,
-                    state,
-                    parent=task_id,
-                    tried=rec.tried if state == OPEN else frozenset(),
-                    blocked_by=body if state == BLOCKED else None,
-                )
-                ids.append(task.id)
+        pieces = [(p, None) for p in parts] + list(blocked)
+        for path, area in pieces:
+            if len(path) < 2:
+                continue
+            state, ids = (OPEN, made[0]) if area is None else (BLOCKED, made[1])
+            task = part_of(rec.task, path, self._next_id(task_id), self.params)
+            if area is not None:
+                task = dataclasses.replace(task, area_m2=area)
+            self.tasks[task.id] = TaskRecord(
+                task,
+                state,
+                parent=task_id,
+                tried=rec.tried if state == OPEN else frozenset(),
+                blocked_by=body if state == BLOCKED else None,
+            )
+            ids.append(task.id)
         return made
 
     def settle_unreachable(self) -> list[str]:

@@ -22,8 +22,9 @@ path a robot can drive, joined round the body where a transit gets round it
 (:func:`planners.bodies.reroute`), and by the stretches under or behind it, which are
 ``blocked`` until the body goes (its robot heard from again). Transits are planned round it too.
 
-Progress, not only liveliness: a robot that reaches no waypoint of its plan for
-``coordinator.stall_s`` sim seconds (holding for a peer at a shared cell aside) is stuck: the
+Progress, not only liveliness: a robot that for ``coordinator.stall_s`` sim seconds reaches no
+waypoint of its plan and comes no ``coordinator.stall_progress_m`` nearer the one it heads for
+(holding for a peer at a shared cell aside; giving waypoints up is no progress) is stuck: the
 unswept remainder of its task goes back to the market as work it has tried, and its unstarted
 tasks with it; it stays in the market with no work (it waits) and may win other work, whose
 plan starts with a transit planned from where it stands. A robot that no transit takes to its
@@ -58,11 +59,14 @@ WAITING_STATES = ("holding", "done", "waiting", "localizing", "unlocalized")
 
 @dataclass
 class Progress:
-    """How far a robot has got along its plan: waypoints reached (not given up), and since
-    when (sim s) that count has stood."""
+    """How far a robot has got along its plan: waypoints reached (not given up), the waypoint
+    it heads for and the least distance to it so far, and since when (sim s) it has neither
+    reached another nor come ``stall_progress_m`` nearer the one it heads for."""
 
     plan_id: int
     reached: int
+    heading_for: int
+    best_m: float
     since: float
 
 
@@ -100,6 +104,7 @@ class Market:
         self.bodies: dict[str, tuple[float, float]] = {}
         self.progress: dict[str, Progress] = {}
         self.stall_s = math.inf
+        self.stall_progress_m = 0.0
 
     # ---- selling --------------------------------------------------------------------------
 
@@ -310,7 +315,10 @@ class Market:
             way = planner.reroute(rec.task.path)
             if not way.changed:
                 continue
-            parts, blocked = self.job.replace(tid, way.paths, way.dropped, body)
+            # a stretch a robot cannot drive whose floor some robot still sweeps from beside
+            # it is no loss; the rest is floor the body puts out of reach
+            lost = [(p, a) for p in way.dropped if (a := planner.blocked_m2(p)) > 0]
+            parts, blocked = self.job.replace(tid, way.paths, lost, body)
             area = sum(self.job.tasks[t].task.area_m2 for t in blocked)
             self.journal.event(
                 "rerouted",
@@ -328,19 +336,26 @@ class Market:
     # ---- progress ---------------------------------------------------------------------------
 
     def observe(self, rid: str, msg: RobotStatus) -> None:
-        """Take a status report for the stall watch: waypoints reached on its plan."""
+        """Take a status report for the stall watch: waypoints reached on its plan, and how
+        near (by its last pose) it is to the one it heads for. A waypoint given up is no
+        progress: the robot heads for the next one from where it stands."""
+        now = self.journal.clock
         reached = msg.waypoint - msg.skipped
+        plan, xy = self.dispatcher.plans.get(rid), self.job.robots[rid].xy
+        if plan is None or plan.plan_id != msg.plan_id or xy is None or not len(plan.waypoints):
+            self.progress.pop(rid, None)
+            return
+        target = plan.waypoints[min(max(msg.waypoint, 0), len(plan.waypoints) - 1)]
+        gap = math.dist(xy, target)
         p = self.progress.get(rid)
-        if (
-            p is None
-            or p.plan_id != msg.plan_id
-            or reached > p.reached
-            or msg.state in WAITING_STATES
-        ):
-            self.progress[rid] = Progress(msg.plan_id, reached, self.journal.clock)
+        fresh = p is None or p.plan_id != msg.plan_id or msg.state in WAITING_STATES
+        if fresh or reached > p.reached or gap < p.best_m - self.stall_progress_m:
+            self.progress[rid] = Progress(msg.plan_id, reached, msg.waypoint, gap, now)
+        elif msg.waypoint != p.heading_for:
+            p.heading_for, p.best_m = msg.waypoint, gap
 
     def check_stalls(self) -> None:
-        """Robots with work that have reached no waypoint for ``stall_s``: stuck."""
+        """Robots with work that have made no progress on their plans for ``stall_s``: stuck."""
         now = self.journal.clock
         for rid, p in list(self.progress.items()):
             r = self.job.robots.get(rid)
@@ -349,7 +364,7 @@ class Market:
                 continue
             if plan is None or plan.plan_id != p.plan_id or now - p.since < self.stall_s:
                 continue
-            self.stuck(rid, f"reached no waypoint of its plan for {now - p.since:.0f} s")
+            self.stuck(rid, f"no progress on its plan for {now - p.since:.0f} s")
 
     def stuck(self, rid: str, why: str) -> None:
         """``rid`` is alive but gets nowhere: its work goes back to the market (what it was

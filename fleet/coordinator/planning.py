@@ -24,8 +24,9 @@ from fleet.world import World
 from planners.auction import Task, split_tour
 from planners.bodies import Rerouted, reroute, with_bodies
 from planners.coverage import plan_coverage
+from planners.coverage.metrics import swath
 from planners.coverage.transit import Transit
-from planners.grid import clearance, reachable
+from planners.grid import clearance, dilate, reachable
 from planners.polyline import densify, without_straight_vertices
 
 PLAN_RESOLUTION = 0.025
@@ -60,6 +61,9 @@ class TaskPlanner:
         # a lost robot's body: its radius, and the error of the pose it last reported
         self.body_radius = cfg.robot.radius + cfg.coordinator.body_margin
         self.bodies = np.zeros((0, 2))
+        # floor the brush reaches from some robot centre, without bodies and with them
+        self.brushable = self._brushable(self.reachable)
+        self.brushable_now = self.brushable
 
     def tasks(self) -> tuple[Task, ...]:
         result = plan_coverage(self.grid, [self.dock], self.params)
@@ -116,6 +120,19 @@ class TaskPlanner:
         grid = with_bodies(self.grid, self.bodies, self.body_radius)
         free = (clearance(grid) >= self.params.robot_radius) & self.reachable
         self.transit = Transit(self.grid, free)
+        self.brushable_now = self._brushable(free)
+
+    def _brushable(self, centres: np.ndarray) -> np.ndarray:
+        return dilate(centres, self.params.cleaning_width / 2, self.grid.resolution) & (
+            self.grid.free
+        )
+
+    def blocked_m2(self, path: np.ndarray) -> float:
+        """The floor the brush would sweep along ``path`` that the bodies put out of every
+        robot's reach (under them, or in gaps too narrow to pass)."""
+        swept, _ = swath(self.grid, np.asarray(path, dtype=float), self.params.cleaning_width / 2)
+        lost = swept & self.brushable & ~self.brushable_now
+        return float(lost.sum()) * self.grid.resolution**2
 
     def near_bodies(self, path: np.ndarray) -> bool:
         """Whether a robot centre driving ``path`` comes near enough a body to touch it."""

@@ -102,6 +102,7 @@ class Coordinator:
             self.journal, self.awards, self.dispatcher, self.lock, self.wake, self.stop
         )
         self.market.stall_s = params.stall_s
+        self.market.stall_progress_m = params.stall_progress_m
         self.dispatcher.on_unreachable = self.market.cannot_reach
         self.auctioneer = Auctioneer(
             self.keys,

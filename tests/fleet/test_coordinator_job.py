@@ -138,7 +138,7 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     job.robots["robot-1"].award_seq = 3
     job.replace("t02", (np.array([[20.0, 0.0], [21.0, 0.0]]),), (), "robot-2")
     job.tasks["t02.1"].tried = frozenset({"robot-1"})
-    job.replace("t03", (), (np.array([[30.0, 0.0], [31.0, 0.0]]),), "robot-2")
+    job.replace("t03", (), [(np.array([[30.0, 0.0], [31.0, 0.0]]), 0.1)], "robot-2")
     store = JobStore(tmp_path / "job.sqlite")
     store.save_tasks(list(job.tasks.values()))
     store.save_robots(list(job.robots.values()))
@@ -292,13 +292,14 @@ def test_a_stuck_robot_gives_back_its_work(job: Job):
 
 def test_a_task_in_the_way_of_a_body_is_replaced_by_its_parts(job: Job):
     parts = (np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([[3.0, 0.0], [4.0, 0.0]]))
-    blocked = (np.array([[1.0, 0.0], [3.0, 0.0]]),)
+    blocked = [(np.array([[1.0, 0.0], [3.0, 0.0]]), 0.25)]
     open_ids, blocked_ids = job.replace("t00", parts, blocked, "robot-2")
     assert open_ids == ["t00.1", "t00.2"] and blocked_ids == ["t00.3"]
     assert job.tasks["t00"].state == REPLACED
     assert [job.tasks[t].state for t in open_ids] == [OPEN, OPEN]
     stuck = job.tasks["t00.3"]
     assert stuck.state == BLOCKED and stuck.blocked_by == "robot-2"
-    assert stuck.task.area_m2 == pytest.approx(2.0)  # half the length of a 4 m² task
+    assert stuck.task.area_m2 == 0.25  # the floor it puts out of reach
+    assert job.tasks["t00.1"].task.area_m2 == pytest.approx(1.0)  # a quarter of a 4 m² task
     assert job.reopen("robot-1") == []  # another body
     assert job.reopen("robot-2") == ["t00.3"] and stuck.state == OPEN

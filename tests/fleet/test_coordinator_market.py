@@ -267,3 +267,25 @@ def test_holding_for_a_peer_is_not_being_stuck(planner: TaskPlanner) -> None:
         c.market.observe("robot-0", RobotStatus(at, "holding", "t00", 0.2, 2, 5, 0.0, 0, 0, 7))
         c.market.check_stalls()
     assert c.events("stuck") == []
+
+
+def test_a_slow_robot_that_gets_nearer_its_waypoint_is_not_stuck(planner: TaskPlanner) -> None:
+    """A long transit driven slowly (giving way, say) reaches no waypoint for a minute, but
+    comes nearer the next one all the time: that is progress."""
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.market.stall_s, c.market.stall_progress_m = 30.0, 0.1
+    c.job.award("t00", "robot-0", False)
+    path = np.array([[0.0, 0.0], [20.0, 0.0]])
+    c.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", path, 0)
+    for at in range(0, 120, 5):
+        c.job.robots["robot-0"].xy = (0.05 * at, 0.0)
+        c.journal.heard(float(at))
+        c.market.observe("robot-0", RobotStatus(at, "driving", "t00", 0.1, 1, 2, 0.0, 0, 0, 7))
+        c.market.check_stalls()
+    assert c.events("stuck") == []
+    # the same robot, standing still: stuck once stall_s has passed
+    for at in range(120, 160, 5):
+        c.journal.heard(float(at))
+        c.market.observe("robot-0", RobotStatus(at, "driving", "t00", 0.1, 1, 2, 0.0, 0, 0, 7))
+        c.market.check_stalls()
+    assert [r for r, _, _ in c.events("stuck")] == ["robot-0"]
