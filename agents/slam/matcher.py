@@ -147,82 +147,25 @@ class CorrelativeMatcher:
         if penalties is None:
             penalties = (p.translation_penalty, p.rotation_penalty)
         t_pen, r_pen = penalties if penalize else (0.0, 0.0)
-        res = field.resolution
-        rows, cols = field.shape
         prior = np.asarray(prior, dtype=float)
         n_points = points.shape[0]
-        all_points = points
+        searched = points
         margin = p.covariance_margin
         if search_points is not None and n_points > search_points:
-            points = points[:: math.ceil(n_points / search_points)]
+            searched = points[:: math.ceil(n_points / search_points)]
             margin = 0.0
         if distinct is not None:
             margin = max(margin, rival_margin)
-        n_xy = math.ceil(window_xy / res - 1e-9)
-        n_th = math.ceil(window_theta / p.angular_step - 1e-9)
-        d_theta = np.arange(-n_th, n_th + 1) * p.angular_step
-        c, s = np.cos(prior[2] + d_theta), np.sin(prior[2] + d_theta)
-        px = c[:, None] * points[:, 0] - s[:, None] * points[:, 1] + prior[0]
-        py = s[:, None] * points[:, 0] + c[:, None] * points[:, 1] + prior[1]
-        col0 = np.floor((px - field.origin[0]) / res).astype(np.int64)
-        row0 = np.floor((py - field.origin[1]) / res).astype(np.int64)
-        rot_penalty = r_pen * d_theta**2
-        pen_xy = t_pen * res * res
-
-        f = max(1, min(coarse_factor, 2 * n_xy + 1))
-        starts = np.arange(-n_xy, n_xy + 1, f)
-        ends = np.minimum(starts + f - 1, n_xy)
-        nearest = np.where((starts <= 0) & (ends >= 0), 0, np.minimum(abs(starts), abs(ends)))
-        coarse = self._scores(field.pooled(f), row0, col0, starts, starts)
-        coarse -= rot_penalty[:, None, None]
-        coarse -= pen_xy * (nearest[None, :, None] ** 2 + nearest[None, None, :] ** 2)
-
-        order = np.argsort(coarse, axis=None)[::-1]
-        coarse_sorted = coarse.reshape(-1)[order]
-        offs = np.arange(f)
-        samples: list[np.ndarray] = []
-        best = -np.inf
-        k, batch = 0, 4
-        limit = order.size if max_coarse is None else min(order.size, max_coarse)
-        while k < limit:
-            if coarse_sorted[k] < best - margin:
-                break
-            # Coarse cells in order of their bound, in batches that double (up to 64): the first
-            # few set the best fine score, later ones are cut by it in few numpy calls.
-            end = min(k + batch, limit)
-            chunk = order[k:end]
-            chunk = chunk[coarse_sorted[k:end] >= best - margin]
-            k += batch
-            batch = min(2 * batch, 64)
-            ti, jy, jx = np.unravel_index(chunk, coarse.shape)
-            ky = starts[jy][:, None] + offs  # (B, f)
-            kx = starts[jx][:, None] + offs
-            r = np.clip(row0[ti][:, None, :] + ky[:, :, None], 0, rows - 1)  # (B, f, N)
-            cc = np.clip(col0[ti][:, None, :] + kx[:, :, None], 0, cols - 1)
-            flat = r[:, :, None, :] * cols + cc[:, None, :, :]  # (B, f, f, N)
-            score = field.values.reshape(-1)[flat].mean(axis=-1)
-            score -= rot_penalty[ti][:, None, None]
-            score -= pen_xy * (ky[:, :, None] ** 2 + kx[:, None, :] ** 2)
-            valid = (ky[:, :, None] <= n_xy) & (kx[:, None, :] <= n_xy)
-            score = np.where(valid, score, -np.inf)
-            best = max(best, float(score.max()))
-            grid_t = np.broadcast_to(d_theta[ti][:, None, None], score.shape)
-            grid_y = np.broadcast_to(ky[:, :, None] * res, score.shape)
-            grid_x = np.broadcast_to(kx[:, None, :] * res, score.shape)
-            samples.append(np.stack([grid_x, grid_y, grid_t, score], axis=-1).reshape(-1, 4))
-        cand = np.concatenate(samples)
-        cand = cand[np.isfinite(cand[:, 3])]
+        window = _Window.around(
+            field, searched, prior, window_xy, window_theta, p.angular_step, (t_pen, r_pen)
+        )
+        coarse, starts, f = _coarse_bounds(field, window, coarse_factor)
+        cand = _branch_and_bound(field, window, coarse, starts, f, margin, max_coarse)
         top = cand[np.argmax(cand[:, 3])]
-        covariance = self._covariance(cand, n_points, res)
-        rival_gap = math.inf
-        if distinct is not None:
-            off = cand[:, :3] - top[:3]
-            far = (np.hypot(off[:, 0], off[:, 1]) > distinct[0]) | (np.abs(off[:, 2]) > distinct[1])
-            if far.any():
-                rival_gap = float(top[3] - cand[far, 3].max())
-        start = prior + top[:3]
-        pose = self._refine(field, all_points, start, prior, t_pen, r_pen)
-        score = float(field.bilinear(*self._transform(pose, all_points))[0].mean())
+        covariance = self._covariance(cand, n_points, field.resolution)
+        rival_gap = math.inf if distinct is None else _rival_gap(cand, top, distinct)
+        pose = self._refine(field, points, prior + top[:3], prior, t_pen, r_pen)
+        score = float(field.bilinear(*self._transform(pose, points))[0].mean())
         return MatchResult(pose=pose, score=score, covariance=covariance, rival_gap=rival_gap)
 
     @staticmethod
@@ -232,17 +175,6 @@ class CorrelativeMatcher:
             c * points[:, 0] - s * points[:, 1] + pose[0],
             s * points[:, 0] + c * points[:, 1] + pose[1],
         )
-
-    @staticmethod
-    def _scores(
-        table: np.ndarray, row0: np.ndarray, col0: np.ndarray, dy: np.ndarray, dx: np.ndarray
-    ) -> np.ndarray:
-        """Mean of ``table`` over points shifted by every (dy, dx) for every rotation: (T, Y, X)."""
-        rows, cols = table.shape
-        r = np.clip(row0[:, None, :] + dy[None, :, None], 0, rows - 1)
-        c = np.clip(col0[:, None, :] + dx[None, :, None], 0, cols - 1)
-        flat = r[:, :, None, :] * cols + c[:, None, :, :]
-        return table.reshape(-1)[flat].mean(axis=-1)
 
     def _covariance(self, cand: np.ndarray, n_points: int, res: float) -> np.ndarray:
         """Olson 2009 §IV: Σ = Σᵢ wᵢ xᵢxᵢᵀ / Σ w − μμᵀ with wᵢ from the candidate scores."""
@@ -312,3 +244,131 @@ class CorrelativeMatcher:
                 break
             pose, r, jac, cost = trial, r_new, jac_new, cost_new
         return pose
+
+
+@dataclass(frozen=True, eq=False)
+class _Window:
+    """A discrete search window around a prior: ± ``n_xy`` cells and the rotations ``d_theta``
+    (offsets from the prior's heading), each point's cell at every rotation before translation,
+    and the prior penalty of each rotation and of one cell² of translation."""
+
+    n_xy: int
+    d_theta: np.ndarray  # (T,)
+    row0: np.ndarray  # (T, N)
+    col0: np.ndarray  # (T, N)
+    rot_penalty: np.ndarray  # (T,)
+    pen_xy: float
+
+    @classmethod
+    def around(
+        cls,
+        field: LikelihoodField,
+        points: np.ndarray,
+        prior: np.ndarray,
+        window_xy: float,
+        window_theta: float,
+        angular_step: float,
+        penalties: tuple[float, float],
+    ) -> _Window:
+        res = field.resolution
+        t_pen, r_pen = penalties
+        n_xy = math.ceil(window_xy / res - 1e-9)
+        n_th = math.ceil(window_theta / angular_step - 1e-9)
+        d_theta = np.arange(-n_th, n_th + 1) * angular_step
+        c, s = np.cos(prior[2] + d_theta), np.sin(prior[2] + d_theta)
+        px = c[:, None] * points[:, 0] - s[:, None] * points[:, 1] + prior[0]
+        py = s[:, None] * points[:, 0] + c[:, None] * points[:, 1] + prior[1]
+        col0 = np.floor((px - field.origin[0]) / res).astype(np.int64)
+        row0 = np.floor((py - field.origin[1]) / res).astype(np.int64)
+        return cls(n_xy, d_theta, row0, col0, r_pen * d_theta**2, t_pen * res * res)
+
+
+def _coarse_bounds(
+    field: LikelihoodField, window: _Window, coarse_factor: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The low-resolution level of Olson 2009 §III-C: for every rotation and every block of
+    f×f translations, the score on the max-pooled field minus the smallest prior penalty in the
+    block, an upper bound of every fine score in it. Returns the bounds (T, Y, X), the first
+    translation (cells) of each block along an axis, and f."""
+    n_xy = window.n_xy
+    f = max(1, min(coarse_factor, 2 * n_xy + 1))
+    starts = np.arange(-n_xy, n_xy + 1, f)
+    ends = np.minimum(starts + f - 1, n_xy)
+    nearest = np.where((starts <= 0) & (ends >= 0), 0, np.minimum(abs(starts), abs(ends)))
+    coarse = _scores(field.pooled(f), window.row0, window.col0, starts, starts)
+    coarse -= window.rot_penalty[:, None, None]
+    coarse -= window.pen_xy * (nearest[None, :, None] ** 2 + nearest[None, None, :] ** 2)
+    return coarse, starts, f
+
+
+def _branch_and_bound(
+    field: LikelihoodField,
+    window: _Window,
+    coarse: np.ndarray,
+    starts: np.ndarray,
+    f: int,
+    margin: float,
+    max_coarse: int | None,
+) -> np.ndarray:
+    """The full-resolution level of Olson 2009 §III-C: the fine translations under each coarse
+    block, best bound first, until a bound falls ``margin`` below the best fine score (or after
+    ``max_coarse`` blocks). Returns every scored candidate as rows (dx, dy, dθ, score)."""
+    res = field.resolution
+    rows, cols = field.shape
+    n_xy = window.n_xy
+    order = np.argsort(coarse, axis=None)[::-1]
+    coarse_sorted = coarse.reshape(-1)[order]
+    offs = np.arange(f)
+    samples: list[np.ndarray] = []
+    best = -np.inf
+    k, batch = 0, 4
+    limit = order.size if max_coarse is None else min(order.size, max_coarse)
+    while k < limit:
+        if coarse_sorted[k] < best - margin:
+            break
+        # Coarse cells in order of their bound, in batches that double (up to 64): the first
+        # few set the best fine score, later ones are cut by it in few numpy calls.
+        end = min(k + batch, limit)
+        chunk = order[k:end]
+        chunk = chunk[coarse_sorted[k:end] >= best - margin]
+        k += batch
+        batch = min(2 * batch, 64)
+        ti, jy, jx = np.unravel_index(chunk, coarse.shape)
+        ky = starts[jy][:, None] + offs  # (B, f)
+        kx = starts[jx][:, None] + offs
+        r = np.clip(window.row0[ti][:, None, :] + ky[:, :, None], 0, rows - 1)  # (B, f, N)
+        cc = np.clip(window.col0[ti][:, None, :] + kx[:, :, None], 0, cols - 1)
+        flat = r[:, :, None, :] * cols + cc[:, None, :, :]  # (B, f, f, N)
+        score = field.values.reshape(-1)[flat].mean(axis=-1)
+        score -= window.rot_penalty[ti][:, None, None]
+        score -= window.pen_xy * (ky[:, :, None] ** 2 + kx[:, None, :] ** 2)
+        valid = (ky[:, :, None] <= n_xy) & (kx[:, None, :] <= n_xy)
+        score = np.where(valid, score, -np.inf)
+        best = max(best, float(score.max()))
+        grid_t = np.broadcast_to(window.d_theta[ti][:, None, None], score.shape)
+        grid_y = np.broadcast_to(ky[:, :, None] * res, score.shape)
+        grid_x = np.broadcast_to(kx[:, None, :] * res, score.shape)
+        samples.append(np.stack([grid_x, grid_y, grid_t, score], axis=-1).reshape(-1, 4))
+    cand = np.concatenate(samples)
+    return cand[np.isfinite(cand[:, 3])]
+
+
+def _rival_gap(cand: np.ndarray, top: np.ndarray, distinct: tuple[float, float]) -> float:
+    """The best candidate's score minus that of the best one farther than ``distinct``
+    (metres, radians) from it; ``inf`` when there is none."""
+    off = cand[:, :3] - top[:3]
+    far = (np.hypot(off[:, 0], off[:, 1]) > distinct[0]) | (np.abs(off[:, 2]) > distinct[1])
+    if not far.any():
+        return math.inf
+    return float(top[3] - cand[far, 3].max())
+
+
+def _scores(
+    table: np.ndarray, row0: np.ndarray, col0: np.ndarray, dy: np.ndarray, dx: np.ndarray
+) -> np.ndarray:
+    """Mean of ``table`` over points shifted by every (dy, dx) for every rotation: (T, Y, X)."""
+    rows, cols = table.shape
+    r = np.clip(row0[:, None, :] + dy[None, :, None], 0, rows - 1)
+    c = np.clip(col0[:, None, :] + dx[None, :, None], 0, cols - 1)
+    flat = r[:, :, None, :] * cols + c[:, None, :, :]
+    return table.reshape(-1)[flat].mean(axis=-1)
