@@ -111,25 +111,7 @@ def relocalize(
         )
     if field is None:
         field = map_field(saved, params)
-    wide = CorrelativeMatcher(dataclasses.replace(params, angular_step=params.reloc_angular_step))
-    sectors = params.reloc_sectors
-    half = window_theta / sectors
-    candidates = []
-    for k in range(sectors):
-        centre = prior_arr[2] - window_theta + (2 * k + 1) * half
-        result = wide.match(
-            field,
-            points,
-            np.array([prior_arr[0], prior_arr[1], centre]),
-            window_xy,
-            half,
-            params.reloc_coarse_factor,
-            penalize=False,
-            search_points=params.reloc_search_points,
-        )
-        candidates.append((result.score, result.pose))
-    scores = np.array([c[0] for c in candidates])
-    poses = np.array([c[1] for c in candidates])
+    scores, poses = _sector_bests(field, points, prior_arr, window_xy, window_theta, params)
     best = int(np.argmax(scores))
     fine = CorrelativeMatcher(params).match(
         field,
@@ -148,19 +130,53 @@ def relocalize(
             fine.score,
             f"best score {fine.score:.3f} below reloc_min_score {params.reloc_min_score}",
         )
+    ambiguity = _ambiguity(scores, poses, best, params)
+    return Relocalization(not ambiguity, found, fine.score, ambiguity)
+
+
+def _sector_bests(
+    field: LikelihoodField,
+    points: np.ndarray,
+    prior: np.ndarray,
+    window_xy: float,
+    window_theta: float,
+    params: SlamParams,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The wide search: the best score and pose of each of the ``reloc_sectors`` heading
+    sectors of ± ``window_theta`` around ``prior``, each searched over ± ``window_xy``."""
+    wide = CorrelativeMatcher(dataclasses.replace(params, angular_step=params.reloc_angular_step))
+    sectors = params.reloc_sectors
+    half = window_theta / sectors
+    candidates = []
+    for k in range(sectors):
+        centre = prior[2] - window_theta + (2 * k + 1) * half
+        result = wide.match(
+            field,
+            points,
+            np.array([prior[0], prior[1], centre]),
+            window_xy,
+            half,
+            params.reloc_coarse_factor,
+            penalize=False,
+            search_points=params.reloc_search_points,
+        )
+        candidates.append((result.score, result.pose))
+    return np.array([c[0] for c in candidates]), np.array([c[1] for c in candidates])
+
+
+def _ambiguity(scores: np.ndarray, poses: np.ndarray, best: int, params: SlamParams) -> str:
+    """Why the sector candidates are ambiguous: the best distinct one scores within
+    ``reloc_ambiguity_margin`` of candidate ``best``; "" when none does."""
     offset = poses - poses[best]
     distinct = (np.hypot(offset[:, 0], offset[:, 1]) > params.reloc_distinct_xy) | (
         np.abs(wrap_angle(offset[:, 2])) > params.reloc_distinct_theta
     )
     rivals = np.flatnonzero(distinct & (scores > scores[best] - params.reloc_ambiguity_margin))
-    if rivals.size:
-        r = int(rivals[np.argmax(scores[rivals])])
-        x, y, theta = poses[r]
-        return Relocalization(
-            False,
-            found,
-            fine.score,
-            f"ambiguous: ({x:.2f}, {y:.2f}, {theta:.2f}) scores {scores[r]:.3f} against "
-            f"{scores[best]:.3f}, within reloc_ambiguity_margin {params.reloc_ambiguity_margin}",
-        )
-    return Relocalization(True, found, fine.score, "")
+    if not rivals.size:
+        return ""
+    r = int(rivals[np.argmax(scores[rivals])])
+    x, y, theta = poses[r]
+    return (
+        f"ambiguous: ({x:.2f}, {y:.2f}, {theta:.2f}) scores {scores[r]:.3f} against "
+        f"{scores[best]:.3f}, within reloc_ambiguity_margin {params.reloc_ambiguity_margin}"
+    )
