@@ -29,6 +29,7 @@ from agents.slam.geometry import (
     wrap_angle,
 )
 from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
+from agents.slam.motion import prior_penalties, step_sigmas
 from agents.slam.occupancy import LogOddsGrid, log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
@@ -186,7 +187,7 @@ class Slam:
                 p.search_window_xy,
                 p.search_window_theta,
                 p.coarse_factor,
-                penalties=self._prior_penalties(step),
+                penalties=prior_penalties(p, step),
             )
             score = result.score
             matched = score >= p.min_match_score
@@ -202,32 +203,6 @@ class Slam:
             self._add_node(points, odom, t)
         self._remember_pose()
         return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
-
-    def _prior_penalties(self, step: np.ndarray) -> tuple[float, float]:
-        """Score penalties per m² and rad² for leaving the odometry prior of one ``step``.
-
-        The step's odometry uncertainty follows the linear motion model of ``SlamParams``
-        (σ_xy = a·dd + b, σ_θ = c·|dθ| + d·dd, as Thrun et al., Probabilistic Robotics §5.4,
-        with standard deviations instead of variances). A Gaussian prior with that σ, weighed
-        against the scan's mean likelihood, costs prior_weight·d²/σ²; the penalty is that,
-        capped by the fixed translation_penalty / rotation_penalty, which hold for short steps
-        (where the odometry is better than any scan in a featureless corridor)."""
-        p = self.params
-        sigma_xy, sigma_theta = self._step_sigmas(step)
-        t_pen = min(p.translation_penalty, p.prior_weight / sigma_xy**2)
-        r_pen = p.rotation_penalty
-        if sigma_theta > 0:
-            r_pen = min(r_pen, p.prior_weight / sigma_theta**2)
-        return t_pen, r_pen
-
-    def _step_sigmas(self, step: np.ndarray) -> tuple[float, float]:
-        """Standard deviations (σ_xy per axis, σ_θ) of the odometry error of one ``step``
-        (dx, dy, dθ) under the linear motion model of ``SlamParams``."""
-        p = self.params
-        dd = math.hypot(step[0], step[1])
-        sigma_xy = p.motion_xy_per_m * dd + p.motion_xy_floor
-        sigma_theta = p.motion_theta_per_rad * abs(step[2]) + p.motion_theta_per_m * dd
-        return sigma_xy, sigma_theta
 
     def trajectory(self) -> np.ndarray:
         """(scans, 3) poses of every processed scan after the latest graph optimization."""
@@ -369,10 +344,10 @@ class Slam:
 
     def _accumulate_drift(self, step: np.ndarray) -> None:
         """Grow the uncertainty since the last closure by one odometry step (the motion model
-        of ``_prior_penalties``; a heading error σ_θ moves the position by σ_θ·dd, first-order
+        of ``agents.slam.motion``; a heading error σ_θ moves the position by σ_θ·dd, first-order
         propagation)."""
         dd = math.hypot(step[0], step[1])
-        sigma_xy, sigma_theta = self._step_sigmas(step)
+        sigma_xy, sigma_theta = step_sigmas(self.params, step)
         self._drift_var_xy += sigma_xy**2 + self._drift_var_theta * dd**2
         self._drift_var_theta += sigma_theta**2
 

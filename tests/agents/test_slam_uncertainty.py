@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from agents.slam.motion import prior_penalties
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam import Slam, _Closure
 from fleet.slam_params import SlamParams
@@ -17,9 +18,8 @@ PARAMS = SlamParams()
 
 
 def test_prior_penalties_follow_the_motion_model():
-    slam = Slam(PARAMS)
-    short = slam._prior_penalties(np.array([0.03, 0.0, 0.01]))
-    long = slam._prior_penalties(np.array([1.0, 0.0, 0.5]))
+    short = prior_penalties(PARAMS, np.array([0.03, 0.0, 0.01]))
+    long = prior_penalties(PARAMS, np.array([1.0, 0.0, 0.5]))
     assert short == (PARAMS.translation_penalty, PARAMS.rotation_penalty)
     sigma_xy = PARAMS.motion_xy_per_m * 1.0 + PARAMS.motion_xy_floor
     sigma_theta = PARAMS.motion_theta_per_rad * 0.5 + PARAMS.motion_theta_per_m * 1.0

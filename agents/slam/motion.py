@@ -1,0 +1,36 @@
+"""The odometry motion model of the SLAM: how uncertain one odometry step is, and what that makes
+the tracking prior weigh. Loop closure grows its search window with the same model."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fleet.slam_params import SlamParams
+
+
+def step_sigmas(params: SlamParams, step: np.ndarray) -> tuple[float, float]:
+    """Standard deviations (σ_xy per axis, σ_θ) of the odometry error of one ``step``
+    (dx, dy, dθ) under the linear motion model of ``SlamParams``."""
+    dd = math.hypot(step[0], step[1])
+    sigma_xy = params.motion_xy_per_m * dd + params.motion_xy_floor
+    sigma_theta = params.motion_theta_per_rad * abs(step[2]) + params.motion_theta_per_m * dd
+    return sigma_xy, sigma_theta
+
+
+def prior_penalties(params: SlamParams, step: np.ndarray) -> tuple[float, float]:
+    """Score penalties per m² and rad² for leaving the odometry prior of one ``step``.
+
+    The step's odometry uncertainty follows the linear motion model of ``SlamParams``
+    (σ_xy = a·dd + b, σ_θ = c·|dθ| + d·dd, as Thrun et al., Probabilistic Robotics §5.4,
+    with standard deviations instead of variances). A Gaussian prior with that σ, weighed
+    against the scan's mean likelihood, costs prior_weight·d²/σ²; the penalty is that,
+    capped by the fixed translation_penalty / rotation_penalty, which hold for short steps
+    (where the odometry is better than any scan in a featureless corridor)."""
+    sigma_xy, sigma_theta = step_sigmas(params, step)
+    t_pen = min(params.translation_penalty, params.prior_weight / sigma_xy**2)
+    r_pen = params.rotation_penalty
+    if sigma_theta > 0:
+        r_pen = min(r_pen, params.prior_weight / sigma_theta**2)
+    return t_pen, r_pen
