@@ -3,11 +3,11 @@
 Per scan, the odometry delta since the previous scan predicts the pose, and the correlative
 matcher (Olson 2009) aligns the scan with the older of the two active submaps around that
 prediction. Scans that moved enough become *nodes*: they are inserted into both active submaps
-(each submap receives ``submap_nodes`` nodes; a new one starts every ``submap_nodes/2``), so
-the matching submap is always well filled. Nodes and submaps are poses of a pose graph with
-constraints node-in-submap (from tracking), node-to-node (odometry) and loop closures (a node
-matched against an older finished submap near its estimate). After new loop closures the graph
-is optimized with sparse least squares and the current pose follows the last node's correction.
+(``agents.slam.submaps``), so the matching submap is always well filled. Nodes and submaps are
+poses of a pose graph with constraints node-in-submap (from tracking), node-to-node (odometry)
+and loop closures (a node matched against an older finished submap near its estimate). After
+new loop closures the graph is optimized with sparse least squares and the current pose follows
+the last node's correction.
 
 The map frame is the frame of ``initial_pose``: an agent that knows its dock pose in the world
 passes it, and the SLAM map is then in world coordinates.
@@ -16,7 +16,7 @@ passes it, and the SLAM map is then in world coordinates.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -25,14 +25,13 @@ from agents.slam.geometry import (
     inverse,
     relative,
     scan_to_points,
-    transform_points,
     wrap_angle,
 )
-from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
+from agents.slam.matcher import CorrelativeMatcher
 from agents.slam.motion import prior_penalties, step_sigmas
-from agents.slam.occupancy import LogOddsGrid, log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
+from agents.slam.submaps import Submaps
 from fleet.slam_params import SlamParams
 
 Pose = tuple[float, float, float]
@@ -62,17 +61,6 @@ class SlamStats:
     optimizations: int
 
 
-@dataclass(eq=False)
-class _Submap:
-    index: int
-    graph_id: int
-    grid: LogOddsGrid
-    nodes: int = 0
-    finished: bool = False
-    field: LikelihoodField | None = None
-    field_nodes: int = -1
-
-
 @dataclass(frozen=True, eq=False)
 class _Closure:
     """A loop-closure match: node ``node_id`` seen from submap ``submap_graph_id`` at ``pose``;
@@ -83,13 +71,6 @@ class _Closure:
     pose: np.ndarray
     correction: np.ndarray
     nodes_then: int  # the SLAM's node count when it was found
-
-
-@dataclass(eq=False)
-class _MapCache:
-    origin: tuple[float, float]
-    log_odds: np.ndarray
-    submaps: set[int] = field(default_factory=set)
 
 
 class Slam:
@@ -117,8 +98,7 @@ class Slam:
         self.range_max = min(range_max, params.max_range)
         self._matcher = CorrelativeMatcher(params)
         self._graph = PoseGraph()
-        self._submaps: list[_Submap] = []
-        self._active: list[_Submap] = []
+        self._submaps = Submaps(params, self._graph, self.range_max)
         self._pose = np.asarray(initial_pose, dtype=float)
         self._last_odom: np.ndarray | None = None
         self._last_node_id: int | None = None
@@ -136,12 +116,6 @@ class Slam:
         self._unconfirmed: _Closure | None = None
         self._nodes_since_optimization = 0
         self._optimizations = 0
-        self._cache: _MapCache | None = None
-        self._half_size = self.range_max + params.submap_travel
-        # Cell boundaries of the map lie at (k + ½)·resolution, so walls drawn on round
-        # coordinates fall on cell centres. A wall on a boundary is split between two cells by
-        # range noise, and matching then settles it into one cell, shifting the map half a cell.
-        self._lattice_offset = 0.5 * params.resolution
 
     @property
     def pose(self) -> Pose:
@@ -149,7 +123,11 @@ class Slam:
 
     def stats(self) -> SlamStats:
         return SlamStats(
-            self._scans, self._nodes, len(self._submaps), self._loop_closures, self._optimizations
+            self._scans,
+            self._nodes,
+            len(self._submaps.all),
+            self._loop_closures,
+            self._optimizations,
         )
 
     def process(
@@ -175,10 +153,10 @@ class Slam:
         step = relative(self._last_odom, odom)
         prior = compose(self._pose, step)
         self._last_odom = odom
-        submap = self._active[0]
+        submap = self._submaps.active[0]
         matched, score = False, 0.0
         if points.shape[0] >= 3 and submap.grid.touched is not None:
-            fld = self._field(submap)
+            fld = self._submaps.field(submap)
             sm_pose = self._graph.poses[submap.graph_id]
             result = self._matcher.match(
                 fld,
@@ -225,44 +203,7 @@ class Slam:
 
     def occupancy(self) -> SlamMap:
         """The map in the map frame: finished submaps (cached) plus the active ones."""
-        p = self.params
-        boxes = [self._submap_box(s) for s in self._submaps if s.grid.touched is not None]
-        tile = p.map_tile * p.resolution
-        if not boxes:
-            return SlamMap(
-                np.zeros((p.map_tile, p.map_tile), dtype=np.float32),
-                p.resolution,
-                (float(self._pose[0]), float(self._pose[1])),
-            )
-        shift = self._lattice_offset
-        lo = np.floor((np.min([b[0] for b in boxes], axis=0) - shift) / tile) * tile + shift
-        hi = np.ceil((np.max([b[1] for b in boxes], axis=0) - shift) / tile) * tile + shift
-        origin = (float(lo[0]), float(lo[1]))
-        shape = (
-            round((hi[1] - lo[1]) / p.resolution),
-            round((hi[0] - lo[0]) / p.resolution),
-        )
-        cache = self._cache
-        if cache is None or cache.origin != origin or cache.log_odds.shape != shape:
-            cache = self._cache = _MapCache(origin, np.zeros(shape, dtype=np.float32))
-        for s in self._submaps:
-            if s.finished and s.index not in cache.submaps:
-                self._render(s, cache.log_odds, origin)
-                cache.submaps.add(s.index)
-        out = cache.log_odds.copy()
-        for s in self._active:
-            self._render(s, out, origin)
-        np.clip(out, log_odds(p.p_min), log_odds(p.p_max), out=out)
-        return SlamMap(out, p.resolution, origin)
-
-    def _field(self, submap: _Submap) -> LikelihoodField:
-        p = self.params
-        if submap.field is None or (
-            not submap.finished and submap.nodes - submap.field_nodes >= p.field_refresh_nodes
-        ):
-            submap.field = LikelihoodField(submap.grid, p.match_sigma)
-            submap.field_nodes = submap.nodes
-        return submap.field
+        return self._submaps.occupancy((float(self._pose[0]), float(self._pose[1])))
 
     def _is_new_node(self, odom: np.ndarray, t: float) -> bool:
         p = self.params
@@ -273,46 +214,11 @@ class Slam:
             or t - self._last_node_t >= p.node_max_interval
         )
 
-    def _new_submap(self, pose: np.ndarray) -> None:
-        """Start a submap at ``pose``'s position, its grid axis-aligned with the map frame and
-        snapped to the map's cell lattice: all submaps then quantize a wall into the same cells,
-        so the discretization bias does not differ (and accumulate) between submaps, and the
-        map is composed from them without resampling across lattices."""
-        p = self.params
-        shift = self._lattice_offset
-        snapped = np.array(
-            [
-                round((pose[0] - shift) / p.resolution) * p.resolution + shift,
-                round((pose[1] - shift) / p.resolution) * p.resolution + shift,
-                0.0,
-            ]
-        )
-        n = math.ceil(2 * self._half_size / p.resolution)
-        grid = LogOddsGrid(
-            (n, n),
-            (-self._half_size, -self._half_size),
-            p.resolution,
-            p.p_hit,
-            p.p_miss,
-            p.p_min,
-            p.p_max,
-        )
-        submap = _Submap(len(self._submaps), self._graph.add_pose(snapped), grid)
-        self._submaps.append(submap)
-        self._active.append(submap)
-        if len(self._active) > 2:
-            old = self._active.pop(0)
-            old.finished = True
-            margin = math.ceil(max(p.loop_window_xy, 3.0 * p.match_sigma) / p.resolution) + 1
-            old.grid = old.grid.cropped(margin)
-            old.field = LikelihoodField(old.grid, p.match_sigma)
-            old.field_nodes = old.nodes
-
     def _add_node(self, points: np.ndarray, odom: np.ndarray, t: float) -> None:
         p = self.params
         pose = self._pose
-        if not self._submaps:
-            self._new_submap(pose)
+        if not self._submaps.all:
+            self._submaps.start(pose)
         node_id = self._graph.add_pose(pose)
         if self._last_node_id is not None:
             step = relative(self._last_node_odom, odom)
@@ -320,23 +226,12 @@ class Slam:
                 self._last_node_id, node_id, step, p.odom_sigma_xy, p.odom_sigma_theta
             )
             self._accumulate_drift(step)
-        for s in self._active:
-            local = relative(self._graph.poses[s.graph_id], pose)
-            s.grid.insert(local[:2], transform_points(local, points))
-            s.nodes += 1
-            self._graph.add_constraint(
-                s.graph_id, node_id, local, p.constraint_sigma_xy, p.constraint_sigma_theta
-            )
+        self._submaps.add_node(node_id, pose, points)
         self._last_node_id = node_id
         self._last_node_odom = odom
         self._last_node_t = t
         self._nodes += 1
         self._nodes_since_optimization += 1
-        newest = self._active[-1]
-        newest_pose = self._graph.poses[newest.graph_id]
-        far = math.hypot(*(pose[:2] - newest_pose[:2])) > 0.5 * p.submap_travel
-        if newest.nodes >= max(1, p.submap_nodes // 2) or far:
-            self._new_submap(pose)
         if self._nodes % p.loop_every_nodes == 0 and points.shape[0] >= 3:
             self._close_loops(node_id, points)
         if self._pending_loops and self._nodes_since_optimization >= p.optimize_every_nodes:
@@ -379,16 +274,16 @@ class Slam:
         pose = self._graph.poses[node_id]
         window_xy, window_theta = self._loop_windows()
         radius = p.loop_search_radius + window_xy
-        newest_allowed = self._active[0].index - p.loop_min_submap_gap
+        newest_allowed = self._submaps.active[0].index - p.loop_min_submap_gap
         if self._unconfirmed is not None and self._nodes - self._unconfirmed.nodes_then > (
             p.loop_confirm_nodes
         ):
             self._unconfirmed = None
         candidates = []
-        for s in self._submaps:
+        for s in self._submaps.all:
             if not s.finished or s.index > newest_allowed or s.grid.touched is None:
                 continue
-            lo, hi = self._submap_box(s)
+            lo, hi = self._submaps.box(s)
             gap = np.maximum(np.maximum(lo - pose[:2], pose[:2] - hi), 0.0)
             distance = float(np.hypot(*gap))
             if distance <= radius:
@@ -468,46 +363,7 @@ class Slam:
         self._pending_loops = 0
         self._nodes_since_optimization = 0
         self._optimizations += 1
-        self._cache = None
-
-    def _submap_box(self, s: _Submap) -> tuple[np.ndarray, np.ndarray]:
-        """Axis-aligned map-frame bounds (lo, hi) of the submap's observed cells."""
-        r0, r1, c0, c1 = s.grid.touched
-        res = s.grid.resolution
-        ox, oy = s.grid.origin
-        corners = np.array(
-            [[ox + c * res, oy + r * res] for r in (r0, r1) for c in (c0, c1)], dtype=float
-        )
-        world = transform_points(self._graph.poses[s.graph_id], corners)
-        return world.min(axis=0), world.max(axis=0)
-
-    def _render(self, s: _Submap, target: np.ndarray, origin: tuple[float, float]) -> None:
-        """Add half the submap's log-odds into ``target`` (every node lives in two submaps),
-        sampling the submap at the centre of each target cell it covers."""
-        if s.grid.touched is None:
-            return
-        res = self.params.resolution
-        lo, hi = self._submap_box(s)
-        rows, cols = target.shape
-        c0 = max(math.floor((lo[0] - origin[0]) / res), 0)
-        c1 = min(math.ceil((hi[0] - origin[0]) / res), cols)
-        r0 = max(math.floor((lo[1] - origin[1]) / res), 0)
-        r1 = min(math.ceil((hi[1] - origin[1]) / res), rows)
-        if r0 >= r1 or c0 >= c1:
-            return
-        ys = origin[1] + (np.arange(r0, r1) + 0.5) * res
-        xs = origin[0] + (np.arange(c0, c1) + 0.5) * res
-        gx, gy = np.meshgrid(xs, ys)
-        pose = self._graph.poses[s.graph_id]
-        c, sn = math.cos(pose[2]), math.sin(pose[2])
-        dx, dy = gx - pose[0], gy - pose[1]
-        lx, ly = c * dx + sn * dy, -sn * dx + c * dy
-        gc = np.floor((lx - s.grid.origin[0]) / res).astype(np.int64)
-        gr = np.floor((ly - s.grid.origin[1]) / res).astype(np.int64)
-        tr0, tr1, tc0, tc1 = s.grid.touched
-        ok = (gr >= tr0) & (gr < tr1) & (gc >= tc0) & (gc < tc1)
-        block = target[r0:r1, c0:c1]
-        block[ok] += 0.5 * s.grid.log_odds[gr[ok], gc[ok]]
+        self._submaps.moved()
 
 
 def _rotate_covariance(cov: np.ndarray, theta: float) -> np.ndarray:
