@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
+from agents.slam.loop_closure import Closure, LoopCloser
 from agents.slam.motion import prior_penalties
 from agents.slam.pose_graph import PoseGraph
-from agents.slam.slam import Slam, _Closure
 from fleet.slam_params import SlamParams
 
 PARAMS = SlamParams()
@@ -29,34 +29,36 @@ def test_prior_penalties_follow_the_motion_model():
 
 
 def test_loop_window_grows_with_drift_up_to_its_cap_and_resets_on_a_closure():
-    slam = Slam(PARAMS)
-    assert slam._loop_windows() == (PARAMS.loop_window_xy, PARAMS.loop_window_theta)
+    graph = PoseGraph()
+    closer = LoopCloser(PARAMS, graph)
+    assert closer.windows() == (PARAMS.loop_window_xy, PARAMS.loop_window_theta)
     widths = []
     for _ in range(400):
-        slam._accumulate_drift(np.array([0.5, 0.0, 0.05]))
-        widths.append(slam._loop_windows())
+        closer.accumulate_drift(np.array([0.5, 0.0, 0.05]))
+        widths.append(closer.windows())
     xy = [w[0] for w in widths]
     assert xy == sorted(xy) and xy[0] == PARAMS.loop_window_xy
     assert xy[-1] == PARAMS.loop_window_max_xy and widths[-1][1] == PARAMS.loop_window_max_theta
     assert PARAMS.loop_window_xy < xy[len(xy) // 8] < PARAMS.loop_window_max_xy
-    slam._graph.add_pose(np.zeros(3))
-    slam._graph.add_pose(np.zeros(3))
-    slam._add_closure(_Closure(1, 0, np.zeros(3), np.zeros(3), 1))
-    assert slam._loop_windows() == (PARAMS.loop_window_xy, PARAMS.loop_window_theta)
-    assert slam.stats().loop_closures == 1
+    graph.add_pose(np.zeros(3))
+    graph.add_pose(np.zeros(3))
+    closer.add(Closure(1, 0, np.zeros(3), np.zeros(3), 1))
+    assert closer.windows() == (PARAMS.loop_window_xy, PARAMS.loop_window_theta)
+    assert (closer.closures, closer.pending, graph.num_constraints) == (1, 1, 1)
 
 
 def test_closures_agree_when_they_imply_the_same_rigid_correction():
-    slam = Slam(PARAMS)
+    graph = PoseGraph()
+    closer = LoopCloser(PARAMS, graph)
     for pose in ([0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [8.0, 1.0, 0.3]):
-        slam._graph.add_pose(np.array(pose))
+        graph.add_pose(np.array(pose))
     shift = np.array([0.5, -0.8, 0.1])  # the trajectory is off by this rigid motion
     other = np.array([0.5, -0.2, 0.1])
     far_turn = np.array([0.5, -0.8, 0.2])
-    first = _Closure(1, 0, np.zeros(3), shift, 1)
-    assert slam._agrees(first, _Closure(2, 0, np.zeros(3), shift.copy(), 2))
-    assert not slam._agrees(first, _Closure(2, 0, np.zeros(3), other, 2))
-    assert not slam._agrees(first, _Closure(2, 0, np.zeros(3), far_turn, 2))
+    first = Closure(1, 0, np.zeros(3), shift, 1)
+    assert closer.agrees(first, Closure(2, 0, np.zeros(3), shift.copy(), 2))
+    assert not closer.agrees(first, Closure(2, 0, np.zeros(3), other, 2))
+    assert not closer.agrees(first, Closure(2, 0, np.zeros(3), far_turn, 2))
 
 
 def test_gauss_newton_leaves_an_unconstrained_pose_and_solves_the_rest():
