@@ -25,6 +25,9 @@ from fleet.slam_params import SlamParams
 
 @dataclass(eq=False)
 class Submap:
+    """One submap: its place in order, the graph id of its pose, its grid, the nodes inserted,
+    whether it is finished, and its likelihood field as built when it held ``field_nodes``."""
+
     index: int
     graph_id: int
     grid: LogOddsGrid
