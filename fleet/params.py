@@ -182,6 +182,7 @@ class CoordinatorParams:
     deconfliction: DeconflictionMode = "local"
     replan_lag_s: float = 10.0
     body_margin: float = 0.1
+    max_detour_m: float = 1.0
     stall_s: float = 30.0
     stall_progress_m: float = 0.1
 
@@ -193,6 +194,7 @@ class CoordinatorParams:
             "replan_lag_s",
             "stall_s",
             "stall_progress_m",
+            "max_detour_m",
         ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")

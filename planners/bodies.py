@@ -57,10 +57,17 @@ class Rerouted:
         return bool(self.dropped)
 
 
-def reroute(path: np.ndarray, free: np.ndarray, grid: GridMap, min_run: float) -> Rerouted:
+def reroute(
+    path: np.ndarray,
+    free: np.ndarray,
+    grid: GridMap,
+    min_run: float,
+    max_detour: float = np.inf,
+) -> Rerouted:
     """``path`` (N, 2) repaired on ``free`` (the grid's cells a robot centre may occupy): see
     the module docstring. Runs shorter than ``min_run`` metres are dropped with the stretches
-    around them."""
+    around them; a transit joins two runs only when it is at most ``max_detour`` metres longer
+    than the straight line between them."""
     path = np.asarray(path, dtype=float)
     runs, dropped = _split(path, free, grid, min_run)
     if not dropped:
@@ -72,6 +79,10 @@ def reroute(path: np.ndarray, free: np.ndarray, grid: GridMap, min_run: float) -
             try:
                 bridge = transit.path(paths[-1][-1], run[0])
             except ValueError:
+                paths.append(run)
+                continue
+            gap = float(np.hypot(*(run[0] - paths[-1][-1])))
+            if path_length(bridge) > gap + max_detour:
                 paths.append(run)
                 continue
             paths[-1] = np.vstack([paths[-1], bridge[1:-1], run])

@@ -60,10 +60,12 @@ class TaskPlanner:
         self.transit = Transit(self.grid, self.reachable)
         # a lost robot's body: its radius, and the error of the pose it last reported
         self.body_radius = cfg.robot.radius + cfg.coordinator.body_margin
+        self.max_detour = cfg.coordinator.max_detour_m
         self.bodies = np.zeros((0, 2))
         # floor the brush reaches from some robot centre, without bodies and with them
         self.brushable = self._brushable(self.reachable)
         self.brushable_now = self.brushable
+        self._counted = np.zeros(self.grid.shape, dtype=bool)
 
     def tasks(self) -> tuple[Task, ...]:
         result = plan_coverage(self.grid, [self.dock], self.params)
@@ -121,6 +123,7 @@ class TaskPlanner:
         free = (clearance(grid) >= self.params.robot_radius) & self.reachable
         self.transit = Transit(self.grid, free)
         self.brushable_now = self._brushable(free)
+        self._counted = np.zeros(self.grid.shape, dtype=bool)
 
     def _brushable(self, centres: np.ndarray) -> np.ndarray:
         return dilate(centres, self.params.cleaning_width / 2, self.grid.resolution) & (
@@ -129,9 +132,11 @@ class TaskPlanner:
 
     def blocked_m2(self, path: np.ndarray) -> float:
         """The floor the brush would sweep along ``path`` that the bodies put out of every
-        robot's reach (under them, or in gaps too narrow to pass)."""
+        robot's reach (under them, or in gaps too narrow to pass), counting no floor that an
+        earlier call since :meth:`set_bodies` counted (lanes overlap)."""
         swept, _ = swath(self.grid, np.asarray(path, dtype=float), self.params.cleaning_width / 2)
-        lost = swept & self.brushable & ~self.brushable_now
+        lost = swept & self.brushable & ~self.brushable_now & ~self._counted
+        self._counted |= lost
         return float(lost.sum()) * self.grid.resolution**2
 
     def near_bodies(self, path: np.ndarray) -> bool:
@@ -147,4 +152,4 @@ class TaskPlanner:
         """``path`` repaired round the bodies (:func:`planners.bodies.reroute`): the runs a
         robot can drive, joined round a body where a transit gets round it, and the stretches
         under or behind it."""
-        return reroute(path, self.transit.free, self.grid, self.grid.resolution)
+        return reroute(path, self.transit.free, self.grid, self.grid.resolution, self.max_detour)

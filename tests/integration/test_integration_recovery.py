@@ -27,11 +27,14 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 
 
 def _check_floor(run: FleetRun, report: dict) -> None:
-    assert report["status"] == "done", run.explained()
+    """Clean, without contact or a task held twice; "done" only with nothing left out (a
+    piece every robot tried in vain makes it "incomplete", and names the piece)."""
+    assert report["status"] == ("incomplete" if report["left_out"] else "done"), run.explained()
     assert report["coverage"] >= 0.95, run.explained()
     assert report["collisions"] == {"robot_wall": 0, "robot_robot": 0}, run.explained()
     assert report["overlaps"] == [], run.explained()
-    assert all(t["state"] in ("done", "replaced") for t in report["tasks"]), run.explained()
+    settled = ("done", "replaced", "unreachable")
+    assert all(t["state"] in settled for t in report["tasks"]), run.explained()
 
 
 def _after(events: list[dict], seq: int, kind: str, robot: str) -> list[dict]:

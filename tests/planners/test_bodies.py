@@ -103,3 +103,16 @@ def test_every_repaired_path_runs_on_free_cells(seed: int) -> None:
         assert len(part) >= 2 and _on_free(part, grid, free)
     swept = sum(float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in out.paths)
     assert swept > 0.5 * float(np.hypot(*np.diff(path, axis=0).T).sum())
+
+
+def test_a_detour_longer_than_allowed_splits_the_path() -> None:
+    # a table right below the lane and a wall right above: round the body only via the far
+    # side of the table, metres farther than the gap
+    grid, free = _free(_room(4.0, 3.0, [(1.0, 0.6, 3.0, 2.05)]), [(2.0, 2.55)])
+    lane = np.array([[0.4, 2.55], [3.6, 2.55]])
+    long_way = reroute(lane, free, grid, min_run=RES)
+    assert len(long_way.paths) == 1  # joined: down round the table and back up
+    assert float(np.hypot(*np.diff(long_way.paths[0], axis=0).T).sum()) > 3.2 + 2.0
+    split = reroute(lane, free, grid, min_run=RES, max_detour=1.0)
+    assert len(split.paths) == 2
+    assert split.paths[0][:, 0].max() < 2.0 < split.paths[1][:, 0].min()

@@ -1,0 +1,58 @@
+"""A robot killed where its body is in the way, end to end: real processes on a real router.
+
+On the small world with three robots at ``--speed 0``, robot-1 is SIGKILLed 10.8 s of sim time
+into the job, beside the dock, where its body hems robot-0 in between the dock and the wall
+(before the body was planned round, that run ended "done" at 79 % after robot-0 spent half of
+it escaping in the pocket). Now the fleet must still clean the floor (coverage of the floor not
+under the body ≥ 0.95), without contact, and say what it could not reach: a run that finishes
+with floor left out ends ``incomplete``, exit status 4, with each piece in report.json, and never
+``done``.
+"""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+
+import pytest
+from fleet_runs import FleetRun
+
+from fleet.bench.kill_sweep import outside_body
+from fleet.cli.up import INCOMPLETE_EXIT
+from fleet.params import load_fleet_config
+from fleet.supervisor.runner import SimClock
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
+KILL_AT_S = 10.8
+
+
+def test_a_robot_killed_in_the_way_is_planned_round_and_the_floor_still_cleaned(
+    tmp_path: Path,
+) -> None:
+    run = FleetRun(tmp_path / "run", timeout_s=300.0)
+    clock = SimClock(run)
+    try:
+        run.wait_for(lambda: clock.t >= KILL_AT_S, timeout=120, what="sim time 10.8 s")
+        run.signal("robot-1", signal.SIGKILL)
+        report = run.finish()
+    finally:
+        clock.close()
+        run.cleanup()
+    assert run.left == [], f"processes left behind: {run.left}"
+    events = run.events()
+    assert any(e["kind"] == "body" and e["robot"] == "robot-1" for e in events), run.explained()
+    assert any(e["kind"] == "rerouted" for e in events), run.explained()
+    radius = load_fleet_config().robot.radius
+    covered = outside_body(run.dir, "robot-1", radius)
+    assert covered is not None and covered >= 0.95, run.explained()
+    assert report["collisions"] == {"robot_wall": 0, "robot_robot": 0}, run.explained()
+    assert report["overlaps"] == [], run.explained()
+    left = report["left_out"]
+    if left:
+        assert report["status"] == "incomplete", run.explained()
+        assert run.proc.returncode == INCOMPLETE_EXIT, run.explained()
+        assert report["left_out_m2"] > 0 and all(p["path"] for p in left)
+    else:
+        assert report["status"] == "done", run.explained()
+    settled = ("done", "replaced", "blocked", "unreachable")
+    assert all(t["state"] in settled for t in report["tasks"]), run.explained()
