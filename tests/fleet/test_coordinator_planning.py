@@ -11,6 +11,7 @@ from fleet.config import resolve_world
 from fleet.coordinator.planning import TaskPlanner
 from fleet.params import load_fleet_config
 from fleet.world import load_world
+from planners.auction import Task
 from planners.polyline import path_length
 
 
@@ -78,3 +79,32 @@ def test_tasks_that_follow_on_are_one_plan_each_from_where_the_last_ends(small):
     assert np.array_equal(
         waypoints[starts[1] :], np.vstack([run[1].path[::-1], run[0].path[::-1][1:]])
     )
+
+
+@pytest.fixture
+def corridor():
+    cfg = load_fleet_config()
+    planner = TaskPlanner(load_world(resolve_world("corridor"), cfg.robot.radius), cfg)
+    yield planner
+    planner.set_bodies(np.zeros((0, 2)))
+
+
+def test_a_body_in_the_only_way_cuts_the_far_room_off(corridor):
+    """A body in the corridor, the only way between the two rooms: a plan from the west room
+    to a task in the east room finds no way (ValueError: the dispatcher reports the task
+    unreachable for that robot), a lane through the corridor falls apart into its two rooms'
+    parts, and the corridor's floor is out of reach; without the body, the way is open."""
+    east = Task("t09", np.array([[6.0, 0.5], [7.5, 0.5]]), 0.45, 3.0, (1,))
+    west_xy = (1.0, 1.5)
+    assert corridor.drive(west_xy, [(east, False)])[0].shape[1] == 2
+    corridor.set_bodies(np.array([[4.0, 1.45]]))
+    with pytest.raises(ValueError, match="no free path"):
+        corridor.drive(west_xy, [(east, False)])
+    through = np.array([[2.0, 1.45], [6.0, 1.45]])
+    assert corridor.near_bodies(through)
+    way = corridor.reroute(through)
+    assert len(way.paths) == 2 and way.changed
+    assert way.paths[0][:, 0].max() < 3.6 and way.paths[1][:, 0].min() > 4.4
+    assert corridor.blocked_m2(way.dropped[0]) > 0.15  # the corridor's floor, 0.3 m wide
+    corridor.set_bodies(np.zeros((0, 2)))
+    assert corridor.drive(west_xy, [(east, False)])[0].shape[1] == 2
