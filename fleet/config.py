@@ -9,8 +9,10 @@ knows which section maps to which class.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import types
 import typing
+from collections.abc import Iterable
 from importlib import resources
 from pathlib import Path
 from typing import Any, TypeVar
@@ -72,12 +74,32 @@ def read_yaml(path: Path) -> Any:
         raise ConfigError(f"{path}: invalid YAML{where}: {problem}") from None
 
 
+def unknown_field(where: str, name: str, known: Iterable[str]) -> ConfigError:
+    """The error for an unknown field ``name`` at ``where`` (file and dotted field), with the
+    nearest known name as a hint for a typo and the known names."""
+    known = sorted(known)
+    close = difflib.get_close_matches(name, known, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    return ConfigError(f"{where}: unknown field{hint} (known: {', '.join(known)})")
+
+
+def _at(source: str, field: str) -> str:
+    """``file: dotted.field`` (``file`` alone at the top level), the prefix of every error."""
+    return f"{source}: {field}" if field else source
+
+
+def _dotted(field: str, name: str) -> str:
+    return f"{field}.{name}" if field else name
+
+
 def _type_name(tp: Any) -> str:
     return getattr(tp, "__name__", str(tp))
 
 
-def _coerce(value: Any, tp: Any, where: str) -> Any:
-    """Check ``value`` against the annotation ``tp`` and convert (int → float, list → tuple)."""
+def _coerce(value: Any, tp: Any, source: str, field: str) -> Any:
+    """Check ``value`` against the annotation ``tp`` and convert (int → float, list → tuple);
+    errors name ``source`` (the file) and ``field`` (dotted)."""
+    where = _at(source, field)
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
     if tp is Any:
@@ -90,7 +112,7 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
             if a is type(None):
                 continue
             try:
-                return _coerce(value, a, where)
+                return _coerce(value, a, source, field)
             except ConfigError as e:
                 errors.append(str(e))
         raise ConfigError(errors[0] if errors else f"{where}: invalid value {value!r}")
@@ -105,20 +127,23 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
             if len(value) != len(args):
                 raise ConfigError(f"{where}: expected {len(args)} items, got {len(value)}")
             items = [
-                _coerce(v, a, f"{where}[{i}]")
+                _coerce(v, a, source, f"{field}[{i}]")
                 for i, (v, a) in enumerate(zip(value, args, strict=False))
             ]
         else:
             a = args[0] if args else Any
-            items = [_coerce(v, a, f"{where}[{i}]") for i, v in enumerate(value)]
+            items = [_coerce(v, a, source, f"{field}[{i}]") for i, v in enumerate(value)]
         return tuple(items) if origin is tuple else items
     if origin is dict:
         if not isinstance(value, dict):
             raise ConfigError(f"{where}: expected a mapping, got {value!r}")
         ka, va = args or (Any, Any)
-        return {_coerce(k, ka, where): _coerce(v, va, f"{where}.{k}") for k, v in value.items()}
+        return {
+            _coerce(k, ka, source, field): _coerce(v, va, source, _dotted(field, str(k)))
+            for k, v in value.items()
+        }
     if dataclasses.is_dataclass(tp):
-        return from_mapping(tp, value, where)
+        return from_mapping(tp, value, source, field)
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
@@ -142,31 +167,32 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     return value
 
 
-def from_mapping(cls: type[T], data: Any, where: str) -> T:
+def from_mapping(cls: type[T], data: Any, source: str, field: str = "") -> T:
     """Build the dataclass ``cls`` from a mapping; unknown or mistyped fields raise ConfigError.
 
-    Missing fields take the dataclass defaults. ``where`` prefixes error messages, e.g.
-    ``configs/fleet.yaml: dwa``. A dataclass may define ``validate(self) -> None`` raising
-    ValueError for cross-field checks; its message is prefixed with ``where`` too.
+    Missing fields take the dataclass defaults. Errors begin with ``source`` (the file) and the
+    dotted field, e.g. ``configs/fleet.yaml: dwa.sim_time``; ``field`` is where ``data`` sits
+    in the file (empty at the top level). An unknown field's error suggests the nearest known
+    name. A dataclass may define ``validate(self) -> None`` raising ValueError for cross-field
+    checks; its message is prefixed with the file and ``field`` too.
     """
+    where = _at(source, field)
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise ConfigError(f"{where}: expected a mapping, got {data!r}")
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(data) - set(fields))
+    unknown = sorted(set(data) - set(fields), key=str)
     if unknown:
-        raise ConfigError(
-            f"{where}: unknown field {unknown[0]!r} (known: {', '.join(sorted(fields))})"
-        )
+        raise unknown_field(_at(source, _dotted(field, str(unknown[0]))), str(unknown[0]), fields)
     kwargs = {}
     for name, f in fields.items():
-        sub = f"{where}.{name}"
+        sub = _dotted(field, name)
         if name in data:
-            kwargs[name] = _coerce(data[name], hints[name], sub)
+            kwargs[name] = _coerce(data[name], hints[name], source, sub)
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise ConfigError(f"{sub}: required field is missing")
+            raise ConfigError(f"{_at(source, sub)}: required field is missing")
     obj = cls(**kwargs)
     check = getattr(obj, "validate", None)
     if callable(check):
@@ -180,10 +206,8 @@ def from_mapping(cls: type[T], data: Any, where: str) -> T:
 def load_dataclass(cls: type[T], path: Path, section: str | None = None) -> T:
     """Load ``cls`` from a YAML file, or from one top-level section of it."""
     data = read_yaml(path)
-    where = f"{path}"
-    if section is not None:
-        if data is not None and not isinstance(data, dict):
-            raise ConfigError(f"{path}: expected a mapping at the top level")
-        data = (data or {}).get(section)
-        where = f"{path}: {section}"
-    return from_mapping(cls, data, where)
+    if section is None:
+        return from_mapping(cls, data, str(path))
+    if data is not None and not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level")
+    return from_mapping(cls, (data or {}).get(section), str(path), section)

@@ -22,7 +22,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 from scipy import ndimage
 
-from fleet.config import ConfigError, read_yaml
+from fleet.config import ConfigError, read_yaml, unknown_field
 from planners.grid import GridMap
 
 Pose = tuple[float, float, float]
@@ -194,11 +194,9 @@ def _thick_segment(seg: tuple[float, ...], thickness: float) -> np.ndarray:
 
 
 def _world_from_yaml(path: Path, data: dict) -> World:
-    unknown = sorted(set(data) - WORLD_FIELDS)
+    unknown = sorted(set(data) - WORLD_FIELDS, key=str)
     if unknown:
-        raise ConfigError(
-            f"{path}: unknown field {unknown[0]!r} (known: {', '.join(sorted(WORLD_FIELDS))})"
-        )
+        raise unknown_field(f"{path}: {unknown[0]}", str(unknown[0]), WORLD_FIELDS)
     name = data.get("name", path.stem)
     if not isinstance(name, str):
         raise ConfigError(f"{path}: name: expected a string")
@@ -260,9 +258,9 @@ def _list(data: dict, key: str, path: Path) -> list:
 def _furniture(item: Any, where: str) -> Furniture:
     if not isinstance(item, dict):
         raise ConfigError(f"{where}: expected a mapping")
-    unknown = sorted(set(item) - FURNITURE_FIELDS)
+    unknown = sorted(set(item) - FURNITURE_FIELDS, key=str)
     if unknown:
-        raise ConfigError(f"{where}: unknown field {unknown[0]!r}")
+        raise unknown_field(f"{where}.{unknown[0]}", str(unknown[0]), FURNITURE_FIELDS)
     kind = item.get("type", "box")
     name = str(item.get("name", kind))
     if "center" not in item:
@@ -292,11 +290,9 @@ def _furniture(item: Any, where: str) -> Furniture:
 
 
 def _parse_ros_map(path: Path, data: dict) -> GridMap:
-    unknown = sorted(set(data) - ROS_MAP_FIELDS)
+    unknown = sorted(set(data) - ROS_MAP_FIELDS, key=str)
     if unknown:
-        raise ConfigError(
-            f"{path}: unknown field {unknown[0]!r} (known: {', '.join(sorted(ROS_MAP_FIELDS))})"
-        )
+        raise unknown_field(f"{path}: {unknown[0]}", str(unknown[0]), ROS_MAP_FIELDS)
     for key in ("image", "resolution", "origin"):
         if key not in data:
             raise ConfigError(f"{path}: {key}: required field is missing")

@@ -1,0 +1,77 @@
+"""The configuration loader: errors name the file and the dotted field; unknown fields get a
+hint."""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from pathlib import Path
+
+import pytest
+
+from fleet.config import ConfigError
+from fleet.params import FleetConfig, load_fleet_config
+from fleet.world import load_world
+
+SECTIONS = typing.get_type_hints(FleetConfig)
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def _config_error(path: Path) -> str:
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    return str(info.value)
+
+
+def _typo(name: str) -> str:
+    """``name`` with its last two letters swapped: a typo difflib should see through."""
+    return name[:-2] + name[-1] + name[-2]
+
+
+@pytest.mark.parametrize("section", SECTIONS)
+def test_a_misspelt_field_of_every_section_gets_a_did_you_mean_hint(
+    tmp_path: Path, section: str
+) -> None:
+    field = max((f.name for f in dataclasses.fields(SECTIONS[section])), key=len)
+    path = _write(tmp_path / "fleet.yaml", f"{section}:\n  {_typo(field)}: 1\n")
+    msg = _config_error(path)
+    assert msg.startswith(f"{path}: {section}.{_typo(field)}: unknown field"), msg
+    assert f"did you mean {field!r}?" in msg, msg
+
+
+def test_a_misspelt_section_gets_a_hint(tmp_path: Path) -> None:
+    msg = _config_error(_write(tmp_path / "fleet.yaml", "wall_folow:\n  speed: 0.1\n"))
+    assert "wall_folow: unknown field; did you mean 'wall_follow'?" in msg, msg
+
+
+def test_an_unknown_field_like_no_known_one_gets_no_hint(tmp_path: Path) -> None:
+    msg = _config_error(_write(tmp_path / "fleet.yaml", "lidar:\n  colour: blue\n"))
+    assert "lidar.colour: unknown field (known: beams," in msg, msg
+    assert "did you mean" not in msg
+
+
+def test_a_mistyped_field_is_named_after_the_file(tmp_path: Path) -> None:
+    path = _write(tmp_path / "fleet.yaml", "sim:\n  physics_hz: fast\n")
+    assert _config_error(path).startswith(f"{path}: sim.physics_hz: expected a number")
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "hint"),
+    [
+        ("walls:\n  - [0, 0, 3, 0]\nstart: []\n", "start", "starts"),
+        (
+            "walls:\n  - [0, 0, 3, 0]\nfurniture:\n  - {center: [1, 1], size: [1, 1], agnle: 3}\n",
+            "furniture[0].agnle",
+            "angle",
+        ),
+    ],
+)
+def test_world_files_get_the_hint_too(tmp_path: Path, text: str, field: str, hint: str) -> None:
+    path = _write(tmp_path / "world.yaml", text)
+    with pytest.raises(ConfigError) as info:
+        load_world(path)
+    assert f"{path}: {field}: unknown field; did you mean {hint!r}?" in str(info.value)
