@@ -9,6 +9,7 @@ from typing import Literal, get_args
 
 from fleet.config import configs_dir, from_mapping, read_yaml
 from fleet.slam_params import SlamParams
+from planners.checks import require_non_negative, require_positive
 from planners.coverage.params import CoverageParams
 from planners.dwa import DWAParams
 from planners.wall_follow import WallFollowParams
@@ -32,9 +33,9 @@ class RobotParams:
     mass: float = 3.5
 
     def validate(self) -> None:
-        for name in ("radius", "wheel_base", "cleaning_width", "max_vel_x", "max_vel_theta"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0")
+        require_positive(
+            self, "radius", "wheel_base", "cleaning_width", "max_vel_x", "max_vel_theta"
+        )
         if self.cleaning_width > 2 * self.radius + 1e-9:
             raise ValueError("cleaning_width must not exceed the robot diameter")
 
@@ -49,12 +50,10 @@ class LidarParams:
     rate_hz: float = 10.0
 
     def validate(self) -> None:
-        if self.beams < 1:
-            raise ValueError("beams must be >= 1")
+        require_positive(self, "beams", "rate_hz")
+        require_non_negative(self, "noise_sigma")
         if not 0 < self.range_min < self.range_max:
             raise ValueError("need 0 < range_min < range_max")
-        if self.noise_sigma < 0 or self.rate_hz <= 0:
-            raise ValueError("noise_sigma must be >= 0 and rate_hz > 0")
 
 
 @dataclass(frozen=True)
@@ -81,9 +80,7 @@ class OdometryParams:
     def validate(self) -> None:
         if not 1.0 <= self.rate_hz <= 200.0:
             raise ValueError("rate_hz must be within 1..200")
-        for name in ("alpha_trans", "alpha_rot", "alpha_rot_trans", "alpha_trans_rot"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0")
+        require_non_negative(self, "alpha_trans", "alpha_rot", "alpha_rot_trans", "alpha_trans_rot")
 
 
 @dataclass(frozen=True)
@@ -99,10 +96,11 @@ class SimParams:
     def validate(self) -> None:
         if self.physics_hz < 20:
             raise ValueError("physics_hz must be >= 20")
-        if self.cell_size <= 0 or self.max_lag_s <= 0:
-            raise ValueError("cell_size and max_lag_s must be > 0")
-        if not 0 < self.agent_timeout_s <= self.first_answer_timeout_s:
-            raise ValueError("need 0 < agent_timeout_s <= first_answer_timeout_s")
+        require_positive(
+            self, "clock_hz", "coverage_hz", "cell_size", "max_lag_s", "agent_timeout_s"
+        )
+        if self.agent_timeout_s > self.first_answer_timeout_s:
+            raise ValueError("agent_timeout_s must not exceed first_answer_timeout_s")
 
 
 @dataclass(frozen=True)
@@ -139,7 +137,8 @@ class AgentParams:
     edge_peer_clear: float = 1.0
 
     def validate(self) -> None:
-        for name in (
+        require_positive(
+            self,
             "edge_slack",
             "edge_window",
             "edge_heading",
@@ -159,13 +158,10 @@ class AgentParams:
             "escape_after_s",
             "escape_distance",
             "escape_speed",
-        ):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0")
+        )
+        require_non_negative(self, "give_way_max_s")
         if not self.align_exit <= self.align_enter <= math.pi:
             raise ValueError("need 0 < align_exit <= align_enter <= pi")
-        if self.give_way_max_s < 0:
-            raise ValueError("give_way_max_s must be >= 0 (0: waiting for a peer counts too)")
         if not 0 < self.edge_cover <= 1:
             raise ValueError("edge_cover must be within (0, 1]")
 
@@ -187,7 +183,8 @@ class CoordinatorParams:
     stall_progress_m: float = 0.1
 
     def validate(self) -> None:
-        for name in (
+        require_positive(
+            self,
             "task_target_s",
             "heartbeat_timeout_s",
             "bid_timeout_s",
@@ -195,11 +192,8 @@ class CoordinatorParams:
             "stall_s",
             "stall_progress_m",
             "max_detour_m",
-        ):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0")
-        if self.body_margin < 0:
-            raise ValueError("body_margin must be >= 0")
+        )
+        require_non_negative(self, "body_margin")
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from planners.checks import require_non_negative, require_positive
+
 
 @dataclass(frozen=True)
 class SlamParams:
@@ -106,7 +108,8 @@ class SlamParams:
     reloc_max_scans: int = 20  # a restarted agent gives up after this many scans without a match
 
     def validate(self) -> None:
-        positive = (
+        require_positive(
+            self,
             "resolution",
             "max_range",
             "node_max_interval",
@@ -140,12 +143,7 @@ class SlamParams:
             "reloc_distinct_xy",
             "reloc_distinct_theta",
         )
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0")
-        for name in ("motion_xy_per_m", "motion_theta_per_rad", "motion_theta_per_m"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0")
+        require_non_negative(self, "motion_xy_per_m", "motion_theta_per_rad", "motion_theta_per_m")
         if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < self.p_max < 1:
             raise ValueError("need 0 < p_min < p_miss < 0.5 < p_hit < p_max < 1")
         if not self.p_min < self.free_threshold < self.occupied_threshold < self.p_max:
@@ -154,10 +152,11 @@ class SlamParams:
             raise ValueError("patch_tolerance must be within 0..100")
         if self.submap_nodes < 2:
             raise ValueError("submap_nodes must be >= 2")
-        for name in ("coarse_factor", "loop_coarse_factor", "reloc_coarse_factor"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1")
-        for name in (
+        require_positive(
+            self,
+            "coarse_factor",
+            "loop_coarse_factor",
+            "reloc_coarse_factor",
             "map_tile",
             "loop_search_points",
             "loop_max_coarse",
@@ -169,9 +168,7 @@ class SlamParams:
             "reloc_sectors",
             "reloc_min_points",
             "reloc_max_scans",
-        ):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1")
+        )
         if self.search_window_theta > math.pi or self.loop_window_theta > math.pi:
             raise ValueError("angular search windows must be <= pi")
         if not 0 < self.min_match_score < 1 or not 0 < self.loop_min_score < 1:

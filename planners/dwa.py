@@ -18,6 +18,8 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
+from planners.checks import require_non_negative, require_positive
+
 # Smallest body-to-obstacle gap used in the 1/gap obstacle cost: keeps the cost finite when a
 # robot that already is closer than robot_radius + safety_margin (sensor noise) moves away.
 _MIN_GAP = 1e-3
@@ -69,12 +71,18 @@ class DWAParams:
     def validate(self) -> None:
         if not 0.0 <= self.min_vel_x <= self.max_vel_x or self.max_vel_x <= 0:
             raise ValueError("need 0 <= min_vel_x <= max_vel_x and max_vel_x > 0")
-        for name in ("max_vel_theta", "acc_lim_x", "acc_lim_theta", "sim_time", "sim_granularity"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0")
-        if self.vx_samples < 1 or self.vtheta_samples < 1:
-            raise ValueError("vx_samples and vtheta_samples must be >= 1")
-        for name in (
+        require_positive(
+            self,
+            "max_vel_theta",
+            "acc_lim_x",
+            "acc_lim_theta",
+            "sim_time",
+            "sim_granularity",
+            "vx_samples",
+            "vtheta_samples",
+        )
+        require_non_negative(
+            self,
             "path_distance_bias",
             "goal_distance_bias",
             "occdist_scale",
@@ -82,9 +90,7 @@ class DWAParams:
             "forward_point_distance",
             "goal_lookahead",
             "corner_angle",
-        ):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0")
+        )
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from planners.checks import require_non_negative, require_positive
+
 # Returns scattered about their fitted line by more than this (rms, m) are no straight wall:
 # about twice the median-filtered scan's noise.
 LINE_RMS_M = 0.015
@@ -82,7 +84,8 @@ class WallFollowParams:
     lookahead: float = 0.3
 
     def validate(self) -> None:
-        for name in (
+        require_positive(
+            self,
             "distance",
             "speed",
             "gain_distance",
@@ -96,11 +99,8 @@ class WallFollowParams:
             "wall_band",
             "horizon",
             "lookahead",
-        ):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0")
-        if self.front_margin < 0:
-            raise ValueError("front_margin must be >= 0")
+        )
+        require_non_negative(self, "front_margin")
         if self.reach <= self.distance:
             raise ValueError("reach must be > distance")
         if self.max_approach >= math.pi / 2:

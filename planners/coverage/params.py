@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from planners.checks import require_non_negative, require_positive
+
 
 @dataclass(frozen=True)
 class CoverageParams:
@@ -50,7 +52,8 @@ class CoverageParams:
     simplify_tolerance: float = 0.03
 
     def validate(self) -> None:
-        for name in (
+        require_positive(
+            self,
             "robot_radius",
             "cleaning_width",
             "max_speed",
@@ -59,21 +62,20 @@ class CoverageParams:
             "max_turn_accel",
             "door_width",
             "max_lane_length",
-        ):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0")
+        )
+        require_non_negative(
+            self, "turn_cost_s", "min_room_area", "max_task_area", "simplify_tolerance"
+        )
         if self.cleaning_width > 2 * self.robot_radius + 1e-9:
             raise ValueError("cleaning_width must not exceed the robot diameter (2·robot_radius)")
         if not 0.0 <= self.overlap < 0.9:
             raise ValueError("overlap must be within [0, 0.9)")
         if self.method not in ("bcd", "spiral"):
             raise ValueError(f"method must be 'bcd' or 'spiral', got {self.method!r}")
-        if self.turn_cost_s < 0 or not 0 < self.turn_angle_deg < 180:
-            raise ValueError("turn_cost_s must be >= 0 and turn_angle_deg within (0, 180)")
+        if not 0 < self.turn_angle_deg < 180:
+            raise ValueError("turn_angle_deg must be within (0, 180)")
         if not 0.0 <= self.fill_in_target <= 1.0:
             raise ValueError("fill_in_target must be within [0, 1]")
-        if self.min_room_area < 0 or self.max_task_area < 0 or self.simplify_tolerance < 0:
-            raise ValueError("min_room_area, max_task_area and simplify_tolerance must be >= 0")
 
     @property
     def lane_spacing(self) -> float:

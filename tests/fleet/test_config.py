@@ -3,14 +3,16 @@ hint."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import typing
 from pathlib import Path
 
 import pytest
+import yaml
 
-from fleet.config import ConfigError
-from fleet.params import FleetConfig, load_fleet_config
+from fleet.config import ConfigError, from_mapping
+from fleet.params import FleetConfig, default_config_path, load_fleet_config
 from fleet.world import load_world
 
 SECTIONS = typing.get_type_hints(FleetConfig)
@@ -75,3 +77,25 @@ def test_world_files_get_the_hint_too(tmp_path: Path, text: str, field: str, hin
     with pytest.raises(ConfigError) as info:
         load_world(path)
     assert f"{path}: {field}: unknown field; did you mean {hint!r}?" in str(info.value)
+
+
+DEFAULT_SECTIONS = yaml.safe_load(default_config_path().read_text())
+
+
+def _numeric_fields() -> list[tuple[str, str]]:
+    out = []
+    for section, cls in SECTIONS.items():
+        hints = typing.get_type_hints(cls)
+        out += [(section, f.name) for f in dataclasses.fields(cls) if hints[f.name] in (int, float)]
+    return out
+
+
+@pytest.mark.parametrize("value", [0, -1])
+@pytest.mark.parametrize(("section", "field"), _numeric_fields())
+def test_a_field_refused_for_its_sign_is_named(section: str, field: str, value: int) -> None:
+    data = copy.deepcopy(DEFAULT_SECTIONS)
+    data[section][field] = value
+    try:
+        from_mapping(FleetConfig, data, "fleet.yaml")
+    except ConfigError as e:
+        assert str(e).startswith(f"fleet.yaml: {section}") and field in str(e), str(e)
