@@ -71,11 +71,11 @@ class OdometryParams:
     """
 
     rate_hz: float = 50.0
-    alpha_trans: float = 0.02
-    alpha_rot: float = 0.02
-    alpha_rot_trans: float = 0.005
-    alpha_trans_rot: float = 0.01
-    heading_bias_per_m: float = 0.004
+    alpha_trans: float = 0.005
+    alpha_rot: float = 0.005
+    alpha_rot_trans: float = 0.002
+    alpha_trans_rot: float = 0.003
+    heading_bias_per_m: float = 0.001
 
     def validate(self) -> None:
         if not 1.0 <= self.rate_hz <= 200.0:

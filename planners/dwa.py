@@ -62,7 +62,7 @@ class DWAParams:
     path_distance_bias: float = 32.0
     goal_distance_bias: float = 24.0
     occdist_scale: float = 0.1
-    safety_margin: float = 0.05
+    safety_margin: float = 0.0
     forward_point_distance: float = 0.325
     goal_lookahead: float = 1.0
     corner_angle: float = 1.0

@@ -99,3 +99,16 @@ def test_a_field_refused_for_its_sign_is_named(section: str, field: str, value: 
         from_mapping(FleetConfig, data, "fleet.yaml")
     except ConfigError as e:
         assert str(e).startswith(f"fleet.yaml: {section}") and field in str(e), str(e)
+
+
+def test_fleet_yaml_shows_the_code_defaults() -> None:
+    """A field in configs/fleet.yaml holds its dataclass's default: every run uses the file, a
+    test or a tool that builds a section in code gets the default, and they must agree."""
+    shown = yaml.safe_load(default_config_path().read_text())
+    wrong = []
+    for section, cls in SECTIONS.items():
+        values = shown.get(section) or {}
+        for f in dataclasses.fields(cls):
+            if f.name in values and values[f.name] != f.default:
+                wrong.append(f"{section}.{f.name}: {values[f.name]!r}, the code {f.default!r}")
+    assert not wrong, "\n".join(wrong)

@@ -16,7 +16,8 @@ RADIUS = 0.17
 DT = 0.1
 GOAL_TOLERANCE = 0.1
 LIDAR_RANGE = 6.0
-PARAMS = DWAParams()
+# a margin above the radius: the tests of a blocked robot stop it short of the wall by it
+PARAMS = DWAParams(safety_margin=0.05)
 
 
 def lidar(pose: np.ndarray, circles: np.ndarray, rng: np.random.Generator) -> np.ndarray:
