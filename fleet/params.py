@@ -1,4 +1,8 @@
-"""The sections of configs/fleet.yaml as frozen dataclasses, and the whole file."""
+"""The sections of configs/fleet.yaml as frozen dataclasses, and the whole file.
+
+``robot:`` is the one description of the robot (planners.robot.RobotSpec); the other sections
+take their defaults from their dataclasses, which equal the values the file shows.
+"""
 
 from __future__ import annotations
 
@@ -12,32 +16,12 @@ from fleet.slam_params import SlamParams
 from planners.checks import require_non_negative, require_positive
 from planners.coverage.params import CoverageParams
 from planners.dwa import DWAParams
+from planners.robot import RobotSpec
 from planners.wall_follow import WallFollowParams
 
 # how transits between tasks are kept apart: see fleet.coordinator.transits
 DeconflictionMode = Literal["local", "prioritized", "cbs"]
 DECONFLICTION_MODES: tuple[str, ...] = get_args(DeconflictionMode)
-
-
-@dataclass(frozen=True)
-class RobotParams:
-    """A disc robot with differential drive."""
-
-    radius: float = 0.17
-    wheel_base: float = 0.3
-    cleaning_width: float = 0.30
-    max_vel_x: float = 0.5
-    max_vel_theta: float = 1.0
-    acc_lim_x: float = 0.5
-    acc_lim_theta: float = 1.0
-    mass: float = 3.5
-
-    def validate(self) -> None:
-        require_positive(
-            self, "radius", "wheel_base", "cleaning_width", "max_vel_x", "max_vel_theta"
-        )
-        if self.cleaning_width > 2 * self.radius + 1e-9:
-            raise ValueError("cleaning_width must not exceed the robot diameter")
 
 
 @dataclass(frozen=True)
@@ -198,7 +182,10 @@ class CoordinatorParams:
 
 @dataclass(frozen=True)
 class FleetConfig:
-    robot: RobotParams = field(default_factory=RobotParams)
+    """The whole file: ``robot:`` must be given (every field), the other sections may be left
+    out in whole or in part."""
+
+    robot: RobotSpec
     lidar: LidarParams = field(default_factory=LidarParams)
     odometry: OdometryParams = field(default_factory=OdometryParams)
     sim: SimParams = field(default_factory=SimParams)
@@ -222,6 +209,7 @@ def default_config_path() -> Path:
 
 
 def load_fleet_config(path: str | Path | None = None) -> FleetConfig:
-    """Load and validate ``configs/fleet.yaml`` (or ``path``); errors name file and field."""
+    """Load and validate ``configs/fleet.yaml`` (or ``path``); errors name file and field.
+    The ``robot:`` section is required in full: the robot has no defaults."""
     p = Path(path) if path is not None else default_config_path()
     return from_mapping(FleetConfig, read_yaml(p), str(p))

@@ -143,8 +143,11 @@ class World:
         )
 
 
-def load_world(path: str | Path, robot_radius: float = 0.17) -> World:
-    """Load a world YAML or a ROS map_server YAML; start poses are checked against obstacles."""
+def load_world(path: str | Path, robot_radius: float | None = None) -> World:
+    """Load a world YAML or a ROS map_server YAML. Its start poses (and dock) must lie in the
+    world and the starts outside obstacles; with ``robot_radius`` the starts must also keep
+    that clearance from obstacles and from each other's robots (a world loaded for its floor
+    plan alone needs no robot)."""
     path = Path(path)
     data = read_yaml(path)
     if not isinstance(data, dict):
@@ -373,7 +376,7 @@ def _resample(g: GridMap, resolution: float) -> GridMap:
     )
 
 
-def _check_starts(world: World, radius: float) -> None:
+def _check_starts(world: World, radius: float | None) -> None:
     if not world.starts and world.dock is None:
         return
     where = world.source
@@ -387,11 +390,13 @@ def _check_starts(world: World, radius: float) -> None:
         x, y = pose[0], pose[1]
         if not (xmin <= x <= xmax and ymin <= y <= ymax):
             raise ConfigError(f"{where}: {field}: ({x}, {y}) lies outside the world {world.bounds}")
-        if field != "dock" and c < radius:
+        if field != "dock" and (c <= 0 or (radius is not None and c < radius)):
+            near = "" if radius is None else f" or closer than the robot radius {radius} m to one"
             raise ConfigError(
-                f"{where}: {field}: ({x}, {y}) is inside an obstacle or closer than the robot "
-                f"radius {radius} m to one (clearance {c:.3f} m)"
+                f"{where}: {field}: ({x}, {y}) is inside an obstacle{near} (clearance {c:.3f} m)"
             )
+    if radius is None:
+        return
     for i in range(len(world.starts)):
         for j in range(i):
             a, b = world.starts[i], world.starts[j]

@@ -39,6 +39,8 @@ from fleet.world import load_world
 from sim_server.core import TRUTH_HZ
 
 CIRCLE_M = 0.6
+# robots circle at this share of the robot's top speed
+SPEED_SHARE = 0.6
 INTENT_POINTS = 20
 TASKS = 40
 
@@ -77,7 +79,8 @@ def run(endpoint: str, robots: int, speed: float, world: str, seconds: float = 3
         "state": round(cfg.sim.physics_hz),
     }
     ranges = np.full(cfg.lidar.beams, 3.0, dtype=np.float32)
-    omega = cfg.robot.max_vel_x * 0.6 / CIRCLE_M
+    v = cfg.robot.max_vel_x * SPEED_SHARE
+    omega = v / CIRCLE_M
     beat_every = 1.0 / cfg.agent.heartbeat_hz
     wall0 = last_beat = time.monotonic()
     t = 0.0
@@ -91,7 +94,7 @@ def run(endpoint: str, robots: int, speed: float, world: str, seconds: float = 3
                 cx, cy, _ = starts[i]
                 x, y, th = cx + CIRCLE_M * math.cos(a), cy + CIRCLE_M * math.sin(a), a + math.pi / 2
                 if step % every["odom"] == 0:
-                    sim.publish(k.robot(rid, "odom"), Odometry(t, x, y, th, 0.3, omega))
+                    sim.publish(k.robot(rid, "odom"), Odometry(t, x, y, th, v, omega))
                 if step % every["scan"] == 0:
                     scan = LaserScan(t, -math.pi, 2 * math.pi / len(ranges), 0.1, 6.0, ranges)
                     sim.publish(k.robot(rid, "scan"), scan, control=True)
@@ -102,7 +105,7 @@ def run(endpoint: str, robots: int, speed: float, world: str, seconds: float = 3
                         visits[max(r - 3, 0) : r + 3, max(c - 3, 0) : c + 3] += 1
                 if step % every["control"] == 0:
                     bus = agents[i]
-                    bus.publish(k.robot(rid, "cmd_vel"), Twist(t, 0.3, omega), control=True)
+                    bus.publish(k.robot(rid, "cmd_vel"), Twist(t, v, omega), control=True)
                     bus.publish(k.robot(rid, "pose"), PoseEstimate(t, x, y, th))
                     ahead = a + np.linspace(0, 1.2, INTENT_POINTS)
                     pts = np.stack(
@@ -115,7 +118,7 @@ def run(endpoint: str, robots: int, speed: float, world: str, seconds: float = 3
                     )
                     bus.publish(k.robot(rid, "intent"), Intent(t, pts))
                 if step % every["status"] == 0:
-                    status = RobotStatus(t, "driving", f"t{i:02d}", (t / 600) % 1, 3, 10, 0.3 * t)
+                    status = RobotStatus(t, "driving", f"t{i:02d}", (t / 600) % 1, 3, 10, v * t)
                     agents[i].publish(k.robot(rid, "status"), status, control=True)
             if step % every["clock"] == 0:
                 sim.publish(k.clock(), Clock(t, speed))

@@ -17,7 +17,6 @@ import numpy as np
 
 from sim_server.lidar import SegmentIndex, cast_scans, cast_scans_reference, occupancy_to_segments
 
-ROBOT_RADIUS = 0.17
 _FLOOR_PER_BOX = 1.3
 
 
@@ -30,8 +29,9 @@ class Scene:
     self_index: np.ndarray
 
 
-def furnished_scene(n_segments: int, n_robots: int, seed: int = 0) -> Scene:
-    """A square floor with 4 walls and (n_segments − 4) / 4 boxes, and n_robots robot discs."""
+def furnished_scene(n_segments: int, n_robots: int, robot_radius: float, seed: int = 0) -> Scene:
+    """A square floor with 4 walls and (n_segments − 4) / 4 boxes, and n_robots robot discs of
+    ``robot_radius``."""
     rng = np.random.default_rng(seed)
     n_boxes = max(0, math.ceil((n_segments - 4) / 4))
     side = max(4.0, math.sqrt(n_boxes * _FLOOR_PER_BOX))
@@ -49,14 +49,14 @@ def furnished_scene(n_segments: int, n_robots: int, seed: int = 0) -> Scene:
     )
     edges = np.concatenate([corners, np.roll(corners, -1, axis=1)], axis=-1).reshape(-1, 4)
     segments = np.concatenate([walls, edges])[: max(n_segments, 4)]
-    clearance = np.hypot(half[:, 0], half[:, 1]) + ROBOT_RADIUS
+    clearance = np.hypot(half[:, 0], half[:, 1]) + robot_radius
     origins = []
     while len(origins) < n_robots:
-        p = rng.uniform(ROBOT_RADIUS, side - ROBOT_RADIUS, size=2)
+        p = rng.uniform(robot_radius, side - robot_radius, size=2)
         if np.all(np.hypot(*(centre - p).T) > clearance):
             origins.append(p)
     origins = np.array(origins).reshape(-1, 2)
-    discs = np.column_stack([origins, np.full(n_robots, ROBOT_RADIUS)])
+    discs = np.column_stack([origins, np.full(n_robots, robot_radius)])
     return Scene(
         segments=segments.astype(np.float64),
         origins=origins,
@@ -66,8 +66,9 @@ def furnished_scene(n_segments: int, n_robots: int, seed: int = 0) -> Scene:
     )
 
 
-def map_scene(yaml_path: Path, n_robots: int, seed: int = 0) -> Scene:
-    """The boundary segments of a ROS map, with robots at random free cells clear of walls."""
+def map_scene(yaml_path: Path, n_robots: int, robot_radius: float, seed: int = 0) -> Scene:
+    """The boundary segments of a ROS map, with robot discs of ``robot_radius`` at random free
+    cells clear of walls."""
     from scipy.ndimage import binary_erosion
 
     from fleet.world import load_ros_map
@@ -76,7 +77,7 @@ def map_scene(yaml_path: Path, n_robots: int, seed: int = 0) -> Scene:
     free, res, origin = grid.free, grid.resolution, grid.origin
     segments = occupancy_to_segments(grid.occupied, res, origin)
     rng = np.random.default_rng(seed)
-    margin = int(np.ceil(2 * ROBOT_RADIUS / res))
+    margin = int(np.ceil(2 * robot_radius / res))
     clear = binary_erosion(free, iterations=margin)
     free_r, free_c = np.nonzero(clear)
     pick = rng.choice(free_r.size, size=n_robots, replace=False)
@@ -87,7 +88,7 @@ def map_scene(yaml_path: Path, n_robots: int, seed: int = 0) -> Scene:
         segments=segments,
         origins=origins,
         headings=rng.uniform(-math.pi, math.pi, size=n_robots),
-        discs=np.column_stack([origins, np.full(n_robots, ROBOT_RADIUS)]),
+        discs=np.column_stack([origins, np.full(n_robots, robot_radius)]),
         self_index=np.arange(n_robots),
     )
 

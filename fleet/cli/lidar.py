@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from fleet.cli.common import ConfigOpt, _load
+
 
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
@@ -35,6 +37,7 @@ def bench_lidar(
         bool, typer.Option(help="Also time the brute-force caster (every beam × every segment).")
     ] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    config: ConfigOpt = None,
 ) -> None:
     """Time sim_server.lidar.cast_scans on furnished synthetic floors.
 
@@ -49,14 +52,15 @@ def bench_lidar(
 
     from fleet.bench.lidar import furnished_scene, map_scene, rays_per_second
 
+    radius = _load(config)[0].robot.radius
     runs = [
-        ("1x150", furnished_scene(150, 1), False),
-        ("100x150+discs", furnished_scene(150, 100), False),
-        ("1x5000", furnished_scene(5000, 1), False),
-        ("1x5000 indexed", furnished_scene(5000, 1), True),
+        ("1x150", furnished_scene(150, 1, radius), False),
+        ("100x150+discs", furnished_scene(150, 100, radius), False),
+        ("1x5000", furnished_scene(5000, 1, radius), False),
+        ("1x5000 indexed", furnished_scene(5000, 1, radius), True),
     ]
     if map_yaml is not None:
-        scene = map_scene(map_yaml, 100)
+        scene = map_scene(map_yaml, 100, radius)
         runs.append(("map 100 indexed", scene, True))
     rows = []
     for name, scene, indexed in runs:

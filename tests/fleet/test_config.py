@@ -16,6 +16,7 @@ from fleet.params import FleetConfig, default_config_path, load_fleet_config
 from fleet.world import load_world
 
 SECTIONS = typing.get_type_hints(FleetConfig)
+DEFAULT_SECTIONS = yaml.safe_load(default_config_path().read_text())
 
 
 def _write(path: Path, text: str) -> Path:
@@ -29,6 +30,13 @@ def _config_error(path: Path) -> str:
     return str(info.value)
 
 
+def _with(path: Path, section: str, field: str, value: object) -> Path:
+    """The built-in fleet.yaml with ``section.field`` set to ``value``, written to ``path``."""
+    data = copy.deepcopy(DEFAULT_SECTIONS)
+    data[section][field] = value
+    return _write(path, yaml.safe_dump(data))
+
+
 def _typo(name: str) -> str:
     """``name`` with its last two letters swapped: a typo difflib should see through."""
     return name[:-2] + name[-1] + name[-2]
@@ -39,25 +47,26 @@ def test_a_misspelt_field_of_every_section_gets_a_did_you_mean_hint(
     tmp_path: Path, section: str
 ) -> None:
     field = max((f.name for f in dataclasses.fields(SECTIONS[section])), key=len)
-    path = _write(tmp_path / "fleet.yaml", f"{section}:\n  {_typo(field)}: 1\n")
+    path = _with(tmp_path / "fleet.yaml", section, _typo(field), 1)
     msg = _config_error(path)
     assert msg.startswith(f"{path}: {section}.{_typo(field)}: unknown field"), msg
     assert f"did you mean {field!r}?" in msg, msg
 
 
 def test_a_misspelt_section_gets_a_hint(tmp_path: Path) -> None:
-    msg = _config_error(_write(tmp_path / "fleet.yaml", "wall_folow:\n  speed: 0.1\n"))
+    path = _write(tmp_path / "fleet.yaml", yaml.safe_dump({"wall_folow": {"speed": 0.1}}))
+    msg = _config_error(path)
     assert "wall_folow: unknown field; did you mean 'wall_follow'?" in msg, msg
 
 
 def test_an_unknown_field_like_no_known_one_gets_no_hint(tmp_path: Path) -> None:
-    msg = _config_error(_write(tmp_path / "fleet.yaml", "lidar:\n  colour: blue\n"))
+    msg = _config_error(_with(tmp_path / "fleet.yaml", "lidar", "colour", "blue"))
     assert "lidar.colour: unknown field (known: beams," in msg, msg
     assert "did you mean" not in msg
 
 
 def test_a_mistyped_field_is_named_after_the_file(tmp_path: Path) -> None:
-    path = _write(tmp_path / "fleet.yaml", "sim:\n  physics_hz: fast\n")
+    path = _with(tmp_path / "fleet.yaml", "sim", "physics_hz", "fast")
     assert _config_error(path).startswith(f"{path}: sim.physics_hz: expected a number")
 
 
@@ -77,9 +86,6 @@ def test_world_files_get_the_hint_too(tmp_path: Path, text: str, field: str, hin
     with pytest.raises(ConfigError) as info:
         load_world(path)
     assert f"{path}: {field}: unknown field; did you mean {hint!r}?" in str(info.value)
-
-
-DEFAULT_SECTIONS = yaml.safe_load(default_config_path().read_text())
 
 
 def _numeric_fields() -> list[tuple[str, str]]:
@@ -109,6 +115,20 @@ def test_fleet_yaml_shows_the_code_defaults() -> None:
     for section, cls in SECTIONS.items():
         values = shown.get(section) or {}
         for f in dataclasses.fields(cls):
-            if f.name in values and values[f.name] != f.default:
+            given = f.default is not dataclasses.MISSING
+            if given and f.name in values and values[f.name] != f.default:
                 wrong.append(f"{section}.{f.name}: {values[f.name]!r}, the code {f.default!r}")
     assert not wrong, "\n".join(wrong)
+
+
+def test_the_robot_must_be_described(tmp_path: Path) -> None:
+    """robot: has no defaults: a config without it, or without one of its fields, is refused."""
+    path = _write(tmp_path / "fleet.yaml", "lidar:\n  beams: 90\n")
+    assert _config_error(path) == f"{path}: robot: required field is missing"
+    robot = dict(DEFAULT_SECTIONS["robot"])
+    del robot["acc_lim_theta"]
+    path = _write(tmp_path / "fleet.yaml", yaml.safe_dump({"robot": robot}))
+    assert _config_error(path) == f"{path}: robot.acc_lim_theta: required field is missing"
+    robot = DEFAULT_SECTIONS["robot"] | {"cleaning_width": 0.5}
+    path = _write(tmp_path / "fleet.yaml", yaml.safe_dump({"robot": robot}))
+    assert "robot: cleaning_width must not exceed the robot diameter" in _config_error(path)

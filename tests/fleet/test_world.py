@@ -8,14 +8,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from PIL import Image
 
 from fleet.config import ConfigError, configs_dir
-from fleet.params import load_fleet_config
+from fleet.params import default_config_path, load_fleet_config
 from fleet.world import load_ros_map, load_world
 from planners.grid import clearance, reachable
 
 RADIUS = 0.17
+# a fleet.yaml must describe the robot; the tests of other sections take the built-in one
+ROBOT_SECTION = yaml.safe_dump(
+    {"robot": yaml.safe_load(default_config_path().read_text())["robot"]}
+)
 WORLDS = configs_dir() / "worlds"
 SHARED = Path(__file__).resolve().parents[3] / "shared"
 APARTMENT = SHARED / "data" / "maps" / "cob_ipa_apartment.yaml"
@@ -139,7 +144,7 @@ def _write(path: Path, text: str) -> Path:
 
 def _error(path: Path) -> str:
     with pytest.raises(ConfigError) as info:
-        load_world(path)
+        load_world(path, RADIUS)
     return str(info.value)
 
 
@@ -211,6 +216,18 @@ def test_start_inside_a_wall(tmp_path: Path) -> None:
     )
     msg = _error(path)
     assert str(path) in msg and "starts[1]" in msg
+
+
+def test_a_world_loaded_without_a_robot_checks_only_that_its_starts_are_free(
+    tmp_path: Path,
+) -> None:
+    near_wall = _write(tmp_path / "near.yaml", SMALL_ROOM + "starts:\n  - [0.15, 1.0, 0]\n")
+    assert load_world(near_wall).starts == ((0.15, 1.0, 0.0),)
+    with pytest.raises(ConfigError, match="closer than the robot radius"):
+        load_world(near_wall, RADIUS)
+    in_wall = _write(tmp_path / "in.yaml", SMALL_ROOM + "starts:\n  - [3.0, 1.0, 0]\n")
+    with pytest.raises(ConfigError, match=r"starts\[0\].* is inside an obstacle \("):
+        load_world(in_wall)
 
 
 def test_start_inside_furniture(tmp_path: Path) -> None:
@@ -300,7 +317,7 @@ def test_fleet_config_loads_default() -> None:
 
 
 def test_fleet_config_unknown_field(tmp_path: Path) -> None:
-    path = _write(tmp_path / "fleet.yaml", "robot:\n  radius: 0.2\nlidar:\n  beamz: 10\n")
+    path = _write(tmp_path / "fleet.yaml", ROBOT_SECTION + "lidar:\n  beamz: 10\n")
     with pytest.raises(ConfigError) as info:
         load_fleet_config(path)
     msg = str(info.value)
@@ -324,7 +341,8 @@ def test_fleet_config_unknown_section(tmp_path: Path) -> None:
     ],
 )
 def test_fleet_config_wrong_type_names_dotted_field(tmp_path: Path, text: str, field: str) -> None:
-    path = _write(tmp_path / "fleet.yaml", text)
+    robot = "" if text.startswith("robot:") else ROBOT_SECTION
+    path = _write(tmp_path / "fleet.yaml", robot + text)
     with pytest.raises(ConfigError) as info:
         load_fleet_config(path)
     msg = str(info.value)
@@ -332,7 +350,9 @@ def test_fleet_config_wrong_type_names_dotted_field(tmp_path: Path, text: str, f
 
 
 def test_fleet_config_validate_names_the_section(tmp_path: Path) -> None:
-    path = _write(tmp_path / "fleet.yaml", "lidar:\n  range_min: 5.0\n  range_max: 1.0\n")
+    path = _write(
+        tmp_path / "fleet.yaml", ROBOT_SECTION + "lidar:\n  range_min: 5.0\n  range_max: 1.0\n"
+    )
     with pytest.raises(ConfigError) as info:
         load_fleet_config(path)
     assert str(path) in str(info.value) and "lidar" in str(info.value)
@@ -347,7 +367,7 @@ def test_fleet_config_validate_names_the_section(tmp_path: Path) -> None:
     ],
 )
 def test_fleet_config_edge_pass_fields_are_checked(tmp_path: Path, text: str, field: str) -> None:
-    path = _write(tmp_path / "fleet.yaml", text)
+    path = _write(tmp_path / "fleet.yaml", ROBOT_SECTION + text)
     with pytest.raises(ConfigError) as info:
         load_fleet_config(path)
     assert str(path) in str(info.value) and field in str(info.value), str(info.value)

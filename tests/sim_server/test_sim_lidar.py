@@ -24,6 +24,7 @@ from sim_server.lidar import (
 
 BEAMS = np.linspace(0.0, 2 * math.pi, 360, endpoint=False)
 NO_DISCS = np.zeros((0, 3))
+RADIUS = 0.17
 
 
 def rotated_box(cx: float, cy: float, w: float, h: float, angle: float) -> np.ndarray:
@@ -165,7 +166,7 @@ def test_corner_endpoint_parallel_and_behind_cases():
 
 @pytest.mark.parametrize("beams", [BEAMS, np.linspace(-2.0, 2.0, 271), np.array([3.0, -1.0, 0.5])])
 def test_matches_brute_force_reference_on_a_furnished_scene(beams):
-    scene = furnished_scene(400, 12, seed=4)
+    scene = furnished_scene(400, 12, RADIUS, seed=4)
     args = (scene.origins, scene.headings, beams)
     rest = (scene.discs, 6.0, scene.self_index)
     expected = cast_scans_reference(*args, scene.segments, *rest)
@@ -365,7 +366,7 @@ def test_ros_apartment_map_boundary_matches_a_cell_ray_march():
     segments = occupancy_to_segments(occupied, res, origin)
     assert len(segments) == 3626
     index = SegmentIndex(segments, reach=6.0)
-    scene = map_scene(MAP_YAML, 3, seed=1)
+    scene = map_scene(MAP_YAML, 3, RADIUS, seed=1)
     ranges = cast_scans(scene.origins, scene.headings, BEAMS, index, NO_DISCS, 6.0)
     assert np.isfinite(ranges).mean() > 0.5
     for origin_xy, heading, scan in zip(scene.origins, scene.headings, ranges, strict=True):
