@@ -388,7 +388,7 @@ class Agent:
                 scan.stamp,
                 a.stale_after_s,
                 self.cfg.robot.radius,
-                self.cfg.dwa.max_vel_x,
+                self.cfg.robot.max_vel_x,
             )
             src.on_scan(
                 dataclasses.replace(
@@ -446,7 +446,7 @@ class Agent:
                 obstacles,
                 self._peer_centres(scan.stamp, everyone=True),
                 self.cfg.dwa,
-                self.cfg.robot.radius,
+                self.cfg.robot,
                 dt,
                 a,
             )
@@ -464,7 +464,7 @@ class Agent:
                 velocity,
                 obstacles,
                 self.cfg.dwa,
-                self.cfg.robot.radius,
+                self.cfg.robot,
                 dt,
                 a,
                 self._peer_centres(scan.stamp, everyone=False, skip=ordered),
@@ -569,7 +569,7 @@ class Agent:
         if follow is None or follow.done or self.state in ("stale", "holding"):
             return intent_points(pose, v, w, stamp, horizon)
         ahead = follow.waypoints[follow.index : follow.index + INTENT_WAYPOINTS]
-        speed = max(v, 0.5 * self.cfg.dwa.max_vel_x)
+        speed = max(v, 0.5 * self.cfg.robot.max_vel_x)
         return path_intent(np.array(pose[:2]), ahead, speed, stamp, horizon)
 
     def _publish(

@@ -32,6 +32,7 @@ from agents.peers import rim_points
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, DWAResult, dwa_control, rollout
 from planners.polyline import densify
+from planners.robot import RobotSpec
 from planners.wall_follow import WallFollowParams, to_robot_frame, wall_follow_step
 
 LOCAL_PATH_M = 3.0
@@ -180,7 +181,11 @@ def carrot(state: FollowState, xy: np.ndarray, lookahead: float) -> np.ndarray:
 
 
 def stop_speed(
-    state: FollowState, xy: np.ndarray, params: DWAParams, along_tolerance: float
+    state: FollowState,
+    xy: np.ndarray,
+    params: DWAParams,
+    robot: RobotSpec,
+    along_tolerance: float,
 ) -> float | None:
     """The speed for the approach to a stop, or None when the next waypoint is no stop or is
     farther than the braking distance from full speed.
@@ -201,22 +206,22 @@ def stop_speed(
     seg = wps[i] - start
     length = float(np.hypot(*seg))
     left = math.dist(xy, wps[i]) if length < 1e-9 else length - float((xy - start) @ seg) / length
-    braking = params.max_vel_x**2 / (2 * params.acc_lim_x)
+    braking = robot.max_vel_x**2 / (2 * robot.acc_lim_x)
     if left > braking + along_tolerance:
         return None
-    return math.sqrt(2 * params.acc_lim_x * max(left - along_tolerance / 2, 0.0))
+    return math.sqrt(2 * robot.acc_lim_x * max(left - along_tolerance / 2, 0.0))
 
 
 def rotate_in_place(
-    heading_error: float, velocity: tuple[float, float], params: DWAParams, dt: float
+    heading_error: float, velocity: tuple[float, float], robot: RobotSpec, dt: float
 ) -> tuple[float, float]:
     """(v, ω) that brakes to a stop and turns by ``heading_error``: the turn rate is the
     largest from which the robot can still stop on the heading, √(2·acc_lim_theta·|error|),
     capped at max_vel_theta and reached within the acceleration limits."""
     v0, w0 = velocity
-    v = max(0.0, v0 - params.acc_lim_x * dt)
-    rate = min(params.max_vel_theta, math.sqrt(2.0 * params.acc_lim_theta * abs(heading_error)))
-    dw = params.acc_lim_theta * dt
+    v = max(0.0, v0 - robot.acc_lim_x * dt)
+    rate = min(robot.max_vel_theta, math.sqrt(2.0 * robot.acc_lim_theta * abs(heading_error)))
+    dw = robot.acc_lim_theta * dt
     w = min(max(math.copysign(rate, heading_error), w0 - dw), w0 + dw)
     return v, w
 
@@ -331,7 +336,7 @@ def escape_step(
     obstacles: np.ndarray,
     peers: np.ndarray,
     params: DWAParams,
-    robot_radius: float,
+    robot: RobotSpec,
     dt: float,
     agent: AgentParams,
 ) -> tuple[FollowState, DWAResult] | None:
@@ -342,17 +347,17 @@ def escape_step(
     closed."""
     error = math.remainder(state.escape_heading - pose[2], 2 * math.pi)
     if abs(error) > ESCAPE_HEADING_TOLERANCE:
-        return state, _held(pose, *rotate_in_place(error, velocity, params, dt), params)
+        return state, _held(pose, *rotate_in_place(error, velocity, robot, dt), params)
     sign = state.escape_sign
     way = sign * np.array([math.cos(pose[2]), math.sin(pose[2])])
     ahead = np.asarray(pose[:2]) + np.linspace(0.02, state.escape_m, 5)[:, None] * way
     walls, robots = gaps(
-        np.vstack([np.asarray(pose[:2])[None, :], ahead]), obstacles, peers, robot_radius
+        np.vstack([np.asarray(pose[:2])[None, :], ahead]), obstacles, peers, robot.radius
     )
-    if not _kept_clear(walls[1:], robots[1:], (walls[0], robots[0]), robot_radius):
+    if not _kept_clear(walls[1:], robots[1:], (walls[0], robots[0]), robot.radius):
         return None
     v0 = velocity[0]
-    v = min(max(sign * agent.escape_speed, v0 - params.acc_lim_x * dt), v0 + params.acc_lim_x * dt)
+    v = min(max(sign * agent.escape_speed, v0 - robot.acc_lim_x * dt), v0 + robot.acc_lim_x * dt)
     result = _held(pose, v, 0.0, params)
     left = state.escape_m - abs(v) * dt if v * sign > 0 else state.escape_m
     return replace(state, escape_m=max(0.0, left)), result
@@ -365,7 +370,7 @@ def keep_clear(
     obstacles: np.ndarray,
     peers: np.ndarray,
     params: DWAParams,
-    robot_radius: float,
+    robot: RobotSpec,
     dt: float,
     agent: AgentParams,
 ) -> tuple[FollowState, DWAResult]:
@@ -377,18 +382,16 @@ def keep_clear(
     xy = np.asarray(pose[:2], dtype=float)
     if state.escape_m <= 0 and len(peers):
         d = np.hypot(*(peers - xy).T)
-        if d.min() < 2 * robot_radius + ESCAPE_MARGIN_M:
-            state = start_escape(state, pose, None, obstacles, peers, robot_radius, agent)
+        if d.min() < 2 * robot.radius + ESCAPE_MARGIN_M:
+            state = start_escape(state, pose, None, obstacles, peers, robot.radius, agent)
     if state.escape_m > 0:
-        stepped = escape_step(
-            state, pose, velocity, obstacles, peers, params, robot_radius, dt, agent
-        )
+        stepped = escape_step(state, pose, velocity, obstacles, peers, params, robot, dt, agent)
         if stepped is not None:
             return stepped
         state = replace(state, escape_m=0.0)
     v0, w0 = velocity
-    v = max(0.0, v0 - params.acc_lim_x * dt)
-    w = min(max(0.0, w0 - params.acc_lim_theta * dt), w0 + params.acc_lim_theta * dt)
+    v = max(0.0, v0 - robot.acc_lim_x * dt)
+    w = min(max(0.0, w0 - robot.acc_lim_theta * dt), w0 + robot.acc_lim_theta * dt)
     return state, _held(pose, v, w, params)
 
 
@@ -450,7 +453,7 @@ def edge_step(
     peers: np.ndarray,
     wall: WallFollowParams,
     params: DWAParams,
-    robot_radius: float,
+    robot: RobotSpec,
     dt: float,
     agent: AgentParams,
     max_speed: float | None,
@@ -468,16 +471,15 @@ def edge_step(
     side = wall_beside(state, pose, obstacles, wall, agent)
     if not side:
         return 0, None
-    limits = (params.max_vel_x, params.max_vel_theta, params.acc_lim_x, params.acc_lim_theta)
     points = to_robot_frame(obstacles, pose)
-    command = wall_follow_step(points, side, velocity, wall, robot_radius, limits, dt, max_speed)
+    command = wall_follow_step(points, side, velocity, wall, robot, dt, max_speed)
     if command is None:
         return 0, None
     xs, ys, _ = rollout(
         pose, np.array([command.v]), np.array([command.w]), np.linspace(0.0, EDGE_CHECK_S, 6)
     )
-    clear, _ = gaps(np.column_stack([xs[0], ys[0]]), obstacles, np.zeros((0, 2)), robot_radius)
-    if clear[1:].min() < min(robot_radius + EDGE_MARGIN_M, clear[0]):
+    clear, _ = gaps(np.column_stack([xs[0], ys[0]]), obstacles, np.zeros((0, 2)), robot.radius)
+    if clear[1:].min() < min(robot.radius + EDGE_MARGIN_M, clear[0]):
         return 0, None
     return side, _held(pose, command.v, command.w, params)
 
@@ -488,7 +490,7 @@ def control_step(
     velocity: tuple[float, float],
     obstacles: np.ndarray,
     params: DWAParams,
-    robot_radius: float,
+    robot: RobotSpec,
     dt: float,
     agent: AgentParams,
     peers: np.ndarray | None = None,
@@ -523,11 +525,9 @@ def control_step(
     if state.edge_side:
         state = replace(state, edge_side=0)
     peers = np.zeros((0, 2)) if peers is None else peers
-    seen = np.vstack([obstacles, rim_points(peers, robot_radius)]) if len(peers) else obstacles
+    seen = np.vstack([obstacles, rim_points(peers, robot.radius)]) if len(peers) else obstacles
     if state.escape_m > 0:
-        escaping = escape_step(
-            state, pose, velocity, obstacles, peers, params, robot_radius, dt, agent
-        )
+        escaping = escape_step(state, pose, velocity, obstacles, peers, params, robot, dt, agent)
         if escaping is not None:
             return escaping
         state = replace(state, escape_m=0.0)
@@ -537,7 +537,7 @@ def control_step(
     error = math.remainder(math.atan2(aim[1] - xy[1], aim[0] - xy[0]) - pose[2], 2 * math.pi)
     limit = agent.align_exit if state.aligning else agent.align_enter
     if abs(error) > limit and dist > agent.waypoint_tolerance:
-        result = _held(pose, *rotate_in_place(error, velocity, params, dt), params)
+        result = _held(pose, *rotate_in_place(error, velocity, robot, dt), params)
         if not state.aligning:
             state = replace(state, aligning=True, best_error=math.inf)
         progressed = abs(error) < state.best_error - TURN_PROGRESS_RAD
@@ -545,7 +545,7 @@ def control_step(
         state = replace(state, aligning=False)
         path = local_path(state, xy)
         result = None
-        speed = stop_speed(state, xy, params, agent.along_tolerance)
+        speed = stop_speed(state, xy, params, robot, agent.along_tolerance)
         if wall is not None:
             side, result = edge_step(
                 state,
@@ -555,7 +555,7 @@ def control_step(
                 peers,
                 wall,
                 params,
-                robot_radius,
+                robot,
                 dt,
                 agent,
                 speed,
@@ -563,24 +563,23 @@ def control_step(
             state = replace(state, edge_side=side)
         if result is None and speed is not None:
             v_now = velocity[0]
-            speed = min(max(speed, v_now - params.acc_lim_x * dt), v_now + params.acc_lim_x * dt)
-            fixed = replace(params, min_vel_x=speed, max_vel_x=speed, vx_samples=1)
-            result = dwa_control(pose, velocity, path, seen, fixed, robot_radius, dt)
+            speed = min(max(speed, v_now - robot.acc_lim_x * dt), v_now + robot.acc_lim_x * dt)
+            result = dwa_control(pose, velocity, path, seen, params, robot, dt, speed)
             if not (result.admissible and math.isfinite(result.cost)):
                 result = None
         if result is None:
-            result = dwa_control(pose, velocity, path, seen, params, robot_radius, dt)
+            result = dwa_control(pose, velocity, path, seen, params, robot, dt)
         progressed = dist < state.best_dist - PROGRESS_M
         blocked = 0.0 if progressed else state.blocked_s + dt
         state = replace(state, blocked_s=blocked)
         if blocked >= agent.escape_after_s:
-            state = start_escape(state, pose, aim, obstacles, peers, robot_radius, agent)
+            state = start_escape(state, pose, aim, obstacles, peers, robot.radius, agent)
     if progressed and state.aligning:
         return replace(state, best_error=abs(error)), result
     if progressed:
         return replace(state, stalled_s=0.0, yielded_s=0.0, best_dist=dist), result
     if state.yielded_s + dt <= agent.give_way_max_s and peer_in_the_way(
-        state, xy, peers, robot_radius, params.max_vel_x * params.sim_time
+        state, xy, peers, robot.radius, robot.max_vel_x * params.sim_time
     ):
         return replace(state, yielded_s=state.yielded_s + dt), result
     if state.stalled_s + dt >= agent.give_up_after_s:

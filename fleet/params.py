@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, get_args
 
-from fleet.config import configs_dir, from_mapping, read_yaml
+from fleet.config import ConfigError, configs_dir, from_mapping, read_yaml
 from fleet.slam_params import SlamParams
 from planners.checks import require_non_negative, require_positive
 from planners.coverage.params import CoverageParams
@@ -180,6 +180,18 @@ class CoordinatorParams:
         require_non_negative(self, "body_margin")
 
 
+# Fields of other sections that copied the robot's numbers, and the robot: field each became.
+# A config that still gives one is refused, so a copy cannot silently disagree with robot:.
+MOVED_TO_ROBOT: dict[str, dict[str, str]] = {
+    "dwa": {
+        "max_vel_x": "max_vel_x",
+        "max_vel_theta": "max_vel_theta",
+        "acc_lim_x": "acc_lim_x",
+        "acc_lim_theta": "acc_lim_theta",
+    },
+}
+
+
 @dataclass(frozen=True)
 class FleetConfig:
     """The whole file: ``robot:`` must be given (every field), the other sections may be left
@@ -197,6 +209,11 @@ class FleetConfig:
     coverage: CoverageParams = field(default_factory=CoverageParams)
 
     def validate(self) -> None:
+        if self.dwa.min_vel_x > self.robot.max_vel_x:
+            raise ValueError(
+                f"dwa.min_vel_x ({self.dwa.min_vel_x}) must not exceed robot.max_vel_x "
+                f"({self.robot.max_vel_x})"
+            )
         if self.wall_follow.distance <= self.robot.radius:
             raise ValueError(
                 f"wall_follow.distance ({self.wall_follow.distance}) must exceed robot.radius "
@@ -210,6 +227,26 @@ def default_config_path() -> Path:
 
 def load_fleet_config(path: str | Path | None = None) -> FleetConfig:
     """Load and validate ``configs/fleet.yaml`` (or ``path``); errors name file and field.
-    The ``robot:`` section is required in full: the robot has no defaults."""
+
+    The ``robot:`` section is required in full. A field that moved to it (see
+    ``MOVED_TO_ROBOT``) is refused where it used to be, naming where it lives now.
+    """
     p = Path(path) if path is not None else default_config_path()
-    return from_mapping(FleetConfig, read_yaml(p), str(p))
+    data = read_yaml(p)
+    _refuse_moved(data, p)
+    return from_mapping(FleetConfig, data, str(p))
+
+
+def _refuse_moved(data: object, path: Path) -> None:
+    if not isinstance(data, dict):
+        return
+    for section, moved in MOVED_TO_ROBOT.items():
+        given = data.get(section)
+        if not isinstance(given, dict):
+            continue
+        for old, new in moved.items():
+            if old in given:
+                raise ConfigError(
+                    f"{path}: {section}.{old}: the robot's size and limits live in robot: "
+                    f"(robot.{new}); remove {section}.{old}"
+                )

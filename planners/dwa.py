@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from planners.checks import require_non_negative, require_positive
+from planners.robot import RobotSpec
 
 # Smallest body-to-obstacle gap used in the 1/gap obstacle cost: keeps the cost finite when a
 # robot that already is closer than robot_radius + safety_margin (sensor noise) moves away.
@@ -29,8 +30,12 @@ _MIN_GAP = 1e-3
 class DWAParams:
     """Parameters named as in ROS base_local_planner / dwa_local_planner.
 
-    ``sim_granularity`` is, as in ROS, the largest distance (m) between consecutive
-    collision-checked points of a rollout. Fields added beyond the original set:
+    The robot's top speeds and acceleration limits (ROS's ``max_vel_x``, ``max_vel_theta``,
+    ``acc_lim_x``, ``acc_lim_theta``) are not copied here: they are the robot's
+    (:class:`planners.robot.RobotSpec`), passed beside these. ``min_vel_x`` is the planner's
+    choice (0: it never samples reverse). ``sim_granularity`` is, as in ROS, the largest
+    distance (m) between consecutive collision-checked points of a rollout. Fields added beyond
+    the original set:
 
     - ``forward_point_distance`` (ROS dwa_local_planner, default 0.325 m): the "nose" point ahead
       of the trajectory's end that the alignment and goal-front costs score. Without it a robot
@@ -50,11 +55,7 @@ class DWAParams:
       purpose), so an arc that ends on the path but bulges off it in between scores worse.
     """
 
-    max_vel_x: float = 0.5
     min_vel_x: float = 0.0
-    max_vel_theta: float = 1.0
-    acc_lim_x: float = 0.5
-    acc_lim_theta: float = 1.0
     sim_time: float = 1.5
     sim_granularity: float = 0.1
     vx_samples: int = 8
@@ -69,20 +70,10 @@ class DWAParams:
     path_aggregation: Literal["last", "mean"] = "mean"
 
     def validate(self) -> None:
-        if not 0.0 <= self.min_vel_x <= self.max_vel_x or self.max_vel_x <= 0:
-            raise ValueError("need 0 <= min_vel_x <= max_vel_x and max_vel_x > 0")
-        require_positive(
-            self,
-            "max_vel_theta",
-            "acc_lim_x",
-            "acc_lim_theta",
-            "sim_time",
-            "sim_granularity",
-            "vx_samples",
-            "vtheta_samples",
-        )
+        require_positive(self, "sim_time", "sim_granularity", "vx_samples", "vtheta_samples")
         require_non_negative(
             self,
+            "min_vel_x",
             "path_distance_bias",
             "goal_distance_bias",
             "occdist_scale",
@@ -115,15 +106,21 @@ class DWAResult:
 
 
 def dynamic_window(
-    velocity: tuple[float, float], params: DWAParams, dt: float
+    velocity: tuple[float, float],
+    params: DWAParams,
+    robot: RobotSpec,
+    dt: float,
+    speed: float | None = None,
 ) -> tuple[float, float, float, float]:
-    """(v_lo, v_hi, w_lo, w_hi): the velocities reachable within ``dt`` under the acceleration
-    limits, clipped into [min_vel_x, max_vel_x] × [−max_vel_theta, max_vel_theta] (a current
-    velocity outside the limits is commanded back to the nearest limit)."""
+    """(v_lo, v_hi, w_lo, w_hi): the velocities reachable within ``dt`` under the robot's
+    acceleration limits, clipped into [min_vel_x, max_vel_x] × [−max_vel_theta, max_vel_theta]
+    (a current velocity outside the limits is commanded back to the nearest limit); with
+    ``speed``, v is clipped to that one speed instead."""
     v0, w0 = velocity
-    dv, dw = params.acc_lim_x * dt, params.acc_lim_theta * dt
-    v_lo, v_hi = np.clip([v0 - dv, v0 + dv], params.min_vel_x, params.max_vel_x)
-    w_lo, w_hi = np.clip([w0 - dw, w0 + dw], -params.max_vel_theta, params.max_vel_theta)
+    dv, dw = robot.acc_lim_x * dt, robot.acc_lim_theta * dt
+    v_min, v_max = (speed, speed) if speed is not None else (params.min_vel_x, robot.max_vel_x)
+    v_lo, v_hi = np.clip([v0 - dv, v0 + dv], v_min, v_max)
+    w_lo, w_hi = np.clip([w0 - dw, w0 + dw], -robot.max_vel_theta, robot.max_vel_theta)
     return float(v_lo), float(v_hi), float(w_lo), float(w_hi)
 
 
@@ -213,14 +210,18 @@ def dwa_control(
     path: np.ndarray,
     obstacles: np.ndarray,
     params: DWAParams,
-    robot_radius: float,
+    robot: RobotSpec,
     dt: float,
+    speed: float | None = None,
 ) -> DWAResult:
-    """One DWA step: the best (v, ω) for the next control period ``dt``.
+    """One DWA step: the best (v, ω) for the next control period ``dt``, for the disc ``robot``
+    (radius ``robot_radius`` below) within its speed and acceleration limits.
 
     Sampling: ``vx_samples`` × ``vtheta_samples`` velocities spread over the dynamic window
     (see :func:`dynamic_window`), each held for ``sim_time`` (ROS ``use_dwa``), collision-checked
-    at points at most ``sim_granularity`` apart.
+    at points at most ``sim_granularity`` apart. With ``speed`` (a caller's braking profile),
+    v is that one speed and only ω is sampled; the points are then at most ``sim_granularity``
+    apart at that speed.
 
     Admissibility: a rollout is inadmissible if any of its points has clearance (distance from
     the robot centre to the nearest obstacle point) below ``robot_radius + safety_margin``.
@@ -246,7 +247,8 @@ def dwa_control(
     so a robot facing away turns around (v = 0 samples are in the window whenever the robot is
     slow). Near a stop the end-point cost is least for the speed whose rollout ends on the goal,
     v ≈ d/sim_time, so the robot slows down smoothly (the acceleration needed is ≤ v/sim_time,
-    within acc_lim_x with the defaults) and stops on the goal instead of overshooting.
+    within acc_lim_x whenever max_vel_x/sim_time is, as for the fleet's robot) and stops on the
+    goal instead of overshooting.
 
     ``admissible`` is True when some collision-free sample moves the robot forward (v > 0) and
     the best command is not to stand still short of the final goal (farther than
@@ -258,14 +260,16 @@ def dwa_control(
     obstacles = np.asarray(obstacles, dtype=float)
     if obstacles.size == 0:
         obstacles = obstacles.reshape(0, 2)
+    robot_radius = robot.radius
     _check_inputs(pose, velocity, path, obstacles, robot_radius, dt)
     p = params
-    v_lo, v_hi, w_lo, w_hi = dynamic_window(velocity, p, dt)
+    v_lo, v_hi, w_lo, w_hi = dynamic_window(velocity, p, robot, dt, speed)
+    vx_samples, top = (1, speed) if speed is not None else (p.vx_samples, robot.max_vel_x)
     vv, ww = np.meshgrid(
-        _samples(v_lo, v_hi, p.vx_samples), _samples(w_lo, w_hi, p.vtheta_samples), indexing="ij"
+        _samples(v_lo, v_hi, vx_samples), _samples(w_lo, w_hi, p.vtheta_samples), indexing="ij"
     )
     v, w = vv.ravel(), ww.ravel()
-    steps = max(1, math.ceil(p.max_vel_x * p.sim_time / p.sim_granularity - 1e-9))
+    steps = max(1, math.ceil(top * p.sim_time / p.sim_granularity - 1e-9))
     t = np.linspace(0.0, p.sim_time, steps + 1)
     xs, ys, ths = rollout(pose, v, w, t)
 

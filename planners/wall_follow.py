@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planners.checks import require_non_negative, require_positive
+from planners.robot import RobotSpec
 
 # Returns scattered about their fitted line by more than this (rms, m) are no straight wall:
 # about twice the median-filtered scan's noise.
@@ -213,21 +214,21 @@ def wall_follow_step(
     side: int,
     velocity: tuple[float, float],
     params: WallFollowParams,
-    robot_radius: float,
-    limits: tuple[float, float, float, float],
+    robot: RobotSpec,
     dt: float,
     max_speed: float | None = None,
 ) -> WallFollowCommand | None:
-    """One control step of the wall follower (see the module's docstring).
+    """One control step of the wall follower (see the module's docstring) for the disc
+    ``robot``, within its speed and acceleration limits.
 
     ``points``: obstacle points in the robot frame; ``side``: +1 wall on the left, −1 on the
-    right; ``limits``: (max_vel_x, max_vel_theta, acc_lim_x, acc_lim_theta); ``max_speed``: a
-    further cap on v (the caller's braking toward a stop). The speed is the least of the
-    cruising speed, ``max_speed``, the speed from which the robot can still stop
-    ``front_margin`` short of the nearest point in its corridor ahead (√(2·a·gap)) and the one
-    from which it can brake to ``corner_speed`` where the wall ends, scaled by the cosine of
-    the heading error and, nearer the wall than the set distance, by the share of the gap to
-    contact left (at least ``CLOSE_SPEED``), all within the acceleration limits.
+    right; ``max_speed``: a further cap on v (the caller's braking toward a stop). The speed is
+    the least of the cruising speed, the robot's top speed, ``max_speed``, the speed from which
+    the robot can still stop ``front_margin`` short of the nearest point in its corridor ahead
+    (√(2·a·gap)) and the one from which it can brake to ``corner_speed`` where the wall ends,
+    scaled by the cosine of the heading error and, nearer the wall than the set distance, by
+    the share of the gap to contact left (at least ``CLOSE_SPEED``), all within the
+    acceleration limits.
     None when no wall point lies within ``reach`` on that side.
     """
     if side not in (-1, 1):
@@ -237,7 +238,9 @@ def wall_follow_step(
         return None
     extent = wall_extent(points, p, side, params.wall_band, params.horizon)
     ends = extent <= params.corner_lookahead
-    v_max, w_max, acc_v, acc_w = limits
+    robot_radius = robot.radius
+    v_max, w_max = robot.max_vel_x, robot.max_vel_theta
+    acc_v, acc_w = robot.acc_lim_x, robot.acc_lim_theta
     r = float(math.hypot(p[0], p[1]))
     bearing = math.atan2(p[1], p[0])
     toward = -side * math.remainder(bearing - side * math.pi / 2, 2 * math.pi)

@@ -109,7 +109,7 @@ def follow_tour(
                 velocity,
                 obstacles,
                 cfg.dwa,
-                cfg.robot.radius,
+                cfg.robot,
                 dt,
                 cfg.agent,
                 wall=cfg.wall_follow if cfg.agent.edge_pass else None,

@@ -53,12 +53,12 @@ def bench_dwa(
     from planners.dwa import dwa_control, rollout
 
     cfg = load_fleet_config()
-    params, radius, dt = cfg.dwa, cfg.robot.radius, 1.0 / cfg.agent.control_hz
+    params, robot, dt = cfg.dwa, cfg.robot, 1.0 / cfg.agent.control_hz
     pose, obstacles, path = _scene(beams)
     velocity = (0.3, 0.2)
 
     def step() -> None:
-        dwa_control(tuple(pose), velocity, path, obstacles, params, radius, dt)
+        dwa_control(tuple(pose), velocity, path, obstacles, params, robot, dt)
 
     for _ in range(20):
         step()
@@ -71,7 +71,7 @@ def bench_dwa(
     samples = params.vx_samples * params.vtheta_samples
     v = np.repeat(np.linspace(0.25, 0.35, params.vx_samples), params.vtheta_samples)
     w = np.tile(np.linspace(0.1, 0.3, params.vtheta_samples), params.vx_samples)
-    steps = int(np.ceil(params.max_vel_x * params.sim_time / params.sim_granularity - 1e-9))
+    steps = int(np.ceil(robot.max_vel_x * params.sim_time / params.sim_granularity - 1e-9))
     xs, ys, _ = rollout(tuple(pose), v, w, np.linspace(0.0, params.sim_time, steps + 1)[1:])
     points = np.column_stack([xs.ravel(), ys.ravel()])
 

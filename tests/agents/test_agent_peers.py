@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from robots import ROBOT
 
 from agents.follower import FollowState, keep_clear
 from agents.peers import (
@@ -73,7 +74,7 @@ def _idle_among(peer_path: np.ndarray, seconds: float, dt: float = 0.1):
         ahead = peer_path[1:][np.hypot(*(peer_path[1:] - peer).T) > 1e-9]
         centres = intent_centres([path_intent(peer, ahead, 0.25, t, 2.0)], t, 0.5)
         idle, result = keep_clear(
-            idle, pose, velocity, np.zeros((0, 2)), centres, DWA, 0.17, dt, AGENT
+            idle, pose, velocity, np.zeros((0, 2)), centres, DWA, ROBOT, dt, AGENT
         )
         velocity = (result.v, result.w)
         xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([dt]))

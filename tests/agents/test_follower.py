@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from robots import ROBOT
 
 from agents.follower import (
     ESCAPE_MARGIN_M,
@@ -38,23 +39,24 @@ def test_lane_end_is_reached_along_the_lane_not_within_a_radius() -> None:
 
 
 def test_rotate_in_place_brakes_and_turns_within_the_limits() -> None:
-    v, w = rotate_in_place(2.0, (0.3, 0.0), DWA, DT)
-    assert v == pytest.approx(0.3 - DWA.acc_lim_x * DT)
-    assert w == pytest.approx(DWA.acc_lim_theta * DT)
-    v, w = rotate_in_place(-2.0, (0.0, -1.0), DWA, DT)
-    assert (v, w) == (0.0, -DWA.max_vel_theta)
+    v, w = rotate_in_place(2.0, (0.3, 0.0), ROBOT, DT)
+    assert v == pytest.approx(0.3 - ROBOT.acc_lim_x * DT)
+    assert w == pytest.approx(ROBOT.acc_lim_theta * DT)
+    v, w = rotate_in_place(-2.0, (0.0, -1.0), ROBOT, DT)
+    assert (v, w) == (0.0, -ROBOT.max_vel_theta)
     # close to the heading the rate is the one it can still stop from: sqrt(2·a·|error|)
-    _, w = rotate_in_place(0.02, (0.0, 0.25), DWA, DT)
-    assert w == pytest.approx(math.sqrt(2 * DWA.acc_lim_theta * 0.02))
+    _, w = rotate_in_place(0.02, (0.0, 0.25), ROBOT, DT)
+    assert w == pytest.approx(math.sqrt(2 * ROBOT.acc_lim_theta * 0.02))
 
 
 def test_stop_speed_only_on_the_approach_to_a_sharp_corner() -> None:
     corner = FollowState(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 0.3]]), index=1)
-    assert stop_speed(corner, np.array([0.5, 0.0]), DWA, 0.03) is None  # beyond braking distance
-    v = stop_speed(corner, np.array([1.9, 0.0]), DWA, 0.03)
-    assert v == pytest.approx(math.sqrt(2 * DWA.acc_lim_x * (0.1 - 0.015)))
+    # beyond the braking distance
+    assert stop_speed(corner, np.array([0.5, 0.0]), DWA, ROBOT, 0.03) is None
+    v = stop_speed(corner, np.array([1.9, 0.0]), DWA, ROBOT, 0.03)
+    assert v == pytest.approx(math.sqrt(2 * ROBOT.acc_lim_x * (0.1 - 0.015)))
     gentle = FollowState(np.array([[0.0, 0.0], [2.0, 0.0], [3.0, 1.0]]), index=1)  # 45°
-    assert stop_speed(gentle, np.array([1.9, 0.0]), DWA, 0.03) is None
+    assert stop_speed(gentle, np.array([1.9, 0.0]), DWA, ROBOT, 0.03) is None
 
 
 def _track(path: np.ndarray, pose: tuple[float, float, float], seconds: float):
@@ -62,7 +64,7 @@ def _track(path: np.ndarray, pose: tuple[float, float, float], seconds: float):
     state, velocity = FollowState(path), (0.0, 0.0)
     poses = [pose]
     for _ in range(round(seconds / DT)):
-        state, result = control_step(state, pose, velocity, np.zeros((0, 2)), DWA, 0.17, DT, AGENT)
+        state, result = control_step(state, pose, velocity, np.zeros((0, 2)), DWA, ROBOT, DT, AGENT)
         if result is None:
             return poses, state, True
         velocity = (result.v, result.w)
@@ -131,7 +133,7 @@ def test_a_peer_overlapping_the_robot_does_not_license_an_escape_into_a_wall() -
     east = FollowState(np.array([[1.2, 1.97], [1.79, 1.97]]), index=1, escape_m=0.15)
     east = replace(east, escape_heading=math.pi, escape_sign=-1)
     moving = escape_step(
-        east, (1.85, 1.2, math.pi), (-0.1, 0.0), table, peers, DWA, 0.17, DT, AGENT
+        east, (1.85, 1.2, math.pi), (-0.1, 0.0), table, peers, DWA, ROBOT, DT, AGENT
     )
     assert moving is None
 
@@ -143,7 +145,7 @@ def test_escape_turns_first_then_drives_in_the_cheaper_sense() -> None:
     none = np.zeros((0, 2))
     behind = start_escape(state, (0.0, 0.0, 0.0), path[1], none, none, 0.17, AGENT)
     assert behind.escape_sign == -1 and behind.escape_m == AGENT.escape_distance
-    stepped = escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, 0.17, DT, AGENT)
+    stepped = escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, ROBOT, DT, AGENT)
     assert stepped is not None and stepped[1].v < 0 and stepped[1].w == 0.0
     # the aim is to the left: turn in place before driving
     left = start_escape(
@@ -156,12 +158,12 @@ def test_escape_turns_first_then_drives_in_the_cheaper_sense() -> None:
         AGENT,
     )
     assert left.escape_sign == 1 and left.escape_heading == pytest.approx(math.pi / 2, abs=0.1)
-    turning = escape_step(left, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, 0.17, DT, AGENT)
+    turning = escape_step(left, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, ROBOT, DT, AGENT)
     assert turning is not None and turning[1].v == 0.0 and turning[1].w > 0
     # the way closes during the move: the escape ends
     wall = np.array([[-0.25, y] for y in np.linspace(-0.5, 0.5, 21)])
     assert (
-        escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), wall, none, DWA, 0.17, DT, AGENT) is None
+        escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), wall, none, DWA, ROBOT, DT, AGENT) is None
     )
 
 
@@ -171,7 +173,7 @@ def test_a_robot_wedged_against_a_wall_escapes_and_then_drives_on() -> None:
     path = np.array([[0.0, 0.0], [0.0, 1.0]])
     state, pose, velocity = FollowState(path, index=1), (0.0, 0.0, 1.2), (0.0, 0.0)
     for _ in range(60):
-        state, result = control_step(state, pose, velocity, wall, DWA, 0.17, DT, AGENT)
+        state, result = control_step(state, pose, velocity, wall, DWA, ROBOT, DT, AGENT)
         assert result is not None
         velocity = (result.v, result.w)
         xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([DT]))
@@ -199,7 +201,7 @@ def _stall(peers: np.ndarray, obstacles: np.ndarray, agent: AgentParams) -> floa
     state = FollowState(np.array([[0.0, 0.0], [2.0, 0.0]]), index=1)
     pose, velocity = (0.0, 0.0, 0.0), (0.0, 0.0)
     for k in range(400):
-        state, result = control_step(state, pose, velocity, obstacles, DWA, 0.17, DT, agent, peers)
+        state, result = control_step(state, pose, velocity, obstacles, DWA, ROBOT, DT, agent, peers)
         if state.skipped:
             return k * DT
         assert result is not None
@@ -233,7 +235,7 @@ def test_a_waypoint_given_up_far_short_is_missed(at: float, missed: tuple[int, .
     lane = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]])
     state = FollowState(lane, index=1, stalled_s=AGENT.give_up_after_s, best_dist=2.0 - at)
     state, _ = control_step(
-        state, (at, 0.0, 0.0), (0.0, 0.0), np.zeros((0, 2)), DWA, 0.17, DT, AGENT
+        state, (at, 0.0, 0.0), (0.0, 0.0), np.zeros((0, 2)), DWA, ROBOT, DT, AGENT
     )
     assert state.index == 2 and state.skipped == 1
     assert state.missed == missed

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from robots import ROBOT
 
 from agents.follower import FollowState, control_step, scan_points, wall_beside
 from agents.time_use import step_kind
@@ -47,7 +48,7 @@ def _drive(
         obstacles = scan_points(seen, ranges, -math.pi, INCREMENT)
         before = state
         state, result = control_step(
-            state, seen, velocity, obstacles, DWA, 0.17, DT, AGENT, peers, WALL
+            state, seen, velocity, obstacles, DWA, ROBOT, DT, AGENT, peers, WALL
         )
         if result is None:
             break

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import pytest
 import yaml
+from robots import ROBOT
 
 from fleet.config import ConfigError, from_mapping
-from fleet.params import FleetConfig, default_config_path, load_fleet_config
+from fleet.params import MOVED_TO_ROBOT, FleetConfig, default_config_path, load_fleet_config
 from fleet.world import load_world
 
 SECTIONS = typing.get_type_hints(FleetConfig)
@@ -132,3 +133,29 @@ def test_the_robot_must_be_described(tmp_path: Path) -> None:
     robot = DEFAULT_SECTIONS["robot"] | {"cleaning_width": 0.5}
     path = _write(tmp_path / "fleet.yaml", yaml.safe_dump({"robot": robot}))
     assert "robot: cleaning_width must not exceed the robot diameter" in _config_error(path)
+
+
+def test_the_tests_robot_is_the_fleets() -> None:
+    assert load_fleet_config().robot == ROBOT
+
+
+MOVED = [(section, old, new) for section, m in MOVED_TO_ROBOT.items() for old, new in m.items()]
+
+
+@pytest.mark.parametrize(("section", "field", "home"), MOVED)
+def test_an_old_config_with_a_copy_of_the_robot_is_refused(
+    tmp_path: Path, section: str, field: str, home: str
+) -> None:
+    """The robot's numbers moved to robot:; an old config that still has them elsewhere is told
+    where they live now instead of keeping a copy that could disagree."""
+    path = _with(tmp_path / "fleet.yaml", section, field, 0.5)
+    assert _config_error(path) == (
+        f"{path}: {section}.{field}: the robot's size and limits live in robot: "
+        f"(robot.{home}); remove {section}.{field}"
+    )
+
+
+def test_dwa_may_not_sample_faster_than_the_robot_drives(tmp_path: Path) -> None:
+    path = _with(tmp_path / "fleet.yaml", "dwa", "min_vel_x", 0.6)
+    msg = _config_error(path)
+    assert "dwa.min_vel_x (0.6) must not exceed robot.max_vel_x (0.5)" in msg, msg

@@ -7,12 +7,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from robots import ROBOT
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from planners.dwa import DWAParams, DWAResult, dwa_control, dynamic_window, rollout
 
-RADIUS = 0.17
+RADIUS = ROBOT.radius
 DT = 0.1
 GOAL_TOLERANCE = 0.1
 LIDAR_RANGE = 6.0
@@ -100,13 +101,13 @@ def drive(pose, path, circles, rng, steps=600, velocity=(0.0, 0.0), params=PARAM
         seg += int(np.argmin(np.hypot(*(path[seg : seg + 30] - pose[:2]).T)))
         obstacles = lidar(pose, circles, rng) if len(circles) else np.zeros((0, 2))
         res = dwa_control(
-            tuple(pose), (v, w), path[max(seg - 1, 0) : seg + 60], obstacles, params, RADIUS, DT
+            tuple(pose), (v, w), path[max(seg - 1, 0) : seg + 60], obstacles, params, ROBOT, DT
         )
-        v_lo, v_hi, w_lo, w_hi = dynamic_window((v, w), params, DT)
+        v_lo, v_hi, w_lo, w_hi = dynamic_window((v, w), params, ROBOT, DT)
         assert v_lo - 1e-9 <= res.v <= v_hi + 1e-9 and w_lo - 1e-9 <= res.w <= w_hi + 1e-9
         results.append(res)
-        v = float(np.clip(res.v, v - PARAMS.acc_lim_x * DT, v + PARAMS.acc_lim_x * DT))
-        w = float(np.clip(res.w, w - PARAMS.acc_lim_theta * DT, w + PARAMS.acc_lim_theta * DT))
+        v = float(np.clip(res.v, v - ROBOT.acc_lim_x * DT, v + ROBOT.acc_lim_x * DT))
+        w = float(np.clip(res.w, w - ROBOT.acc_lim_theta * DT, w + ROBOT.acc_lim_theta * DT))
         xs, ys, ths = rollout(tuple(pose), [v], [w], np.linspace(DT / 10, DT, 10))
         if len(circles):
             gaps = np.hypot(xs[0][:, None] - circles[:, 0], ys[0][:, None] - circles[:, 1])
@@ -164,7 +165,7 @@ def test_blocked_corridor_is_inadmissible_and_stops():
     path = np.array([[0.0, 0.0], [3.0, 0.0]])
     pose, v, w = np.zeros(3), 0.0, 0.0
     for _ in range(300):
-        res = dwa_control(tuple(pose), (v, w), path, corridor(1.5), PARAMS, RADIUS, DT)
+        res = dwa_control(tuple(pose), (v, w), path, corridor(1.5), PARAMS, ROBOT, DT)
         if not res.admissible:
             break
         v, w = res.v, res.w
@@ -174,22 +175,22 @@ def test_blocked_corridor_is_inadmissible_and_stops():
     stop_line = 1.5 - RADIUS - PARAMS.safety_margin
     assert stop_line - 0.05 < pose[0] <= stop_line
     np.testing.assert_allclose(res.trajectory, np.tile(pose, (len(res.trajectory), 1)))
-    free = dwa_control(tuple(pose), (0.0, 0.0), path, corridor(None), PARAMS, RADIUS, DT)
+    free = dwa_control(tuple(pose), (0.0, 0.0), path, corridor(None), PARAMS, ROBOT, DT)
     assert free.admissible and free.v > 0
 
 
 def test_moving_robot_that_is_blocked_brakes_as_hard_as_allowed():
     path = np.array([[0.0, 0.0], [3.0, 0.0]])
-    res = dwa_control((0.0, 0.0, 0.0), (0.4, 0.0), path, corridor(0.4), PARAMS, RADIUS, DT)
+    res = dwa_control((0.0, 0.0, 0.0), (0.4, 0.0), path, corridor(0.4), PARAMS, ROBOT, DT)
     assert not res.admissible
-    assert res.v == pytest.approx(0.4 - PARAMS.acc_lim_x * DT)
+    assert res.v == pytest.approx(0.4 - ROBOT.acc_lim_x * DT)
     assert res.w == 0.0 and res.cost == math.inf
 
 
 def test_rotates_in_place_toward_a_path_to_the_side_when_the_front_is_blocked():
     wall = np.column_stack([np.full(60, 0.225), np.linspace(-0.6, 0.6, 60)])
     path = np.array([[0.0, 0.0], [0.0, 2.0]])
-    res = dwa_control((0.0, 0.0, 0.0), (0.0, 0.0), path, wall, PARAMS, RADIUS, DT)
+    res = dwa_control((0.0, 0.0, 0.0), (0.0, 0.0), path, wall, PARAMS, ROBOT, DT)
     assert not res.admissible
     assert res.v == 0.0 and res.w > 0
 
@@ -201,10 +202,10 @@ def test_commands_stay_in_the_dynamic_window():
         pose = (*rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi))
         path = np.cumsum(rng.uniform(-1, 1, (rng.integers(1, 6), 2)), axis=0)
         obstacles = rng.uniform(-3, 3, (rng.integers(0, 360), 2))
-        res = dwa_control(pose, velocity, path, obstacles, PARAMS, RADIUS, 0.1)
-        v_lo, v_hi, w_lo, w_hi = dynamic_window(velocity, PARAMS, 0.1)
-        assert PARAMS.min_vel_x <= v_lo <= v_hi <= PARAMS.max_vel_x
-        assert -PARAMS.max_vel_theta <= w_lo <= w_hi <= PARAMS.max_vel_theta
+        res = dwa_control(pose, velocity, path, obstacles, PARAMS, ROBOT, 0.1)
+        v_lo, v_hi, w_lo, w_hi = dynamic_window(velocity, PARAMS, ROBOT, 0.1)
+        assert PARAMS.min_vel_x <= v_lo <= v_hi <= ROBOT.max_vel_x
+        assert -ROBOT.max_vel_theta <= w_lo <= w_hi <= ROBOT.max_vel_theta
         assert v_lo - 1e-12 <= res.v <= v_hi + 1e-12
         assert w_lo - 1e-12 <= res.w <= w_hi + 1e-12
 
@@ -212,7 +213,7 @@ def test_commands_stay_in_the_dynamic_window():
 def test_trajectory_is_the_exact_rollout_of_the_command():
     pose = (1.0, -2.0, 0.3)
     res = dwa_control(
-        pose, (0.3, 0.5), np.array([[1.0, -2.0], [3.0, 0.0]]), np.zeros((0, 2)), PARAMS, RADIUS, DT
+        pose, (0.3, 0.5), np.array([[1.0, -2.0], [3.0, 0.0]]), np.zeros((0, 2)), PARAMS, ROBOT, DT
     )
     assert isinstance(res, DWAResult) and res.admissible
     assert res.trajectory.shape[1] == 3
@@ -247,24 +248,20 @@ def test_bad_input_is_rejected_with_a_clear_message(kwargs, message):
         "path": np.array([[1.0, 0.0]]),
         "obstacles": np.zeros((0, 2)),
         "params": PARAMS,
-        "robot_radius": RADIUS,
+        "robot": ROBOT,
         "dt": DT,
     } | kwargs
     with pytest.raises(ValueError, match=message):
         dwa_control(**args)
 
 
-def test_fleet_yaml_dwa_section_lists_every_parameter_with_its_default():
-    import yaml
-
-    from fleet.config import ConfigError, configs_dir, from_mapping
-    from fleet.params import load_fleet_config
-
-    section = yaml.safe_load((configs_dir() / "fleet.yaml").read_text())["dwa"]
-    assert set(section) == set(DWAParams.__dataclass_fields__)
-    assert load_fleet_config().dwa == DWAParams(**section)
-    with pytest.raises(ConfigError, match="min_vel_x"):
-        from_mapping(DWAParams, {"min_vel_x": 0.6}, "fleet.yaml: dwa")
+def test_a_given_speed_is_the_only_one_sampled():
+    """A caller's braking profile fixes v; only ω is chosen, and the rollouts are checked at
+    points sim_granularity apart at that speed: ceil(0.15 m/s · 1.5 s / 0.1 m) = 3 steps."""
+    path = np.array([[0.0, 0.0], [3.0, 0.0]])
+    res = dwa_control((0.0, 0.0, 0.0), (0.2, 0.0), path, np.zeros((0, 2)), PARAMS, ROBOT, DT, 0.15)
+    assert res.v == 0.15 and res.admissible
+    assert len(res.trajectory) == 4
 
 
 def test_bench_dwa_prints_the_timings_as_json():

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from robots import ROBOT
 
 from agents.follower import scan_points
 from planners.dwa import rollout
@@ -21,8 +22,7 @@ from planners.wall_follow import (
 from sim_server.lidar import add_noise, cast_scans, polygon_edges
 
 PARAMS = WallFollowParams()
-LIMITS = (0.5, 1.0, 0.5, 1.0)  # max_vel_x, max_vel_theta, acc_lim_x, acc_lim_theta
-RADIUS = 0.17
+RADIUS = ROBOT.radius
 DT = 0.1
 BEAMS = 360
 SETTLE_S = 2.0
@@ -52,7 +52,7 @@ def _drive(
         )[0]
         ranges = add_noise(ranges, 0.01, 0.1, 6.0, rng)
         points = to_robot_frame(scan_points(pose, ranges, -math.pi, increment), pose)
-        command = wall_follow_step(points, side, velocity, PARAMS, RADIUS, LIMITS, DT)
+        command = wall_follow_step(points, side, velocity, PARAMS, ROBOT, DT)
         assert command is not None, f"lost the wall at {pose}"
         velocity = (command.v, command.w)
         xs, ys, ths = rollout(pose, np.array([command.v]), np.array([command.w]), np.array([DT]))
@@ -116,9 +116,9 @@ def test_a_staircase_wall_is_followed_without_contact(rise: float) -> None:
 
 def test_no_wall_near_is_no_command() -> None:
     far = np.array([[2.0, -2.0], [2.1, -2.0]])
-    assert wall_follow_step(far, -1, (0.2, 0.0), PARAMS, RADIUS, LIMITS, DT) is None
+    assert wall_follow_step(far, -1, (0.2, 0.0), PARAMS, ROBOT, DT) is None
     with pytest.raises(ValueError, match="side"):
-        wall_follow_step(far, 0, (0.2, 0.0), PARAMS, RADIUS, LIMITS, DT)
+        wall_follow_step(far, 0, (0.2, 0.0), PARAMS, ROBOT, DT)
 
 
 def test_the_fitted_wall_is_not_pulled_in_by_the_noise() -> None:
