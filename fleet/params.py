@@ -189,6 +189,14 @@ MOVED_TO_ROBOT: dict[str, dict[str, str]] = {
         "acc_lim_x": "acc_lim_x",
         "acc_lim_theta": "acc_lim_theta",
     },
+    "coverage": {
+        "robot_radius": "radius",
+        "cleaning_width": "cleaning_width",
+        "max_speed": "max_vel_x",
+        "max_accel": "acc_lim_x",
+        "max_turn_rate": "max_vel_theta",
+        "max_turn_accel": "acc_lim_theta",
+    },
 }
 
 

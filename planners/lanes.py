@@ -1,12 +1,12 @@
 """Boustrophedon lanes over a grid split among k robots: the baseline of `fleet bench coverage`.
 
-The free space a robot centre may use (clearance ≥ ``robot_radius``, connected to a start) is
-split into k vertical strips of equal area; each strip is swept by horizontal lanes spaced
-``cleaning_width · (1 − overlap)`` apart, plus one extra lane on each side of every row where the
-free space changes shape (an obstacle edge), so the swath reaches along furniture too. Lane
-segments are chained greedily from the robot's start, nearest endpoint first (the ordering of
-boustrophedon coverage, Choset 2000), with transitions that are straight where the straight line
-is free and A* on the grid where it is not.
+The free space a robot centre may use (clearance ≥ the robot's radius, connected to a start) is
+split into k vertical strips of equal area; each strip is swept by horizontal lanes spaced the
+robot's ``cleaning_width · (1 − overlap)`` apart, plus one extra lane on each side of every row
+where the free space changes shape (an obstacle edge), so the swath reaches along furniture too.
+Lane segments are chained greedily from the robot's start, nearest endpoint first (the ordering
+of boustrophedon coverage, Choset 2000), with transitions that are straight where the straight
+line is free and A* on the grid where it is not.
 """
 
 from __future__ import annotations
@@ -14,22 +14,15 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
 
 from planners.grid import GridMap
 from planners.polyline import simplify
+from planners.robot import RobotSpec
 
 SHAPE_CHANGE_CELLS = 3
-
-
-@dataclass(frozen=True)
-class LaneParams:
-    robot_radius: float = 0.2
-    cleaning_width: float = 0.3
-    overlap: float = 0.15
 
 
 def free_centres(grid: GridMap, starts: np.ndarray, robot_radius: float) -> np.ndarray:
@@ -152,12 +145,13 @@ def transition(free: np.ndarray, a: tuple[int, int], b: tuple[int, int]) -> list
 
 
 def plan_lanes(
-    grid: GridMap, starts: list[tuple[float, float]], params: LaneParams
+    grid: GridMap, starts: list[tuple[float, float]], robot: RobotSpec, overlap: float
 ) -> list[np.ndarray]:
-    """One waypoint path (N, 2) in world metres per start."""
-    free = free_centres(grid, np.array(starts, dtype=float), params.robot_radius)
+    """One waypoint path (N, 2) in world metres per start, for ``robot`` with lanes sharing
+    ``overlap`` of its cleaning width."""
+    free = free_centres(grid, np.array(starts, dtype=float), robot.radius)
     strips = split_strips(free, len(starts))
-    spacing = math.floor(params.cleaning_width * (1 - params.overlap) / grid.resolution + 1e-9)
+    spacing = math.floor(robot.cleaning_width * (1 - overlap) / grid.resolution + 1e-9)
     # Give each robot the strip whose free cells are nearest its start, in order of start x.
     order = np.argsort([s[0] for s in starts], kind="stable")
     paths: list[np.ndarray] = [np.zeros((0, 2))] * len(starts)

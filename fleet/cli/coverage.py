@@ -15,8 +15,12 @@ if TYPE_CHECKING:
     from rich.status import Status
 
     from planners.coverage import CoverageParams
+    from planners.robot import RobotSpec
 
 APARTMENT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
+# `fleet plan coverage` and its bench plan for the bare robot radius; the coordinator adds
+# coordinator.wall_clearance
+PLAN_WALL_CLEARANCE = 0.0
 
 
 def register(
@@ -131,9 +135,7 @@ def plan_coverage_cmd(
         grid = world.grid(resolution)
     except ConfigError as err:
         _fail(str(err))
-    params = dataclasses.replace(
-        cfg.coverage, robot_radius=cfg.robot.radius, cleaning_width=cfg.robot.cleaning_width
-    )
+    params, robot = cfg.coverage, cfg.robot
     if method is not None:
         if method not in ("bcd", "spiral"):
             _fail(f"--method must be bcd or spiral, got {method!r}")
@@ -154,7 +156,7 @@ def plan_coverage_cmd(
             _fail(str(err))
     try:
         with _status(f"planning coverage of {path.name} for {robots} robot(s)"):
-            plan = plan_coverage(grid, starts, params)
+            plan = plan_coverage(grid, starts, params, robot, wall_clearance=PLAN_WALL_CLEARANCE)
     except PlanningError as err:
         _fail(f"{path}: {err}")
     out.mkdir(parents=True, exist_ok=True)
@@ -164,8 +166,8 @@ def plan_coverage_cmd(
             {"id": i, "start": [float(s[0]), float(s[1])], "path": p.round(4).tolist()}
             for i, (s, p) in enumerate(zip(plan.starts, plan.paths, strict=True))
         ],
-        "cleaning_width_m": params.cleaning_width,
-        "robot_radius_m": params.robot_radius,
+        "cleaning_width_m": robot.cleaning_width,
+        "robot_radius_m": robot.radius,
     }
     (out / "paths.json").write_text(json.dumps(doc))
     render_plan(grid, plan.room_labels, list(plan.paths), plan.unreachable).save(out / "plan.png")
@@ -187,7 +189,7 @@ def plan_coverage_cmd(
     console.print(
         f"unreachable free space: {summary['unreachable_free_m2']:.2f} m² "
         f"(free cells no robot can clean from these starts: cut off, or too close to walls "
-        f"for the {params.cleaning_width:.2f} m swath), hatched red in plan.png"
+        f"for the {robot.cleaning_width:.2f} m swath), hatched red in plan.png"
     )
     console.print(f"wrote {out / 'paths.json'} and {out / 'plan.png'}")
 
@@ -249,10 +251,11 @@ def _print_table(plan: Any, title: str) -> None:
     Console().print(table)
 
 
-def _plan_time(grid, starts, params) -> float:
+def _plan_time(grid, starts, params, robot) -> float:
     from planners.coverage import plan_coverage
 
-    return plan_coverage(grid, starts, params).plan_time_s
+    plan = plan_coverage(grid, starts, params, robot, wall_clearance=PLAN_WALL_CLEARANCE)
+    return plan.plan_time_s
 
 
 def bench_coverage(
@@ -281,9 +284,7 @@ def bench_coverage(
     from fleet.params import load_fleet_config
 
     cfg = load_fleet_config()
-    params = dataclasses.replace(
-        cfg.coverage, robot_radius=cfg.robot.radius, cleaning_width=cfg.robot.cleaning_width
-    )
+    params, robot = cfg.coverage, cfg.robot
     maps = [("home", configs_dir() / "worlds" / "home.yaml")]
     apt = APARTMENT / "cob_ipa_apartment.yaml"
     if apt.exists():
@@ -291,14 +292,17 @@ def bench_coverage(
     rows: list[dict[str, Any]] = []
     with _status("fleet bench coverage") as status:
         for name, path in maps:
-            _bench_map(name, path, params, repeat, rows, status)
+            _bench_map(name, path, params, robot, repeat, rows, status)
     if as_json:
         print(json.dumps({"results": rows}))
         return
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title="fleet bench coverage (cleaning width 0.30 m, robot radius 0.17 m, 5 cm)")
+    table = Table(
+        title=f"fleet bench coverage (cleaning width {robot.cleaning_width:.2f} m, "
+        f"robot radius {robot.radius:.2f} m, 5 cm)"
+    )
     cols = (
         "map",
         "planner",
@@ -334,6 +338,7 @@ def _bench_map(
     name: str,
     path: Path,
     params: CoverageParams,
+    robot: RobotSpec,
     repeat: int,
     rows: list[dict[str, Any]],
     status: Status,
@@ -341,12 +346,12 @@ def _bench_map(
     """Append the bench rows of one map to ``rows``, telling ``status`` which case runs."""
     from fleet.world import load_world
     from planners.coverage import plan_coverage, plan_metrics
-    from planners.lanes import LaneParams, plan_lanes
+    from planners.lanes import plan_lanes
 
-    world = load_world(path, params.robot_radius)
+    world = load_world(path, robot.radius)
     grid = world.grid(0.05)
-    s1 = [p[:2] for p in world.start_poses(1, params.robot_radius)]
-    s3 = [p[:2] for p in world.start_poses(3, params.robot_radius)]
+    s1 = [p[:2] for p in world.start_poses(1, robot.radius)]
+    s3 = [p[:2] for p in world.start_poses(3, robot.radius)]
     single = None
     for label, starts, p in (
         ("bcd k=1", s1, params),
@@ -354,11 +359,11 @@ def _bench_map(
         ("spiral k=1", s1, dataclasses.replace(params, method="spiral")),
     ):
         status.update(f"fleet bench coverage: {name}, {label}, run 1 of {repeat}")
-        plan = plan_coverage(grid, starts, p)
+        plan = plan_coverage(grid, starts, p, robot, wall_clearance=PLAN_WALL_CLEARANCE)
         fastest = plan.plan_time_s
         for run in range(2, repeat + 1):
             status.update(f"fleet bench coverage: {name}, {label}, run {run} of {repeat}")
-            fastest = min(fastest, _plan_time(grid, starts, p))
+            fastest = min(fastest, _plan_time(grid, starts, p, robot))
         row = {
             "map": name,
             "planner": label,
@@ -374,15 +379,21 @@ def _bench_map(
                 plan.metrics.makespan_s / single.metrics.makespan_s, 3
             )
         rows.append(row)
-    lane_params = LaneParams(params.robot_radius, params.cleaning_width, params.overlap)
     for label, starts in (("baseline lanes k=1", s1), ("baseline lanes k=3", s3)):
         status.update(f"fleet bench coverage: {name}, {label}")
         dt = math.inf
         for _ in range(repeat):
             t0 = time.perf_counter()
-            paths = plan_lanes(grid, starts, lane_params)
+            paths = plan_lanes(grid, starts, robot, params.overlap)
             dt = min(dt, time.perf_counter() - t0)
-        m = plan_metrics(grid, paths, params, single.cleanable if single is not None else None)
+        m = plan_metrics(
+            grid,
+            paths,
+            params,
+            robot,
+            wall_clearance=PLAN_WALL_CLEARANCE,
+            cleanable_mask=single.cleanable if single is not None else None,
+        )
         rows.append(
             {
                 "map": name,

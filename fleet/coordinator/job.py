@@ -30,6 +30,7 @@ import numpy as np
 from planners.auction import Task, ahead_of, remainder
 from planners.auction.detour import part_of
 from planners.coverage.params import CoverageParams
+from planners.robot import RobotSpec
 
 OPEN, ASSIGNED, DONE, REPLACED = "open", "assigned", "done", "replaced"
 BLOCKED, UNREACHABLE = "blocked", "unreachable"
@@ -84,8 +85,12 @@ class RobotRecord:
 class Job:
     """Tasks and robots; every method returns what changed so the shell can persist and tell."""
 
-    def __init__(self, params: CoverageParams) -> None:
+    def __init__(self, params: CoverageParams, spec: RobotSpec, wall_clearance: float) -> None:
+        """``params`` and the robot's ``spec`` time the tasks cut from others; robot centres
+        keep ``spec.radius + wall_clearance`` from obstacles, a lost robot's body included."""
         self.params = params
+        self.spec = spec
+        self.wall_clearance = wall_clearance
         self.tasks: dict[str, TaskRecord] = {}
         self.robots: dict[str, RobotRecord] = {}
 
@@ -181,12 +186,18 @@ class Job:
                 new_id = self._next_id(rec.task.id)
                 if i == 0 and robot.xy is not None:
                     # its body stays where it stopped: no robot centre comes within two radii
-                    clearance = 2 * self.params.robot_radius
+                    clearance = 2 * (self.spec.radius + self.wall_clearance)
                     rest = ahead_of(
-                        rec.task, np.array(robot.xy), rec.reverse, clearance, new_id, self.params
+                        rec.task,
+                        np.array(robot.xy),
+                        rec.reverse,
+                        clearance,
+                        new_id,
+                        self.params,
+                        self.spec,
                     )
                 else:
-                    rest = remainder(rec.task, rec.swept, new_id, self.params)
+                    rest = remainder(rec.task, rec.swept, new_id, self.params, self.spec)
                 rec.state, rec.owner = REPLACED, None
                 if rest is not None:
                     self.tasks[rest.id] = TaskRecord(rest, parent=rec.task.id)
@@ -205,7 +216,7 @@ class Job:
         rec = self.tasks.get(task_id)
         if rec is None or rec.state != ASSIGNED or rec.owner != rid:
             return None
-        rest = remainder(rec.task, rec.swept, self._next_id(task_id), self.params)
+        rest = remainder(rec.task, rec.swept, self._next_id(task_id), self.params, self.spec)
         if rest is None:
             return None
         rec.state, rec.owner = REPLACED, None
@@ -244,7 +255,9 @@ class Job:
             if later.position < rec.position:
                 continue
             if later.started:
-                rest = remainder(later.task, later.swept, self._next_id(later.task.id), self.params)
+                rest = remainder(
+                    later.task, later.swept, self._next_id(later.task.id), self.params, self.spec
+                )
                 if rest is None:
                     later.state = DONE
                     continue
@@ -278,7 +291,7 @@ class Job:
             if len(path) < 2:
                 continue
             state, ids = (OPEN, made[0]) if area is None else (BLOCKED, made[1])
-            task = part_of(rec.task, path, self._next_id(task_id), self.params)
+            task = part_of(rec.task, path, self._next_id(task_id), self.params, self.spec)
             if area is not None:
                 task = dataclasses.replace(task, area_m2=area)
             self.tasks[task.id] = TaskRecord(

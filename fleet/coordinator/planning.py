@@ -41,20 +41,15 @@ class TaskPlanner:
         self.grid = world.grid(PLAN_RESOLUTION)
         self.dock = tuple(float(v) for v in world.start_poses(1, cfg.robot.radius)[0][:2])
         self.target_s = cfg.coordinator.task_target_s
+        self.robot = cfg.robot
         # Paths keep wall_clearance more than the robot radius from obstacles: the DWA needs
         # clearance above the radius plus the noise of a median-filtered scan. Lanes overlap by
         # lane_overlap, as a real robot tracks its lane only to a few centimetres.
-        self.params = dataclasses.replace(
-            cfg.coverage,
-            robot_radius=cfg.robot.radius + cfg.coordinator.wall_clearance,
-            overlap=cfg.coordinator.lane_overlap,
-            cleaning_width=cfg.robot.cleaning_width,
-            max_speed=cfg.robot.max_vel_x,
-            max_accel=cfg.robot.acc_lim_x,
-            max_turn_rate=cfg.robot.max_vel_theta,
-            max_turn_accel=cfg.robot.acc_lim_theta,
-        )
-        centres = clearance(self.grid) >= self.params.robot_radius
+        self.wall_clearance = cfg.coordinator.wall_clearance
+        # what a robot centre keeps from obstacles, and from the bodies of lost robots
+        self.centre_clearance = self.robot.radius + self.wall_clearance
+        self.params = dataclasses.replace(cfg.coverage, overlap=cfg.coordinator.lane_overlap)
+        centres = clearance(self.grid) >= self.centre_clearance
         start = self.grid.world_to_cell(np.array([self.dock]))
         self.reachable = reachable(centres, start)
         self.transit = Transit(self.grid, self.reachable)
@@ -68,10 +63,12 @@ class TaskPlanner:
         self._counted = np.zeros(self.grid.shape, dtype=bool)
 
     def tasks(self) -> tuple[Task, ...]:
-        result = plan_coverage(self.grid, [self.dock], self.params)
+        result = plan_coverage(
+            self.grid, [self.dock], self.params, self.robot, wall_clearance=self.wall_clearance
+        )
         m = result.metrics
         tasks = split_tour(
-            result.paths[0], result.cell_labels, self.grid, self.target_s, self.params
+            result.paths[0], result.cell_labels, self.grid, self.target_s, self.params, self.robot
         )
         # judged on the plan's own floor: centres kept radius + wall clearance from obstacles
         log.info(
@@ -120,13 +117,13 @@ class TaskPlanner:
         from their last reported poses): transits from now on, and :meth:`reroute`."""
         self.bodies = np.asarray(bodies, dtype=float).reshape(-1, 2)
         grid = with_bodies(self.grid, self.bodies, self.body_radius)
-        free = (clearance(grid) >= self.params.robot_radius) & self.reachable
+        free = (clearance(grid) >= self.centre_clearance) & self.reachable
         self.transit = Transit(self.grid, free)
         self.brushable_now = self._brushable(free)
         self._counted = np.zeros(self.grid.shape, dtype=bool)
 
     def _brushable(self, centres: np.ndarray) -> np.ndarray:
-        return dilate(centres, self.params.cleaning_width / 2, self.grid.resolution) & (
+        return dilate(centres, self.robot.cleaning_width / 2, self.grid.resolution) & (
             self.grid.free
         )
 
@@ -134,7 +131,7 @@ class TaskPlanner:
         """The floor the brush would sweep along ``path`` that the bodies put out of every
         robot's reach (under them, or in gaps too narrow to pass), counting no floor that an
         earlier call since :meth:`set_bodies` counted (lanes overlap)."""
-        swept, _ = swath(self.grid, np.asarray(path, dtype=float), self.params.cleaning_width / 2)
+        swept, _ = swath(self.grid, np.asarray(path, dtype=float), self.robot.cleaning_width / 2)
         lost = swept & self.brushable & ~self.brushable_now & ~self._counted
         self._counted |= lost
         return float(lost.sum()) * self.grid.resolution**2
@@ -143,7 +140,7 @@ class TaskPlanner:
         """Whether a robot centre driving ``path`` comes near enough a body to touch it."""
         if not len(self.bodies):
             return False
-        reach = self.body_radius + self.params.robot_radius + self.grid.resolution
+        reach = self.body_radius + self.centre_clearance + self.grid.resolution
         pts = densify(np.asarray(path, dtype=float), self.grid.resolution)
         gaps = np.hypot(*(pts[:, None, :] - self.bodies[None, :, :]).transpose(2, 0, 1))
         return bool(gaps.min() < reach)

@@ -86,7 +86,7 @@ class Coordinator:
         self.lock = threading.RLock()
         self.stop = threading.Event()
         self.wake = threading.Event()
-        self.job = Job(planner.params)
+        self.job = Job(planner.params, planner.robot, planner.wall_clearance)
         self.phase = "gathering"
         self.given_up = GivenUpWaypoints()
         resumed = self._load(store)

@@ -29,9 +29,9 @@ The model:
 Public API::
 
     Task(id, path, area_m2, time_s, cells)            .entry .exit .pieces
-    split_tour(path, cell_labels, grid, target_s, params, prefix="t") -> tuple[Task, ...]
-    remainder(task, swept, new_id, params) -> Task | None
-    ahead_of(task, xy, reverse, clearance, new_id, params) -> Task | None
+    split_tour(path, cell_labels, grid, target_s, params, robot, prefix="t") -> tuple[Task, ...]
+    remainder(task, swept, new_id, params, robot) -> Task | None
+    ahead_of(task, xy, reverse, clearance, new_id, params, robot) -> Task | None
     travel_times(free, resolution, origin, start_xy, targets_xy, speed) -> (K,) seconds
     TravelGrid(free, resolution, origin, speed)(start_xy, targets_xy) -> (K,) seconds
     Commitment(pose, current_s=0.0, current_end=None, queued=())

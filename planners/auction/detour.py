@@ -8,12 +8,15 @@ import numpy as np
 from planners.auction.tasks import Task, task_time
 from planners.coverage.params import CoverageParams
 from planners.polyline import path_length
+from planners.robot import RobotSpec
 
 
-def part_of(task: Task, path: np.ndarray, new_id: str, params: CoverageParams) -> Task:
+def part_of(
+    task: Task, path: np.ndarray, new_id: str, params: CoverageParams, robot: RobotSpec
+) -> Task:
     """A task driving ``path``, a part of ``task``'s path (possibly with a detour of its own):
     its area is ``task``'s scaled by the share of its length (at most all of it), its time
-    recomputed, its cells ``task``'s."""
+    recomputed for ``robot``, its cells ``task``'s."""
     whole = path_length(task.path)
     share = min(1.0, path_length(path) / whole) if whole > 0 else 1.0
-    return Task(new_id, path, task.area_m2 * share, task_time(path, params), task.cells)
+    return Task(new_id, path, task.area_m2 * share, task_time(path, params, robot), task.cells)

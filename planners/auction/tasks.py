@@ -18,10 +18,10 @@ least ``HOP_M``, else (and among equal hops) to the candidate nearest ``T0 + tar
 no candidate, to the vertex nearest ``T0 + target_s``. Estimated time at a vertex is the
 robot's driving time so far by :func:`planners.drive_time.vertex_times`: it stops and turns in
 place at the turns :func:`planners.coverage.metrics.path_time` counts (vertices of the
-Ramer–Douglas–Peucker simplification turning by more than ``turn_angle_deg``), within
-``max_turn_rate`` and ``max_turn_accel``, and drives the straight runs between them from rest
-to rest within ``max_speed`` and ``max_accel``; each task's ``time_s`` is then that time of
-its own path, so the turn at a cut belongs to neither task.
+Ramer–Douglas–Peucker simplification turning by more than ``turn_angle_deg``), within the
+robot's ``max_vel_theta`` and ``acc_lim_theta``, and drives the straight runs between them from
+rest to rest within its ``max_vel_x`` and ``acc_lim_x``; each task's ``time_s`` is then that
+time of its own path, so the turn at a cut belongs to neither task.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ from planners.coverage.params import CoverageParams
 from planners.drive_time import vertex_times
 from planners.grid import GridMap
 from planners.polyline import cut_start, heading_changes, simplify
+from planners.robot import RobotSpec
 
 # share of target_s a cut may fall before or after its target
 CUT_WINDOW = 0.25
@@ -88,11 +89,12 @@ def split_tour(
     grid: GridMap,
     target_s: float,
     params: CoverageParams,
+    robot: RobotSpec,
     prefix: str = "t",
 ) -> tuple[Task, ...]:
     """Cut one robot's coverage path at its vertices into consecutive tasks of about
-    ``target_s`` estimated seconds each, preferring the long hops (the transits between
-    sweeps) within a window around each target cut (the rule: module docstring).
+    ``target_s`` estimated seconds each for ``robot``, preferring the long hops (the transits
+    between sweeps) within a window around each target cut (the rule: module docstring).
 
     Every vertex of the path is in exactly one task, but for the cut vertices, which end one
     task and begin the next (task k's exit is task k + 1's entry). Ids are ``prefix`` and a
@@ -110,10 +112,10 @@ def split_tour(
             f"cell_labels has shape {cell_labels.shape}, the grid {grid.shape}: not the plan's"
         )
     seg_len = np.hypot(*np.diff(pts, axis=0).T)
-    new_cells, swept_labels, new_labels = _first_sweeps(pts, cell_labels, grid, params)
+    new_cells, swept_labels, new_labels = _first_sweeps(pts, cell_labels, grid, robot)
     area = grid.resolution**2
-    hop = np.maximum(seg_len - new_cells * area / params.cleaning_width, 0.0)
-    elapsed = _elapsed(pts, params)
+    hop = np.maximum(seg_len - new_cells * area / robot.cleaning_width, 0.0)
+    elapsed = _elapsed(pts, params, robot)
     cuts = _cuts(elapsed, hop, target_s)
     tasks = []
     for k, (a, b) in enumerate(itertools.pairwise(cuts)):
@@ -126,14 +128,16 @@ def split_tour(
                 id=f"{prefix}{k:02d}",
                 path=piece,
                 area_m2=float(new_cells[a:b].sum() * area),
-                time_s=task_time(piece, params),
+                time_s=task_time(piece, params, robot),
                 cells=tuple(int(c) for c in cells),
             )
         )
     return tuple(tasks)
 
 
-def remainder(task: Task, swept: np.ndarray, new_id: str, params: CoverageParams) -> Task | None:
+def remainder(
+    task: Task, swept: np.ndarray, new_id: str, params: CoverageParams, robot: RobotSpec
+) -> Task | None:
     """The unswept rest of ``task``: ``swept`` is a bool array of length ``task.pieces``.
 
     The remainder's path runs from the start of the first unswept piece to the end of the last
@@ -154,7 +158,7 @@ def remainder(task: Task, swept: np.ndarray, new_id: str, params: CoverageParams
     seg_len = np.hypot(*np.diff(task.path, axis=0).T)
     total = float(seg_len.sum())
     share = float(seg_len[todo].sum()) / total if total > 0 else len(todo) / task.pieces
-    return Task(new_id, path, task.area_m2 * share, task_time(path, params), task.cells)
+    return Task(new_id, path, task.area_m2 * share, task_time(path, params, robot), task.cells)
 
 
 def ahead_of(
@@ -164,6 +168,7 @@ def ahead_of(
     clearance: float,
     new_id: str,
     params: CoverageParams,
+    robot: RobotSpec,
 ) -> Task | None:
     """What a robot driving ``task`` (backwards if ``reverse``) still had ahead of it when it
     stopped at ``xy``: the path from the point of it nearest ``xy`` on, less the first
@@ -187,22 +192,23 @@ def ahead_of(
     rest = cut_start(path, at)
     rest = rest[::-1] if reverse else rest
     share = (total - at) / total
-    return Task(new_id, rest, task.area_m2 * share, task_time(rest, params), task.cells)
+    return Task(new_id, rest, task.area_m2 * share, task_time(rest, params, robot), task.cells)
 
 
-def task_time(path: np.ndarray, params: CoverageParams) -> float:
-    """The estimated seconds to drive ``path`` from rest to rest (module docstring)."""
-    return float(_elapsed(np.asarray(path, dtype=float), params)[-1])
+def task_time(path: np.ndarray, params: CoverageParams, robot: RobotSpec) -> float:
+    """The estimated seconds ``robot`` takes to drive ``path`` from rest to rest (module
+    docstring)."""
+    return float(_elapsed(np.asarray(path, dtype=float), params, robot)[-1])
 
 
 def _first_sweeps(
-    pts: np.ndarray, cell_labels: np.ndarray, grid: GridMap, params: CoverageParams
+    pts: np.ndarray, cell_labels: np.ndarray, grid: GridMap, robot: RobotSpec
 ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
     """Per segment: how many cleanable cells it sweeps first along the path, the cell labels
     under its whole swath, and those under the floor it sweeps first."""
     floor = cell_labels > 0
     covered = np.zeros(grid.shape, dtype=bool)
-    hw = params.cleaning_width / 2 / grid.resolution
+    hw = robot.cleaning_width / 2 / grid.resolution
     cells = to_cells(grid, pts)
     n = len(pts) - 1
     new_cells = np.zeros(n)
@@ -226,19 +232,19 @@ def _first_sweeps(
     return new_cells, swept_labels, new_labels
 
 
-def _elapsed(pts: np.ndarray, params: CoverageParams) -> np.ndarray:
+def _elapsed(pts: np.ndarray, params: CoverageParams, robot: RobotSpec) -> np.ndarray:
     """Estimated seconds from the start to each vertex (:func:`planners.drive_time.vertex_times`):
     the robot stops and turns in place at the turns ``path_time`` counts, and drives each
-    straight run between them from rest to rest within ``max_speed`` and ``max_accel``."""
+    straight run between them from rest to rest within its ``max_vel_x`` and ``acc_lim_x``."""
     stops, angles = _turns(pts, params)
     return vertex_times(
         pts,
         stops,
         angles,
-        params.max_speed,
-        params.max_accel,
-        params.max_turn_rate,
-        params.max_turn_accel,
+        robot.max_vel_x,
+        robot.acc_lim_x,
+        robot.max_vel_theta,
+        robot.acc_lim_theta,
     )
 
 

@@ -2,11 +2,12 @@
 
 Public API::
 
-    plan_coverage(grid: GridMap, starts: list[tuple[float, float]], params: CoverageParams)
-        -> CoveragePlan
+    plan_coverage(grid: GridMap, starts: list[tuple[float, float]], params: CoverageParams,
+                  robot: RobotSpec, *, wall_clearance: float) -> CoveragePlan
     coverage_metrics(grid, paths, robot_radius, cleaning_width, *, max_speed, turn_cost_s, ...)
         -> CoverageMetrics
-    plan_metrics(grid, paths, params: CoverageParams, cleanable_mask=None) -> CoverageMetrics
+    plan_metrics(grid, paths, params: CoverageParams, robot: RobotSpec, *,
+                 wall_clearance: float, cleanable_mask=None) -> CoverageMetrics
 
 ``CoveragePlan`` holds per robot the (N, 2) waypoint path in world metres, the room and cell
 label images, their networkx adjacency graphs, the cell → robot assignment, the metrics, and the

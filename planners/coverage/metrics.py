@@ -4,8 +4,8 @@ Definitions (cells are judged by their centres, so areas are counted in whole ce
 
 * **cleanable area** — the free cells within the swath of some robot-centre cell reachable from
   a start (``planners.grid.cleanable``): reachable centres dilated by a disc of radius
-  ``cleaning_width / 2``. The cleaning swath, not the robot's body, is the footprint: a robot of
-  radius 0.17 m with a 0.30 m brush never cleans the last few centimetres along a wall.
+  ``cleaning_width / 2``. The cleaning swath, not the robot's body, is the footprint: a robot
+  whose brush is narrower than its body never cleans the last few centimetres along a wall.
 * **covered** — cleanable cells whose centre lies strictly within ``cleaning_width / 2`` of a
   path (the union of the capsules around its segments: the swath of a brush that is
   ``cleaning_width`` wide, including the disc swept when turning on the spot).
@@ -21,7 +21,8 @@ Definitions (cells are judged by their centres, so areas are counted in whole ce
   whatever the turns, so at a given coverage repetition measures excess path length.
 * **turns** — vertices of the path simplified with tolerance ``simplify_tolerance``
   (Ramer–Douglas–Peucker) where the heading changes by more than ``turn_angle_deg``.
-* **estimated time** — length / ``max_speed`` + turns · ``turn_cost_s``.
+* **estimated time** — length / ``max_speed`` (the robot's top speed) + turns ·
+  ``turn_cost_s``.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import numpy as np
 from planners.coverage.params import CoverageParams
 from planners.grid import GridMap, cleanable, inflate, reachable
 from planners.polyline import count_turns, path_length, simplify
+from planners.robot import RobotSpec
 
 _PIECE_CELLS = 24.0
 
@@ -153,7 +155,7 @@ def coverage_metrics(
     robot_radius: float,
     cleaning_width: float,
     *,
-    max_speed: float = 0.5,
+    max_speed: float,
     turn_cost_s: float = 2.0,
     turn_angle_deg: float = 45.0,
     simplify_tolerance: float = 0.03,
@@ -203,16 +205,21 @@ def plan_metrics(
     grid: GridMap,
     paths: Sequence[np.ndarray],
     params: CoverageParams,
+    robot: RobotSpec,
+    *,
+    wall_clearance: float,
     cleanable_mask: np.ndarray | None = None,
 ) -> CoverageMetrics:
-    """:func:`coverage_metrics` with the robot, speed, turn and simplification figures of
-    ``params``: how a plan and anything compared with it are judged."""
+    """:func:`coverage_metrics` for ``robot`` (its centre kept ``wall_clearance`` more than its
+    radius from obstacles, as :func:`planners.coverage.plan_coverage` plans it) with the turn
+    and simplification figures of ``params``: how a plan and anything compared with it are
+    judged."""
     return coverage_metrics(
         grid,
         paths,
-        params.robot_radius,
-        params.cleaning_width,
-        max_speed=params.max_speed,
+        robot.radius + wall_clearance,
+        robot.cleaning_width,
+        max_speed=robot.max_vel_x,
         turn_cost_s=params.turn_cost_s,
         turn_angle_deg=params.turn_angle_deg,
         simplify_tolerance=params.simplify_tolerance,

@@ -6,43 +6,38 @@ from dataclasses import dataclass
 from typing import Literal
 
 from planners.checks import require_non_negative, require_positive
+from planners.robot import RobotSpec
 
 
 @dataclass(frozen=True)
 class CoverageParams:
-    """How to plan coverage paths.
+    """How to plan coverage paths for a robot (:class:`planners.robot.RobotSpec`, passed beside
+    these: its radius, brush and limits are not copied here).
 
-    ``robot_radius`` and ``cleaning_width`` must equal the ``robot:`` section (0.17 m, 0.30 m).
-    Lanes are ``cleaning_width · (1 − overlap)`` apart. With ``fill_in`` the floor the sweeps
-    miss is cleaned by targeted passes placed in the tour like any task, the most cells per
-    metre first, until the sweeps and passes cover a little more than ``fill_in_target`` of
-    the cleanable area; the final pruning then drops the tasks that cost the most driving per
-    cell while at least ``fill_in_target`` stays covered (1.0: every pass, nothing lost).
-    With ``return_strips`` a dead-end room may get a lane along the wall where its lanes end
-    (and lanes across its usual axis), so the way back to its door is sweeping rather than a
-    transit. Rooms are separated at openings narrower than ``door_width``; a room smaller than
-    ``min_room_area`` joins its largest neighbour. A boustrophedon cell is cut into lane
-    groups of at most ``max_task_area`` (0: every lane is a task of its own, cut into pieces
-    of at most ``max_lane_length``), so the tour can leave a cell part-swept to visit a
-    neighbour and come back, and k robots can balance the work finely. Time estimates use
-    ``max_speed`` plus ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``); the
-    market's tasks (``planners.auction.split_tour``) are timed by the robot's kinematics
-    instead: a stop and a turn in place at each such turn (``max_turn_rate``,
-    ``max_turn_accel``) and rest-to-rest runs between them (``max_speed``, ``max_accel``).
+    Lanes are the robot's ``cleaning_width · (1 − overlap)`` apart. With ``fill_in`` the floor
+    the sweeps miss is cleaned by targeted passes placed in the tour like any task, the most
+    cells per metre first, until the sweeps and passes cover a little more than
+    ``fill_in_target`` of the cleanable area; the final pruning then drops the tasks that cost
+    the most driving per cell while at least ``fill_in_target`` stays covered (1.0: every pass,
+    nothing lost). With ``return_strips`` a dead-end room may get a lane along the wall where
+    its lanes end (and lanes across its usual axis), so the way back to its door is sweeping
+    rather than a transit. Rooms are separated at openings narrower than ``door_width``; a room
+    smaller than ``min_room_area`` joins its largest neighbour. A boustrophedon cell is cut into
+    lane groups of at most ``max_task_area`` (0: every lane is a task of its own, cut into
+    pieces of at most ``max_lane_length``), so the tour can leave a cell part-swept to visit a
+    neighbour and come back, and k robots can balance the work finely. Time estimates use the
+    robot's top speed ``max_vel_x`` plus ``turn_cost_s`` per turn (a heading change over
+    ``turn_angle_deg``); the market's tasks (``planners.auction.split_tour``) are timed by the
+    robot's kinematics instead: a stop and a turn in place at each such turn (``max_vel_theta``,
+    ``acc_lim_theta``) and rest-to-rest runs between them (``max_vel_x``, ``acc_lim_x``).
     """
 
-    robot_radius: float = 0.17
-    cleaning_width: float = 0.30
     overlap: float = 0.0
     method: Literal["bcd", "spiral"] = "bcd"
     edge_pass: bool = False
     fill_in: bool = True
     return_strips: bool = True
     fill_in_target: float = 0.995
-    max_speed: float = 0.5
-    max_accel: float = 0.5
-    max_turn_rate: float = 1.0
-    max_turn_accel: float = 1.0
     turn_cost_s: float = 2.0
     turn_angle_deg: float = 45.0
     door_width: float = 1.0
@@ -52,22 +47,10 @@ class CoverageParams:
     simplify_tolerance: float = 0.03
 
     def validate(self) -> None:
-        require_positive(
-            self,
-            "robot_radius",
-            "cleaning_width",
-            "max_speed",
-            "max_accel",
-            "max_turn_rate",
-            "max_turn_accel",
-            "door_width",
-            "max_lane_length",
-        )
+        require_positive(self, "door_width", "max_lane_length")
         require_non_negative(
             self, "turn_cost_s", "min_room_area", "max_task_area", "simplify_tolerance"
         )
-        if self.cleaning_width > 2 * self.robot_radius + 1e-9:
-            raise ValueError("cleaning_width must not exceed the robot diameter (2·robot_radius)")
         if not 0.0 <= self.overlap < 0.9:
             raise ValueError("overlap must be within [0, 0.9)")
         if self.method not in ("bcd", "spiral"):
@@ -77,6 +60,5 @@ class CoverageParams:
         if not 0.0 <= self.fill_in_target <= 1.0:
             raise ValueError("fill_in_target must be within [0, 1]")
 
-    @property
-    def lane_spacing(self) -> float:
-        return self.cleaning_width * (1.0 - self.overlap)
+    def lane_spacing(self, robot: RobotSpec) -> float:
+        return robot.cleaning_width * (1.0 - self.overlap)

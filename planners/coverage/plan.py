@@ -44,6 +44,7 @@ from planners.coverage.tour import (
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, cleanable, clearance, extend_labels, reachable
 from planners.polyline import densify, without_repeats, without_straight_vertices
+from planners.robot import RobotSpec
 
 # A wall direction this close to a grid axis is taken as the axis: lanes then lie exactly
 # between rows of cells, and the rasterized walls of an axis-aligned plan measure slightly off.
@@ -93,35 +94,43 @@ class PlanningError(ValueError):
 
 
 def plan_coverage(
-    grid: GridMap, starts: Sequence[tuple[float, float]], params: CoverageParams
+    grid: GridMap,
+    starts: Sequence[tuple[float, float]],
+    params: CoverageParams,
+    robot: RobotSpec,
+    *,
+    wall_clearance: float,
 ) -> CoveragePlan:
-    """Plan coverage of all floor reachable from ``starts`` (one per robot, world metres).
+    """Plan coverage by ``robot`` of all floor reachable from ``starts`` (one per robot, world
+    metres), its centre kept ``wall_clearance`` more than its radius from obstacles.
 
-    Steps: robot-centre cells (clearance ≥ robot_radius) 4-connected to a start; rooms by
-    distance-transform segmentation; per room the dominant wall direction, a frame rotated to
-    it and the boustrophedon decomposition (Choset 2000) of the room in that frame; lanes on
-    one lattice per room (``lattice.room_lanes``); in a dead-end room with
+    Steps: robot-centre cells (clearance ≥ radius + ``wall_clearance``) 4-connected to a start;
+    rooms by distance-transform segmentation; per room the dominant wall direction, a frame
+    rotated to it and the boustrophedon decomposition (Choset 2000) of the room in that frame;
+    lanes on one lattice per room (``lattice.room_lanes``); in a dead-end room with
     ``params.return_strips``, lanes along either axis, with a return strip
     (``strips.return_strips``) on either lane-end side or none, whichever gives the shortest
-    tour of the room alone from its door and back; sweep tasks per cell (groups of
-    boustrophedon lanes, or a spiral); one tour over all tasks of a connected part of the floor
+    tour of the room alone from its door and back; sweep tasks per cell (groups of boustrophedon
+    lanes, or a spiral); one tour over all tasks of a connected part of the floor
     (``tour.plan_tour``: task order, direction and variant by path-cost estimates between task
     ends, ``geodesic.PathCosts``); with ``params.fill_in``, targeted passes for the floor the
-    sweeps miss (``fill_in.fill_in_tasks``) inserted into the tour where they cost least; for
-    k robots the tour is cut into contiguous pieces balancing estimated time, each re-ordered
-    from its robot's start; last, the tasks whose floor the rest of the driven path cleans
-    anyway go, and the fill-in's surplus over ``params.fill_in_target`` is traded for the
-    tasks that cost the most driving per cell (``prune.prune_driven``). Transits are straight
-    when clear, A* on the inflated grid otherwise.
+    sweeps miss (``fill_in.fill_in_tasks``) inserted into the tour where they cost least; for k
+    robots the tour is cut into contiguous pieces balancing estimated time, each re-ordered from
+    its robot's start; last, the tasks whose floor the rest of the driven path cleans anyway go,
+    and the fill-in's surplus over ``params.fill_in_target`` is traded for the tasks that cost
+    the most driving per cell (``prune.prune_driven``). Transits are straight when clear, A* on
+    the inflated grid otherwise.
     """
     t0 = time.perf_counter()
     params.validate()
+    robot.validate()
     if not grid.free.any():
         raise PlanningError("the map has no free cell")
     if len(starts) == 0:
         raise PlanningError("no start given")
+    keep = robot.radius + wall_clearance
     clear = clearance(grid)
-    centres = clear >= params.robot_radius
+    centres = clear >= keep
     start_xy = np.array(starts, dtype=float).reshape(-1, 2)
     start_cells = grid.world_to_cell(start_xy)
     for (x, y), rc in zip(start_xy, start_cells, strict=True):
@@ -131,11 +140,14 @@ def plan_coverage(
             what = (
                 "inside an obstacle"
                 if not grid.free[rc[0], rc[1]]
-                else (f"closer than the robot radius {params.robot_radius} m to an obstacle")
+                else (
+                    f"closer than the robot radius {robot.radius} m + wall clearance "
+                    f"{wall_clearance} m to an obstacle"
+                )
             )
             raise PlanningError(f"start ({x:.2f}, {y:.2f}) is {what}")
     reach = reachable(centres, start_cells)
-    clean = cleanable(grid, reach, params.cleaning_width / 2)
+    clean = cleanable(grid, reach, robot.cleaning_width / 2)
     unreachable = grid.free & ~clean
     res = grid.resolution
 
@@ -145,8 +157,8 @@ def plan_coverage(
     n_rooms = int(rooms.max())
     cell_labels = np.zeros(grid.shape, dtype=np.int32)
     room_img = extend_labels(rooms, clean)
-    step = max(1, math.floor(params.lane_spacing / res + 1e-9))
-    hw = params.cleaning_width / 2 / res
+    step = max(1, math.floor(params.lane_spacing(robot) / res + 1e-9))
+    hw = robot.cleaning_width / 2 / res
     room_tasks: list[list[SweepTask]] = []
     blocks: list[list[tuple[int, int]]] = []
     room_angle: list[float] = []
@@ -159,7 +171,9 @@ def plan_coverage(
         options = []
         for a in (angle, angle + math.pi / 2) if strips else (angle,):
             options.extend(
-                _room_options(grid, mask, room_img == room, room, base, a, step, hw, params, strips)
+                _room_options(
+                    grid, mask, room_img == room, room, base, a, step, hw, params, robot, strips
+                )
             )
         best = 0
         if len(options) > 1:
@@ -173,7 +187,7 @@ def plan_coverage(
             for i in pick:
                 cost, tours[i] = _closed_tour(options[i].tasks, doors[room], costs)
                 miss = _missed(grid, options[i].tasks, mine, hw * res) * res**2
-                cost += MISS_FACTOR * miss / params.cleaning_width
+                cost += MISS_FACTOR * miss / robot.cleaning_width
                 guess[i] = cost * (1 + AXIS_MARGIN if options[i].frame.angle != angle else 1)
             best = min(guess, key=guess.get)
         if best > 0:
@@ -193,10 +207,10 @@ def plan_coverage(
     comp, _ = ndimage.label(reach)
     robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
     tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=blocks)
-    pieces = _split(tasks, tours, robot_comp, costs, start_xy, params)
+    pieces = _split(tasks, tours, robot_comp, costs, start_xy, robot)
     # only BCD plans get the final pruning, which trades the fill-in's surplus back
     pruned = params.method == "bcd"
-    prints = Footprints(grid, clean, params.cleaning_width / 2)
+    prints = Footprints(grid, clean, robot.cleaning_width / 2)
     if params.fill_in:
         goal = _fill_in_goal(params.fill_in_target) if pruned else params.fill_in_target
         tasks, pieces = _add_fill_in(
@@ -213,6 +227,7 @@ def plan_coverage(
             transit,
             costs,
             params,
+            robot,
             goal,
         )
     if pruned:
@@ -225,7 +240,9 @@ def plan_coverage(
     ]
     robot_tasks = [tuple(tasks[t] for t, _ in piece) for piece in pieces]
 
-    metrics = plan_metrics(grid, paths, params, clean)
+    metrics = plan_metrics(
+        grid, paths, params, robot, wall_clearance=wall_clearance, cleanable_mask=clean
+    )
     room_graph = _room_graph(grid, room_img, room_angle, transit)
     cell_graph = _cell_graph(grid, cell_img, cell_room, robot_tasks)
     assignment = {
@@ -259,7 +276,7 @@ class _RoomOption:
     n_cells: int
 
 
-def _room_options(grid, mask, clean_mask, room, base, angle, step, hw, params, strips) -> list:
+def _room_options(grid, mask, clean_mask, room, base, angle, step, hw, params, robot, strips):
     """The room's tasks with lanes at ``angle``: plain, and (with ``strips``) with a return
     strip along either lane-end side where the lanes allow one."""
     frame = frame_for(grid, mask, angle, margin=math.ceil(hw) + 1)
@@ -267,37 +284,45 @@ def _room_options(grid, mask, clean_mask, room, base, angle, step, hw, params, s
     # stacked cells always merge: the lattice, clamp lanes and fill-in take their shoulders
     labels, cells = decompose(rot, max_step=max(rot.shape))
     lanes, shoulders = room_lanes(cells, rot, resample(grid, clean_mask, frame), labels, step, hw)
-    plain = _cell_tasks(room, base, cells, lanes, shoulders, None, frame, params)
+    plain = _cell_tasks(room, base, cells, lanes, shoulders, None, frame, params, robot)
     out = [_RoomOption(plain, frame, labels, len(cells))]
     if strips:
         for high in (False, True):
             clipped, strips = return_strips(lanes, rot, step, high)
             if any(strips):
-                ts = _cell_tasks(room, base, cells, clipped, shoulders, strips, frame, params)
+                ts = _cell_tasks(
+                    room, base, cells, clipped, shoulders, strips, frame, params, robot
+                )
                 out.append(_RoomOption(ts, frame, labels, len(cells)))
     return out
 
 
-def _cell_tasks(room, base, cells, lanes, shoulders, strips, frame, params) -> list[SweepTask]:
+def _cell_tasks(
+    room, base, cells, lanes, shoulders, strips, frame, params, robot
+) -> list[SweepTask]:
     """The room's tasks: per cell its edge pass, spiral or lanes, shoulder lanes and strips."""
     tasks: list[SweepTask] = []
     for k, cell in enumerate(cells, start=1):
         cid = base + k
         if params.edge_pass:
-            tasks.append(edge_task(room, cid, cell, frame, params))
+            tasks.append(edge_task(room, cid, cell, frame, params, robot))
         if params.method == "spiral":
-            tasks.append(spiral_task(room, cid, cell, frame, params))
+            tasks.append(spiral_task(room, cid, cell, frame, params, robot))
             continue
         if len(lanes[k - 1]):
             tasks.extend(
-                cell_tasks(room, cid, cell, lanes[k - 1], frame, params, params.max_task_area)
+                cell_tasks(
+                    room, cid, cell, lanes[k - 1], frame, params, robot, params.max_task_area
+                )
             )
         for lane in shoulders[k - 1]:
             tasks.extend(
-                cell_tasks(room, cid, cell, lane[None, :], frame, params, params.max_task_area)
+                cell_tasks(
+                    room, cid, cell, lane[None, :], frame, params, robot, params.max_task_area
+                )
             )
         for strip in strips[k - 1] if strips else ():
-            tasks.append(strip_task(room, cid, strip, frame, params))
+            tasks.append(strip_task(room, cid, strip, frame, params, robot))
     return tasks
 
 
@@ -396,7 +421,7 @@ def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=()):
     return tours
 
 
-def _split(tasks, tours, robot_comp, costs, start_xy, params) -> list[list[tuple[int, int]]]:
+def _split(tasks, tours, robot_comp, costs, start_xy, robot) -> list[list[tuple[int, int]]]:
     """Each robot's (task, option) sequence: a part's tour is cut into pieces balancing the
     estimated time among the robots starting in it (``ordering.split_tour``), each piece then
     re-ordered from its robot's start."""
@@ -412,7 +437,7 @@ def _split(tasks, tours, robot_comp, costs, start_xy, params) -> list[list[tuple
         opt = np.array([ends.offset[t] + o for t, o in tour], dtype=np.int64)
         entry, exit_ = ends.entry[opt], ends.exit[opt]
         starts = n_pts + robots
-        v = params.max_speed
+        v = robot.max_vel_x
         split = split_tour(
             np.array([tasks[t].time_s for t, _ in tour]),
             np.concatenate([[0.0], ends.cost[exit_[:-1], entry[1:]]]) / v,
@@ -444,6 +469,7 @@ def _add_fill_in(
     transit,
     costs,
     params,
+    robot,
     goal,
 ):
     """Tasks and robot tours with fill-in passes for the floor the driven tours miss
@@ -454,7 +480,7 @@ def _add_fill_in(
     round looks at what the new tours miss. Each round first drops the tasks whose floor other
     tasks already clean (``prune.prune_tasks``). ``prints`` keeps the tasks' footprints on the
     cleanable floor (``prints.clean``) for these prunings and the final one."""
-    hw = params.cleaning_width / 2
+    hw = robot.cleaning_width / 2
     for _ in range(FILL_IN_ROUNDS):
         pieces = prune_tasks(tasks, pieces, prints)
         fixed: list[SweepTask] = []
@@ -476,7 +502,7 @@ def _add_fill_in(
         owner = [r for r, piece in enumerate(initial) for _ in piece]
         for path, area in passes:
             rc = grid.world_to_cell(path[0])
-            _, _, t = path_time(path, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
+            _, _, t = path_time(path, robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
             room, cell = int(room_img[rc[0], rc[1]]), int(cell_img[rc[0], rc[1]])
             fixed.append(SweepTask(room, cell, (path,), area, t))
             near = [

@@ -20,6 +20,7 @@ from planners.coverage.metrics import path_time
 from planners.coverage.params import CoverageParams
 from planners.coverage.sweeps import boustrophedon, eroded_sides, lane_rows, lanes_of
 from planners.polyline import path_length, simplify
+from planners.robot import RobotSpec
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,13 +46,14 @@ def cell_tasks(
     lanes: np.ndarray,
     frame: RotatedFrame,
     params: CoverageParams,
+    robot: RobotSpec,
     max_area: float,
 ) -> list[SweepTask]:
     """The boustrophedon tasks of one cell over ``lanes`` ((n, 3) row coordinate, first and
     last column, sorted by row), lanes grouped so each group is ≤ ``max_area``."""
     res = frame.resolution
     lengths = (lanes[:, 2] - lanes[:, 1] + 1) * res
-    lane_area = lengths * params.lane_spacing
+    lane_area = lengths * params.lane_spacing(robot)
     groups: list[list[int]] = [[]]
     acc = 0.0
     for k, a in enumerate(lane_area):
@@ -63,20 +65,23 @@ def cell_tasks(
     tasks = []
     for g in groups:
         if len(g) == 1:
-            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params))
+            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot))
             continue
         sel = lanes[g]
         sides = (True, False) if len(sel) > 1 else (True,)
         variants = tuple(_to_world(frame, boustrophedon(cell, sel, left), params) for left in sides)
-        _, _, t = path_time(
-            variants[0], params.max_speed, params.turn_cost_s, params.turn_angle_deg
-        )
+        _, _, t = path_time(variants[0], robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
         tasks.append(SweepTask(room, cell_id, variants, float(lane_area[g].sum()), t))
     return tasks
 
 
 def _lane_pieces(
-    room: int, cell_id: int, lane: np.ndarray, frame: RotatedFrame, params: CoverageParams
+    room: int,
+    cell_id: int,
+    lane: np.ndarray,
+    frame: RotatedFrame,
+    params: CoverageParams,
+    robot: RobotSpec,
 ) -> list[SweepTask]:
     """One lane as tasks of at most ``params.max_lane_length``: equal pieces meeting at a cell
     centre, so driving them one after the other sweeps exactly what the whole lane does (each
@@ -85,27 +90,33 @@ def _lane_pieces(
     y, lo, hi = (float(v) for v in lane)
     n = max(1, math.ceil((hi - lo) * res / params.max_lane_length - 1e-9))
     cuts = np.unique(np.rint(np.linspace(lo, hi, n + 1)))
+    spacing = params.lane_spacing(robot)
     tasks = []
     for a, b in itertools.pairwise(cuts):
         path = frame.to_world(np.array([[y, a], [y, b]]))
         length = (b - a) * res
-        t = length / params.max_speed
-        tasks.append(SweepTask(room, cell_id, (path,), length * params.lane_spacing, t))
+        t = length / robot.max_vel_x
+        tasks.append(SweepTask(room, cell_id, (path,), length * spacing, t))
     if len(cuts) == 1:
         path = frame.to_world(np.array([[y, lo], [y, hi]]))
-        tasks.append(SweepTask(room, cell_id, (path,), res * params.lane_spacing, 0.0))
+        tasks.append(SweepTask(room, cell_id, (path,), res * spacing, 0.0))
     return tasks
 
 
 def spiral_task(
-    room: int, cell_id: int, cell: MonotoneCell, frame: RotatedFrame, params: CoverageParams
+    room: int,
+    cell_id: int,
+    cell: MonotoneCell,
+    frame: RotatedFrame,
+    params: CoverageParams,
+    robot: RobotSpec,
 ) -> SweepTask:
     """An inward spiral over the cell: ring 0 runs along the outermost cells, ring j ≥ 1 along the
     cell eroded by ``j·step − ½`` cells (lanes between cell centres, like the boustrophedon
     lanes); the core too thin for another ring is swept by boustrophedon lanes.
     """
     res = frame.resolution
-    step = max(1, math.floor(params.lane_spacing / res + 1e-9))
+    step = max(1, math.floor(params.lane_spacing(robot) / res + 1e-9))
     parts: list[np.ndarray] = []
     j = 0
     while True:
@@ -118,22 +129,27 @@ def spiral_task(
     rows, left, right = eroded_sides(cell, max(0, (j - 1) * step + 3) if j else 0)
     if len(rows) and not np.any(np.diff(rows) != 1):
         core = MonotoneCell(int(rows[0]), left, right)
-        ys = lane_rows(core, params.lane_spacing / res)
+        ys = lane_rows(core, params.lane_spacing(robot) / res)
         parts.append(boustrophedon(core, lanes_of(core, ys), True))
     world = _to_world(frame, np.vstack(parts), params)
-    _, _, t = path_time(world, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
+    _, _, t = path_time(world, robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
     return SweepTask(room, cell_id, (world,), cell.cells * res * res, t)
 
 
 def edge_task(
-    room: int, cell_id: int, cell: MonotoneCell, frame: RotatedFrame, params: CoverageParams
+    room: int,
+    cell_id: int,
+    cell: MonotoneCell,
+    frame: RotatedFrame,
+    params: CoverageParams,
+    robot: RobotSpec,
 ) -> SweepTask:
     """The edge pass of a cell: once around its outermost cells (walls and furniture, and the
     borders it shares with neighbouring cells), so the swath reaches every corner."""
     rows, left, right = eroded_sides(cell, 0)
     ring = _ring(rows.astype(float), left.astype(float), right.astype(float), 0, 0.0)
     world = _to_world(frame, np.vstack([ring, ring[:1]]), params)
-    _, _, t = path_time(world, params.max_speed, params.turn_cost_s, params.turn_angle_deg)
+    _, _, t = path_time(world, robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
     return SweepTask(room, cell_id, (world,), 0.0, t)
 
 
@@ -157,7 +173,12 @@ def _to_world(frame: RotatedFrame, rc: np.ndarray, params: CoverageParams) -> np
 
 
 def strip_task(
-    room: int, cell_id: int, strip: np.ndarray, frame: RotatedFrame, params: CoverageParams
+    room: int,
+    cell_id: int,
+    strip: np.ndarray,
+    frame: RotatedFrame,
+    params: CoverageParams,
+    robot: RobotSpec,
 ) -> SweepTask:
     """A return strip ((n, 2) (row, col) polyline, ``strips.return_strips``) as one task:
     cut into pieces, the tour would use them as connectors between lanes instead of as the
@@ -165,5 +186,5 @@ def strip_task(
     path = _to_world(frame, strip, params)
     length = path_length(path)
     return SweepTask(
-        room, cell_id, (path,), length * params.lane_spacing, length / params.max_speed
+        room, cell_id, (path,), length * params.lane_spacing(robot), length / robot.max_vel_x
     )

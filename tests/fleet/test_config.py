@@ -108,16 +108,26 @@ def test_a_field_refused_for_its_sign_is_named(section: str, field: str, value: 
         assert str(e).startswith(f"fleet.yaml: {section}") and field in str(e), str(e)
 
 
+# configs/fleet.yaml's first line says what its sections show
+SHOWS_EVERY_FIELD = "missing ones take the defaults shown here"
+
+
 def test_fleet_yaml_shows_the_code_defaults() -> None:
     """A field in configs/fleet.yaml holds its dataclass's default: every run uses the file, a
-    test or a tool that builds a section in code gets the default, and they must agree."""
-    shown = yaml.safe_load(default_config_path().read_text())
+    test or a tool that builds a section in code gets the default, and they must agree. As the
+    file says it shows the defaults, it leaves no field out either."""
+    text = default_config_path().read_text()
+    shown = yaml.safe_load(text)
+    every = SHOWS_EVERY_FIELD in text.splitlines()[0]
     wrong = []
     for section, cls in SECTIONS.items():
         values = shown.get(section) or {}
         for f in dataclasses.fields(cls):
-            given = f.default is not dataclasses.MISSING
-            if given and f.name in values and values[f.name] != f.default:
+            default = f.default is not dataclasses.MISSING
+            if f.name not in values:
+                if every:
+                    wrong.append(f"{section}.{f.name}: missing")
+            elif default and values[f.name] != f.default:
                 wrong.append(f"{section}.{f.name}: {values[f.name]!r}, the code {f.default!r}")
     assert not wrong, "\n".join(wrong)
 

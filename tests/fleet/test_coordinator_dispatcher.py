@@ -33,7 +33,7 @@ def test_a_robot_gets_one_plan_for_the_run_of_its_queue_once_it_has_the_award(
     planner: TaskPlanner,
 ) -> None:
     cfg = load_fleet_config()
-    job = Job(planner.params)
+    job = Job(planner.params, planner.robot, planner.wall_clearance)
     # t01 begins where t00 ends, and t02 where t01 ends driven backwards; t03 is elsewhere
     job.add_tasks(
         (

@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from robots import ROBOT
 
 from fleet.coordinator.job import (
     ASSIGNED,
@@ -33,7 +34,7 @@ def _task(tid: str, x0: float, pieces: int = 4) -> Task:
 
 @pytest.fixture
 def job() -> Job:
-    j = Job(CoverageParams())
+    j = Job(CoverageParams(), ROBOT, 0.0)
     j.add_tasks(tuple(_task(f"t{i:02d}", 10.0 * i) for i in range(4)))
     for rid in ("robot-0", "robot-1"):
         r = j.robot(rid)
@@ -76,7 +77,7 @@ def test_a_lost_robot_leaves_the_unswept_remainder_and_its_unstarted_tasks(job: 
     rest = job.tasks["t00.1"]
     assert rest.state == OPEN and rest.parent == "t00"
     # the rest begins two robot radii past where it stopped, mid-piece: its body is in the way
-    gap = 2 * job.params.robot_radius
+    gap = 2 * (job.spec.radius + job.wall_clearance)
     assert np.allclose(rest.task.path[0], [2.5 + gap, 0.0]) and np.allclose(
         rest.task.path[-1], [4, 0]
     )
@@ -149,7 +150,7 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     store.add_event(1.0, 2.0, "awarded", "robot-0", "t00", "")
     store.close()
 
-    again = Job(CoverageParams())
+    again = Job(CoverageParams(), ROBOT, 0.0)
     store = JobStore(tmp_path / "job.sqlite")
     store.load_job(again)
     assert set(again.tasks) == set(job.tasks)
@@ -190,7 +191,7 @@ def test_a_state_file_of_another_layout_is_refused(tmp_path):
 def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_path):
     from fleet.report.summary import job_report
 
-    job = Job(CoverageParams())
+    job = Job(CoverageParams(), ROBOT, 0.0)
     job.add_tasks((_task("t00", 0.0), _task("t01", 10.0)))
     store = JobStore(tmp_path / "job.sqlite")
     store.save_tasks(list(job.tasks.values()))

@@ -9,6 +9,7 @@ import threading
 
 import numpy as np
 import pytest
+from robots import ROBOT
 
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer, Sale
@@ -45,7 +46,7 @@ class Coordinator:
     """The market's parts as the service wires them, with robots that bid ``prices``."""
 
     def __init__(self, planner: TaskPlanner, robots: list[str]) -> None:
-        self.job = Job(CoverageParams())
+        self.job = Job(CoverageParams(), ROBOT, 0.0)
         self.job.add_tasks(tuple(_task(i) for i in range(6)))
         for rid in robots:
             r = self.job.robot(rid)
@@ -207,7 +208,7 @@ def test_a_body_in_the_way_is_planned_round_and_its_floor_is_blocked(
         blocked = [r for r in made.values() if r.state == "blocked"]
         assert blocked and all(r.blocked_by == "robot-1" for r in blocked)
         drivable = [r for r in made.values() if r.state == OPEN]
-        reach = planner.body_radius + planner.params.robot_radius - planner.grid.resolution
+        reach = planner.body_radius + planner.centre_clearance - planner.grid.resolution
         for rec in drivable:
             pts = densify(rec.task.path, 0.01)
             assert np.hypot(*(pts - [2.0, 0.85]).T).min() >= reach

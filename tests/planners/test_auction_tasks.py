@@ -7,6 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
+from robots import ROBOT
 
 from fleet.config import resolve_world
 from fleet.params import load_fleet_config
@@ -35,7 +36,7 @@ def _lanes(x0: float, x1: float, ys: np.ndarray) -> np.ndarray:
 
 
 def _time(path: np.ndarray) -> float:
-    return task_time(path, PARAMS)
+    return task_time(path, PARAMS, ROBOT)
 
 
 def _joined(tasks: tuple[Task, ...]) -> np.ndarray:
@@ -45,7 +46,7 @@ def _joined(tasks: tuple[Task, ...]) -> np.ndarray:
 def test_tasks_share_their_boundaries_and_together_are_the_path():
     grid, labels = _open_floor()
     path = _lanes(0.3, 9.0, np.arange(0.3, 3.6, 0.3))
-    tasks = split_tour(path, labels, grid, 40.0, PARAMS)
+    tasks = split_tour(path, labels, grid, 40.0, PARAMS, ROBOT)
     assert len(tasks) > 3
     assert [t.id for t in tasks] == [f"t{k:02d}" for k in range(len(tasks))]
     for a, b in itertools.pairwise(tasks):
@@ -59,21 +60,21 @@ def test_every_task_but_the_last_takes_about_the_target_time():
     # short lanes: vertices every few seconds, so a cut can land close to its target
     path = _lanes(0.3, 2.3, np.arange(0.3, 3.9, 0.3))
     target = 25.0
-    tasks = split_tour(path, labels, grid, target, PARAMS)
+    tasks = split_tour(path, labels, grid, target, PARAMS, ROBOT)
     assert len(tasks) >= 4
     for t in tasks[:-1]:
         assert (1 - CUT_WINDOW) * target - 6 <= t.time_s <= (1 + CUT_WINDOW) * target + 2
     assert 0 < tasks[-1].time_s <= (1 + CUT_WINDOW) * target + 2
     whole = _time(path)
     # the turn at each cut (half a turn in place here) belongs to neither task
-    half_turn = np.pi / PARAMS.max_turn_rate + PARAMS.max_turn_rate / PARAMS.max_turn_accel
+    half_turn = np.pi / ROBOT.max_vel_theta + ROBOT.max_vel_theta / ROBOT.acc_lim_theta
     assert whole - half_turn * (len(tasks) - 1) <= sum(t.time_s for t in tasks) <= whole + 1e-9
 
 
 def test_a_path_shorter_than_the_target_is_one_task():
     grid, labels = _open_floor()
     path = _lanes(0.3, 2.0, np.array([0.3, 0.6]))
-    (task,) = split_tour(path, labels, grid, 1000.0, PARAMS, prefix="r")
+    (task,) = split_tour(path, labels, grid, 1000.0, PARAMS, ROBOT, prefix="r")
     assert task.id == "r00"
     assert np.array_equal(task.path, path)
     assert task.time_s == pytest.approx(_time(path))
@@ -96,7 +97,7 @@ def test_the_cut_lands_on_the_long_hop_within_the_window():
     grid, labels, path, hop = _two_blocks()
     before = _time(path[: hop + 1])
     # the hop's start lies 15 % before the target: inside the window, not at the target
-    tasks = split_tour(path, labels, grid, before / 0.85, PARAMS)
+    tasks = split_tour(path, labels, grid, before / 0.85, PARAMS, ROBOT)
     assert len(tasks[0].path) - 1 in (hop, hop + 1)
     # cut after the hop: its end reaches into the right block's floor
     assert tasks[0].cells[0] == 1
@@ -110,7 +111,7 @@ def test_the_cut_lands_on_the_long_hop_within_the_window():
 def test_a_hop_outside_the_window_does_not_draw_the_cut():
     grid, labels, path, hop = _two_blocks()
     before = _time(path[: hop + 1])
-    tasks = split_tour(path, labels, grid, before / 1.6, PARAMS)
+    tasks = split_tour(path, labels, grid, before / 1.6, PARAMS, ROBOT)
     assert len(tasks[0].path) - 1 < hop
     assert abs(tasks[0].time_s - before / 1.6) <= CUT_WINDOW * before / 1.6
 
@@ -127,7 +128,7 @@ def test_a_hop_outside_the_window_does_not_draw_the_cut():
 def test_bad_arguments_are_named(target, path, word):
     grid, labels = _open_floor()
     with pytest.raises(ValueError, match=word):
-        split_tour(path, labels, grid, target, PARAMS)
+        split_tour(path, labels, grid, target, PARAMS, ROBOT)
 
 
 @pytest.fixture(scope="module")
@@ -136,29 +137,25 @@ def small_world():
     cfg = load_fleet_config()
     world = load_world(resolve_world("small"), cfg.robot.radius)
     grid = world.grid(0.025)
-    params = dataclasses.replace(
-        cfg.coverage,
-        robot_radius=cfg.robot.radius + cfg.coordinator.wall_clearance,
-        overlap=cfg.coordinator.lane_overlap,
-        cleaning_width=cfg.robot.cleaning_width,
-        max_speed=cfg.robot.max_vel_x,
-    )
+    params = dataclasses.replace(cfg.coverage, overlap=cfg.coordinator.lane_overlap)
     x, y = world.start_poses(1, cfg.robot.radius)[0][:2]
-    return grid, params, plan_coverage(grid, [(float(x), float(y))], params)
+    clearance = cfg.coordinator.wall_clearance
+    plan = plan_coverage(grid, [(float(x), float(y))], params, cfg.robot, wall_clearance=clearance)
+    return grid, params, plan
 
 
 def test_the_small_world_tour_splits_into_tasks_of_its_cells(small_world):
     grid, params, plan = small_world
     path = plan.paths[0]
-    tasks = split_tour(path, plan.cell_labels, grid, 30.0, params)
+    tasks = split_tour(path, plan.cell_labels, grid, 30.0, params, ROBOT)
     assert len(tasks) >= 4
     assert np.array_equal(_joined(tasks), path)
-    whole = task_time(path, params)
+    whole = task_time(path, params, ROBOT)
     total = sum(t.time_s for t in tasks)
     # a cut drops the turn in place at it, or, where the path drives through, adds a stop
     cuts = len(tasks) - 1
-    half_turn = np.pi / params.max_turn_rate + params.max_turn_rate / params.max_turn_accel
-    stop = params.max_speed / params.max_accel
+    half_turn = np.pi / ROBOT.max_vel_theta + ROBOT.max_vel_theta / ROBOT.acc_lim_theta
+    stop = ROBOT.max_vel_x / ROBOT.acc_lim_x
     assert whole - half_turn * cuts - 1e-9 <= total <= whole + stop * cuts + 1e-9
     labels = set(np.unique(plan.cell_labels[plan.cell_labels > 0]).tolist())
     for t in tasks:
@@ -175,12 +172,12 @@ def _task() -> Task:
 
 
 def test_a_task_swept_whole_leaves_no_remainder():
-    assert remainder(_task(), np.ones(5, bool), "t07.1", PARAMS) is None
+    assert remainder(_task(), np.ones(5, bool), "t07.1", PARAMS, ROBOT) is None
 
 
 def test_a_task_not_swept_at_all_is_its_own_remainder():
     task = _task()
-    rest = remainder(task, np.zeros(5, bool), "t07.1", PARAMS)
+    rest = remainder(task, np.zeros(5, bool), "t07.1", PARAMS, ROBOT)
     assert rest is not None
     assert rest.id == "t07.1"
     assert np.array_equal(rest.path, task.path)
@@ -192,7 +189,7 @@ def test_a_task_not_swept_at_all_is_its_own_remainder():
 def test_the_remainder_drives_again_the_swept_pieces_between_unswept_ones():
     task = _task()
     swept = np.array([True, False, True, False, True])
-    rest = remainder(task, swept, "t07.2", PARAMS)
+    rest = remainder(task, swept, "t07.2", PARAMS, ROBOT)
     assert rest is not None
     assert np.array_equal(rest.path, task.path[1:5])
     assert rest.pieces == 3
@@ -204,19 +201,19 @@ def test_the_remainder_drives_again_the_swept_pieces_between_unswept_ones():
 @pytest.mark.parametrize("n", [0, 4, 6])
 def test_swept_flags_of_the_wrong_length_raise(n):
     with pytest.raises(ValueError, match="swept"):
-        remainder(_task(), np.zeros(n, bool), "t07.1", PARAMS)
+        remainder(_task(), np.zeros(n, bool), "t07.1", PARAMS, ROBOT)
 
 
 def test_what_a_robot_had_ahead_starts_past_where_it_stopped() -> None:
     task = Task("t05", np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 2.0]]), 5.0, 20.0, (1,))
     params = CoverageParams()
-    rest = ahead_of(task, np.array([1.0, 0.1]), False, 0.5, "t05.1", params)
+    rest = ahead_of(task, np.array([1.0, 0.1]), False, 0.5, "t05.1", params, ROBOT)
     assert rest is not None and rest.id == "t05.1"
     assert np.allclose(rest.path, [[1.5, 0.0], [3.0, 0.0], [3.0, 2.0]])
     assert rest.area_m2 == pytest.approx(5.0 * 3.5 / 5.0)
     # driven backwards from (3, 2): what was ahead is the start of the task, in its own direction
-    back = ahead_of(task, np.array([2.9, 1.0]), True, 0.5, "t05.1", params)
+    back = ahead_of(task, np.array([2.9, 1.0]), True, 0.5, "t05.1", params, ROBOT)
     assert back is not None
     assert np.allclose(back.path, [[0.0, 0.0], [3.0, 0.0], [3.0, 0.5]])
     # stopped within reach of the end: nothing left
-    assert ahead_of(task, np.array([3.0, 1.8]), False, 0.5, "t05.1", params) is None
+    assert ahead_of(task, np.array([3.0, 1.8]), False, 0.5, "t05.1", params, ROBOT) is None

@@ -4,6 +4,7 @@ import itertools
 
 import numpy as np
 from coverage_maps import boxed, furnished, grid_of, open_spots
+from robots import ROBOT
 
 from planners.coverage import CoverageParams, plan_coverage
 from planners.coverage.bcd import decompose
@@ -103,8 +104,10 @@ def test_fill_in_reaches_the_target_and_its_passes_never_cross_blocked_cells():
     for seed in (4, 5):
         g = furnished(seed)
         starts = open_spots(g, 1)
-        without = plan_coverage(g, starts, CoverageParams(fill_in=False))
-        full = plan_coverage(g, starts, CoverageParams(fill_in_target=1.0))
+        without = plan_coverage(g, starts, CoverageParams(fill_in=False), ROBOT, wall_clearance=0.0)
+        full = plan_coverage(
+            g, starts, CoverageParams(fill_in_target=1.0), ROBOT, wall_clearance=0.0
+        )
         assert full.metrics.total.coverage > without.metrics.total.coverage
         assert full.metrics.total.coverage >= 0.999
         assert all(_crossings(g, p) == 0 for p in full.paths)
@@ -118,8 +121,8 @@ def test_fill_in_reaches_the_target_and_its_passes_never_cross_blocked_cells():
 def test_fill_in_target_bounds_the_passes():
     g = grid_of(boxed(60, 90))
     start = (1.0, 1.0)
-    loose = plan_coverage(g, [start], CoverageParams(fill_in_target=0.9))
-    tight = plan_coverage(g, [start], CoverageParams(fill_in_target=1.0))
+    loose = plan_coverage(g, [start], CoverageParams(fill_in_target=0.9), ROBOT, wall_clearance=0.0)
+    tight = plan_coverage(g, [start], CoverageParams(fill_in_target=1.0), ROBOT, wall_clearance=0.0)
     assert tight.metrics.total.coverage == 1.0
     assert loose.metrics.total.path_length_m <= tight.metrics.total.path_length_m
 
@@ -134,5 +137,5 @@ def test_a_wall_strip_beside_a_doorway_is_swept_at_the_coordinators_resolution()
     w = load_world(Path(__file__).resolve().parents[2] / "configs" / "worlds" / "home.yaml")
     g = w.grid(0.025)
     starts = [p[:2] for p in w.start_poses(1, 0.17)]
-    plan = plan_coverage(g, starts, CoverageParams(fill_in=False))
+    plan = plan_coverage(g, starts, CoverageParams(fill_in=False), ROBOT, wall_clearance=0.0)
     assert plan.metrics.total.coverage >= 0.975

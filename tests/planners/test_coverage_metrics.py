@@ -77,7 +77,7 @@ def test_cleanable_area_from_the_path_starts_and_unreachable_space():
     occ = np.zeros((20, 40), dtype=bool)
     occ[:, 20] = True  # the right half is cut off from a start on the left
     g = grid_of(occ)
-    m = coverage_metrics(g, [np.array([[0.5, 0.5], [0.6, 0.5]])], 0.17, 0.30)
+    m = coverage_metrics(g, [np.array([[0.5, 0.5], [0.6, 0.5]])], 0.17, 0.30, max_speed=0.5)
     assert m.cleanable_area_m2 > 0
     assert m.unreachable_free_m2 >= 19 * 20 * 0.05**2
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 from coverage_maps import DATA, RES, boxed, furnished, grid_of, open_spots
+from robots import ROBOT
 
 from planners.coverage import CoverageParams, PlanningError, plan_coverage
 from planners.coverage.bcd import decompose
@@ -19,7 +20,7 @@ def test_corridor_one_lane_matches_the_analytic_values():
     # walls at rows 0 and 9, columns 0 and 49: robot centres fit on rows 4–5, columns 4–45
     g = grid_of(boxed(10, 50))
     start = ((4 + 0.5) * RES, 5 * RES)  # on the lane between rows 4 and 5, at its first column
-    plan = plan_coverage(g, [start], SWEEPS_ONLY)
+    plan = plan_coverage(g, [start], SWEEPS_ONLY, ROBOT, wall_clearance=0.0)
     m = plan.metrics.total
     assert math.isclose(m.path_length_m, 41 * RES, abs_tol=1e-9)
     assert m.turns == 0 and m.repetition == 0.0
@@ -32,7 +33,7 @@ def test_corridor_one_lane_matches_the_analytic_values():
 def test_empty_rectangle_lanes_length_and_coverage():
     g = grid_of(boxed(40, 60))  # robot centres: rows 4–35, columns 4–55
     start = (4.5 * RES, 5 * RES)
-    plan = plan_coverage(g, [start], SWEEPS_ONLY)
+    plan = plan_coverage(g, [start], SWEEPS_ONLY, ROBOT, wall_clearance=0.0)
     m = plan.metrics.total
     # 6 lanes 51 cells long (rows 4.5, 10.5, …, 34.5) and 5 turns of 6 rows along the sides
     assert math.isclose(m.path_length_m, (6 * 51 + 5 * 6) * RES, abs_tol=1e-9)
@@ -71,7 +72,7 @@ def test_no_path_crosses_an_occupied_or_unknown_cell(method):
     params = CoverageParams(method=method)
     for name, g, starts in _maps():
         for k in (1, 3):
-            plan = plan_coverage(g, starts[:k], params)
+            plan = plan_coverage(g, starts[:k], params, ROBOT, wall_clearance=0.0)
             for path in plan.paths:
                 assert _crossings(g, path) == 0, (name, method, k)
             assert plan.metrics.total.coverage > 0.95, (name, method, k)
@@ -85,7 +86,9 @@ def test_apartment_paths_are_safe_and_cover_it():
 
     w = load_world(path)
     g = w.grid(RES)
-    plan = plan_coverage(g, [p[:2] for p in w.start_poses(3, 0.17)], PARAMS)
+    plan = plan_coverage(
+        g, [p[:2] for p in w.start_poses(3, 0.17)], PARAMS, ROBOT, wall_clearance=0.0
+    )
     assert all(_crossings(g, p) == 0 for p in plan.paths)
     assert plan.metrics.total.coverage > 0.97
     assert plan.room_labels.max() >= 5
@@ -93,7 +96,7 @@ def test_apartment_paths_are_safe_and_cover_it():
 
 def test_decomposition_cells_are_disjoint_cover_the_cleanable_area_and_adjacency_is_symmetric():
     for g in (furnished(2), furnished(3)):
-        plan = plan_coverage(g, open_spots(g, 1), PARAMS)
+        plan = plan_coverage(g, open_spots(g, 1), PARAMS, ROBOT, wall_clearance=0.0)
         labels = plan.cell_labels
         assert np.array_equal(labels > 0, plan.cleanable)
         assert set(plan.cell_graph.nodes) == set(np.unique(labels[labels > 0]).tolist())
@@ -135,8 +138,8 @@ def test_three_robots_share_the_work():
     w = load_world("configs/worlds/home.yaml")
     g = w.grid(RES)
     starts = [p[:2] for p in w.start_poses(3, 0.17)]
-    one = plan_coverage(g, starts[:1], PARAMS)
-    three = plan_coverage(g, starts, PARAMS)
+    one = plan_coverage(g, starts[:1], PARAMS, ROBOT, wall_clearance=0.0)
+    three = plan_coverage(g, starts, PARAMS, ROBOT, wall_clearance=0.0)
     assert three.metrics.makespan_s <= 0.45 * one.metrics.makespan_s
     assert three.metrics.total.coverage >= one.metrics.total.coverage - 0.01
     assert set(three.assignment.values()) == {0, 1, 2}
@@ -147,22 +150,24 @@ def test_three_robots_share_the_work():
 def test_bad_starts_and_maps_raise_clear_errors():
     g = grid_of(boxed(40, 60))
     with pytest.raises(PlanningError, match="inside an obstacle"):
-        plan_coverage(g, [(0.02, 1.0)], PARAMS)
+        plan_coverage(g, [(0.02, 1.0)], PARAMS, ROBOT, wall_clearance=0.0)
     with pytest.raises(PlanningError, match="closer than the robot radius"):
-        plan_coverage(g, [(0.1, 1.0)], PARAMS)
+        plan_coverage(g, [(0.1, 1.0)], PARAMS, ROBOT, wall_clearance=0.0)
     with pytest.raises(PlanningError, match="outside the map"):
-        plan_coverage(g, [(10.0, 1.0)], PARAMS)
+        plan_coverage(g, [(10.0, 1.0)], PARAMS, ROBOT, wall_clearance=0.0)
     with pytest.raises(PlanningError, match="no free cell"):
-        plan_coverage(grid_of(np.ones((10, 10), bool)), [(0.2, 0.2)], PARAMS)
+        plan_coverage(
+            grid_of(np.ones((10, 10), bool)), [(0.2, 0.2)], PARAMS, ROBOT, wall_clearance=0.0
+        )
     with pytest.raises(ValueError, match="overlap"):
-        plan_coverage(g, [(1.0, 1.0)], CoverageParams(overlap=1.5))
+        plan_coverage(g, [(1.0, 1.0)], CoverageParams(overlap=1.5), ROBOT, wall_clearance=0.0)
 
 
 def test_unreachable_free_space_is_reported():
     occ = boxed(40, 81)
     occ[:, 40] = True  # the right room has no door
     g = grid_of(occ)
-    plan = plan_coverage(g, [(1.0, 1.0)], PARAMS)
+    plan = plan_coverage(g, [(1.0, 1.0)], PARAMS, ROBOT, wall_clearance=0.0)
     right_room = 38 * 39 * RES**2
     assert plan.unreachable_area_m2 >= right_room
     assert plan.unreachable[20, 60] and not plan.cleanable[20, 60]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from coverage_maps import boxed, grid_of
+from robots import ROBOT
 
 from planners.coverage import plan_coverage
 from planners.coverage.metrics import swath
@@ -71,7 +72,10 @@ def _hall_and_dead_end_room():
 def test_strips_shorten_the_path_through_a_dead_end_room_at_the_same_coverage():
     grid = _hall_and_dead_end_room()
     plans = {
-        s: plan_coverage(grid, [(0.8, 1.5)], CoverageParams(return_strips=s)) for s in (False, True)
+        s: plan_coverage(
+            grid, [(0.8, 1.5)], CoverageParams(return_strips=s), ROBOT, wall_clearance=0.0
+        )
+        for s in (False, True)
     }
     with_strips, without = plans[True].metrics.total, plans[False].metrics.total
     assert with_strips.coverage >= 0.995 and without.coverage >= 0.995

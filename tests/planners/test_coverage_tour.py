@@ -4,6 +4,7 @@ import itertools
 
 import numpy as np
 from coverage_maps import boxed, furnished, grid_of, open_spots
+from robots import ROBOT
 
 from planners.coverage import CoverageParams, plan_coverage
 from planners.coverage.geodesic import PathCosts
@@ -92,7 +93,7 @@ def test_lane_pieces_sweep_exactly_what_the_whole_lane_sweeps():
     assert (cov_p == cov_w).all() and (visits_p == visits_w).all()
     # the corridor's one lane (columns 4–45) in pieces of at most 0.5 m, driven end to end
     params = CoverageParams(max_lane_length=0.5, fill_in=False)
-    plan = plan_coverage(g, [(0.225, 0.25)], params)
+    plan = plan_coverage(g, [(0.225, 0.25)], params, ROBOT, wall_clearance=0.0)
     assert len(plan.tasks[0]) == 5
     assert plan.metrics.total.repetition == 0.0
     assert np.isclose(plan.metrics.total.path_length_m, 41 * 0.05)
@@ -119,7 +120,7 @@ def _stubs(path: np.ndarray, away: float = 0.15, window: int = 8) -> int:
 
 def test_l_shaped_room_reaches_the_coverage_target_without_stubs():
     g = _l_room()
-    plan = plan_coverage(g, [(0.5, 0.5)], CoverageParams())
+    plan = plan_coverage(g, [(0.5, 0.5)], CoverageParams(), ROBOT, wall_clearance=0.0)
     assert plan.metrics.total.coverage >= 0.995
     assert _stubs(plan.paths[0]) == 0
     transit = Transit(g, clearance(g) >= 0.17)
@@ -131,7 +132,7 @@ def test_fill_in_passes_are_tour_legs_not_out_and_back_stubs():
     # the former fill-in left from the nearest path vertex and came back to it: 3 and 1 stubs
     for seed in (4, 5):
         g = furnished(seed)
-        plan = plan_coverage(g, open_spots(g, 1), CoverageParams())
+        plan = plan_coverage(g, open_spots(g, 1), CoverageParams(), ROBOT, wall_clearance=0.0)
         assert plan.metrics.total.coverage >= 0.995
         assert _stubs(plan.paths[0]) == 0
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+from robots import ROBOT
 
 from planners.polyline import (
     TurnCounter,
@@ -43,7 +44,7 @@ def test_the_coverage_plan_drives_no_straight_vertices() -> None:
     cfg = load_fleet_config()
     world = load_world(resolve_world("small"), cfg.robot.radius)
     starts = [p[:2] for p in world.start_poses(1, cfg.robot.radius)]
-    plan = plan_coverage(world.grid(0.05), starts, CoverageParams())
+    plan = plan_coverage(world.grid(0.05), starts, CoverageParams(), ROBOT, wall_clearance=0.0)
     path = plan.paths[0]
     assert (np.hypot(*np.diff(path, axis=0).T) > 1e-9).all()
     assert (heading_changes(path) > 1e-6).all()
