@@ -35,9 +35,10 @@ SEGMENT_INDEX_MIN = 400
 # the same collision: a robot grinding along a wall re-touches it many times a second.
 COLLISION_DEBOUNCE_S = 1.0
 # The cleaning grid sweeps each robot's brush along the chord between its poses this often. At
-# ≤ 0.5 m/s and ≤ 1 rad/s the arc between two updates leaves its chord by ≤ v·ω/(8·hz²) ≈ 0.6 mm,
-# far below the 5 cm cells. summary() sweeps up to the current poses; the grid itself is current
-# at every step the default coverage rate (2 Hz) publishes it.
+# the robot's top speeds v, ω the arc between two updates leaves its chord by ≤ v·ω/(8·hz²),
+# under a millimetre for the robot of configs/fleet.yaml, far below the 5 cm cells. summary()
+# sweeps up to the current poses; the grid itself is current at every step the default
+# coverage rate (2 Hz) publishes it.
 CLEANING_HZ = 10.0
 # The true poses go to the dashboard and the report this often.
 TRUTH_HZ = 10.0
