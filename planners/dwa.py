@@ -191,7 +191,14 @@ class _Polyline:
         return np.array([np.interp(s, self.cum, self.points[:, k]) for k in range(2)])
 
 
-def _check_inputs(pose, velocity, path, obstacles, robot_radius, dt):
+def _check_inputs(
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    path: np.ndarray,
+    obstacles: np.ndarray,
+    robot_radius: float,
+    dt: float,
+) -> None:
     if len(pose) != 3 or not np.all(np.isfinite(pose)):
         raise ValueError(f"pose must be three finite numbers (x, y, theta), got {pose!r}")
     if len(velocity) != 2 or not np.all(np.isfinite(velocity)):
@@ -215,26 +222,154 @@ def dwa_control(
     speed: float | None = None,
 ) -> DWAResult:
     """One DWA step: the best (v, ω) for the next control period ``dt``, for the disc ``robot``
-    (radius ``robot_radius`` below) within its speed and acceleration limits.
+    within its speed and acceleration limits.
 
-    Sampling: ``vx_samples`` × ``vtheta_samples`` velocities spread over the dynamic window
-    (see :func:`dynamic_window`), each held for ``sim_time`` (ROS ``use_dwa``), collision-checked
-    at points at most ``sim_granularity`` apart. With ``speed`` (a caller's braking profile),
-    v is that one speed and only ω is sampled; the points are then at most ``sim_granularity``
-    apart at that speed.
+    The stages, in order: sample velocities in the dynamic window and roll each out
+    (:func:`_rollouts`; with ``speed``, a caller's braking profile, v is that one speed and
+    only ω is sampled), check each rollout against the obstacles (:func:`_obstacle_terms`),
+    find the local goal on the path (:func:`_local_goal`), score the admissible rollouts
+    (:func:`_cost`) and take the cheapest (:func:`_choose`).
 
-    Admissibility: a rollout is inadmissible if any of its points has clearance (distance from
-    the robot centre to the nearest obstacle point) below ``robot_radius + safety_margin``.
-    A robot that already is that close (lidar noise biases the nearest point low; a pushed
-    robot) may also take trajectories that never touch (clearance ≥ robot_radius) and end at
-    least as far from obstacles as it starts, so it can slide out instead of freezing.
+    ``admissible`` is True when some collision-free sample moves the robot forward (v > 0) and
+    the best command is not to stand still short of the final goal (farther than
+    ``sim_granularity``). A blocked robot ends in one of these two: no forward sample is free,
+    or the ones that are free creep so close to the obstacle that the obstacle cost outweighs
+    the progress left. Either way the command is a fallback, see :class:`DWAResult`.
+    """
+    path = np.asarray(path, dtype=float)
+    obstacles = np.asarray(obstacles, dtype=float)
+    if obstacles.size == 0:
+        obstacles = obstacles.reshape(0, 2)
+    _check_inputs(pose, velocity, path, obstacles, robot.radius, dt)
+    rollouts = _rollouts(pose, velocity, params, robot, dt, speed)
+    ok, occ = _obstacle_terms(rollouts, pose, obstacles, params, robot.radius)
+    line = _Polyline(path, params.corner_angle)
+    goal = _local_goal(line, pose, params)
+    cost = _cost(rollouts, line, goal, ok, occ, params)
+    return _choose(rollouts, cost, ok, line, pose, velocity, params)
 
-    Scoring (lower is better; ROS dwa_local_planner's four map-grid costs, in metres, plus
-    obstacle cost), with e the rollout's end position, n = e + forward_point_distance·(cos θe,
-    sin θe) its nose, g the local goal (the path point ``goal_lookahead`` beyond the robot's
-    projection onto the path, or the next stop when nearer: a sharp corner, see
-    ``corner_angle``, or the final goal), d_path the distance to the path up to g, u the unit
-    vector from the robot toward g (ROS: the angle to the goal)::
+
+@dataclass(frozen=True, eq=False)
+class _Rollouts:
+    """The sampled commands (v, w) (K,) and their rollouts: ``x``, ``y``, ``theta`` (K, T) at
+    times ``t`` (T,), and ``body`` ((T − 1)·K, 2) the rollouts' points after the start, rollout
+    by rollout. ``window`` is the dynamic window (v_lo, v_hi, w_lo, w_hi) they were drawn from."""
+
+    v: np.ndarray
+    w: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    theta: np.ndarray
+    body: np.ndarray
+    window: tuple[float, float, float, float]
+
+
+def _rollouts(
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    params: DWAParams,
+    robot: RobotSpec,
+    dt: float,
+    speed: float | None,
+) -> _Rollouts:
+    """``vx_samples`` × ``vtheta_samples`` velocities spread over the dynamic window (see
+    :func:`dynamic_window`), each held for ``sim_time`` (ROS ``use_dwa``) and rolled out at
+    points at most ``sim_granularity`` apart at the top speed. With ``speed``, v is that one
+    speed and only ω is sampled; the points are then at most ``sim_granularity`` apart at that
+    speed."""
+    window = dynamic_window(velocity, params, robot, dt, speed)
+    v_lo, v_hi, w_lo, w_hi = window
+    vx_samples, top = (1, speed) if speed is not None else (params.vx_samples, robot.max_vel_x)
+    vv, ww = np.meshgrid(
+        _samples(v_lo, v_hi, vx_samples), _samples(w_lo, w_hi, params.vtheta_samples), indexing="ij"
+    )
+    v, w = vv.ravel(), ww.ravel()
+    steps = max(1, math.ceil(top * params.sim_time / params.sim_granularity - 1e-9))
+    t = np.linspace(0.0, params.sim_time, steps + 1)
+    xs, ys, ths = rollout(pose, v, w, t)
+    body = np.column_stack([xs[:, 1:].ravel(), ys[:, 1:].ravel()])
+    return _Rollouts(v, w, t, xs, ys, ths, body, window)
+
+
+def _obstacle_terms(
+    rollouts: _Rollouts,
+    pose: tuple[float, float, float],
+    obstacles: np.ndarray,
+    params: DWAParams,
+    robot_radius: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per rollout: whether it is admissible, and its obstacle cost
+    ``occdist_scale / max(min clearance − robot_radius, ε)``.
+
+    A rollout is inadmissible if any of its points has clearance (distance from the robot
+    centre to the nearest obstacle point) below ``robot_radius + safety_margin``. A robot that
+    already is that close (lidar noise biases the nearest point low; a pushed robot) may also
+    take trajectories that never touch (clearance ≥ robot_radius) and end at least as far from
+    obstacles as it starts, so it can slide out instead of freezing.
+    """
+    k = len(rollouts.v)
+    if not len(obstacles):
+        return np.ones(k, dtype=bool), np.zeros(k)
+    threshold = robot_radius + params.safety_margin
+    tree = cKDTree(obstacles)
+    clearance = tree.query(rollouts.body)[0].reshape(k, len(rollouts.t) - 1)
+    min_clear = clearance.min(axis=1)
+    start_clear = float(tree.query(np.asarray(pose[:2], dtype=float))[0])
+    ok = min_clear >= threshold
+    if start_clear < threshold:
+        ok |= (min_clear >= robot_radius) & (clearance[:, -1] >= start_clear)
+    return ok, params.occdist_scale / np.maximum(min_clear - robot_radius, _MIN_GAP)
+
+
+@dataclass(frozen=True, eq=False)
+class _LocalGoal:
+    """The local goal g (``point``, at arc length ``s`` on the path), the arc length of the
+    next ``stop``, the unit ``direction`` u from the robot toward g and the ``distance`` to g."""
+
+    point: np.ndarray
+    s: float
+    stop: float
+    direction: np.ndarray
+    distance: float
+
+
+def _local_goal(line: _Polyline, pose: tuple[float, float, float], params: DWAParams) -> _LocalGoal:
+    """The path point ``goal_lookahead`` beyond the robot's projection onto the path, or the
+    next stop when nearer: a sharp corner (see ``corner_angle``) more than ``sim_granularity``
+    ahead, or the final goal. u is the robot's heading when it stands on g (ROS: the angle to
+    the goal)."""
+    robot_xy = np.asarray(pose[:2], dtype=float)
+    # The robot is somewhere before the second sharp corner: on a boustrophedon path this keeps
+    # it from projecting onto the neighbouring lane.
+    reach = int(line.corners[1]) if len(line.corners) > 1 else None
+    s_robot = float(line.nearest(robot_xy[None, :], reach)[1][0])
+    ahead = line.cum[line.corners]
+    ahead = ahead[ahead > s_robot + params.sim_granularity]
+    stop = float(ahead[0]) if len(ahead) else float(line.cum[-1])
+    s_goal = min(s_robot + params.goal_lookahead, stop)
+    goal = line.at(s_goal)
+    to_goal = goal - robot_xy
+    dist = float(np.hypot(*to_goal))
+    u = to_goal / dist if dist > 1e-9 else np.array([math.cos(pose[2]), math.sin(pose[2])])
+    return _LocalGoal(goal, s_goal, stop, u, dist)
+
+
+def _cost(
+    rollouts: _Rollouts,
+    line: _Polyline,
+    goal: _LocalGoal,
+    ok: np.ndarray,
+    occ: np.ndarray,
+    params: DWAParams,
+) -> np.ndarray:
+    """Each rollout's cost, inf for the inadmissible ones.
+
+    Lower is better; ROS dwa_local_planner's four map-grid costs, in metres, plus the obstacle
+    cost ``occ`` (see :func:`_obstacle_terms`). With e the rollout's end position,
+    n = e + forward_point_distance·(cos θe, sin θe) its nose, g the local goal and u the unit
+    vector from the robot toward it (see :func:`_local_goal`), and d_path the distance to the
+    path up to g::
 
         cost = path_distance_bias/2 · (d_path(e) + a · d_path(n))        path + alignment
              + goal_distance_bias/2 · (|e − g| + |n − (g + f·u)|)         goal + goal front
@@ -249,88 +384,61 @@ def dwa_control(
     v ≈ d/sim_time, so the robot slows down smoothly (the acceleration needed is ≤ v/sim_time,
     within acc_lim_x whenever max_vel_x/sim_time is, as for the fleet's robot) and stops on the
     goal instead of overshooting.
-
-    ``admissible`` is True when some collision-free sample moves the robot forward (v > 0) and
-    the best command is not to stand still short of the final goal (farther than
-    ``sim_granularity``). A blocked robot ends in one of these two: no forward sample is free,
-    or the ones that are free creep so close to the obstacle that the obstacle cost outweighs
-    the progress left. Either way the command is a fallback, see :class:`DWAResult`.
     """
-    path = np.asarray(path, dtype=float)
-    obstacles = np.asarray(obstacles, dtype=float)
-    if obstacles.size == 0:
-        obstacles = obstacles.reshape(0, 2)
-    robot_radius = robot.radius
-    _check_inputs(pose, velocity, path, obstacles, robot_radius, dt)
-    p = params
-    v_lo, v_hi, w_lo, w_hi = dynamic_window(velocity, p, robot, dt, speed)
-    vx_samples, top = (1, speed) if speed is not None else (p.vx_samples, robot.max_vel_x)
-    vv, ww = np.meshgrid(
-        _samples(v_lo, v_hi, vx_samples), _samples(w_lo, w_hi, p.vtheta_samples), indexing="ij"
-    )
-    v, w = vv.ravel(), ww.ravel()
-    steps = max(1, math.ceil(top * p.sim_time / p.sim_granularity - 1e-9))
-    t = np.linspace(0.0, p.sim_time, steps + 1)
-    xs, ys, ths = rollout(pose, v, w, t)
-
-    threshold = robot_radius + p.safety_margin
-    if len(obstacles):
-        tree = cKDTree(obstacles)
-        clearance = tree.query(np.column_stack([xs[:, 1:].ravel(), ys[:, 1:].ravel()]))[0]
-        clearance = clearance.reshape(len(v), steps)
-        min_clear = clearance.min(axis=1)
-        start_clear = float(tree.query(np.asarray(pose[:2], dtype=float))[0])
-        ok = min_clear >= threshold
-        if start_clear < threshold:
-            ok |= (min_clear >= robot_radius) & (clearance[:, -1] >= start_clear)
-        occ = p.occdist_scale / np.maximum(min_clear - robot_radius, _MIN_GAP)
-    else:
-        ok = np.ones(len(v), dtype=bool)
-        occ = np.zeros(len(v))
-
-    line = _Polyline(path, p.corner_angle)
-    robot_xy = np.asarray(pose[:2], dtype=float)
-    # The robot is somewhere before the second sharp corner: on a boustrophedon path this keeps
-    # it from projecting onto the neighbouring lane.
-    reach = int(line.corners[1]) if len(line.corners) > 1 else None
-    s_robot = float(line.nearest(robot_xy[None, :], reach)[1][0])
-    ahead = line.cum[line.corners]
-    ahead = ahead[ahead > s_robot + p.sim_granularity]
-    stop = float(ahead[0]) if len(ahead) else float(line.cum[-1])
-    s_goal = min(s_robot + p.goal_lookahead, stop)
-    goal = line.at(s_goal)
-    to_goal = goal - robot_xy
-    dist = float(np.hypot(*to_goal))
-    u = to_goal / dist if dist > 1e-9 else np.array([math.cos(pose[2]), math.sin(pose[2])])
-    f = p.forward_point_distance
-    end = np.column_stack([xs[:, -1], ys[:, -1]])
-    nose = end + f * np.column_stack([np.cos(ths[:, -1]), np.sin(ths[:, -1])])
-    reach_goal = max(1, int(np.searchsorted(line.cum, s_goal)))
-    if p.path_aggregation == "mean":
-        body = np.column_stack([xs[:, 1:].ravel(), ys[:, 1:].ravel()])
+    k = len(rollouts.v)
+    f = params.forward_point_distance
+    end = np.column_stack([rollouts.x[:, -1], rollouts.y[:, -1]])
+    heading = rollouts.theta[:, -1]
+    nose = end + f * np.column_stack([np.cos(heading), np.sin(heading)])
+    reach_goal = max(1, int(np.searchsorted(line.cum, goal.s)))
+    if params.path_aggregation == "mean":
+        body = rollouts.body
         d_body = line.nearest(np.vstack([body, nose]), reach_goal)[0]
-        d_end = d_body[: len(body)].reshape(len(v), steps).mean(axis=1)
+        d_end = d_body[: len(body)].reshape(k, len(rollouts.t) - 1).mean(axis=1)
         d_nose = d_body[len(body) :]
     else:
         d_path = line.nearest(np.vstack([end, nose]), reach_goal)[0]
-        d_end, d_nose = d_path[: len(v)], d_path[len(v) :]
-    align = 0.0 if s_goal == stop and dist <= f else 1.0
+        d_end, d_nose = d_path[:k], d_path[k:]
+    align = 0.0 if goal.s == goal.stop and goal.distance <= f else 1.0
     path_cost = d_end + align * d_nose
-    goal_cost = np.hypot(*(end - goal).T) + np.hypot(*(nose - (goal + f * u)).T)
-    cost = p.path_distance_bias / 2 * path_cost + p.goal_distance_bias / 2 * goal_cost + occ
-    cost = np.where(ok, cost, np.inf)
+    g = goal.point
+    goal_cost = np.hypot(*(end - g).T) + np.hypot(*(nose - (g + f * goal.direction)).T)
+    cost = params.path_distance_bias / 2 * path_cost + params.goal_distance_bias / 2 * goal_cost
+    return np.where(ok, cost + occ, np.inf)
 
+
+def _choose(
+    rollouts: _Rollouts,
+    cost: np.ndarray,
+    ok: np.ndarray,
+    line: _Polyline,
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    params: DWAParams,
+) -> DWAResult:
+    """The cheapest rollout, and whether it is admissible (see :func:`dwa_control`); when no
+    rollout is, braking (:func:`_brake`)."""
     k = int(np.argmin(cost))
+    v, w = rollouts.v, rollouts.w
     standstill = v[k] == 0.0 and w[k] == 0.0
-    arrived = np.hypot(*(line.goal - robot_xy)) <= p.sim_granularity
+    robot_xy = np.asarray(pose[:2], dtype=float)
+    arrived = np.hypot(*(line.goal - robot_xy)) <= params.sim_granularity
     admissible = bool(np.any(ok & (v > 0))) and not (standstill and not arrived)
     if np.isfinite(cost[k]):
-        traj = np.column_stack([xs[k], ys[k], ths[k]])
+        traj = np.column_stack([rollouts.x[k], rollouts.y[k], rollouts.theta[k]])
         return DWAResult(float(v[k]), float(w[k]), traj, float(cost[k]), admissible)
-    return _brake(pose, velocity, v_lo, w_lo, w_hi, t)
+    v_lo, _, w_lo, w_hi = rollouts.window
+    return _brake(pose, velocity, v_lo, w_lo, w_hi, rollouts.t)
 
 
-def _brake(pose, velocity, v_lo, w_lo, w_hi, t) -> DWAResult:
+def _brake(
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    v_lo: float,
+    w_lo: float,
+    w_hi: float,
+    t: np.ndarray,
+) -> DWAResult:
     """Fallback: slow down as hard as the window allows, keeping the current arc's curvature."""
     v0, w0 = velocity
     w = w0 * v_lo / v0 if v0 > 0 else 0.0
