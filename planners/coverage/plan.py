@@ -124,15 +124,67 @@ def plan_coverage(
     t0 = time.perf_counter()
     params.validate()
     robot.validate()
+    floor = _floor(grid, starts, robot, wall_clearance)
+    # one PathCosts for all stages: each stage's queries reuse the costs the earlier ones computed
+    costs = PathCosts(grid, floor.reach)
+    sweeps = _room_sweeps(grid, floor, costs, params, robot)
+    transit = Transit(grid, floor.reach)
+    tasks, pieces = _robot_tours(grid, floor, sweeps, costs, transit, params, robot)
+    return _assemble(grid, floor, sweeps, tasks, pieces, transit, params, robot, wall_clearance, t0)
+
+
+@dataclass(frozen=True, eq=False)
+class _Floor:
+    """The floor as the robots can use it: ``clear`` every cell's clearance (m), ``reach`` the
+    robot-centre cells 4-connected to a start, ``clean`` the cells their swaths reach, ``comp``
+    the connected parts of ``reach`` (labels); the starts as (k, 2) world points, their cells
+    and the part each lies in (``robot_comp``)."""
+
+    clear: np.ndarray
+    reach: np.ndarray
+    clean: np.ndarray
+    comp: np.ndarray
+    start_xy: np.ndarray
+    start_cells: np.ndarray
+    robot_comp: np.ndarray
+
+
+def _floor(
+    grid: GridMap, starts: Sequence[tuple[float, float]], robot: RobotSpec, wall_clearance: float
+) -> _Floor:
+    """The floor reachable from ``starts`` by a robot centre keeping ``robot.radius +
+    wall_clearance`` from obstacles; a :class:`PlanningError` when there is none to plan on."""
     if not grid.free.any():
         raise PlanningError("the map has no free cell")
     if len(starts) == 0:
         raise PlanningError("no start given")
-    keep = robot.radius + wall_clearance
     clear = clearance(grid)
-    centres = clear >= keep
+    centres = clear >= robot.radius + wall_clearance
     start_xy = np.array(starts, dtype=float).reshape(-1, 2)
     start_cells = grid.world_to_cell(start_xy)
+    _check_starts(grid, start_xy, start_cells, centres, robot, wall_clearance)
+    reach = reachable(centres, start_cells)
+    comp, _ = ndimage.label(reach)
+    return _Floor(
+        clear=clear,
+        reach=reach,
+        clean=cleanable(grid, reach, robot.cleaning_width / 2),
+        comp=comp,
+        start_xy=start_xy,
+        start_cells=start_cells,
+        robot_comp=comp[start_cells[:, 0], start_cells[:, 1]],
+    )
+
+
+def _check_starts(
+    grid: GridMap,
+    start_xy: np.ndarray,
+    start_cells: np.ndarray,
+    centres: np.ndarray,
+    robot: RobotSpec,
+    wall_clearance: float,
+) -> None:
+    """A :class:`PlanningError` naming the first start that is not on a robot-centre cell."""
     for (x, y), rc in zip(start_xy, start_cells, strict=True):
         if not grid.in_bounds(rc):
             raise PlanningError(f"start ({x:.2f}, {y:.2f}) is outside the map")
@@ -146,121 +198,180 @@ def plan_coverage(
                 )
             )
             raise PlanningError(f"start ({x:.2f}, {y:.2f}) is {what}")
-    reach = reachable(centres, start_cells)
-    clean = cleanable(grid, reach, robot.cleaning_width / 2)
-    unreachable = grid.free & ~clean
-    res = grid.resolution
 
-    rooms = segment_rooms(reach, clear, res, params.door_width, params.min_room_area)
+
+@dataclass(frozen=True, eq=False)
+class _Sweeps:
+    """Every room's sweep tasks (room by room), the dead-end rooms' tours from their doors
+    (``blocks``: (task, option) runs, for ``_component_tours``), the room and cell label images
+    over the cleanable floor, each room's lane angle and each cell's room."""
+
+    tasks: list[SweepTask]
+    blocks: list[list[tuple[int, int]]]
+    room_img: np.ndarray
+    cell_img: np.ndarray
+    room_angle: list[float]
+    cell_room: list[int]
+
+
+def _room_sweeps(
+    grid: GridMap, floor: _Floor, costs: PathCosts, params: CoverageParams, robot: RobotSpec
+) -> _Sweeps:
+    """Rooms by distance-transform segmentation; per room the dominant wall direction
+    (``_sweep_angle``), a frame rotated to it and the boustrophedon decomposition (Choset
+    2000) of the room in that frame, its lanes and its cells' sweep tasks (``_room_options``);
+    in a dead-end room with ``params.return_strips``, the option ``_choose_option`` picks."""
+    res = grid.resolution
+    rooms = segment_rooms(floor.reach, floor.clear, res, params.door_width, params.min_room_area)
     doors = _dead_end_doors(grid, rooms)
-    costs = PathCosts(grid, reach)
-    n_rooms = int(rooms.max())
     cell_labels = np.zeros(grid.shape, dtype=np.int32)
-    room_img = extend_labels(rooms, clean)
+    room_img = extend_labels(rooms, floor.clean)
     step = max(1, math.floor(params.lane_spacing(robot) / res + 1e-9))
     hw = robot.cleaning_width / 2 / res
     room_tasks: list[list[SweepTask]] = []
     blocks: list[list[tuple[int, int]]] = []
     room_angle: list[float] = []
     cell_room: list[int] = []
-    for room in range(1, n_rooms + 1):
+    for room in range(1, int(rooms.max()) + 1):
         mask = rooms == room
+        room_mask = room_img == room
         angle = _sweep_angle(mask, res)
         base = len(cell_room)
         strips = room in doors and params.method == "bcd" and params.return_strips
         options = []
         for a in (angle, angle + math.pi / 2) if strips else (angle,):
             options.extend(
-                _room_options(
-                    grid, mask, room_img == room, room, base, a, step, hw, params, robot, strips
-                )
+                _room_options(grid, mask, room_mask, room, base, a, step, hw, params, robot, strips)
             )
-        best = 0
+        best, tour = 0, []
         if len(options) > 1:
-            # straight-line hops pick a challenger cheaply; path costs judge it against plain,
-            # and floor an option leaves to the fill-in costs it a pass over it, there and back
-            rough = [_closed_tour(o.tasks, doors[room], None)[0] for o in options]
-            pick = {0, int(np.argmin(rough))}
-            mine = clean & (room_img == room)
-            guess = {}
-            tours = {}
-            for i in pick:
-                cost, tours[i] = _closed_tour(options[i].tasks, doors[room], costs)
-                miss = _missed(grid, options[i].tasks, mine, hw * res) * res**2
-                cost += MISS_FACTOR * miss / robot.cleaning_width
-                guess[i] = cost * (1 + AXIS_MARGIN if options[i].frame.angle != angle else 1)
-            best = min(guess, key=guess.get)
+            mine = floor.clean & room_mask
+            best, tour = _choose_option(grid, options, angle, doors[room], mine, costs, hw, robot)
         if best > 0:
             # the global tour's local search rarely finds the strip's order by itself: it
             # starts from the room's own tour, put in whole
             first = sum(len(ts) for ts in room_tasks)
-            blocks.append([(first + t, o) for t, o in tours[best]])
+            blocks.append([(first + t, o) for t, o in tour])
         opt = options[best]
         cell_room.extend([room] * opt.n_cells)
         _paint_cells(grid, mask, opt.frame, opt.labels, base, cell_labels)
         room_tasks.append(opt.tasks)
         room_angle.append(opt.frame.angle)
+    return _Sweeps(
+        tasks=[t for ts in room_tasks for t in ts],
+        blocks=blocks,
+        room_img=room_img,
+        cell_img=extend_labels(cell_labels, floor.clean),
+        room_angle=room_angle,
+        cell_room=cell_room,
+    )
 
-    cell_img = extend_labels(cell_labels, clean)
-    transit = Transit(grid, reach)
-    tasks = [t for ts in room_tasks for t in ts]
-    comp, _ = ndimage.label(reach)
-    robot_comp = comp[start_cells[:, 0], start_cells[:, 1]]
-    tours = _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=blocks)
-    pieces = _split(tasks, tours, robot_comp, costs, start_xy, robot)
+
+def _choose_option(
+    grid: GridMap,
+    options: list[_RoomOption],
+    angle: float,
+    door: np.ndarray,
+    mine: np.ndarray,
+    costs: PathCosts,
+    hw: float,
+    robot: RobotSpec,
+) -> tuple[int, list[tuple[int, int]]]:
+    """Which of a dead-end room's ``options`` gives the shortest tour of the room alone from
+    its ``door`` and back, and that tour. Lanes across the usual ``angle`` must win by
+    ``AXIS_MARGIN``, and the floor of ``mine`` (the room's cleanable cells) an option leaves
+    to the fill-in costs it ``MISS_FACTOR`` passes over it. ``hw``: half the cleaning width in
+    cells."""
+    res = grid.resolution
+    # straight-line hops pick a challenger cheaply; path costs judge it against plain,
+    # and floor an option leaves to the fill-in costs it a pass over it, there and back
+    rough = [_closed_tour(o.tasks, door, None)[0] for o in options]
+    pick = {0, int(np.argmin(rough))}
+    guess = {}
+    tours = {}
+    for i in pick:
+        cost, tours[i] = _closed_tour(options[i].tasks, door, costs)
+        miss = _missed(grid, options[i].tasks, mine, hw * res) * res**2
+        cost += MISS_FACTOR * miss / robot.cleaning_width
+        guess[i] = cost * (1 + AXIS_MARGIN if options[i].frame.angle != angle else 1)
+    best = min(guess, key=guess.get)
+    return best, tours[best]
+
+
+def _robot_tours(
+    grid: GridMap,
+    floor: _Floor,
+    sweeps: _Sweeps,
+    costs: PathCosts,
+    transit: Transit,
+    params: CoverageParams,
+    robot: RobotSpec,
+) -> tuple[list[SweepTask], list[list[tuple[int, int]]]]:
+    """The tasks and each robot's (task, option) sequence: one tour per connected part of the
+    floor (``_component_tours``) cut among its robots (``_split``); with ``params.fill_in`` the
+    fill-in passes (``_add_fill_in``); for a BCD plan, last, the pruning of the driven tours
+    (``prune.prune_driven``)."""
+    tasks = sweeps.tasks
+    tours = _component_tours(
+        grid, floor.comp, floor.robot_comp, tasks, costs, floor.start_xy, blocks=sweeps.blocks
+    )
+    pieces = _split(tasks, tours, floor.robot_comp, costs, floor.start_xy, robot)
     # only BCD plans get the final pruning, which trades the fill-in's surplus back
     pruned = params.method == "bcd"
-    prints = Footprints(grid, clean, robot.cleaning_width / 2)
+    prints = Footprints(grid, floor.clean, robot.cleaning_width / 2)
     if params.fill_in:
         goal = _fill_in_goal(params.fill_in_target) if pruned else params.fill_in_target
         tasks, pieces = _add_fill_in(
-            grid,
-            comp,
-            robot_comp,
-            tasks,
-            pieces,
-            start_xy,
-            prints,
-            reach,
-            room_img,
-            cell_img,
-            transit,
-            costs,
-            params,
-            robot,
-            goal,
+            grid, floor, sweeps, tasks, pieces, prints, transit, costs, params, robot, goal
         )
     if pruned:
-        floor = math.ceil(params.fill_in_target * int(clean.sum())) if params.fill_in else None
-        tasks, pieces = prune_driven(tasks, pieces, start_xy, prints, transit, floor)
+        keep = math.ceil(params.fill_in_target * int(floor.clean.sum())) if params.fill_in else None
+        tasks, pieces = prune_driven(tasks, pieces, floor.start_xy, prints, transit, keep)
+    return tasks, pieces
+
+
+def _assemble(
+    grid: GridMap,
+    floor: _Floor,
+    sweeps: _Sweeps,
+    tasks: list[SweepTask],
+    pieces: list[list[tuple[int, int]]],
+    transit: Transit,
+    params: CoverageParams,
+    robot: RobotSpec,
+    wall_clearance: float,
+    t0: float,
+) -> CoveragePlan:
+    """The plan: each robot's driven path, its metrics, the room and cell graphs, the cells'
+    robots; ``plan_time_s`` counted from ``t0`` (a ``time.perf_counter`` reading)."""
     # straight runs as one segment each: a follower takes each waypoint as a target
     paths = [
         without_straight_vertices(_drive(s, [path_of(tasks[t], o) for t, o in piece], transit))
-        for s, piece in zip(start_xy, pieces, strict=True)
+        for s, piece in zip(floor.start_xy, pieces, strict=True)
     ]
     robot_tasks = [tuple(tasks[t] for t, _ in piece) for piece in pieces]
-
     metrics = plan_metrics(
-        grid, paths, params, robot, wall_clearance=wall_clearance, cleanable_mask=clean
+        grid, paths, params, robot, wall_clearance=wall_clearance, cleanable_mask=floor.clean
     )
-    room_graph = _room_graph(grid, room_img, room_angle, transit)
-    cell_graph = _cell_graph(grid, cell_img, cell_room, robot_tasks)
+    room_graph = _room_graph(grid, sweeps.room_img, sweeps.room_angle, transit)
+    cell_graph = _cell_graph(grid, sweeps.cell_img, sweeps.cell_room, robot_tasks)
     assignment = {
         c: int(r) for c, r in nx.get_node_attributes(cell_graph, "robot").items() if r >= 0
     }
+    unreachable = grid.free & ~floor.clean
     return CoveragePlan(
         paths=tuple(paths),
-        starts=tuple((float(x), float(y)) for x, y in start_xy),
-        room_labels=room_img,
-        cell_labels=cell_img,
+        starts=tuple((float(x), float(y)) for x, y in floor.start_xy),
+        room_labels=sweeps.room_img,
+        cell_labels=sweeps.cell_img,
         room_graph=room_graph,
         cell_graph=cell_graph,
         assignment=assignment,
         tasks=tuple(robot_tasks),
         metrics=metrics,
-        cleanable=clean,
+        cleanable=floor.clean,
         unreachable=unreachable,
-        unreachable_area_m2=float(unreachable.sum() * res * res),
+        unreachable_area_m2=float(unreachable.sum() * grid.resolution * grid.resolution),
         plan_time_s=time.perf_counter() - t0,
         params=params,
     )
@@ -456,22 +567,18 @@ def _fixed(task: SweepTask, option: int) -> SweepTask:
 
 
 def _add_fill_in(
-    grid,
-    comp,
-    robot_comp,
-    tasks,
-    pieces,
-    start_xy,
-    prints,
-    reach,
-    room_img,
-    cell_img,
-    transit,
-    costs,
-    params,
-    robot,
-    goal,
-):
+    grid: GridMap,
+    floor: _Floor,
+    sweeps: _Sweeps,
+    tasks: list[SweepTask],
+    pieces: list[list[tuple[int, int]]],
+    prints: Footprints,
+    transit: Transit,
+    costs: PathCosts,
+    params: CoverageParams,
+    robot: RobotSpec,
+    goal: float,
+) -> tuple[list[SweepTask], list[list[tuple[int, int]]]]:
     """Tasks and robot tours with fill-in passes for the floor the driven tours miss
     (``fill_in.fill_in_tasks``) until ``goal`` of the cleanable area is covered, in up to
     ``FILL_IN_ROUNDS`` rounds. Each sweep keeps the variant its tour chose; a pass goes to the
@@ -481,6 +588,7 @@ def _add_fill_in(
     tasks already clean (``prune.prune_tasks``). ``prints`` keeps the tasks' footprints on the
     cleanable floor (``prints.clean``) for these prunings and the final one."""
     hw = robot.cleaning_width / 2
+    start_xy = floor.start_xy
     for _ in range(FILL_IN_ROUNDS):
         pieces = prune_tasks(tasks, pieces, prints)
         fixed: list[SweepTask] = []
@@ -495,7 +603,7 @@ def _add_fill_in(
         for path in driven:
             covered |= swath(grid, path, hw)[0]
         anchors = np.vstack([densify(path, grid.resolution) for path in driven])
-        passes = fill_in_tasks(grid, covered, anchors, prints.clean, reach, hw, transit, goal)
+        passes = fill_in_tasks(grid, covered, anchors, prints.clean, floor.reach, hw, transit, goal)
         if not passes:
             break
         trees = [cKDTree(p) for p in driven]
@@ -503,11 +611,11 @@ def _add_fill_in(
         for path, area in passes:
             rc = grid.world_to_cell(path[0])
             _, _, t = path_time(path, robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
-            room, cell = int(room_img[rc[0], rc[1]]), int(cell_img[rc[0], rc[1]])
+            room, cell = int(sweeps.room_img[rc[0], rc[1]]), int(sweeps.cell_img[rc[0], rc[1]])
             fixed.append(SweepTask(room, cell, (path,), area, t))
             near = [
                 tree.query(path[[0, -1]])[0].min()
-                if robot_comp[r] == comp[rc[0], rc[1]]
+                if floor.robot_comp[r] == floor.comp[rc[0], rc[1]]
                 else np.inf
                 for r, tree in enumerate(trees)
             ]
