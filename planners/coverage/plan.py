@@ -14,7 +14,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
-from planners.coverage.bcd import decompose
+from planners.coverage.bcd import MonotoneCell, decompose
 from planners.coverage.fill_in import fill_in_tasks
 from planners.coverage.frame import RotatedFrame, dominant_direction, frame_for, resample
 from planners.coverage.geodesic import PathCosts
@@ -387,7 +387,19 @@ class _RoomOption:
     n_cells: int
 
 
-def _room_options(grid, mask, clean_mask, room, base, angle, step, hw, params, robot, strips):
+def _room_options(
+    grid: GridMap,
+    mask: np.ndarray,
+    clean_mask: np.ndarray,
+    room: int,
+    base: int,
+    angle: float,
+    step: int,
+    hw: float,
+    params: CoverageParams,
+    robot: RobotSpec,
+    strips: bool,
+) -> list[_RoomOption]:
     """The room's tasks with lanes at ``angle``: plain, and (with ``strips``) with a return
     strip along either lane-end side where the lanes allow one."""
     frame = frame_for(grid, mask, angle, margin=math.ceil(hw) + 1)
@@ -399,17 +411,25 @@ def _room_options(grid, mask, clean_mask, room, base, angle, step, hw, params, r
     out = [_RoomOption(plain, frame, labels, len(cells))]
     if strips:
         for high in (False, True):
-            clipped, strips = return_strips(lanes, rot, step, high)
-            if any(strips):
+            clipped, cell_strips = return_strips(lanes, rot, step, high)
+            if any(cell_strips):
                 ts = _cell_tasks(
-                    room, base, cells, clipped, shoulders, strips, frame, params, robot
+                    room, base, cells, clipped, shoulders, cell_strips, frame, params, robot
                 )
                 out.append(_RoomOption(ts, frame, labels, len(cells)))
     return out
 
 
 def _cell_tasks(
-    room, base, cells, lanes, shoulders, strips, frame, params, robot
+    room: int,
+    base: int,
+    cells: list[MonotoneCell],
+    lanes: list[np.ndarray],
+    shoulders: list[np.ndarray],
+    strips: list[list[np.ndarray]] | None,
+    frame: RotatedFrame,
+    params: CoverageParams,
+    robot: RobotSpec,
 ) -> list[SweepTask]:
     """The room's tasks: per cell its edge pass, spiral or lanes, shoulder lanes and strips."""
     tasks: list[SweepTask] = []
@@ -491,7 +511,14 @@ def _sweep_angle(mask: np.ndarray, res: float) -> float:
     return angle if spans[0] <= spans[1] else angle + math.pi / 2
 
 
-def _paint_cells(grid, mask, frame, labels, base, out) -> None:
+def _paint_cells(
+    grid: GridMap,
+    mask: np.ndarray,
+    frame: RotatedFrame,
+    labels: np.ndarray,
+    base: int,
+    out: np.ndarray,
+) -> None:
     """Give every grid cell of the room the label of the rotated cell holding its centre."""
     rc = np.argwhere(mask)
     q = np.rint(frame.from_world(grid.cell_to_world(rc))).astype(int)
@@ -502,14 +529,24 @@ def _paint_cells(grid, mask, frame, labels, base, out) -> None:
     out[rc[:, 0], rc[:, 1]] = lab
 
 
-def _ends(tasks, costs, start_xy) -> tuple[TaskEnds, int]:
+def _ends(
+    tasks: Sequence[SweepTask], costs: PathCosts, start_xy: np.ndarray
+) -> tuple[TaskEnds, int]:
     """The tasks' ends with path costs between them and the starts (appended after them), and
     the point index of the first start."""
     pts = end_points(tasks)
     return task_ends(tasks, costs.matrix(np.vstack([pts, start_xy]))), len(pts)
 
 
-def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=()):
+def _component_tours(
+    grid: GridMap,
+    comp: np.ndarray,
+    robot_comp: np.ndarray,
+    tasks: Sequence[SweepTask],
+    costs: PathCosts,
+    start_xy: np.ndarray,
+    blocks: Sequence[list[tuple[int, int]]] = (),
+) -> dict[int, list[tuple[int, int]]]:
     """Per connected part of the floor holding a start: one tour over its tasks from its first
     robot's start. Where several robots share the part the tour is priced as a loop back to
     that start, so that cut into pieces, the first and the last both begin near the starts.
@@ -532,7 +569,14 @@ def _component_tours(grid, comp, robot_comp, tasks, costs, start_xy, blocks=()):
     return tours
 
 
-def _split(tasks, tours, robot_comp, costs, start_xy, robot) -> list[list[tuple[int, int]]]:
+def _split(
+    tasks: Sequence[SweepTask],
+    tours: dict[int, list[tuple[int, int]]],
+    robot_comp: np.ndarray,
+    costs: PathCosts,
+    start_xy: np.ndarray,
+    robot: RobotSpec,
+) -> list[list[tuple[int, int]]]:
     """Each robot's (task, option) sequence: a part's tour is cut into pieces balancing the
     estimated time among the robots starting in it (``ordering.split_tour``), each piece then
     re-ordered from its robot's start."""
@@ -645,7 +689,9 @@ def _drive(start: np.ndarray, legs: Sequence[np.ndarray], transit: Transit) -> n
     return without_repeats(np.vstack(parts))
 
 
-def _room_graph(grid, room_img, angles, transit) -> nx.Graph:
+def _room_graph(
+    grid: GridMap, room_img: np.ndarray, angles: Sequence[float], transit: Transit
+) -> nx.Graph:
     g = nx.Graph()
     res = grid.resolution
     for room in range(1, int(room_img.max()) + 1):
@@ -664,7 +710,12 @@ def _room_graph(grid, room_img, angles, transit) -> nx.Graph:
     return g
 
 
-def _cell_graph(grid, cell_img, cell_room, robot_tasks) -> nx.Graph:
+def _cell_graph(
+    grid: GridMap,
+    cell_img: np.ndarray,
+    cell_room: Sequence[int],
+    robot_tasks: Sequence[Sequence[SweepTask]],
+) -> nx.Graph:
     g = nx.Graph()
     res = grid.resolution
     areas = np.bincount(cell_img.ravel(), minlength=len(cell_room) + 1)
