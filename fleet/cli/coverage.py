@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from planners.coverage import CoverageParams
     from planners.robot import RobotSpec
 
-APARTMENT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "maps"
+APARTMENT = Path(__file__).resolve().parents[3] / "shared" / "data" / "maps"
 # `fleet plan coverage` and its bench plan for the bare robot radius; the coordinator adds
 # coordinator.wall_clearance
 PLAN_WALL_CLEARANCE = 0.0
@@ -289,6 +289,8 @@ def bench_coverage(
     apt = APARTMENT / "cob_ipa_apartment.yaml"
     if apt.exists():
         maps.append(("apartment", apt))
+    else:
+        typer.echo(f"note: {apt} not found; the apartment is left out", err=True)
     rows: list[dict[str, Any]] = []
     with _status("fleet bench coverage") as status:
         for name, path in maps:
