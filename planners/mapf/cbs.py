@@ -18,17 +18,13 @@ meta-agents, optimal for SOC.
   two sides of the rectangle they cross. Each split keeps every solution in one child, so CBS
   stays optimal; their cardinality comes from the MDDs (``mdd.mdd_blocks``). A corridor split
   replaces the conflict's plain split; a rectangle split does where it is at least as cardinal.
-- Meta-agents (MA-CBS, Sharon et al., SoCS 2012): when two groups of agents have conflicted
-  more than ``MERGE_THRESHOLD`` times in the search (MA-CBS's conflict matrix), they are merged
-  into one meta-agent (at most ``MAX_GROUP`` agents, and fewer on large maps, see
-  ``constraints.may_merge``), planned by an optimal joint A* with
-  operator decomposition (``joint``) under its members' constraints, and the search restarts
+- Meta-agents (MA-CBS, Sharon et al., SoCS 2012; ``meta_agent``, shared with ECBS): two groups
+  of agents that keep conflicting are merged into one meta-agent, planned by an optimal joint A*
+  with operator decomposition (``joint``) under its members' constraints, and the search restarts
   from a new root with the merged group (merge & restart, Boyarski et al., IJCAI 2015). Every
   run is a complete CBS over a partition of the agents, so optimality is kept; agents that
   block each other in a dead end are solved jointly in milliseconds instead of being split
-  forever. Two groups are also merged when a meta-agent's replanning under constraints runs
-  past ``REPLAN_BUDGET`` joint expansions. A merge whose first joint search exceeds
-  ``JOINT_BUDGET`` expansions is given up, and that pair is split as before.
+  forever.
 - The low level is space-time A* that breaks ties toward fewer collisions with the other agents'
   paths (a conflict-avoidance table), and the high level toward fewer conflicts.
 
@@ -43,39 +39,23 @@ from heapq import heappop, heappush
 
 import numpy as np
 
-from planners.mapf.conflicts import Conflict, all_conflicts, conflicts_of, positions
-from planners.mapf.constraints import (
-    JOINT_BUDGET,
-    LENGTH_LE,
-    MERGE_THRESHOLD,
-    REPLAN_BUDGET,
-    TARGET,
-    Constraint,
-    as_target,
-    groups_of,
-    may_merge,
-    members,
-    merged,
-    split,
-    table_for,
-    violators,
-)
+from planners.mapf.conflicts import Conflict, positions
+from planners.mapf.constraints import MERGE_THRESHOLD, TARGET, as_target, split
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
-from planners.mapf.joint import JointSearchLimit, group_plan, joint_astar
 from planners.mapf.low_level import SearchStats, space_time_astar
 from planners.mapf.mdd import mdd_blocks, mdd_singletons
+from planners.mapf.meta_agent import (
+    CARDINAL,
+    NON_CARDINAL,
+    Classified,
+    MetaAgentSearch,
+    TreeNode,
+)
 from planners.mapf.model import InfeasibleInstanceError, path_cost
 from planners.mapf.symmetry import Branch, corridor_branches, rectangle_branches
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
 from planners.mapf.vertex_cover import min_vertex_cover
-
-CARDINAL, SEMI_CARDINAL, NON_CARDINAL = 0, 1, 2
-
-# (class, t, a, b, u, v, branches): a conflict with its cardinality class first, so min() picks
-# the best; v is -1 for a vertex conflict, TARGET for a target conflict (a in b's goal u, b parked
-# there); branches: the two children's constraints of a corridor or rectangle split, else ()
-Classified = tuple[int, int, int, int, int, int, tuple[Branch, ...]]
 
 
 @dataclass(frozen=True)
@@ -117,8 +97,10 @@ PLAIN_CBS = CbsOptions(
 )
 
 
-class _Node:
-    __slots__ = ("branch", "conflicts", "costs", "h", "mdds", "parent", "paths", "soc")
+class _Node(TreeNode):
+    """A CBS node: also its agents' MDD singletons (computed on demand) and its CG heuristic."""
+
+    __slots__ = ("h", "mdds")
 
     def __init__(
         self,
@@ -128,22 +110,21 @@ class _Node:
         costs: list[int],
         mdds: dict[int, tuple[int, ...]],
     ) -> None:
-        self.parent = parent
-        self.branch = branch
-        self.paths = paths
-        self.costs = costs
-        self.soc = sum(costs)
+        super().__init__(parent, branch, paths, costs)
         self.mdds = mdds
-        self.conflicts: list[Classified] = []
         self.h = 0
 
+    def child(self, branch: Branch) -> _Node:
+        return _Node(self, branch, list(self.paths), list(self.costs), dict(self.mdds))
 
-class _Restart(Exception):
-    """Two groups were merged: the search starts again from a new root (ICBS's merge & restart)."""
+    def set_member(self, agent: int, path: list[int]) -> None:
+        super().set_member(agent, path)
+        self.mdds.pop(agent, None)
 
 
-class ConflictBasedSearch:
-    """One CBS run on int cells; ``run()`` returns the paths or raises SearchTimeout."""
+class ConflictBasedSearch(MetaAgentSearch):
+    """One CBS run on int cells; ``run()`` returns the optimal paths and the first root's SOC
+    (a lower bound), or raises SearchTimeout."""
 
     def __init__(
         self,
@@ -154,57 +135,36 @@ class ConflictBasedSearch:
         deadline: Deadline,
         stats: SearchStats,
     ) -> None:
-        self.graph = graph
-        self.starts = list(starts)
-        self.goals = list(goals)
+        super().__init__(
+            graph,
+            starts,
+            goals,
+            deadline,
+            stats,
+            options.merge_threshold,
+            options.avoidance_table,
+        )
         self.options = options
-        self.deadline = deadline
-        self.stats = stats
-        self.k = len(self.starts)
-        self.group: tuple[int, ...] = tuple(range(self.k))
         self._counter = 0
-        self._conflict_counts: dict[tuple[frozenset[int], frozenset[int]], int] = {}
-        self._too_big: set[frozenset[int]] = set()
-        self._free_cells = int(graph.free.sum())
-        self._joint_plans: dict[frozenset[int], list[list[int]]] = {}
         self._symmetric = options.corridor or options.rectangle
-        graph.precompute(self.goals)
 
-    def run(self) -> tuple[list[list[int]], int]:
-        """Optimal paths and the root lower bound (SOC of the individually optimal paths)."""
-        first_bound: int | None = None
-        while True:
-            root = self._root()
-            if first_bound is None:
-                first_bound = root.soc
-            try:
-                return self._search(root), first_bound
-            except _Restart:
-                continue
-
-    def _search(self, root: _Node) -> list[list[int]]:
+    def _search(self, root: TreeNode) -> tuple[list[list[int]], int]:
         open_list: list[tuple[int, int, int, _Node]] = []
         self._push(open_list, root)
         while open_list:
             self.deadline.check()
             node = heappop(open_list)[3]
             if not node.conflicts:
-                return node.paths
+                return node.paths, self.first_root_soc
             self.stats.high += 1
             conflict = min(node.conflicts)
             a, b = conflict[2], conflict[3]
-            if self._count(a, b):
-                self._merge(node, a, b)
+            if self.merge_threshold:
+                self._tally(node, a, b)
             pos = positions(node.paths)
+            branches = conflict[6] or [(c,) for c in split(conflict[1:6])]
             children = []
-            for branch in conflict[6] or [(c,) for c in split(conflict[1:6])]:
-                try:
-                    child = self._child(node, branch, pos, self._replan_budget(a, b))
-                except JointSearchLimit:
-                    self._merge(node, a, b)
-                    child = self._child(node, branch, pos, None)
-                if child is None:
-                    continue
+            for child in self._children(node, a, b, branches, pos):
                 if (
                     self.options.bypass
                     and conflict[0] != CARDINAL
@@ -223,167 +183,29 @@ class ConflictBasedSearch:
         self._counter += 1
         heappush(open_list, (node.soc + node.h, len(node.conflicts), self._counter, node))
 
-    def _count(self, a: int, b: int) -> bool:
-        """Count a conflict between the groups of a and b: whether they should merge now."""
-        threshold = self.options.merge_threshold
-        if not threshold:
-            return False
-        ga = frozenset(members(self.group, self.group[a]))
-        gb = frozenset(members(self.group, self.group[b]))
-        key = (ga, gb) if min(ga) < min(gb) else (gb, ga)
-        count = self._conflict_counts.get(key, 0) + 1
-        self._conflict_counts[key] = count
-        return count > threshold
-
-    def _mergeable(self, a: int, b: int) -> frozenset[int] | None:
-        """The agents of a's and b's groups together, if they may be merged."""
-        if not self.options.merge_threshold:
-            return None
-        both = frozenset(members(self.group, self.group[a]) + members(self.group, self.group[b]))
-        ok = may_merge(len(both), self._free_cells) and both not in self._too_big
-        return both if ok else None
-
-    def _replan_budget(self, a: int, b: int) -> int | None:
-        return REPLAN_BUDGET if self._mergeable(a, b) is not None else None
-
-    def _merge(self, node: _Node, a: int, b: int) -> None:
-        """Merge the groups of a and b and restart (raises _Restart), unless the merged group
-        is too large or its joint search exceeds ``JOINT_BUDGET`` (then nothing happens)."""
-        both = self._mergeable(a, b)
-        if both is None:
-            return
-        n = self.graph.num_cells
-        lengths = [len(p) for p in node.paths]
-        cat = (
-            ConflictAvoidanceTable.from_positions(n, positions(node.paths), lengths, sorted(both))
-            if self.options.avoidance_table
-            else None
+    def _low_level(
+        self, agent: int, table: ConstraintTable, cat: ConflictAvoidanceTable | None
+    ) -> tuple[list[int], int] | None:
+        path = space_time_astar(
+            self.graph,
+            self.starts[agent],
+            self.goals[agent],
+            table,
+            cat,
+            self.deadline,
+            self.stats,
         )
-        agents = sorted(both)
-        try:
-            paths = group_plan(
-                self.graph,
-                self.starts,
-                self.goals,
-                agents,
-                cat,
-                self.deadline,
-                self.stats,
-                JOINT_BUDGET,
-            )
-        except JointSearchLimit:
-            self._too_big.add(both)
-            return
-        self._joint_plans[both] = paths
-        self.group = merged(self.group, a, b)
-        raise _Restart
+        return None if path is None else (path, path_cost(path))
 
-    def _root(self) -> _Node:
-        n = self.graph.num_cells
-        paths: list[list[int]] = [[] for _ in range(self.k)]
-        planned: list[int] = []
-        for gid in sorted(set(self.group)):
-            agents = members(self.group, gid)
-            if len(agents) > 1:
-                found = self._joint_plans[frozenset(agents)]
-            else:
-                cat = (
-                    ConflictAvoidanceTable.from_paths(n, [paths[i] for i in planned])
-                    if self.options.avoidance_table
-                    else None
-                )
-                path = space_time_astar(
-                    self.graph,
-                    self.starts[gid],
-                    self.goals[gid],
-                    ConstraintTable(n),
-                    cat,
-                    self.deadline,
-                    self.stats,
-                )
-                if path is None:
-                    raise RuntimeError("an agent has no path although its goal is reachable")
-                found = [path]
-            for i, path in zip(agents, found, strict=True):
-                paths[i] = path
-                planned.append(i)
-        root = _Node(None, (), paths, [path_cost(p) for p in paths], {})
-        pos = positions(paths)
-        root.conflicts = [self._classify(root, c, pos) for c in all_conflicts(paths)]
-        root.h = self._heuristic(root)
-        return root
+    def _new_root(self, paths: list[list[int]], bounds: list[int]) -> _Node:
+        return _Node(None, (), paths, [path_cost(p) for p in paths], {})
 
-    @staticmethod
-    def _constraints(node: _Node) -> list[Constraint]:
-        out: list[Constraint] = []
-        while node.parent is not None:
-            out.extend(node.branch)
-            node = node.parent
-        return out
-
-    def _table(self, node: _Node, agent: int) -> ConstraintTable:
-        return table_for(self.graph.num_cells, self._constraints(node), agent)
-
-    def _child(
-        self, node: _Node, branch: Branch, pos: np.ndarray, budget: int | None
-    ) -> _Node | None:
-        child = _Node(node, branch, list(node.paths), list(node.costs), dict(node.mdds))
-        first = branch[0]
-        agents = violators(first, pos) if first[0] == LENGTH_LE else [first[1]]
-        changed = self._replan(child, agents, pos, budget)
-        if changed is None:
-            return None
-        self._update_conflicts(child, node.conflicts, changed, pos if len(changed) == 1 else None)
-        return child
-
-    def _replan(
-        self, node: _Node, agents: Sequence[int], pos: np.ndarray, budget: int | None
-    ) -> list[int] | None:
-        """Replan the groups of ``agents`` in ``node``; the agents replanned, or None if one of
-        those groups has no plan. Single agents use space-time A*, groups the joint search
-        (raises JointSearchLimit past ``budget`` expansions)."""
-        n = self.graph.num_cells
-        lengths = [len(p) for p in node.paths]
-        constraints = self._constraints(node)
-        changed: list[int] = []
-        for group in groups_of(self.group, agents):
-            cat = (
-                ConflictAvoidanceTable.from_positions(n, pos, lengths, group)
-                if self.options.avoidance_table
-                else None
-            )
-            tables = [table_for(n, constraints, i) for i in group]
-            if len(group) == 1:
-                path = space_time_astar(
-                    self.graph,
-                    self.starts[group[0]],
-                    self.goals[group[0]],
-                    tables[0],
-                    cat,
-                    self.deadline,
-                    self.stats,
-                )
-                paths = None if path is None else [path]
-            else:
-                paths = joint_astar(
-                    self.graph,
-                    [self.starts[i] for i in group],
-                    [self.goals[i] for i in group],
-                    tables,
-                    cat,
-                    self.deadline,
-                    self.stats,
-                    budget,
-                )
-            if paths is None:
-                return None
-            for i, path in zip(group, paths, strict=True):
-                node.paths[i] = path
-                node.costs[i] = path_cost(path)
-                node.mdds.pop(i, None)
-                changed.append(i)
-        node.soc = sum(node.costs)
-        return changed
+    def _set_conflicts(
+        self, node: _Node, kept: list[Classified], new: list[Conflict], pos: np.ndarray
+    ) -> None:
+        now = positions(node.paths) if new and self._symmetric else pos
+        node.conflicts = kept + [self._classify(node, c, now) for c in new]
+        node.h = self._heuristic(node)
 
     def _adopt(self, node: _Node, child: _Node, pos: np.ndarray) -> None:
         """Bypass: the node keeps its constraints and cost but takes the child's better paths."""
@@ -396,31 +218,6 @@ class ConflictBasedSearch:
             node.costs[i] = child.costs[i]
             node.mdds.pop(i, None)
         self._update_conflicts(node, old, changed, pos if len(changed) == 1 else None)
-
-    def _update_conflicts(
-        self,
-        node: _Node,
-        inherited: list[Classified],
-        changed: list[int],
-        pos: np.ndarray | None,
-    ) -> None:
-        """Keep the conflicts not involving ``changed`` agents and find theirs anew (``pos``: the
-        parent's positions, usable when only one agent changed)."""
-        moved = set(changed)
-        kept = [c for c in inherited if c[2] not in moved and c[3] not in moved]
-        if pos is None:
-            pos = positions(node.paths)
-        done: set[int] = set()
-        new: list[Conflict] = []
-        for agent in changed:
-            new.extend(c for c in conflicts_of(agent, node.paths[agent], pos) if c[2] not in done)
-            done.add(agent)
-        now = positions(node.paths) if new and self._symmetric else pos
-        node.conflicts = kept + [self._classify(node, c, now) for c in new]
-        node.h = self._heuristic(node)
-
-    def _single(self, agent: int) -> bool:
-        return self.group.count(self.group[agent]) == 1
 
     def _mdd(self, node: _Node, agent: int) -> tuple[int, ...]:
         singles = node.mdds.get(agent)

@@ -29,27 +29,17 @@ from heapq import heappop, heappush
 
 import numpy as np
 
-from planners.mapf.conflicts import Conflict, all_conflicts, conflicts_of, positions
-from planners.mapf.constraints import (
-    JOINT_BUDGET,
-    LENGTH_LE,
-    MERGE_THRESHOLD,
-    REPLAN_BUDGET,
-    TARGET,
-    Constraint,
-    as_target,
-    groups_of,
-    may_merge,
-    members,
-    merged,
-    split,
-    table_for,
-    violators,
-)
+from planners.mapf.conflicts import Conflict, positions
+from planners.mapf.constraints import MERGE_THRESHOLD, TARGET, as_target, split
 from planners.mapf.deadline import Deadline
 from planners.mapf.grid_graph import GridGraph
-from planners.mapf.joint import JointSearchLimit, group_plan, joint_astar
 from planners.mapf.low_level import SearchStats, focal_astar
+from planners.mapf.meta_agent import (
+    NON_CARDINAL,
+    Classified,
+    MetaAgentSearch,
+    TreeNode,
+)
 from planners.mapf.model import InfeasibleInstanceError, path_cost
 from planners.mapf.symmetry import Branch, corridor_branches, rectangle_branches
 from planners.mapf.tables import ConflictAvoidanceTable, ConstraintTable
@@ -64,18 +54,10 @@ TARGET_AFTER = 2
 SYMMETRY_AFTER = 2
 
 
-class _Node:
-    __slots__ = (
-        "branch",
-        "conflicts",
-        "costs",
-        "done",
-        "lb",
-        "lbs",
-        "parent",
-        "paths",
-        "soc",
-    )
+class _Node(TreeNode):
+    """An ECBS node: also its agents' lower bounds, their sum, and whether it was expanded."""
+
+    __slots__ = ("done", "lb", "lbs")
 
     def __init__(
         self,
@@ -85,19 +67,26 @@ class _Node:
         costs: list[int],
         lbs: list[int],
     ) -> None:
-        self.parent = parent
-        self.branch = branch
-        self.paths = paths
-        self.costs = costs
+        super().__init__(parent, branch, paths, costs)
         self.lbs = lbs
-        self.soc = sum(costs)
         self.lb = sum(lbs)
-        self.conflicts: list[Conflict] = []
         self.done = False
 
+    def child(self, branch: Branch) -> _Node:
+        return _Node(self, branch, list(self.paths), list(self.costs), list(self.lbs))
 
-class _Restart(Exception):
-    """Two groups were merged: the search starts again from a new root."""
+    def set_single(self, agent: int, path: list[int], bound: int) -> None:
+        self.paths[agent] = path
+        self.costs[agent] = path_cost(path)
+        self.lbs[agent] = max(self.lbs[agent], bound)
+
+    def set_member(self, agent: int, path: list[int]) -> None:
+        self.paths[agent] = path
+        self.costs[agent] = self.lbs[agent] = path_cost(path)
+
+    def settle(self) -> None:
+        self.soc = sum(self.costs)
+        self.lb = sum(self.lbs)
 
 
 def ecbs(
@@ -112,15 +101,10 @@ def ecbs(
     """Paths with SOC ≤ w · optimum, and the lower bound that proves it; raises SearchTimeout."""
     if w < 1.0:
         raise ValueError(f"w must be ≥ 1, got {w}")
-    search = _Ecbs(graph, starts, goals, w, deadline, stats, merge_threshold)
-    while True:
-        try:
-            return search.run()
-        except _Restart:
-            continue
+    return _Ecbs(graph, starts, goals, w, deadline, stats, merge_threshold).run()
 
 
-class _Ecbs:
+class _Ecbs(MetaAgentSearch):
     def __init__(
         self,
         graph: GridGraph,
@@ -131,24 +115,11 @@ class _Ecbs:
         stats: SearchStats,
         merge_threshold: int,
     ) -> None:
-        self.graph = graph
-        self.starts = list(starts)
-        self.goals = list(goals)
+        super().__init__(graph, starts, goals, deadline, stats, merge_threshold, True)
         self.w = w
-        self.deadline = deadline
-        self.stats = stats
-        self.merge_threshold = merge_threshold
-        self.k = len(self.starts)
-        self.group: tuple[int, ...] = tuple(range(self.k))
-        self._conflict_counts: dict[tuple[frozenset[int], frozenset[int]], int] = {}
-        self._too_big: set[frozenset[int]] = set()
-        self._free_cells = int(graph.free.sum())
-        self._joint_plans: dict[frozenset[int], list[list[int]]] = {}
-        graph.precompute(self.goals)
 
-    def run(self) -> tuple[list[list[int]], int]:
+    def _search(self, root: TreeNode) -> tuple[list[list[int]], int]:
         w = self.w
-        root = self._root()
         counter = 0
         open_heap: list[tuple[int, int, _Node]] = []
         focal: list[tuple[int, int, int, _Node]] = []
@@ -185,190 +156,49 @@ class _Ecbs:
             if not node.conflicts:
                 return node.paths, open_heap[0][0]
             self.stats.high += 1
-            conflict = min(node.conflicts)
+            conflict = min(node.conflicts)[1:6]
             a, b = conflict[1], conflict[2]
-            count = self._count(a, b)
-            if self.merge_threshold and count > self.merge_threshold:
-                self._merge(node, a, b)
+            count = self._tally(node, a, b)
             if count > TARGET_AFTER:
                 conflict = as_target(conflict, self.goals, node.costs)
             pos = positions(node.paths)
             symmetric = self._symmetric(node, conflict, pos) if count > SYMMETRY_AFTER else None
-            for branch in symmetric or [(c,) for c in split(conflict)]:
-                child = _Node(node, branch, list(node.paths), list(node.costs), list(node.lbs))
-                first = branch[0]
-                agents = violators(first, pos) if first[0] == LENGTH_LE else [first[1]]
-                budget = REPLAN_BUDGET if self._mergeable(a, b) is not None else None
-                try:
-                    changed = self._replan(child, agents, pos, budget)
-                except JointSearchLimit:
-                    self._merge(node, a, b)
-                    changed = self._replan(child, agents, pos, None)
-                if changed is None:
-                    continue
-                self._update_conflicts(child, node.conflicts, changed, pos)
+            branches = symmetric or [(c,) for c in split(conflict)]
+            for child in self._children(node, a, b, branches, pos):
                 push(child)
-
-    @staticmethod
-    def _constraints(node: _Node) -> list[Constraint]:
-        out: list[Constraint] = []
-        anc: _Node | None = node
-        while anc is not None:
-            out.extend(anc.branch)
-            anc = anc.parent
-        return out
 
     def _symmetric(
         self, node: _Node, conflict: Conflict, pos: np.ndarray
     ) -> tuple[Branch, ...] | None:
         """The corridor or rectangle split of a conflict between two single agents, if any."""
         t, a, b, u, v = conflict
-        if v == TARGET or self.group.count(self.group[a]) + self.group.count(self.group[b]) > 2:
+        if v == TARGET or not (self._single(a) and self._single(b)):
             return None
-        n = self.graph.num_cells
-        constraints = self._constraints(node)
-        tables = (table_for(n, constraints, a), table_for(n, constraints, b))
+        tables = (self._table(node, a), self._table(node, b))
         found = corridor_branches(self.graph, pos, conflict, tables, self.deadline)
         if found is None and v == -1:
             found = rectangle_branches(self.graph, pos, t, a, b, u)
         return found
 
-    def _count(self, a: int, b: int) -> int:
-        """Count a conflict between the groups of a and b; how many they have had."""
-        ga = frozenset(members(self.group, self.group[a]))
-        gb = frozenset(members(self.group, self.group[b]))
-        key = (ga, gb) if min(ga) < min(gb) else (gb, ga)
-        count = self._conflict_counts.get(key, 0) + 1
-        self._conflict_counts[key] = count
-        return count
+    def _low_level(
+        self, agent: int, table: ConstraintTable, cat: ConflictAvoidanceTable | None
+    ) -> tuple[list[int], int] | None:
+        assert cat is not None
+        return focal_astar(
+            self.graph,
+            self.starts[agent],
+            self.goals[agent],
+            table,
+            cat,
+            self.w,
+            self.deadline,
+            self.stats,
+        )
 
-    def _mergeable(self, a: int, b: int) -> frozenset[int] | None:
-        """The agents of a's and b's groups together, if they may be merged."""
-        if not self.merge_threshold:
-            return None
-        both = frozenset(members(self.group, self.group[a]) + members(self.group, self.group[b]))
-        ok = may_merge(len(both), self._free_cells) and both not in self._too_big
-        return both if ok else None
+    def _new_root(self, paths: list[list[int]], bounds: list[int]) -> _Node:
+        return _Node(None, (), paths, [path_cost(p) for p in paths], bounds)
 
-    def _merge(self, node: _Node, a: int, b: int) -> None:
-        """Merge the groups of a and b and restart (raises _Restart), unless the merged group
-        is too large or its joint search exceeds ``JOINT_BUDGET`` (then nothing happens)."""
-        both = self._mergeable(a, b)
-        if both is None:
-            return
-        n = self.graph.num_cells
-        agents = sorted(both)
-        lengths = [len(p) for p in node.paths]
-        cat = ConflictAvoidanceTable.from_positions(n, positions(node.paths), lengths, agents)
-        try:
-            paths = group_plan(
-                self.graph,
-                self.starts,
-                self.goals,
-                agents,
-                cat,
-                self.deadline,
-                self.stats,
-                JOINT_BUDGET,
-            )
-        except JointSearchLimit:
-            self._too_big.add(both)
-            return
-        self._joint_plans[both] = paths
-        self.group = merged(self.group, a, b)
-        raise _Restart
-
-    def _root(self) -> _Node:
-        n = self.graph.num_cells
-        paths: list[list[int]] = [[] for _ in range(self.k)]
-        lbs = [0] * self.k
-        planned: list[int] = []
-        for gid in sorted(set(self.group)):
-            agents = members(self.group, gid)
-            if len(agents) > 1:
-                for i, path in zip(agents, self._joint_plans[frozenset(agents)], strict=True):
-                    paths[i] = path
-                    lbs[i] = path_cost(path)
-            else:
-                found = focal_astar(
-                    self.graph,
-                    self.starts[gid],
-                    self.goals[gid],
-                    ConstraintTable(n),
-                    ConflictAvoidanceTable.from_paths(n, [paths[i] for i in planned]),
-                    self.w,
-                    self.deadline,
-                    self.stats,
-                )
-                if found is None:
-                    raise RuntimeError("an agent has no path although its goal is reachable")
-                paths[gid], lbs[gid] = found
-            planned.extend(agents)
-        root = _Node(None, (), paths, [path_cost(p) for p in paths], lbs)
-        root.conflicts = all_conflicts(paths)
-        return root
-
-    def _replan(
-        self, node: _Node, agents: Sequence[int], pos: np.ndarray, budget: int | None
-    ) -> list[int] | None:
-        """Replan the groups of ``agents`` under the node's constraints; the agents replanned,
-        or None if a group has no plan (JointSearchLimit past ``budget`` joint expansions)."""
-        n = self.graph.num_cells
-        lengths = [len(p) for p in node.paths]
-        constraints = self._constraints(node)
-        changed: list[int] = []
-        for group in groups_of(self.group, agents):
-            cat = ConflictAvoidanceTable.from_positions(n, pos, lengths, group)
-            tables = [table_for(n, constraints, i) for i in group]
-            if len(group) == 1:
-                agent = group[0]
-                found = focal_astar(
-                    self.graph,
-                    self.starts[agent],
-                    self.goals[agent],
-                    tables[0],
-                    cat,
-                    self.w,
-                    self.deadline,
-                    self.stats,
-                )
-                if found is None:
-                    return None
-                path, f_min = found
-                node.paths[agent] = path
-                node.costs[agent] = path_cost(path)
-                node.lbs[agent] = max(node.lbs[agent], f_min)
-            else:
-                paths = joint_astar(
-                    self.graph,
-                    [self.starts[i] for i in group],
-                    [self.goals[i] for i in group],
-                    tables,
-                    cat,
-                    self.deadline,
-                    self.stats,
-                    budget,
-                )
-                if paths is None:
-                    return None
-                for i, path in zip(group, paths, strict=True):
-                    node.paths[i] = path
-                    node.costs[i] = node.lbs[i] = path_cost(path)
-            changed.extend(group)
-        node.soc = sum(node.costs)
-        node.lb = sum(node.lbs)
-        return changed
-
-    def _update_conflicts(
-        self, node: _Node, inherited: list[Conflict], changed: list[int], pos: np.ndarray
+    def _set_conflicts(
+        self, node: _Node, kept: list[Classified], new: list[Conflict], pos: np.ndarray
     ) -> None:
-        moved = set(changed)
-        kept = [c for c in inherited if c[1] not in moved and c[2] not in moved]
-        if len(changed) > 1:
-            pos = positions(node.paths)
-        done: set[int] = set()
-        new: list[Conflict] = []
-        for agent in changed:
-            new.extend(c for c in conflicts_of(agent, node.paths[agent], pos) if c[2] not in done)
-            done.add(agent)
-        node.conflicts = kept + new
+        node.conflicts = kept + [(NON_CARDINAL, *c, ()) for c in new]
