@@ -102,7 +102,6 @@ def joint_astar(
     """
     m = len(starts)
     n = graph.num_cells
-    succ = graph.successors
     dists = [graph.distances(g) for g in goals]
     earliest: list[int] = []
     latest: list[int] = []
@@ -260,6 +259,7 @@ def joint_astar(
 
     if cat is not None:
         cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
+    moves = [table.moves(graph.successors) for table in tables]
     expanded = 0
     try:
         while heap:
@@ -283,21 +283,12 @@ def joint_astar(
             g = -neg_g + 1
             u = pos[i]
             goal = goals[i]
-            table = tables[i]
-            vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
             dist = dists[i]
             # the heuristic without agent i's part, which the move changes
             h_rest = n_h[node] - h_of(i, u, t, fin)
             nt = t + 1
             tn = nt * n
-            for v in succ[u]:
-                if tn + v in vertex:
-                    continue
-                bf = blocked.get(v)
-                if bf is not None and nt >= bf:
-                    continue
-                if v != u and (tn + u) * n + v in edge:
-                    continue
+            for v in moves[i](u, nt):
                 if nt + dist[v] > latest[i]:
                     continue
                 clash = False

@@ -67,8 +67,7 @@ def space_time_astar(
     latest = UNREACHABLE if table.max_finish is None else table.max_finish
     if dist[start] > latest:
         return None
-    succ = graph.successors
-    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    moves = table.moves(graph.successors)
     horizon = max(table.horizon, earliest) + 1
     if cat is not None:
         horizon = max(horizon, cat.horizon + 1)
@@ -101,14 +100,7 @@ def space_time_astar(
                 return _path(cells, parents, node)
             nt = t + 1
             tn = nt * n
-            for nc in succ[cell]:
-                if tn + nc in vertex:
-                    continue
-                bf = blocked.get(nc)
-                if bf is not None and nt >= bf:
-                    continue
-                if nc != cell and (tn + cell) * n + nc in edge:
-                    continue
+            for nc in moves(cell, nt):
                 h = dist[nc]
                 if nt + h > latest:
                     continue
@@ -164,8 +156,7 @@ def focal_astar(
     latest = UNREACHABLE if table.max_finish is None else table.max_finish
     if dist[start] > latest:
         return None
-    succ = graph.successors
-    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    moves = table.moves(graph.successors)
     cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
     horizon = max(table.horizon, earliest, cat.horizon) + 1
     span = horizon + 1
@@ -215,14 +206,7 @@ def focal_astar(
                 return _path(cells, parents, node), f_min
             nt = t + 1
             tn = nt * n
-            for nc in succ[cell]:
-                if tn + nc in vertex:
-                    continue
-                bf = blocked.get(nc)
-                if bf is not None and nt >= bf:
-                    continue
-                if nc != cell and (tn + cell) * n + nc in edge:
-                    continue
+            for nc in moves(cell, nt):
                 h = dist[nc]
                 if nt + h > latest:
                     continue

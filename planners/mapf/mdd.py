@@ -17,23 +17,15 @@ def mdd_singletons(
     graph: GridGraph, start: int, goal: int, cost: int, table: ConstraintTable
 ) -> tuple[int, ...]:
     """For t in 0..cost, the only cell of MDD level t, or -1 where the level is wider."""
-    n = graph.num_cells
     dist = graph.distances(goal)
-    succ = graph.successors
-    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    moves = table.moves(graph.successors)
     levels: list[dict[int, list[int]]] = [{start: []}]
     for t in range(1, cost + 1):
         budget = cost - t
-        tn = t * n
         layer: dict[int, list[int]] = {}
         for cell in levels[-1]:
-            for nc in succ[cell]:
-                if dist[nc] > budget or tn + nc in vertex:
-                    continue
-                bf = blocked.get(nc)
-                if bf is not None and t >= bf:
-                    continue
-                if nc != cell and (tn + cell) * n + nc in edge:
+            for nc in moves(cell, t):
+                if dist[nc] > budget:
                     continue
                 parents = layer.get(nc)
                 if parents is None:
@@ -72,27 +64,19 @@ def mdd_blocks(
     """
     if any(cell == goal and t >= cost for cell, t in forbidden):
         return True
-    n = graph.num_cells
     dist = graph.distances(goal)
-    succ = graph.successors
-    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
     if cost == 0 or (start, 0) in forbidden:
         return cost != 0 or start != goal or (start, 0) in forbidden
+    moves = table.moves(graph.successors)
     layer = {start}
     for t in range(1, cost + 1):
         budget = cost - t
-        tn = t * n
         nxt: set[int] = set()
         for cell in layer:
-            for nc in succ[cell]:
+            for nc in moves(cell, t):
                 if t == cost and (nc != goal or cell == goal):
                     continue
-                if dist[nc] > budget or tn + nc in vertex or (nc, t) in forbidden:
-                    continue
-                bf = blocked.get(nc)
-                if bf is not None and t >= bf:
-                    continue
-                if nc != cell and (tn + cell) * n + nc in edge:
+                if dist[nc] > budget or (nc, t) in forbidden:
                     continue
                 nxt.add(nc)
         if not nxt:

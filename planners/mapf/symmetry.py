@@ -76,12 +76,10 @@ def earliest_arrival(
     Space-time A* on ``(cell, t)`` with the true distance as heuristic (admissible with a move
     banned too); beyond the table's horizon only parked cells matter, so times collapse there.
     """
-    n = graph.num_cells
     dist = graph.distances(target)
     if dist[start] >= UNREACHABLE or dist[start] >= bound:
         return bound
-    succ = graph.successors
-    vertex, edge, blocked = table.vertex, table.edge, table.blocked_from
+    moves = table.moves(graph.successors)
     horizon = table.horizon + 1
     span = horizon + 1
     seen = {start * span}
@@ -97,16 +95,8 @@ def earliest_arrival(
         if popped % _CHECK_EVERY == 0:
             deadline.check()
         nt = t + 1
-        tn = nt * n
-        for nc in succ[cell]:
+        for nc in moves(cell, nt):
             if banned is not None and nc != cell and (cell, nc) in (banned, banned[::-1]):
-                continue
-            if tn + nc in vertex:
-                continue
-            bf = blocked.get(nc)
-            if bf is not None and nt >= bf:
-                continue
-            if nc != cell and (tn + cell) * n + nc in edge:
                 continue
             key = nc * span + (nt if nt < horizon else horizon)
             if key in seen or dist[nc] >= UNREACHABLE:

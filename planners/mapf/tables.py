@@ -2,15 +2,24 @@
 
 Keys are ints: a vertex ``(cell, t)`` is ``t * n + cell``; a move ``u → v`` arriving at ``t`` is
 ``(t * n + u) * n + v``, where ``n`` is the number of grid cells.
+
+Every low level that expands ``(cell, t)`` states under a constraint table (space-time and focal
+A*, the joint search, MDDs, the earliest arrivals of corridor reasoning) asks the table for the
+moves it allows (``ConstraintTable.moves``): one call per expansion. The table keeps, beside the
+constraints, the states whose moves a constraint touches, so an expansion that no constraint
+touches (most of them) gets the graph's successor tuple as it is, without a check per successor.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from planners.mapf.conflicts import positions
+
+# no time: later than any time a search reaches
+_NEVER = 1 << 62
 
 
 class ConstraintTable:
@@ -24,6 +33,10 @@ class ConstraintTable:
     """
 
     __slots__ = (
+        "_calm",
+        "_near",
+        "_parked_pending",
+        "_vertex_pending",
         "blocked_from",
         "edge",
         "horizon",
@@ -43,20 +56,32 @@ class ConstraintTable:
         self.min_finish = 0
         self.max_finish: int | None = None
         self.horizon = 0
+        # states (t * n + cell) from which some move arriving at t is forbidden, and per cell
+        # the first arrival time from which a successor is blocked for good (``moves``); the
+        # vertex keys and parked cells added since ``moves`` last spread them to their neighbours
+        self._near: set[int] = set()
+        self._calm: list[int] | None = None
+        self._vertex_pending: list[int] = []
+        self._parked_pending: list[int] = []
 
     def add_vertex(self, cell: int, t: int) -> None:
-        self.vertex.add(t * self.n + cell)
+        key = t * self.n + cell
+        self.vertex.add(key)
+        self._vertex_pending.append(key)
         self.vertex_times.setdefault(cell, []).append(t)
-        self.horizon = max(self.horizon, t)
+        if t > self.horizon:
+            self.horizon = t
 
     def add_edge(self, u: int, v: int, t: int) -> None:
         """Forbid the move ``u → v`` that arrives at time ``t``."""
         self.edge.add((t * self.n + u) * self.n + v)
+        self._near.add(t * self.n + u)
         self.horizon = max(self.horizon, t)
 
     def add_parked(self, cell: int, t: int) -> None:
         """``cell`` is occupied for every time ``≥ t``."""
         self.blocked_from[cell] = min(t, self.blocked_from.get(cell, t))
+        self._parked_pending.append(cell)
         self.horizon = max(self.horizon, t)
 
     def add_min_finish(self, t: int) -> None:
@@ -75,7 +100,10 @@ class ConstraintTable:
         last = len(path) - 1
         for t in range(last):
             self.add_vertex(path[t], t)
-            self.edge.add(((t + 1) * n + path[t + 1]) * n + path[t])
+            # the move back, arriving at t + 1 (``add_edge``)
+            key = (t + 1) * n + path[t + 1]
+            self.edge.add(key * n + path[t])
+            self._near.add(key)
         self.add_parked(path[last], last)
 
     def earliest_finish(self, goal: int) -> int | None:
@@ -87,6 +115,48 @@ class ConstraintTable:
         if self.max_finish is not None and earliest > self.max_finish:
             return None
         return earliest
+
+    def moves(self, successors: Sequence[Sequence[int]]) -> Callable[[int, int], Sequence[int]]:
+        """``moves(cell, t)``: the cells among ``successors[cell]`` (the graph's successor lists:
+        wait first, then the neighbours) that an agent in ``cell`` at ``t - 1`` may be in at
+        ``t``: no vertex constraint there at t, not blocked for good by t, the move not
+        forbidden. For the successor lists of one graph; valid until the table changes."""
+        n = self.n
+        near = self._near
+        for key in self._vertex_pending:
+            t, cell = divmod(key, n)
+            tn = t * n
+            near.update([tn + u for u in successors[cell]])
+        self._vertex_pending.clear()
+        if self._calm is None:
+            self._calm = [_NEVER] * n
+        calm = self._calm
+        for cell in self._parked_pending:
+            t = self.blocked_from[cell]
+            for u in successors[cell]:
+                if t < calm[u]:
+                    calm[u] = t
+        self._parked_pending.clear()
+        vertex, edge, blocked = self.vertex, self.edge, self.blocked_from
+
+        def admissible(cell: int, t: int) -> Sequence[int]:
+            key = t * n + cell
+            if key not in near and t < calm[cell]:
+                return successors[cell]
+            tn = t * n
+            out = []
+            for nc in successors[cell]:
+                if tn + nc in vertex:
+                    continue
+                bf = blocked.get(nc)
+                if bf is not None and t >= bf:
+                    continue
+                if nc != cell and key * n + nc in edge:
+                    continue
+                out.append(nc)
+            return out
+
+        return admissible
 
 
 class ConflictAvoidanceTable:
