@@ -108,29 +108,14 @@ def solve(
     details: dict[str, object] = {}
     try:
         if solver in ("pp", "sipp-pp"):
+            low_level = "sipp" if solver == "sipp-pp" else "astar"
             paths, used, attempts = prioritized(
-                graph,
-                starts,
-                goals,
-                order,
-                "sipp" if solver == "sipp-pp" else "astar",
-                seed,
-                max_restarts,
-                deadline,
-                stats,
+                graph, starts, goals, order, low_level, seed, max_restarts, deadline, stats
             )
             details = {"order": list(used), "attempts": attempts}
             if paths is None:
-                return MapfResult(
-                    "failed",
-                    solver,
-                    None,
-                    deadline.elapsed(),
-                    stats.high,
-                    stats.low,
-                    message=f"no priority order worked ({attempts} tried; PP is incomplete)",
-                    details=details,
-                )
+                message = f"no priority order worked ({attempts} tried; PP is incomplete)"
+                return _unsolved("failed", solver, deadline, stats, message, details)
         elif solver == "ecbs":
             paths, lower_bound = ecbs(graph, starts, goals, w, deadline, stats)
             details = {"w": w}
@@ -139,20 +124,10 @@ def solve(
             search = ConflictBasedSearch(graph, starts, goals, options, deadline, stats)
             paths, _ = search.run()
     except InfeasibleInstanceError as err:
-        return MapfResult(
-            "infeasible", solver, None, deadline.elapsed(), stats.high, stats.low, message=str(err)
-        )
+        return _unsolved("infeasible", solver, deadline, stats, str(err), {})
     except SearchTimeout:
-        return MapfResult(
-            "timeout",
-            solver,
-            None,
-            deadline.elapsed(),
-            stats.high,
-            stats.low,
-            message=f"no solution within {time_limit_s:g} s",
-            details=details,
-        )
+        message = f"no solution within {time_limit_s:g} s"
+        return _unsolved("timeout", solver, deadline, stats, message, details)
     solution = MapfSolution(tuple(tuple(graph.rc(c) for c in _trim(p)) for p in paths))
     if solver.startswith("cbs"):
         lower_bound = solution.soc
@@ -164,6 +139,27 @@ def solve(
         stats.high,
         stats.low,
         lower_bound,
+        details=details,
+    )
+
+
+def _unsolved(
+    status: str,
+    solver: str,
+    deadline: Deadline,
+    stats: SearchStats,
+    message: str,
+    details: dict[str, object],
+) -> MapfResult:
+    """The result of a search that found no solution (``status``: why)."""
+    return MapfResult(
+        status,
+        solver,
+        None,
+        deadline.elapsed(),
+        stats.high,
+        stats.low,
+        message=message,
         details=details,
     )
 

@@ -47,6 +47,29 @@ def _path(cells: list[int], parents: list[int], node: int) -> list[int]:
     return out
 
 
+def _bounds(
+    graph: GridGraph,
+    start: int,
+    goal: int,
+    table: ConstraintTable,
+    cat: ConflictAvoidanceTable | None,
+) -> tuple[int, int, list[int], int] | None:
+    """``(earliest, latest, dist, horizon)`` of a search: the first and last times the agent may
+    finish at its goal, the distances to it, and the first time from which states are merged
+    (beyond every constraint and avoidance entry); None when no path can exist."""
+    earliest = table.earliest_finish(goal)
+    if earliest is None:
+        return None
+    dist = graph.distances(goal)
+    if dist[start] >= UNREACHABLE:
+        return None
+    latest = UNREACHABLE if table.max_finish is None else table.max_finish
+    if dist[start] > latest:
+        return None
+    horizon = max(table.horizon, earliest, 0 if cat is None else cat.horizon) + 1
+    return earliest, latest, dist, horizon
+
+
 def space_time_astar(
     graph: GridGraph,
     start: int,
@@ -57,30 +80,21 @@ def space_time_astar(
     stats: SearchStats,
 ) -> list[int] | None:
     """The cheapest path from ``start`` to ``goal`` (parked there) under ``table``, or None."""
-    earliest = table.earliest_finish(goal)
-    if earliest is None:
+    bounds = _bounds(graph, start, goal, table, cat)
+    if bounds is None:
         return None
+    earliest, latest, dist, horizon = bounds
     n = graph.num_cells
-    dist = graph.distances(goal)
-    if dist[start] >= UNREACHABLE:
-        return None
-    latest = UNREACHABLE if table.max_finish is None else table.max_finish
-    if dist[start] > latest:
-        return None
     moves = table.moves(graph.successors)
-    horizon = max(table.horizon, earliest) + 1
     if cat is not None:
-        horizon = max(horizon, cat.horizon + 1)
         cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
     span = horizon + 1
     arrived = n * span  # key of the goal entered from another cell at t: arrived + t
     cells = [start]
     times = [0]
-    confs = [0]
     parents = [-1]
     keys = [arrived if start == goal else start * span]
-    h0 = max(dist[start], earliest)
-    heap = [(h0, 0, 0, 0)]
+    heap = [(max(dist[start], earliest), 0, 0, 0)]
     closed: set[int] = set()
     best_conf: dict[int, int] = {}
     expanded = 0
@@ -126,7 +140,6 @@ def space_time_astar(
                 idx = len(cells)
                 cells.append(nc)
                 times.append(nt)
-                confs.append(c)
                 parents.append(node)
                 keys.append(nkey)
                 heappush(heap, (nt + h, c, -nt, idx))
@@ -146,56 +159,32 @@ def focal_astar(
     stats: SearchStats,
 ) -> tuple[list[int], int] | None:
     """A path of cost ≤ w · optimum with few CAT collisions, and the lower bound ``f_min``."""
-    earliest = table.earliest_finish(goal)
-    if earliest is None:
+    bounds = _bounds(graph, start, goal, table, cat)
+    if bounds is None:
         return None
+    earliest, latest, dist, horizon = bounds
     n = graph.num_cells
-    dist = graph.distances(goal)
-    if dist[start] >= UNREACHABLE:
-        return None
-    latest = UNREACHABLE if table.max_finish is None else table.max_finish
-    if dist[start] > latest:
-        return None
     moves = table.moves(graph.successors)
     cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
-    horizon = max(table.horizon, earliest, cat.horizon) + 1
     span = horizon + 1
     arrived = n * span  # key of the goal entered from another cell at t: arrived + t
-    cells = [start]
-    times = [0]
-    fs = [max(dist[start], earliest)]
-    confs = [0]
-    parents = [-1]
+    f0 = max(dist[start], earliest)
+    cells, times, confs, parents = [start], [0], [0], [-1]
     keys = [arrived if start == goal else start * span]
     current: dict[int, int] = {keys[0]: 0}
     done: set[int] = set()
-    open_heap = [(fs[0], 0)]
-    focal = [(0, fs[0], 0, 0)]
+    open_heap = [(f0, 0)]
+    focal = [(0, f0, 0, 0)]
     waiting: list[tuple[int, int]] = []
-    threshold = int(w * fs[0] + 1e-9)
+    threshold = int(w * f0 + 1e-9)
+    nodes = (done, current, keys, confs, times)
     expanded = 0
-
-    def live(i: int) -> bool:
-        return i not in done and current.get(keys[i]) == i
-
     try:
         while True:
-            while open_heap and not live(open_heap[0][1]):
-                heappop(open_heap)
-            if not open_heap:
+            picked = _pick(open_heap, focal, waiting, threshold, w, nodes)
+            if picked is None:
                 return None
-            f_min = open_heap[0][0]
-            new_threshold = int(w * f_min + 1e-9)
-            if new_threshold > threshold:
-                threshold = new_threshold
-                while waiting and waiting[0][0] <= threshold:
-                    f, i = heappop(waiting)
-                    if live(i):
-                        heappush(focal, (confs[i], f, -times[i], i))
-            # never empty here: threshold ≥ f_min, so the node at the top of OPEN is in FOCAL
-            while not live(focal[0][3]):
-                heappop(focal)
-            conf, _f, _, node = heappop(focal)
+            node, conf, f_min, threshold = picked
             done.add(node)
             expanded += 1
             if expanded % _CHECK_EVERY == 0:
@@ -227,7 +216,6 @@ def focal_astar(
                 cells.append(nc)
                 times.append(nt)
                 f = nt + h
-                fs.append(f)
                 confs.append(c)
                 parents.append(node)
                 keys.append(nkey)
@@ -239,3 +227,37 @@ def focal_astar(
                     heappush(waiting, (f, idx))
     finally:
         stats.low += expanded
+
+
+def _pick(
+    open_heap: list[tuple[int, int]],
+    focal: list[tuple[int, int, int, int]],
+    waiting: list[tuple[int, int]],
+    threshold: int,
+    w: float,
+    nodes: tuple[set[int], dict[int, int], list[int], list[int], list[int]],
+) -> tuple[int, int, int, int] | None:
+    """The next node of a focal search, its conflicts, ``f_min`` and the focal bound
+    ``w · f_min`` (FOCAL takes the waiting nodes that bound now admits), or None when OPEN is
+    empty. ``nodes``: the expanded nodes, the live node of each state key, and the nodes' keys,
+    conflicts and times; a node is live while unexpanded and the latest of its state."""
+    done, current, keys, confs, times = nodes
+    while open_heap and (
+        open_heap[0][1] in done or current.get(keys[open_heap[0][1]]) != open_heap[0][1]
+    ):
+        heappop(open_heap)
+    if not open_heap:
+        return None
+    f_min = open_heap[0][0]
+    bound = int(w * f_min + 1e-9)
+    if bound > threshold:
+        threshold = bound
+        while waiting and waiting[0][0] <= threshold:
+            f, i = heappop(waiting)
+            if i not in done and current.get(keys[i]) == i:
+                heappush(focal, (confs[i], f, -times[i], i))
+    # never empty here: threshold ≥ f_min, so the node at the top of OPEN is in FOCAL
+    while focal[0][3] in done or current.get(keys[focal[0][3]]) != focal[0][3]:
+        heappop(focal)
+    conf, _f, _, node = heappop(focal)
+    return node, conf, f_min, threshold

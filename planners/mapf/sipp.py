@@ -109,6 +109,11 @@ def sipp(
             return None
     finally:
         stats.low += expanded
+    return _path(cells, arrivals, parents, node)
+
+
+def _path(cells: list[int], arrivals: list[int], parents: list[int], node: int) -> list[int]:
+    """The cells per time step of the chain of states ending at ``node``, the waits filled in."""
     path: list[int] = []
     while node >= 0:
         parent = parents[node]

@@ -199,28 +199,57 @@ def corridor_branches(
     return first, second
 
 
+def _stretch(
+    pos: np.ndarray, agent: int, x: tuple[int, int], t: int, cols: int
+) -> tuple[tuple[int, int], int] | None:
+    """The agent's start (row, column) and the last time of its Manhattan-optimal stretch from
+    it (every step one further from the start), or None if it did not reach ``x`` at ``t`` so."""
+    s = divmod(int(pos[agent, 0]), cols)
+    if abs(x[0] - s[0]) + abs(x[1] - s[1]) != t:
+        return None
+    end = t
+    while end + 1 < pos.shape[1]:
+        g = divmod(int(pos[agent, end + 1]), cols)
+        if abs(g[0] - s[0]) + abs(g[1] - s[1]) != end + 1:
+            break
+        end += 1
+    return s, end
+
+
+def _corner(
+    rs: tuple[int, int],
+    x: tuple[int, int],
+    far: tuple[int, int],
+    first_col: dict[int, int],
+    first_row: dict[int, int],
+) -> tuple[int, int] | None:
+    """The corner Rg of the largest rectangle from ``rs`` (area at least 2) between the conflict
+    cell ``x`` and ``far`` whose bottom side the top agent and right side the left agent both
+    cross (``first_col``, ``first_row``), in normalized coordinates; None if there is none."""
+    best: tuple[int, int, int] | None = None
+    for r in range(x[0], far[0] + 1):
+        for c in range(far[1], x[1] - 1, -1):
+            if first_col[r] <= c and first_row[c] <= r:
+                area = (r - rs[0] + 1) * (c - rs[1] + 1)
+                if best is None or area > best[0]:
+                    best = (area, r, c)
+                break
+    if best is None or best[0] < 2:
+        return None
+    return best[1], best[2]
+
+
 def rectangle_branches(
     graph: GridGraph, pos: np.ndarray, t: int, a: int, b: int, cell: int
 ) -> tuple[Branch, Branch] | None:
     """The rectangle split (barrier constraints) of a vertex conflict between ``a`` and ``b`` in
     ``cell`` at time t, or None if it is no rectangle conflict. Branch 0 constrains a."""
     cols = graph.cols
-    horizon = pos.shape[1]
     x = divmod(cell, cols)
-    stretches = []
-    for agent in (a, b):
-        s = divmod(int(pos[agent, 0]), cols)
-        if abs(x[0] - s[0]) + abs(x[1] - s[1]) != t:
-            return None
-        # the Manhattan-optimal stretch from the start: every step one further from it
-        end = t
-        while end + 1 < horizon:
-            g = divmod(int(pos[agent, end + 1]), cols)
-            if abs(g[0] - s[0]) + abs(g[1] - s[1]) != end + 1:
-                break
-            end += 1
-        stretches.append((s, end))
-    (sa, ea), (sb, eb) = stretches
+    stretch_a, stretch_b = _stretch(pos, a, x, t, cols), _stretch(pos, b, x, t, cols)
+    if stretch_a is None or stretch_b is None:
+        return None
+    (sa, ea), (sb, eb) = stretch_a, stretch_b
     ga, gb = divmod(int(pos[a, ea]), cols), divmod(int(pos[b, eb]), cols)
     signs = []
     for axis in (0, 1):
@@ -254,23 +283,15 @@ def rectangle_branches(
     for s in range(end_of[left] + 1):
         r, c = norm(divmod(int(pos[left, s]), cols))
         first_row.setdefault(c, r)
-    nx = norm(x)
     g_top, g_left = (
         norm(divmod(int(pos[top, end_of[top]]), cols)),
         norm(divmod(int(pos[left, end_of[left]]), cols)),
     )
-    r_max, c_max = min(g_top[0], g_left[0]), min(g_top[1], g_left[1])
-    best: tuple[int, int, int] | None = None
-    for r in range(nx[0], r_max + 1):
-        for c in range(c_max, nx[1] - 1, -1):
-            if first_col[r] <= c and first_row[c] <= r:
-                area = (r - rs[0] + 1) * (c - rs[1] + 1)
-                if best is None or area > best[0]:
-                    best = (area, r, c)
-                break
-    if best is None or best[0] < 2:
+    far = (min(g_top[0], g_left[0]), min(g_top[1], g_left[1]))
+    corner = _corner(rs, norm(x), far, first_col, first_row)
+    if corner is None:
         return None
-    _, rg_r, rg_c = best
+    rg_r, rg_c = corner
     starts = {
         top: norm(divmod(int(pos[top, 0]), cols)),
         left: norm(divmod(int(pos[left, 0]), cols)),
