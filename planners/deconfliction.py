@@ -49,7 +49,7 @@ import numpy as np
 from planners.dependencies import Dependency, dependencies, has_cycle, route_of
 from planners.mapf import MapfInstance, solve
 from planners.mapf.deadline import Deadline
-from planners.mapf.grid_graph import UNREACHABLE
+from planners.mapf.grid_graph import UNREACHABLE, GridGraph
 from planners.mapf.low_level import SearchStats
 from planners.mapf.model import SearchTimeout
 from planners.mapf.sipp import sipp
@@ -61,6 +61,11 @@ STATUSES = ("success", "unreachable", "failed")
 ECBS_W = 1.5
 # a cell with at most this many neighbours is part of a narrow passage (a corridor's chain)
 NARROW_DEGREE = 2
+# why a joint plan whose order of passage has a cycle is refused
+_CYCLIC = (
+    ", but it moves robots round a block of cells in one step, "
+    "an order of passage no delay-tolerant execution can keep"
+)
 
 
 @dataclass(frozen=True)
@@ -165,75 +170,32 @@ def plan_round(
     ``max_reorders`` bounds the priority orders tried after the first (see the module);
     ``joint_only`` plans the round jointly without trying priorities first."""
     deadline = Deadline(float("inf"))
-    if speed <= 0:
-        raise ValueError(f"speed must be > 0, got {speed}")
-    names = [r.name for r in requests]
-    if len(set(names)) != len(names):
-        raise ValueError(f"robot names must be distinct, got {names}")
+    names = _names(requests, speed)
     step_s = graph.cell_size / speed
     t0 = min((r.start_time for r in requests), default=0.0)
     if not requests:
         return RoundPlan("success", "pp", (), t0, step_s)
-    starts = _assign(graph.candidates(np.array([r.start for r in requests])))
-    goals = _assign(graph.candidates(np.array([r.goal for r in requests])), starts)
-    problems = []
-    for r, s, g in zip(requests, starts, goals, strict=True):
-        if s is None:
-            problems.append(f"{r.name}: no free cell for its start {r.start}")
-        elif g is None:
-            problems.append(f"{r.name}: no free cell for its goal {r.goal}")
-        elif graph.component[s] != graph.component[g]:
-            problems.append(f"{r.name}: its goal {r.goal} cannot be reached from {r.start}")
-    if problems:
-        bad = tuple(p.split(":", 1)[0] for p in problems)
-        return RoundPlan(
-            "unreachable",
-            "none",
-            (),
-            t0,
-            step_s,
-            unreachable=bad,
-            message="; ".join(problems),
-            runtime_s=deadline.elapsed(),
-        )
+    located = _cells(graph, requests, t0, step_s, deadline)
+    if isinstance(located, RoundPlan):
+        return located
+    starts, goals = located
     mg = graph.graph
-    start_ids = [mg.cell(s) for s in starts]  # type: ignore[arg-type]
-    goal_ids = [mg.cell(g) for g in goals]  # type: ignore[arg-type]
+    start_ids, goal_ids = [mg.cell(s) for s in starts], [mg.cell(g) for g in goals]
     holds = [max(0, round((r.start_time - t0) / step_s)) for r in requests]
-    instance = MapfInstance(graph.usable, tuple(starts), tuple(goals), tuple(names))  # type: ignore[arg-type]
+    instance = MapfInstance(graph.usable, tuple(starts), tuple(goals), tuple(names))
     mg.precompute(goal_ids)
-    deg = graph.degree()
-    dist = [mg.distances(g)[s] for s, g in zip(start_ids, goal_ids, strict=True)]
-    order = sorted(
-        range(len(requests)),
-        key=lambda i: (
-            start_ids[i] != goal_ids[i],
-            deg[starts[i]] > NARROW_DEGREE,  # type: ignore[index]
-            -dist[i],
-            names[i],
-        ),
-    )
-    paths: list[list[Cell]] | int = (
-        0 if joint_only else _prioritized(graph, start_ids, goal_ids, holds, order, deadline)
-    )
-    tried = {tuple(order)}
-    while not joint_only and isinstance(paths, int) and len(tried) <= max_reorders:
-        # the robot that found no path goes first (it keeps its place among the idle ones)
-        stuck_robot = paths
-        rest = [i for i in order if i != stuck_robot]
-        idle = sum(start_ids[i] == goal_ids[i] for i in rest)
-        order = [*rest[:idle], stuck_robot, *rest[idle:]]
-        if tuple(order) in tried:
-            break
-        tried.add(tuple(order))
-        paths = _prioritized(graph, start_ids, goal_ids, holds, order, deadline)
-    method = "pp"
-    message = ""
+    order = _first_order(graph, starts, start_ids, goal_ids, names)
+    paths: list[list[Cell]] | int = 0
+    if not joint_only:
+        paths, order = _by_priorities(
+            graph, start_ids, goal_ids, holds, order, max_reorders, deadline
+        )
+    method, message = "pp", ""
     if isinstance(paths, int):
         why = "" if joint_only else f"prioritized planning found no path for {names[paths]}; "
         method = "cbs" if len(requests) <= cbs_max_robots else "ecbs"
-        result = solve(instance, method, w=ECBS_W, time_limit_s=joint_time_limit_s, graph=mg)
-        if result.status != "success":
+        joint = _jointly(instance, method, joint_time_limit_s, holds, mg)
+        if isinstance(joint, str):
             return RoundPlan(
                 "failed",
                 method,
@@ -241,29 +203,21 @@ def plan_round(
                 t0,
                 step_s,
                 order=tuple(names[i] for i in order),
-                message=f"{why}{method.upper()}: {result.status} ({result.message})",
+                message=f"{why}{method.upper()}: {joint}",
                 instance=instance,
                 runtime_s=deadline.elapsed(),
             )
-        wait = max(holds)
-        paths = [[p[0]] * wait + list(p) for p in result.solution.paths]  # type: ignore[union-attr]
-        holds = [wait] * len(requests)
+        paths, holds = joint
         message = f"{why}{method.upper()} planned the round"
-    transits = tuple(
-        Transit(name, tuple(path), _waypoints(graph, path, t0, step_s))
-        for name, path in zip(names, paths, strict=True)
-    )
-    routes = [route_of(t.name, t.cells) for t in transits]
-    edges = dependencies(routes)
-    if method != "pp" and has_cycle(routes, edges):
+    transits, edges, cyclic = _passage(graph, names, paths, t0, step_s, method != "pp")
+    if cyclic:
         return RoundPlan(
             "failed",
             method,
             (),
             t0,
             step_s,
-            message=f"{message}, but it moves robots round a block of cells in one step, "
-            "an order of passage no delay-tolerant execution can keep",
+            message=message + _CYCLIC,
             instance=instance,
             runtime_s=deadline.elapsed(),
         )
@@ -280,6 +234,136 @@ def plan_round(
         runtime_s=deadline.elapsed(),
         edges=edges,
     )
+
+
+def _names(requests: Sequence[TransitRequest], speed: float) -> list[str]:
+    """The robots' names; raises ValueError for a speed ≤ 0 or a name given twice."""
+    if speed <= 0:
+        raise ValueError(f"speed must be > 0, got {speed}")
+    names = [r.name for r in requests]
+    if len(set(names)) != len(names):
+        raise ValueError(f"robot names must be distinct, got {names}")
+    return names
+
+
+def _jointly(
+    instance: MapfInstance,
+    method: str,
+    time_limit_s: float,
+    holds: Sequence[int],
+    graph: GridGraph,
+) -> tuple[list[list[Cell]], list[int]] | str:
+    """The joint fallback by ``method`` on ``graph`` (the transit graph's): the paths (every
+    robot waits in its start cell until the latest start step) and the robots' start steps, or
+    why there are none."""
+    result = solve(instance, method, w=ECBS_W, time_limit_s=time_limit_s, graph=graph)
+    if result.solution is None:
+        return f"{result.status} ({result.message})"
+    wait = max(holds)
+    paths = [[p[0]] * wait + list(p) for p in result.solution.paths]
+    return paths, [wait] * len(holds)
+
+
+def _passage(
+    graph: TransitGraph,
+    names: Sequence[str],
+    paths: Sequence[Sequence[Cell]],
+    t0: float,
+    step_s: float,
+    joint: bool,
+) -> tuple[tuple[Transit, ...], dict[str, tuple[Dependency, ...]], bool]:
+    """The robots' transits, their order of passage (``planners.dependencies``) and, for a
+    ``joint`` plan, whether that order has a cycle (prioritized plans have none, see the
+    module)."""
+    transits = tuple(
+        Transit(name, tuple(path), _waypoints(graph, path, t0, step_s))
+        for name, path in zip(names, paths, strict=True)
+    )
+    routes = [route_of(t.name, t.cells) for t in transits]
+    edges = dependencies(routes)
+    return transits, edges, joint and has_cycle(routes, edges)
+
+
+def _cells(
+    graph: TransitGraph,
+    requests: Sequence[TransitRequest],
+    t0: float,
+    step_s: float,
+    deadline: Deadline,
+) -> tuple[list[Cell], list[Cell]] | RoundPlan:
+    """Distinct start and goal cells of the robots (``_assign``), or the ``unreachable`` plan
+    naming the robots without a free cell for their start or goal or with a goal in another
+    component."""
+    starts = _assign(graph.candidates(np.array([r.start for r in requests])))
+    goals = _assign(graph.candidates(np.array([r.goal for r in requests])), starts)
+    problems = []
+    for r, s, g in zip(requests, starts, goals, strict=True):
+        if s is None:
+            problems.append(f"{r.name}: no free cell for its start {r.start}")
+        elif g is None:
+            problems.append(f"{r.name}: no free cell for its goal {r.goal}")
+        elif graph.component[s] != graph.component[g]:
+            problems.append(f"{r.name}: its goal {r.goal} cannot be reached from {r.start}")
+    if not problems:
+        return starts, goals  # type: ignore[return-value]
+    return RoundPlan(
+        "unreachable",
+        "none",
+        (),
+        t0,
+        step_s,
+        unreachable=tuple(p.split(":", 1)[0] for p in problems),
+        message="; ".join(problems),
+        runtime_s=deadline.elapsed(),
+    )
+
+
+def _first_order(
+    graph: TransitGraph,
+    starts: Sequence[Cell],
+    start_ids: Sequence[int],
+    goal_ids: Sequence[int],
+    names: Sequence[str],
+) -> list[int]:
+    """The rule order: robots without a transit, then those starting in a narrow passage, then
+    the longer transits, then by name."""
+    deg = graph.degree()
+    dist = [graph.graph.distances(g)[s] for s, g in zip(start_ids, goal_ids, strict=True)]
+    return sorted(
+        range(len(starts)),
+        key=lambda i: (
+            start_ids[i] != goal_ids[i],
+            deg[starts[i]] > NARROW_DEGREE,
+            -dist[i],
+            names[i],
+        ),
+    )
+
+
+def _by_priorities(
+    graph: TransitGraph,
+    start_ids: Sequence[int],
+    goal_ids: Sequence[int],
+    holds: Sequence[int],
+    order: list[int],
+    max_reorders: int,
+    deadline: Deadline,
+) -> tuple[list[list[Cell]] | int, list[int]]:
+    """Prioritized planning in ``order``, the robot that found no path raised first (it keeps its
+    place among the idle ones), up to ``max_reorders`` more orders: the paths, or the last robot
+    that found none; and the last order tried."""
+    paths = _prioritized(graph, start_ids, goal_ids, holds, order, deadline)
+    tried = {tuple(order)}
+    while isinstance(paths, int) and len(tried) <= max_reorders:
+        stuck_robot = paths
+        rest = [i for i in order if i != stuck_robot]
+        idle = sum(start_ids[i] == goal_ids[i] for i in rest)
+        order = [*rest[:idle], stuck_robot, *rest[idle:]]
+        if tuple(order) in tried:
+            break
+        tried.add(tuple(order))
+        paths = _prioritized(graph, start_ids, goal_ids, holds, order, deadline)
+    return paths, order
 
 
 def _prioritized(

@@ -182,33 +182,80 @@ def build_transit_graph(
     fc = np.arange(ccol)[None, :] * k + best % k
     x = grid.origin[0] + (fc + 0.5) * res
     y = grid.origin[1] + (fr + 0.5) * res
-
-    # keep points at least `spacing` apart: nearer-to-centre cells first
-    cells = np.argwhere(usable)
-    pts = np.column_stack([x[usable], y[usable]])
-    pairs = cKDTree(pts).query_pairs(spacing - 1e-9, output_type="ndarray") if len(pts) else []
-    if len(pairs):
-        rank = np.lexsort((np.arange(len(cells)), np.min(score, axis=2)[usable]))
-        position = np.empty(len(cells), dtype=np.int64)
-        position[rank] = np.arange(len(cells))
-        close: dict[int, list[int]] = {}
-        for i, j in pairs.tolist():
-            close.setdefault(i, []).append(j)
-            close.setdefault(j, []).append(i)
-        dropped: set[int] = set()
-        for i in sorted(close, key=lambda i: position[i]):
-            if i in dropped:
-                continue
-            dropped.update(j for j in close[i] if position[j] > position[i])
-        for i in dropped:
-            usable[cells[i, 0], cells[i, 1]] = False
+    usable = _spaced(usable, x, y, np.min(score, axis=2), spacing)
 
     points = np.full((crow, ccol, 2), np.nan)
     points[usable, 0] = x[usable]
     points[usable, 1] = y[usable]
     rep = (fr * (ccol * k) + fc).astype(np.int64)  # flat fine index of each cell's point
+    open_right, open_down = _openings(ok, usable, rep, k)
 
-    # adjacency: a way through possible centres inside the union of the two cells
+    graph = GridGraph(usable, open_right, open_down)
+    cidx = np.arange(crow * ccol).reshape(crow, ccol)
+    a = np.concatenate([cidx[:, :-1][open_right], cidx[:-1, :][open_down]])
+    b = np.concatenate([cidx[:, 1:][open_right], cidx[1:, :][open_down]])
+    n = crow * ccol
+    _, comp = connected_components(
+        coo_matrix((np.ones(a.size), (a, b)), shape=(n, n)).tocsr(), directed=False
+    )
+    component = np.where(usable.ravel(), comp, -1).reshape(usable.shape)
+
+    fine_region = _components(ok, np.zeros_like(ok, dtype=np.int64)).reshape(ok.shape)
+    cell_region = np.where(usable, fine_region.ravel()[rep], -1)
+    return TransitGraph(
+        usable=usable,
+        points=points,
+        open_right=open_right,
+        open_down=open_down,
+        component=component,
+        cell_size=k * res,
+        origin=(float(grid.origin[0]), float(grid.origin[1])),
+        radius=radius,
+        clearance=clearance_m,
+        graph=graph,
+        fine_resolution=res,
+        fine_region=fine_region,
+        cell_region=cell_region,
+        primary=_primary(usable, component, cell_region),
+    )
+
+
+def _spaced(
+    usable: np.ndarray, x: np.ndarray, y: np.ndarray, score: np.ndarray, spacing: float
+) -> np.ndarray:
+    """The usable cells whose points (``x``, ``y``) stay at least ``spacing`` apart: where two
+    are closer, the one whose point is nearer its own centre (lower ``score``; ties: lower index)
+    is kept."""
+    cells = np.argwhere(usable)
+    pts = np.column_stack([x[usable], y[usable]])
+    pairs = cKDTree(pts).query_pairs(spacing - 1e-9, output_type="ndarray") if len(pts) else []
+    if not len(pairs):
+        return usable
+    rank = np.lexsort((np.arange(len(cells)), score[usable]))
+    position = np.empty(len(cells), dtype=np.int64)
+    position[rank] = np.arange(len(cells))
+    close: dict[int, list[int]] = {}
+    for i, j in pairs.tolist():
+        close.setdefault(i, []).append(j)
+        close.setdefault(j, []).append(i)
+    dropped: set[int] = set()
+    for i in sorted(close, key=lambda i: position[i]):
+        if i in dropped:
+            continue
+        dropped.update(j for j in close[i] if position[j] > position[i])
+    kept = usable.copy()
+    for i in dropped:
+        kept[cells[i, 0], cells[i, 1]] = False
+    return kept
+
+
+def _openings(
+    ok: np.ndarray, usable: np.ndarray, rep: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``open_right`` and ``open_down``: two 4-adjacent usable cells are joined where a way
+    through possible centres (``ok``) inside the union of the two cells joins their points (flat
+    fine indices ``rep``); ``k`` fine cells a side."""
+    crow, ccol = usable.shape
     coarse_r = np.repeat(np.arange(crow), k)[:, None] * np.ones((1, ccol * k), dtype=np.int64)
     coarse_c = np.repeat(np.arange(ccol), k)[None, :] * np.ones((crow * k, 1), dtype=np.int64)
     open_right = np.zeros((crow, max(ccol - 1, 0)), dtype=bool)
@@ -226,19 +273,12 @@ def build_transit_graph(
         first = np.arange(crow - 1) % 2 == parity
         same = (lab[:-1, :] == lab[1:, :]) & (lab[:-1, :] >= 0)
         open_down[first, :] = (same & usable[:-1, :] & usable[1:, :])[first, :]
+    return open_right, open_down
 
-    graph = GridGraph(usable, open_right, open_down)
-    cidx = np.arange(crow * ccol).reshape(crow, ccol)
-    a = np.concatenate([cidx[:, :-1][open_right], cidx[:-1, :][open_down]])
-    b = np.concatenate([cidx[:, 1:][open_right], cidx[1:, :][open_down]])
-    n = crow * ccol
-    _, comp = connected_components(
-        coo_matrix((np.ones(a.size), (a, b)), shape=(n, n)).tocsr(), directed=False
-    )
-    component = np.where(usable.ravel(), comp, -1).reshape(usable.shape)
 
-    fine_region = _components(ok, np.zeros_like(ok, dtype=np.int64)).reshape(ok.shape)
-    cell_region = np.where(usable, fine_region.ravel()[rep], -1)
+def _primary(usable: np.ndarray, component: np.ndarray, cell_region: np.ndarray) -> np.ndarray:
+    """The usable cells in their region's largest component of the graph (the cells located
+    to)."""
     primary = np.zeros_like(usable)
     if usable.any():
         pairs, counts = np.unique(
@@ -251,19 +291,4 @@ def build_transit_graph(
         main = dict(zip(pairs[first, 0].tolist(), pairs[first, 1].tolist(), strict=True))
         lookup = np.vectorize(lambda r: main.get(int(r), -3))
         primary[usable] = component[usable] == lookup(cell_region[usable])
-    return TransitGraph(
-        usable=usable,
-        points=points,
-        open_right=open_right,
-        open_down=open_down,
-        component=component,
-        cell_size=k * res,
-        origin=(float(grid.origin[0]), float(grid.origin[1])),
-        radius=radius,
-        clearance=clearance_m,
-        graph=graph,
-        fine_resolution=res,
-        fine_region=fine_region,
-        cell_region=cell_region,
-        primary=primary,
-    )
+    return primary
