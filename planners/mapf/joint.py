@@ -32,9 +32,10 @@ the other agents' paths (a conflict-avoidance table), then deeper.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from heapq import heapify, heappop, heappush
 from itertools import combinations
+from typing import NamedTuple
 
 import numpy as np
 
@@ -115,9 +116,76 @@ def joint_astar(
         if dists[i][starts[i]] > latest[i]:
             return None
     horizon = max([tb.horizon for tb in tables] + earliest + [cat.horizon if cat else 0]) + 1
+    heuristic = _heuristic(graph, goals, dists, earliest)
+    front = _frontier(m, horizon, heuristic)
+    push, settle, best, heap = front.push, front.settle, front.best, front.heap
     full = (1 << m) - 1
+    can_finish = [i for i in range(m) if starts[i] == goals[i] and earliest[i] == 0]
+    for choice in range(1 << len(can_finish)):
+        fin = 0
+        for bit, i in enumerate(can_finish):
+            if choice >> bit & 1:
+                fin |= 1 << i
+        if fin == full:
+            return [[s] for s in starts]
+        pos, new, i, t = settle(tuple(starts), (), 0, fin, 0)
+        push(pos, new, i, fin, t, 0, 0, -1, -1)
+    limits = _Limits(dists, earliest, latest)
+    expand = _expander(graph, goals, tables, cat, limits, front, heuristic.h_of)
+    n_fin, n_key = front.n_fin, front.n_key
+    expanded = 0
+    try:
+        while heap:
+            f, conf, neg_g, node = heappop(heap)
+            key = n_key[node]
+            if best.get(key) != (-neg_g, conf):
+                continue
+            if n_fin[node] == full:
+                return _paths(front.n_pos, front.n_t, front.n_parent, node, m)
+            expanded += 1
+            if expanded % _CHECK_EVERY == 0:
+                deadline.check()
+            if expanded == PAIR_AFTER and 2 <= m <= 4 and n <= PAIR_MAX_CELLS:
+                heuristic.build_pairs()
+                front.rescore()
+                heappush(heap, (f, conf, neg_g, node))
+                best[key] = (-neg_g, conf)
+                continue
+            if max_expanded is not None and expanded > max_expanded:
+                raise JointSearchLimit
+            expand(node, conf, -neg_g + 1)
+        return None
+    finally:
+        stats.low += expanded
+
+
+class _Limits(NamedTuple):
+    """Per agent: its distances to its goal, and the first and last times it may finish."""
+
+    dists: list[list[int]]
+    earliest: list[int]
+    latest: list[int]
+
+
+class _Heuristic(NamedTuple):
+    """``h_of(i, cell, t, fin)``: agent i's single-agent heuristic, the finished agents in
+    ``fin`` parked; ``h_pairs(pos, new, i, fin, t)``: the pairwise one of a joint state, once
+    ``build_pairs()`` has filled ``pair_values`` (until then it is not used)."""
+
+    h_of: Callable[[int, int, int, int], int]
+    h_pairs: Callable[[tuple[int, ...], tuple[int, ...], int, int, int], int]
+    build_pairs: Callable[[], None]
+    pair_values: dict[tuple[int, int], list[int]]
+
+
+def _heuristic(
+    graph: GridGraph, goals: Sequence[int], dists: list[list[int]], earliest: list[int]
+) -> _Heuristic:
+    """The heuristics of a joint search (see the module)."""
+    m = len(goals)
+    n = graph.num_cells
     # alone[i][mask]: agent i's cost to finish from each cell, the agents in mask parked
-    alone: list[list[list[int] | None]] = [[None] * (full + 1) for _ in range(m)]
+    alone: list[list[list[int] | None]] = [[None] * (1 << m) for _ in range(m)]
 
     def dist_around(i: int, fin: int) -> list[int]:
         """Agent i's distances to its goal avoiding the goals of the finished agents."""
@@ -140,7 +208,69 @@ def joint_astar(
         e = earliest[i] - t
         return d if d >= e else e
 
-    # node arrays: old cells at time t, new cells of the agents already moved, finished mask
+    pair_values: dict[tuple[int, int], list[int]] = {}
+    partitions = _partitions(m)
+
+    def h_pairs(pos: tuple[int, ...], new: tuple[int, ...], i: int, fin: int, t: int) -> int:
+        """The best sum, over a partition of the agents into pairs (and a single), of the pairs'
+        joint costs alone (``_pair_values``) and the singles' heuristics."""
+        top = 0
+        for pairs, singles in partitions:
+            total = 0
+            for a, b in pairs:
+                fa, fb = fin >> a & 1, fin >> b & 1
+                if fa and fb:
+                    continue
+                if fa or fb:
+                    x = b if fa else a
+                    total += h_of(x, new[x], t + 1, fin) if x < i else h_of(x, pos[x], t, fin)
+                elif (a < i) == (b < i):
+                    cells = new if a < i else pos
+                    total += pair_values[(a, b)][cells[a] * n + cells[b]]
+                else:
+                    # one of the two has moved and paid for this step already
+                    total += pair_values[(a, b)][pos[a] * n + pos[b]] - 1
+            for x in singles:
+                if not fin >> x & 1:
+                    total += h_of(x, new[x], t + 1, fin) if x < i else h_of(x, pos[x], t, fin)
+            if total > top:
+                top = total
+        return top
+
+    def build_pairs() -> None:
+        """Compute the pair tables."""
+        for a, b in combinations(range(m), 2):
+            alone_a = _alone(graph, goals[a], dist_around(a, 1 << b))
+            alone_b = _alone(graph, goals[b], dist_around(b, 1 << a))
+            pair_values[(a, b)] = _pair_values(graph, goals[a], goals[b], alone_a, alone_b)
+
+    return _Heuristic(h_of, h_pairs, build_pairs, pair_values)
+
+
+class _Frontier(NamedTuple):
+    """The states of a joint search (parallel lists: cells at time t, new cells of the agents
+    already moved, next agent, finished mask, t, parent, key, single-agent heuristic), the best
+    (g, conflicts) per key, the open list, and the functions that fill them."""
+
+    n_pos: list[tuple[int, ...]]
+    n_new: list[tuple[int, ...]]
+    n_idx: list[int]
+    n_fin: list[int]
+    n_t: list[int]
+    n_parent: list[int]
+    n_key: list[tuple]
+    n_h: list[int]
+    best: dict[tuple, tuple[int, int]]
+    heap: list[tuple[int, int, int, int]]
+    push: Callable[..., None]
+    settle: Callable[..., tuple[tuple[int, ...], tuple[int, ...], int, int]]
+    rescore: Callable[[], None]
+
+
+def _frontier(m: int, horizon: int, heuristic: _Heuristic) -> _Frontier:
+    """An empty frontier of a joint search of ``m`` agents merging states from ``horizon`` on."""
+    full = (1 << m) - 1
+    h_of, h_pairs, pair_values = heuristic.h_of, heuristic.h_pairs, heuristic.pair_values
     n_pos: list[tuple[int, ...]] = []
     n_new: list[tuple[int, ...]] = []
     n_idx: list[int] = []
@@ -205,128 +335,86 @@ def joint_astar(
         n_parent.append(parent)
         heappush(heap, (g + (h if h >= hp else hp), conf, -g, idx))
 
-    pair_values: dict[tuple[int, int], list[int]] = {}
-    partitions = _partitions(m)
-
-    def h_pairs(pos: tuple[int, ...], new: tuple[int, ...], i: int, fin: int, t: int) -> int:
-        """The best sum, over a partition of the agents into pairs (and a single), of the pairs'
-        joint costs alone (``_pair_values``) and the singles' heuristics."""
-        top = 0
-        for pairs, singles in partitions:
-            total = 0
-            for a, b in pairs:
-                fa, fb = fin >> a & 1, fin >> b & 1
-                if fa and fb:
-                    continue
-                if fa or fb:
-                    x = b if fa else a
-                    total += h_of(x, new[x], t + 1, fin) if x < i else h_of(x, pos[x], t, fin)
-                elif (a < i) == (b < i):
-                    cells = new if a < i else pos
-                    total += pair_values[(a, b)][cells[a] * n + cells[b]]
-                else:
-                    # one of the two has moved and paid for this step already
-                    total += pair_values[(a, b)][pos[a] * n + pos[b]] - 1
-            for x in singles:
-                if not fin >> x & 1:
-                    total += h_of(x, new[x], t + 1, fin) if x < i else h_of(x, pos[x], t, fin)
-            if total > top:
-                top = total
-        return top
-
-    def build_pairs() -> None:
-        """Compute the pair tables and re-sort the open list under the stronger heuristic."""
-        for a, b in combinations(range(m), 2):
-            alone_a = _alone(graph, goals[a], dist_around(a, 1 << b))
-            alone_b = _alone(graph, goals[b], dist_around(b, 1 << a))
-            pair_values[(a, b)] = _pair_values(graph, goals[a], goals[b], alone_a, alone_b)
+    def rescore() -> None:
+        """Re-sort the open list under the pairwise heuristic, now that it is built."""
         for k, (_f, conf, neg_g, idx) in enumerate(heap):
             hp = h_pairs(n_pos[idx], n_new[idx], n_idx[idx], n_fin[idx], n_t[idx])
             heap[k] = (-neg_g + max(n_h[idx], hp), conf, neg_g, idx)
         heapify(heap)
 
-    starts_t = tuple(starts)
-    can_finish = [i for i in range(m) if starts[i] == goals[i] and earliest[i] == 0]
-    for choice in range(1 << len(can_finish)):
-        fin = 0
-        for bit, i in enumerate(can_finish):
-            if choice >> bit & 1:
-                fin |= 1 << i
-        if fin == full:
-            return [[s] for s in starts]
-        pos, new, i, t = settle(starts_t, (), 0, fin, 0)
-        push(pos, new, i, fin, t, 0, 0, -1, -1)
+    lists = (n_pos, n_new, n_idx, n_fin, n_t, n_parent, n_key, n_h)
+    return _Frontier(*lists, best, heap, push, settle, rescore)
 
+
+def _expander(
+    graph: GridGraph,
+    goals: Sequence[int],
+    tables: Sequence[ConstraintTable],
+    cat: ConflictAvoidanceTable | None,
+    limits: _Limits,
+    front: _Frontier,
+    h_of: Callable[[int, int, int, int], int],
+) -> Callable[[int, int, int], None]:
+    """``expand(node, conf, g)``: queue the successors of a state (OD: the next agent moves),
+    its collisions with the avoidance table ``conf`` and its cost-to-come ``g`` after the move;
+    ``h_of``: the single-agent heuristic (``_Heuristic``)."""
+    m = len(goals)
+    n = graph.num_cells
+    moves = [table.moves(graph.successors) for table in tables]
+    dists, earliest, latest = limits
+    n_pos, n_new, n_idx, n_fin, n_t = front[:5]
+    n_h = front.n_h
+    push, settle = front.push, front.settle
     if cat is not None:
         cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
-    moves = [table.moves(graph.successors) for table in tables]
-    expanded = 0
-    try:
-        while heap:
-            _f, conf, neg_g, node = heappop(heap)
-            pos, new, i, fin, t = n_pos[node], n_new[node], n_idx[node], n_fin[node], n_t[node]
-            key = n_key[node]
-            if best.get(key) != (-neg_g, conf):
+
+    def expand(node: int, conf: int, g: int) -> None:
+        pos, new, i, fin, t = n_pos[node], n_new[node], n_idx[node], n_fin[node], n_t[node]
+        u = pos[i]
+        goal = goals[i]
+        dist = dists[i]
+        # the heuristic without agent i's part, which the move changes
+        h_rest = n_h[node] - h_of(i, u, t, fin)
+        nt = t + 1
+        tn = nt * n
+        for v in moves[i](u, nt):
+            if nt + dist[v] > latest[i]:
                 continue
-            if fin == full:
-                return _paths(n_pos, n_t, n_parent, node, m)
-            expanded += 1
-            if expanded % _CHECK_EVERY == 0:
-                deadline.check()
-            if expanded == PAIR_AFTER and 2 <= m <= 4 and n <= PAIR_MAX_CELLS:
-                build_pairs()
-                heappush(heap, (_f, conf, neg_g, node))
-                best[key] = (-neg_g, conf)
+            clash = False
+            for j in range(i):
+                if new[j] == v or (v != u and new[j] == u and pos[j] == v):
+                    clash = True
+                    break
+            if clash:
                 continue
-            if max_expanded is not None and expanded > max_expanded:
-                raise JointSearchLimit
-            g = -neg_g + 1
-            u = pos[i]
-            goal = goals[i]
-            dist = dists[i]
-            # the heuristic without agent i's part, which the move changes
-            h_rest = n_h[node] - h_of(i, u, t, fin)
-            nt = t + 1
-            tn = nt * n
-            for v in moves[i](u, nt):
-                if nt + dist[v] > latest[i]:
-                    continue
-                clash = False
-                for j in range(i):
-                    if new[j] == v or (v != u and new[j] == u and pos[j] == v):
-                        clash = True
-                        break
-                if clash:
-                    continue
-                for j in range(i + 1, m):
-                    if fin >> j & 1 and pos[j] == v:
-                        clash = True
-                        break
-                if clash:
-                    continue
-                c = conf
-                if cat is not None:
-                    c += cat_v.get(tn + v, 0)
-                    if v != u:
-                        c += cat_e.get((tn + u) * n + v, 0)
-                    pa = cat_p.get(v)
-                    if pa is not None and nt >= pa:
-                        c += 1
-                moved = (*new, v)
-                if v != goal or nt + 2 <= latest[i]:
-                    hv = h_rest + h_of(i, v, nt, fin)
-                    if i + 1 < m and not fin >> (i + 1) & 1:
-                        push(pos, moved, i + 1, fin, t, g, c, node, hv)
-                    else:
-                        p2, n2, i2, t2 = settle(pos, moved, i + 1, fin, t)
-                        push(p2, n2, i2, fin, t2, g, c, node, hv)
-                if v == goal and u != goal and earliest[i] <= nt:
-                    done = fin | 1 << i
-                    p2, n2, i2, t2 = settle(pos, moved, i + 1, done, t)
-                    push(p2, n2, i2, done, t2, g, c, node, -1)
-        return None
-    finally:
-        stats.low += expanded
+            for j in range(i + 1, m):
+                if fin >> j & 1 and pos[j] == v:
+                    clash = True
+                    break
+            if clash:
+                continue
+            c = conf
+            if cat is not None:
+                c += cat_v.get(tn + v, 0)
+                if v != u:
+                    c += cat_e.get((tn + u) * n + v, 0)
+                pa = cat_p.get(v)
+                if pa is not None and nt >= pa:
+                    c += 1
+            moved = (*new, v)
+            if v != goal or nt + 2 <= latest[i]:
+                hv = h_rest + h_of(i, v, nt, fin)
+                if i + 1 < m and not fin >> (i + 1) & 1:
+                    push(pos, moved, i + 1, fin, t, g, c, node, hv)
+                else:
+                    p2, n2, i2, t2 = settle(pos, moved, i + 1, fin, t)
+                    push(p2, n2, i2, fin, t2, g, c, node, hv)
+            if v == goal and u != goal and earliest[i] <= nt:
+                done = fin | 1 << i
+                p2, n2, i2, t2 = settle(pos, moved, i + 1, done, t)
+                push(p2, n2, i2, done, t2, g, c, node, -1)
+
+    return expand
 
 
 def _partitions(m: int) -> list[tuple[list[tuple[int, int]], list[int]]]:
