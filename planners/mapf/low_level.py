@@ -19,6 +19,7 @@ search with no solution ends instead of waiting forever.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from heapq import heappop, heappush
 
 from planners.mapf.deadline import Deadline
@@ -53,10 +54,12 @@ def _bounds(
     goal: int,
     table: ConstraintTable,
     cat: ConflictAvoidanceTable | None,
-) -> tuple[int, int, list[int], int] | None:
-    """``(earliest, latest, dist, horizon)`` of a search: the first and last times the agent may
-    finish at its goal, the distances to it, and the first time from which states are merged
-    (beyond every constraint and avoidance entry); None when no path can exist."""
+) -> tuple[int, int, list[int], int, int, Callable[[int, int], Sequence[int]]] | None:
+    """``(earliest, latest, dist, horizon, span, moves)`` of a search: the first and last times
+    the agent may finish at its goal, the distances to it, the first time from which states are
+    merged (beyond every constraint and avoidance entry), the time span of a cell's state keys
+    (``cell * span + t``; the goal entered at t is ``num_cells * span + t``) and the table's
+    moves; None when no path can exist."""
     earliest = table.earliest_finish(goal)
     if earliest is None:
         return None
@@ -67,7 +70,7 @@ def _bounds(
     if dist[start] > latest:
         return None
     horizon = max(table.horizon, earliest, 0 if cat is None else cat.horizon) + 1
-    return earliest, latest, dist, horizon
+    return earliest, latest, dist, horizon, horizon + 1, table.moves(graph.successors)
 
 
 def space_time_astar(
@@ -83,13 +86,11 @@ def space_time_astar(
     bounds = _bounds(graph, start, goal, table, cat)
     if bounds is None:
         return None
-    earliest, latest, dist, horizon = bounds
+    earliest, latest, dist, horizon, span, moves = bounds
     n = graph.num_cells
-    moves = table.moves(graph.successors)
+    arrived = n * span  # key of the goal entered from another cell at t: arrived + t
     if cat is not None:
         cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
-    span = horizon + 1
-    arrived = n * span  # key of the goal entered from another cell at t: arrived + t
     cells = [start]
     times = [0]
     parents = [-1]
@@ -162,12 +163,10 @@ def focal_astar(
     bounds = _bounds(graph, start, goal, table, cat)
     if bounds is None:
         return None
-    earliest, latest, dist, horizon = bounds
+    earliest, latest, dist, horizon, span, moves = bounds
     n = graph.num_cells
-    moves = table.moves(graph.successors)
-    cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
-    span = horizon + 1
     arrived = n * span  # key of the goal entered from another cell at t: arrived + t
+    cat_v, cat_e, cat_p = cat.vertex, cat.edge, cat.parked
     f0 = max(dist[start], earliest)
     cells, times, confs, parents = [start], [0], [0], [-1]
     keys = [arrived if start == goal else start * span]
