@@ -312,7 +312,7 @@ class Agent:
     def ready(self) -> bool:
         """Whether the robot may take work: it knows where it is."""
         src = self.pose_source
-        return src is not None and getattr(src, "localized", True)
+        return src is not None and src.localized
 
     def bid_loop(self) -> None:
         """Answer the task calls of each auction round, all of a round's calls in one go."""
@@ -411,8 +411,8 @@ class Agent:
             heading_for = None if follow is None else follow.index
             task = current_task(self.chain, self.chain_starts, heading_for) or self.task
             planned = plan_id >= 0
-            localized = getattr(src, "localized", True)
-            failed = getattr(src, "failed", False)
+            localized = src.localized
+            failed = src.failed
         if localized and not self._was_localized:
             log.info("%s found itself at (%.2f, %.2f, %.2f) in its saved map", self.rid, *pose)
         self._was_localized = localized
@@ -434,7 +434,7 @@ class Agent:
                 log.error(
                     "%s cannot find itself in its saved map (%s); it stays out of the market",
                     self.rid,
-                    getattr(src, "reason", ""),
+                    src.reason,
                 )
         elif follow is None or follow.done:
             state = "done" if planned else "waiting"
@@ -669,7 +669,7 @@ class Agent:
         if (
             self.state_dir is None
             or src is None
-            or not getattr(src, "localized", True)
+            or not src.localized
             or stamp - self._last_pose_save < self.cfg.agent.pose_save_s
         ):
             return

@@ -28,6 +28,21 @@ class PoseSource(Protocol):
 
     name: str
 
+    @property
+    def localized(self) -> bool:
+        """Whether it knows where the robot is (a respawned robot's may not yet)."""
+        ...
+
+    @property
+    def failed(self) -> bool:
+        """Whether it has given up finding the robot for now."""
+        ...
+
+    @property
+    def reason(self) -> str:
+        """Why it is not localized; "" once it is."""
+        ...
+
     def on_odometry(self, msg: Odometry) -> None: ...
 
     def on_scan(self, msg: LaserScan) -> None: ...
@@ -43,6 +58,9 @@ class OdometryPose:
     """Dead reckoning: the odometry pose, which starts at the spawn pose (as the dock is known)."""
 
     name = "odometry"
+    localized = True
+    failed = False
+    reason = ""
 
     def __init__(self, start: Pose) -> None:
         self._pose = start
@@ -88,6 +106,9 @@ class SlamPose:
     """
 
     name = "slam"
+    localized = True
+    failed = False
+    reason = ""
 
     def __init__(self, params: SlamParams, start: Pose, range_min: float, range_max: float) -> None:
         self._slam = Slam(params, start, range_min=range_min, range_max=range_max)
