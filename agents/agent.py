@@ -35,22 +35,14 @@ import numpy as np
 
 from agents.follower import (
     FollowState,
-    advance,
     control_step,
     keep_clear,
     predict,
     scan_points,
 )
 from agents.market import MarketClient, swept_pieces
-from agents.passage import PeerProgress, Waits, waiting_for
-from agents.peers import (
-    gives_way,
-    intent_centres,
-    intent_points,
-    path_intent,
-    peer_discs,
-    without_peers,
-)
+from agents.passage import Holding, Waits, hold
+from agents.peers import cut_out, own_intent, progress, to_avoid
 from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
 from agents.slam.persistence import load_state, save_pose, save_state
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
@@ -81,7 +73,6 @@ from fleet.protocol import (
 
 log = logging.getLogger("agent")
 
-INTENT_WAYPOINTS = 30
 # The latency of a command (sim time from its scan to the clock when it is sent) is smoothed
 # with this gain. At --speed 0 the simulator waits for each answer, so it is 0; in real time
 # it is the time a control step takes.
@@ -112,12 +103,10 @@ class Agent:
         self.latency_s = 0.0
         self.follow: FollowState | None = None
         self.idle = FollowState(np.zeros((0, 2)))
-        self.peers: dict[str, np.ndarray] = {}
-        self.peer_progress: dict[str, PeerProgress] = {}
+        # the latest intent of each other robot
+        self.peers: dict[str, Intent] = {}
         self.waits = Waits.none()
-        # (plan, waypoint) the robot holds at, since when (sim s); and ones it stopped holding
-        self._holding: tuple[int, int, float] | None = None
-        self._hold_given_up: set[tuple[int, int]] = set()
+        self.holding = Holding()
         self.plan_id = -1
         self.task = ""
         self.state = "waiting"
@@ -246,8 +235,7 @@ class Agent:
         rid = self.keys.robot_of(key)
         if rid != self.rid:
             with self.lock:
-                self.peers[rid] = msg.points
-                self.peer_progress[rid] = PeerProgress(msg.plan_id, msg.waypoint, msg.stamp)
+                self.peers[rid] = msg
 
     def _on_clock(self, _key: str, msg: Clock) -> None:
         self.clock = max(self.clock, msg.stamp)
@@ -383,26 +371,7 @@ class Agent:
         with self.lock:
             src = self.pose_source
             assert src is not None
-            centres, radii = peer_discs(
-                self.peers.values(),
-                scan.stamp,
-                a.stale_after_s,
-                self.cfg.robot.radius,
-                self.cfg.robot.max_vel_x,
-            )
-            src.on_scan(
-                dataclasses.replace(
-                    scan,
-                    ranges=without_peers(
-                        src.pose(),
-                        scan.ranges,
-                        scan.angle_min,
-                        scan.angle_increment,
-                        centres,
-                        radii,
-                    ),
-                )
-            )
+            src.on_scan(cut_out(scan, src.pose(), self.peers, a.stale_after_s, self.cfg.robot))
             pose = src.pose()
             velocity = self.velocity
             stale = scan.stamp - self.odom_stamp > a.stale_after_s
@@ -457,7 +426,7 @@ class Agent:
             before = follow
             # on a transit planned in space and time the plan orders it against the peers it
             # waits for (and that wait for it): it gives way by rank to the others only
-            ordered = set(waits.peer) if follow.index <= sweep_from else set()
+            ordered = frozenset(waits.peer) if follow.index <= sweep_from else frozenset()
             follow, result = control_step(
                 follow,
                 predict(pose, self.command, self.latency_s),
@@ -509,68 +478,27 @@ class Agent:
         stamp: float,
     ) -> FollowState | None:
         """The follower advanced to where the robot stands if it must hold there for a peer
-        (its plan's order of passage, :mod:`agents.passage`); None if it may drive on."""
-        if not len(waits.at):
-            return None
-        a = self.cfg.agent
-        ahead = advance(follow, np.array(pose[:2]), a)
-        key = (plan_id, ahead.index)
-        if ahead.done or key in self._hold_given_up:
-            return None
+        (its plan's order of passage, :func:`agents.passage.hold`); None if it may drive on."""
         with self.lock:
-            peers = dict(self.peer_progress)
-        names = waiting_for(waits, ahead.index, peers, stamp, a.hold_silent_s)
-        if not names:
-            self._holding = None
-            return None
-        if self._holding is None or self._holding[:2] != key:
-            self._holding = (*key, stamp)
-            log.info("%s holds before waypoint %d for %s", self.rid, ahead.index, ", ".join(names))
-        elif stamp - self._holding[2] > a.hold_max_s:
-            log.warning(
-                "%s gave up holding before waypoint %d after %.0f s: %s not heard to pass",
-                self.rid,
-                ahead.index,
-                a.hold_max_s,
-                ", ".join(names),
-            )
-            self._hold_given_up.add(key)
-            self._holding = None
-            return None
-        with self.lock:
-            if self.follow is not None and self.follow.waypoints is follow.waypoints:
-                self.follow = ahead
+            peers = progress(self.peers)
+        self.holding, ahead, notes = hold(
+            self.holding, follow, np.array(pose[:2]), plan_id, waits, peers, stamp, self.cfg.agent
+        )
+        for level, text in notes:
+            log.log(level, "%s %s", self.rid, text)
+        if ahead is not None:
+            with self.lock:
+                if self.follow is not None and self.follow.waypoints is follow.waypoints:
+                    self.follow = ahead
         return ahead
 
     def _peer_centres(
-        self, now: float, everyone: bool, skip: set[str] | frozenset[str] = frozenset()
+        self, now: float, everyone: bool, skip: frozenset[str] = frozenset()
     ) -> np.ndarray:
-        """The discs the robots this one gives way to (all of them when it has no work, none
-        in ``skip``) will cover, by their intents; see :mod:`agents.peers`."""
+        """The discs the robots this one gives way to will cover (:func:`agents.peers.to_avoid`)."""
         with self.lock:
-            intents = [
-                pts
-                for rid, pts in self.peers.items()
-                if rid not in skip and (everyone or gives_way(self.rid, rid))
-            ]
-        return intent_centres(intents, now, self.cfg.agent.stale_after_s)
-
-    def _intent(
-        self,
-        stamp: float,
-        pose: tuple[float, float, float],
-        v: float,
-        w: float,
-        follow: FollowState | None,
-    ) -> np.ndarray:
-        """The path ahead at no less than half the top speed while there is one (see
-        :func:`agents.peers.path_intent`), else the current command held."""
-        horizon = self.cfg.agent.intent_horizon_s
-        if follow is None or follow.done or self.state in ("stale", "holding"):
-            return intent_points(pose, v, w, stamp, horizon)
-        ahead = follow.waypoints[follow.index : follow.index + INTENT_WAYPOINTS]
-        speed = max(v, 0.5 * self.cfg.robot.max_vel_x)
-        return path_intent(np.array(pose[:2]), ahead, speed, stamp, horizon)
+            intents = dict(self.peers)
+        return to_avoid(self.rid, intents, now, self.cfg.agent.stale_after_s, everyone, skip)
 
     def _publish(
         self,
@@ -593,14 +521,11 @@ class Agent:
             k.robot(self.rid, "pose"),
             PoseEstimate(stamp, *pose, self.pose_source.covariance(), self.pose_source.name),
         )
+        on_its_way = None if self.state in ("stale", "holding") else follow
+        points = own_intent(stamp, pose, (v, w), on_its_way, self.cfg.robot, a.intent_horizon_s)
         self.bus.publish(
             k.robot(self.rid, "intent"),
-            Intent(
-                stamp,
-                self._intent(stamp, pose, v, w, follow),
-                plan_id,
-                follow.index if follow is not None else -1,
-            ),
+            Intent(stamp, points, plan_id, follow.index if follow is not None else -1),
         )
         if stamp - self._last_status >= 1.0 / a.status_hz or self.state == "done":
             self._last_status = stamp

@@ -11,28 +11,23 @@ newer plan (it is done with that transit), dropped the plan, or has been silent 
 ``silent_s`` (a dead robot's body stays where it stopped; the DWA and the intents deal with
 it). A peer not heard from yet, or still on an older plan (the round's plan has not reached
 it), is waited for. Holding one waypoint for longer than the agent's ``hold_max_s`` is given
-up, so a lost message never stops a robot for good.
+up, so a lost message never stops a robot for good (:func:`hold`).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from agents.follower import FollowState, advance
+from agents.peers import PeerProgress
+from fleet.params import AgentParams
 from fleet.protocol import Plan
 from planners.dependencies import Dependency, blocking
-
-
-@dataclass(frozen=True)
-class PeerProgress:
-    """What a peer's latest intent said: its plan, the waypoint it heads for, when."""
-
-    plan_id: int
-    waypoint: int
-    stamp: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,3 +81,51 @@ def waiting_for(
         for at, name, passed in zip(waits.at, waits.peer, waits.passed, strict=True)
     ]
     return sorted({d.peer for d in blocking(edges, index, reached)})
+
+
+@dataclass(frozen=True)
+class Holding:
+    """Where the robot holds for its peers, (plan, waypoint, since when in sim s), None while
+    it does not; and the (plan, waypoint) pairs it gave up holding at."""
+
+    at: tuple[int, int, float] | None = None
+    given_up: frozenset[tuple[int, int]] = frozenset()
+
+
+def hold(
+    holding: Holding,
+    follow: FollowState,
+    xy: np.ndarray,
+    plan_id: int,
+    waits: Waits,
+    peers: Mapping[str, PeerProgress],
+    now: float,
+    agent: AgentParams,
+) -> tuple[Holding, FollowState | None, tuple[tuple[int, str], ...]]:
+    """Whether a robot at ``xy`` on plan ``plan_id`` must hold for a peer before the waypoint it
+    heads for: the follower advanced to where the robot stands if it must, None if it may drive
+    on; with the log lines (level, text after the robot's id) of holding and of giving up.
+
+    Holding before one waypoint for longer than ``agent.hold_max_s`` is given up, and that
+    waypoint of that plan is never held at again."""
+    if not len(waits.at):
+        return holding, None, ()
+    ahead = advance(follow, xy, agent)
+    key = (plan_id, ahead.index)
+    if ahead.done or key in holding.given_up:
+        return holding, None, ()
+    names = waiting_for(waits, ahead.index, peers, now, agent.hold_silent_s)
+    if not names:
+        return Holding(None, holding.given_up), None, ()
+    who = ", ".join(names)
+    if holding.at is None or holding.at[:2] != key:
+        note = (logging.INFO, f"holds before waypoint {ahead.index} for {who}")
+        return Holding((*key, now), holding.given_up), ahead, (note,)
+    if now - holding.at[2] > agent.hold_max_s:
+        note = (
+            logging.WARNING,
+            f"gave up holding before waypoint {ahead.index} after {agent.hold_max_s:.0f} s: "
+            f"{who} not heard to pass",
+        )
+        return Holding(None, holding.given_up | {key}), None, (note,)
+    return holding, ahead, ()

@@ -1,8 +1,9 @@
-"""The other robots' published intents, and how an agent gives way to them.
+"""Everything about the other robots: their intents, how an agent gives way to them, how far
+they are along their plans, and where they are for SLAM.
 
-Every agent publishes its intent over the next ``intent_horizon_s``: the path ahead at cruising
-speed while it follows one (:func:`path_intent`), else where its current command takes it
-(:func:`intent_points`). Robots are ranked by id (:func:`gives_way`);
+Every agent publishes its intent (:func:`own_intent`) over the next ``intent_horizon_s``: the
+path ahead at cruising speed while it follows one (:func:`path_intent`), else where its current
+command takes it (:func:`intent_points`). Robots are ranked by id (:func:`gives_way`);
 an agent treats the intents of the robots ranked above it as obstacles for the time they cover
 (:func:`intent_centres`, which DWA sees as :func:`rim_points`), so DWA keeps it out of their
 way, stops it short of a crossing, or — through the follower's escape move — makes it step
@@ -12,21 +13,46 @@ each other (prioritized planning, Erdmann and Lozano-Pérez 1987, applied to the
 short-term trajectories). A robot without work gives way to everyone.
 
 The intents also say where the peers are (:func:`peer_discs`), which the agent cuts out of the
-scan it gives SLAM (:func:`without_peers`): a robot that drives past one standing still is a
-moving wall to its scan matcher, which then slides the standing robot's pose along with it.
+scan it gives SLAM (:func:`cut_out`, :func:`without_peers`): a robot that drives past one
+standing still is a moving wall to its scan matcher, which then slides the standing robot's pose
+along with it. And they say how far each peer is along its plan (:func:`progress`), which
+the order of passage waits on (:mod:`agents.passage`).
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fleet.protocol import Intent, LaserScan
 from planners.dwa import rollout
+from planners.robot import RobotSpec
+
+if TYPE_CHECKING:
+    from agents.follower import FollowState
 
 RIM_POINTS = 12
 PEER_MASK_MARGIN_M = 0.05
+# an intent announces at most this many waypoints of the path ahead
+INTENT_WAYPOINTS = 30
+
+
+@dataclass(frozen=True)
+class PeerProgress:
+    """What a peer's latest intent said: its plan, the waypoint it heads for, when."""
+
+    plan_id: int
+    waypoint: int
+    stamp: float
+
+
+def progress(intents: Mapping[str, Intent]) -> dict[str, PeerProgress]:
+    """How far each peer is along its plan, by its latest intent."""
+    return {rid: PeerProgress(i.plan_id, i.waypoint, i.stamp) for rid, i in intents.items()}
 
 
 def intent_points(
@@ -52,6 +78,25 @@ def path_intent(
     return np.column_stack([stamp + t, np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
 
 
+def own_intent(
+    stamp: float,
+    pose: tuple[float, float, float],
+    command: tuple[float, float],
+    follow: FollowState | None,
+    robot: RobotSpec,
+    horizon_s: float,
+) -> np.ndarray:
+    """What the robot announces: the path ahead of ``follow`` (the next ``INTENT_WAYPOINTS``)
+    at no less than half the top speed while it is on its way along one (see
+    :func:`path_intent`), else (``follow`` None or done) its current ``command`` held."""
+    v, w = command
+    if follow is None or follow.done:
+        return intent_points(pose, v, w, stamp, horizon_s)
+    ahead = follow.waypoints[follow.index : follow.index + INTENT_WAYPOINTS]
+    speed = max(v, 0.5 * robot.max_vel_x)
+    return path_intent(np.array(pose[:2]), ahead, speed, stamp, horizon_s)
+
+
 def _rank(rid: str) -> tuple:
     """Natural order of robot ids: robot-2 before robot-10."""
     return tuple(int(p) if p.isdigit() else p for p in re.split(r"(\d+)", rid))
@@ -73,6 +118,28 @@ def intent_centres(intents: Iterable[np.ndarray], now: float, max_age_s: float) 
     ]
     centres = [c for c in centres if len(c)]
     return np.vstack(centres) if centres else np.zeros((0, 2))
+
+
+def to_avoid(
+    me: str,
+    intents: Mapping[str, Intent],
+    now: float,
+    max_age_s: float,
+    everyone: bool,
+    skip: frozenset[str] = frozenset(),
+) -> np.ndarray:
+    """The centres of the discs (see :func:`intent_centres`) that the peers robot ``me`` keeps
+    clear of will cover: those it gives way to (:func:`gives_way`), or all of them with
+    ``everyone`` (a robot without work); none of those in ``skip``."""
+    return intent_centres(
+        [
+            i.points
+            for rid, i in intents.items()
+            if rid not in skip and (everyone or gives_way(me, rid))
+        ],
+        now,
+        max_age_s,
+    )
 
 
 def rim_points(centres: np.ndarray, robot_radius: float) -> np.ndarray:
@@ -122,3 +189,19 @@ def without_peers(
     )
     r[inside] = np.inf
     return r
+
+
+def cut_out(
+    scan: LaserScan,
+    pose: tuple[float, float, float],
+    intents: Mapping[str, Intent],
+    max_age_s: float,
+    robot: RobotSpec,
+) -> LaserScan:
+    """``scan``, taken at about ``pose``, with the returns off the peers' bodies cut out (see
+    :func:`peer_discs` and :func:`without_peers`): what SLAM is given."""
+    centres, radii = peer_discs(
+        [i.points for i in intents.values()], scan.stamp, max_age_s, robot.radius, robot.max_vel_x
+    )
+    ranges = without_peers(pose, scan.ranges, scan.angle_min, scan.angle_increment, centres, radii)
+    return replace(scan, ranges=ranges)

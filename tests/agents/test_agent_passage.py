@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.passage import PeerProgress, Waits, waiting_for
+from agents.passage import Waits, waiting_for
+from agents.peers import PeerProgress
 from fleet.protocol import Plan
 
 
