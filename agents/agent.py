@@ -1,23 +1,20 @@
-"""The robot process: sensors in, DWA path following, cmd_vel, pose, intent and status out.
+"""The robot process: a thin shell around the control step (:mod:`agents.control`).
 
 It knows only what a real robot knows: its scans, its odometry, the sim clock and what the
-coordinator sends. It takes part in the market (:mod:`agents.market`): it bids on called tasks
-from its own pose and commitments, acknowledges the queue it is awarded, drives only plans for
-tasks it holds, and reports the pieces of its task it has swept. A thread of its own sends a
-heartbeat on wall time, so a hung agent falls silent. With a state directory it saves its SLAM
-map and pose every ``agent.state_save_s`` and its pose alone every ``agent.pose_save_s``;
-started with ``respawn`` it takes over its robot's body where it stands, finds itself in the
-saved map (first within ``respawn_window`` of the saved pose), and bids only once it has.
+coordinator sends. Each scan triggers one control step, called with what the agent has heard
+(odometry, the plan it drives, the other robots' intents); the shell publishes what the step
+returns — the cmd_vel it publishes carries that scan's stamp, which is how the simulator knows
+the agent has kept up — and measures the latency of its commands against the sim clock, from
+which the next step predicts its pose. The shell keeps the bus, the threads and the lock, the
+plan it drives (:class:`agents.control.Drive`), the map it publishes, and the state directory.
 
-Each scan triggers one control step; the cmd_vel it publishes carries that
-scan's stamp, which is how the simulator knows the agent has kept up. When its odometry is
-older than ``stale_after_s`` (sim time) it commands a stop. Paths are followed from the pose
-predicted for when the command will take effect (:func:`agents.follower.predict`), by the
-latency it measures against the sim clock. It reads the other robots' intents:
-while it works it keeps out of the way of those ranked above it, and without work it steps
-aside from anyone's (see :mod:`agents.peers`). A transit planned in space and time comes with
-its order of passage: the robot holds at a cell's point until the peers it follows through the
-next cell have left it, as their intents tell (:mod:`agents.passage`).
+It takes part in the market (:mod:`agents.market`): it bids on called tasks from its own pose
+and commitments, acknowledges the queue it is awarded, drives only plans for tasks it holds,
+and reports the pieces of its task it has swept. A thread of its own sends a heartbeat on wall
+time, so a hung agent falls silent. With a state directory it saves its SLAM map and pose every
+``agent.state_save_s`` and its pose alone every ``agent.pose_save_s``; started with
+``respawn`` it takes over its robot's body where it stands, finds itself in the saved map
+(first within ``respawn_window`` of the saved pose), and bids only once it has.
 """
 
 from __future__ import annotations
@@ -31,28 +28,15 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
-
-from agents.follower import (
-    FollowState,
-    control_step,
-    keep_clear,
-    predict,
-    scan_points,
-)
-from agents.market import MarketClient, swept_pieces
-from agents.passage import Holding, Waits, hold
-from agents.peers import cut_out, own_intent, progress, to_avoid
+from agents.control import ControlParams, ControlState, Drive, Heard, control
+from agents.market import MarketClient
 from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
-from agents.slam.persistence import load_state, save_pose, save_state
+from agents.slam.persistence import SavedState, load_state, save_pose, save_state
 from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
-from agents.time_use import step_kind
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
-from fleet.plan_chain import chain_of, chain_starts, current_task
 from fleet.protocol import (
-    TIME_KINDS,
     Award,
     AwardAck,
     Clock,
@@ -62,9 +46,7 @@ from fleet.protocol import (
     MapPatches,
     Odometry,
     Plan,
-    PoseEstimate,
     Request,
-    RobotStatus,
     SpawnReply,
     SpawnRequest,
     TaskCall,
@@ -87,6 +69,8 @@ RESPAWN_MARGIN_THETA = 0.1
 
 
 class Agent:
+    """One robot's process around its control step; see the module's docstring."""
+
     def __init__(self, bus: Bus, rid: str, cfg: FleetConfig, state_dir: Path | None = None) -> None:
         self.bus = bus
         self.state_dir = state_dir
@@ -99,30 +83,17 @@ class Agent:
         self.pose_source: PoseSource | None = None
         self.odom_stamp = -1.0
         self.velocity = (0.0, 0.0)
-        self.command = (0.0, 0.0)
         self.latency_s = 0.0
-        self.follow: FollowState | None = None
-        self.idle = FollowState(np.zeros((0, 2)))
+        self.drive = Drive()
         # the latest intent of each other robot
         self.peers: dict[str, Intent] = {}
-        self.waits = Waits.none()
-        self.holding = Holding()
-        self.plan_id = -1
-        self.task = ""
-        self.state = "waiting"
-        self.distance_m = 0.0
-        self.time_s = np.zeros(len(TIME_KINDS))
+        self.params = ControlParams.of(rid, cfg)
+        self.control_state = ControlState()
         self.clock = 0.0
-        self._last_xy: tuple[float, float] | None = None
-        self._last_status = -1e9
         self._last_map = -1e9
         self._map_seq = 0
         self._map_snapshot: SlamMap | None = None
         self._patches = PatchTracker(cfg.slam.map_tile, cfg.slam.patch_tolerance)
-        self.sweep_from = 0
-        self.chain: list[str] = []
-        self.chain_starts = np.zeros(0, dtype=np.int32)
-        self.chain_time_s = 0.0
         self.market = MarketClient(
             rid,
             cfg.agent.transit_speed,
@@ -134,8 +105,6 @@ class Agent:
         self._calls_ready = threading.Condition()
         self._last_save = -1e9
         self._last_pose_save = -1e9
-        self._unlocalized_logged = False
-        self._was_localized = True
 
     def spawn(
         self, start: tuple[float, float, float], respawn: bool = False, timeout: float = 30.0
@@ -152,40 +121,11 @@ class Agent:
                 raise ValueError("a respawn needs the state directory the robot saved to")
             saved = load_state(self.state_dir)
             start = saved.pose
-        k = self.keys
-        self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
-        self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
-        self.bus.subscribe(k.clock(), Clock, self._on_clock)
-        self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
-        self.bus.subscribe(k.all_robots("intent"), Intent, self._on_intent)
-        self.bus.subscribe(k.task("*"), TaskCall, self._on_call)
-        self.bus.subscribe(k.award(self.rid), Award, self._on_award)
-        self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
-        deadline = time.monotonic() + timeout
-        req = SpawnRequest(self.rid, *start, rejoin=respawn)
-        while True:
-            try:
-                reply = self.bus.request(self.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
-                break
-            except (TimeoutError, RuntimeError) as e:
-                if time.monotonic() > deadline:
-                    raise TimeoutError(f"no simulator answered the spawn request: {e}") from None
-                time.sleep(0.2)
-        if not reply.ok:
-            raise ValueError(f"spawn refused: {reply.error}")
+        self._subscribe()
+        reply = self._request_spawn(SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
         with self.lock:
-            self._was_localized = saved is None
-            if saved is not None:
-                lidar = self.cfg.lidar
-                self.pose_source = RelocalizingSlamPose(
-                    self.cfg.slam,
-                    saved,
-                    lidar.range_min,
-                    lidar.range_max,
-                    near=respawn_window(self.cfg),
-                )
-            else:
-                self.pose_source = self._make_pose_source((reply.x, reply.y, reply.theta))
+            self.control_state = ControlState(localized=saved is None)
+            self.pose_source = self._pose_source(saved, (reply.x, reply.y, reply.theta))
         if saved is not None:
             log.info(
                 "%s took over its body; finding itself in its saved map near (%.2f, %.2f, %.2f)",
@@ -201,6 +141,42 @@ class Agent:
                 reply.theta,
                 self.pose_source.name,
             )
+
+    def _subscribe(self) -> None:
+        k = self.keys
+        self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
+        self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
+        self.bus.subscribe(k.clock(), Clock, self._on_clock)
+        self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
+        self.bus.subscribe(k.all_robots("intent"), Intent, self._on_intent)
+        self.bus.subscribe(k.task("*"), TaskCall, self._on_call)
+        self.bus.subscribe(k.award(self.rid), Award, self._on_award)
+        self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
+
+    def _request_spawn(self, req: SpawnRequest, timeout: float) -> SpawnReply:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                reply = self.bus.request(self.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
+                break
+            except (TimeoutError, RuntimeError) as e:
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"no simulator answered the spawn request: {e}") from None
+                time.sleep(0.2)
+        if not reply.ok:
+            raise ValueError(f"spawn refused: {reply.error}")
+        return reply
+
+    def _pose_source(
+        self, saved: SavedState | None, spawned: tuple[float, float, float]
+    ) -> PoseSource:
+        """The pose source; a respawned robot's first finds the robot in its saved map."""
+        if saved is None:
+            return self._make_pose_source(spawned)
+        lidar = self.cfg.lidar
+        return RelocalizingSlamPose(
+            self.cfg.slam, saved, lidar.range_min, lidar.range_max, near=respawn_window(self.cfg)
+        )
 
     def _make_pose_source(self, start: tuple[float, float, float]) -> PoseSource:
         if self.cfg.agent.pose_source == "odometry":
@@ -242,20 +218,12 @@ class Agent:
 
     def _on_plan(self, _key: str, msg: Plan) -> None:
         with self.lock:
-            if msg.plan_id == self.plan_id:
+            if msg.plan_id == self.drive.plan_id:
                 self._cut_plan(msg)
                 return
             if not self.market.holds(msg.task):
                 return
-            self.plan_id = msg.plan_id
-            self.task = msg.task
-            self.sweep_from = msg.sweep_from
-            self.chain = chain_of(msg)
-            self.chain_starts = chain_starts(msg)
-            self.chain_time_s = sum(w.time_s for w in self.market.queue if w.id in self.chain)
-            self.follow = FollowState(msg.waypoints) if len(msg.waypoints) else None
-            self.waits = Waits.of(msg)
-            self.state = "driving" if self.follow is not None else "done"
+            self.drive = Drive.of(msg, self.market.queue)
         log.info(
             "%s: plan %d (%s) with %d waypoints",
             self.rid,
@@ -267,23 +235,20 @@ class Agent:
     def _cut_plan(self, msg: Plan) -> None:
         """The coordinator took back the end of the plan being driven (tasks it gave to others):
         stop at its new end, driving on as before until there."""
-        follow = self.follow
+        follow = self.drive.follow
         if follow is None or len(msg.waypoints) >= len(follow.waypoints):
             return
-        self.follow = dataclasses.replace(follow, waypoints=msg.waypoints)
-        self.chain = chain_of(msg)
-        self.chain_starts = chain_starts(msg)
-        self.chain_time_s = sum(w.time_s for w in self.market.queue if w.id in self.chain)
-        log.info("%s: plan %d now ends after %s", self.rid, msg.plan_id, self.chain[-1])
+        self.drive = self.drive.cut(msg, self.market.queue)
+        log.info("%s: plan %d now ends after %s", self.rid, msg.plan_id, self.drive.chain[-1])
 
     def _on_award(self, _key: str, msg: Award) -> None:
         with self.lock:
             taken = self.market.on_award(msg)
-            driving = self.follow is not None and not self.follow.done
-            dropped = taken and driving and not any(self.market.holds(t) for t in self.chain)
+            follow = self.drive.follow
+            driving = follow is not None and not follow.done
+            dropped = taken and driving and not any(self.market.holds(t) for t in self.drive.chain)
             if dropped:
-                self.follow = None
-                self.task = ""
+                self.drive = dataclasses.replace(self.drive, follow=None, task="")
             seq = self.market.seq
         self.bus.publish(self.keys.ack(self.rid), AwardAck(self.clock, seq, self.rid), True)
         if taken:
@@ -321,8 +286,9 @@ class Agent:
             with self.lock:
                 assert self.pose_source is not None
                 self.market.use_map(self._map_snapshot)
+                drive = self.drive
                 commitment = self.market.commitment(
-                    self.pose_source.pose(), self.follow, self.chain, self.chain_time_s
+                    self.pose_source.pose(), drive.follow, list(drive.chain), drive.chain_time_s
                 )
                 bids = self.market.bids(calls, commitment)
             for b in bids:
@@ -361,194 +327,41 @@ class Agent:
     # ---- control ------------------------------------------------------------------------
 
     def step(self, scan: LaserScan) -> Twist:
-        """One control step on a fresh scan."""
-        a = self.cfg.agent
+        """One control step on a fresh scan (:func:`agents.control.control`): what the agent
+        has heard goes in, the outputs are published."""
         # The odometry of the scan's moment is sent first but on another stream; give it a
         # moment to arrive, so SLAM pairs the scan with it (see SlamPose).
         deadline = time.monotonic() + ODOM_WAIT_S
         while self.odom_stamp < scan.stamp - 1e-9 and time.monotonic() < deadline:
             time.sleep(0.001)
+        # the lock is held throughout: the pose source is fed odometry on another thread
         with self.lock:
-            src = self.pose_source
-            assert src is not None
-            src.on_scan(cut_out(scan, src.pose(), self.peers, a.stale_after_s, self.cfg.robot))
-            pose = src.pose()
-            velocity = self.velocity
-            stale = scan.stamp - self.odom_stamp > a.stale_after_s
-            follow = self.follow
-            plan_id, sweep_from, waits = self.plan_id, self.sweep_from, self.waits
-            heading_for = None if follow is None else follow.index
-            task = current_task(self.chain, self.chain_starts, heading_for) or self.task
-            planned = plan_id >= 0
-            localized = src.localized
-            failed = src.failed
-        if localized and not self._was_localized:
-            log.info("%s found itself at (%.2f, %.2f, %.2f) in its saved map", self.rid, *pose)
-        self._was_localized = localized
-        if self._last_xy is not None:
-            self.distance_m += float(
-                np.hypot(pose[0] - self._last_xy[0], pose[1] - self._last_xy[1])
+            assert self.pose_source is not None
+            heard = Heard(
+                scan,
+                self.odom_stamp,
+                self.velocity,
+                self.drive,
+                dict(self.peers),
+                self.latency_s,
+                sum(self.bus.decode_errors.values()),
             )
-        self._last_xy = pose[:2]
-        v = w = 0.0
-        obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
-        dt = 1.0 / self.cfg.lidar.rate_hz
-        kind = "other"
-        if stale:
-            state = "stale"
-        elif not localized:
-            state = "unlocalized" if failed else "localizing"
-            if failed and not self._unlocalized_logged:
-                self._unlocalized_logged = True
-                log.error(
-                    "%s cannot find itself in its saved map (%s); it stays out of the market",
-                    self.rid,
-                    src.reason,
-                )
-        elif follow is None or follow.done:
-            state = "done" if planned else "waiting"
-            kind = "idle"
-            self.idle, result = keep_clear(
-                self.idle,
-                pose,
-                velocity,
-                obstacles,
-                self._peer_centres(scan.stamp, everyone=True),
-                self.cfg.dwa,
-                self.cfg.robot,
-                dt,
-                a,
+            self.control_state, out = control(
+                heard, self.control_state, self.params, self.pose_source
             )
-            v, w = result.v, result.w
-        elif (held := self._hold(follow, pose, plan_id, waits, scan.stamp)) is not None:
-            follow, state, kind = held, "holding", "hold"
-        else:
-            before = follow
-            # on a transit planned in space and time the plan orders it against the peers it
-            # waits for (and that wait for it): it gives way by rank to the others only
-            ordered = frozenset(waits.peer) if follow.index <= sweep_from else frozenset()
-            follow, result = control_step(
-                follow,
-                predict(pose, self.command, self.latency_s),
-                velocity,
-                obstacles,
-                self.cfg.dwa,
-                self.cfg.robot,
-                dt,
-                a,
-                self._peer_centres(scan.stamp, everyone=False, skip=ordered),
-                self.cfg.wall_follow if a.edge_pass else None,
-            )
-            with self.lock:
-                if self.follow is not None and self.follow.waypoints is follow.waypoints:
-                    if follow.skipped > self.follow.skipped:
-                        skipped_at = self.follow.waypoints[self.follow.index]
-                        log.warning(
-                            "%s gave up on waypoint %d at (%.2f, %.2f): no progress for %.1f s, "
-                            "%.3f m short at (%.3f, %.3f, %.2f)",
-                            self.rid,
-                            self.follow.index,
-                            skipped_at[0],
-                            skipped_at[1],
-                            a.give_up_after_s,
-                            float(np.hypot(pose[0] - skipped_at[0], pose[1] - skipped_at[1])),
-                            *pose,
-                        )
-                    self.follow = follow
-            kind = step_kind(before, follow, sweep_from)
-            if result is None:
-                state = "done"
-            else:
-                v, w = result.v, result.w
-                state = "driving" if result.admissible else "blocked"
-        self.time_s[TIME_KINDS.index(kind)] += dt
-        self.state = state
-        self.command = (v, w)
+            if out.follow is not heard.drive.follow:
+                self.drive = dataclasses.replace(self.drive, follow=out.follow)
+        for level, text in out.notes:
+            log.log(level, "%s %s", self.rid, text)
         lag = min(max(self.clock - scan.stamp, 0.0), MAX_LATENCY_S)
         self.latency_s += LATENCY_GAIN * (lag - self.latency_s)
-        self._publish(scan.stamp, pose, v, w, follow, plan_id, task, sweep_from)
-        return Twist(scan.stamp, v, w)
-
-    def _hold(
-        self,
-        follow: FollowState,
-        pose: tuple[float, float, float],
-        plan_id: int,
-        waits: Waits,
-        stamp: float,
-    ) -> FollowState | None:
-        """The follower advanced to where the robot stands if it must hold there for a peer
-        (its plan's order of passage, :func:`agents.passage.hold`); None if it may drive on."""
-        with self.lock:
-            peers = progress(self.peers)
-        self.holding, ahead, notes = hold(
-            self.holding, follow, np.array(pose[:2]), plan_id, waits, peers, stamp, self.cfg.agent
-        )
-        for level, text in notes:
-            log.log(level, "%s %s", self.rid, text)
-        if ahead is not None:
-            with self.lock:
-                if self.follow is not None and self.follow.waypoints is follow.waypoints:
-                    self.follow = ahead
-        return ahead
-
-    def _peer_centres(
-        self, now: float, everyone: bool, skip: frozenset[str] = frozenset()
-    ) -> np.ndarray:
-        """The discs the robots this one gives way to will cover (:func:`agents.peers.to_avoid`)."""
-        with self.lock:
-            intents = dict(self.peers)
-        return to_avoid(self.rid, intents, now, self.cfg.agent.stale_after_s, everyone, skip)
-
-    def _publish(
-        self,
-        stamp: float,
-        pose: tuple[float, float, float],
-        v: float,
-        w: float,
-        follow: FollowState | None,
-        plan_id: int,
-        task: str,
-        sweep_from: int,
-    ) -> None:
-        """Command, pose, intent and (at ``agent.status_hz``) status; ``follow``, ``plan_id``,
-        ``task`` and ``sweep_from`` as the control step saw them, so a plan arriving meanwhile
-        is never reported with the state of the one before."""
-        k, a = self.keys, self.cfg.agent
-        self.bus.publish(k.robot(self.rid, "cmd_vel"), Twist(stamp, v, w), control=True)
-        assert self.pose_source is not None
-        self.bus.publish(
-            k.robot(self.rid, "pose"),
-            PoseEstimate(stamp, *pose, self.pose_source.covariance(), self.pose_source.name),
-        )
-        on_its_way = None if self.state in ("stale", "holding") else follow
-        points = own_intent(stamp, pose, (v, w), on_its_way, self.cfg.robot, a.intent_horizon_s)
-        self.bus.publish(
-            k.robot(self.rid, "intent"),
-            Intent(stamp, points, plan_id, follow.index if follow is not None else -1),
-        )
-        if stamp - self._last_status >= 1.0 / a.status_hz or self.state == "done":
-            self._last_status = stamp
-            n = len(follow.waypoints) if follow is not None else 0
-            idx = follow.index if follow is not None else 0
-            self.bus.publish(
-                k.robot(self.rid, "status"),
-                RobotStatus(
-                    stamp,
-                    self.state,
-                    task,
-                    idx / n if n else (1.0 if self.state == "done" else 0.0),
-                    idx,
-                    n,
-                    self.distance_m,
-                    sum(self.bus.decode_errors.values()),
-                    follow.skipped if follow is not None else 0,
-                    plan_id,
-                    swept_pieces(follow, sweep_from),
-                    self.time_s.copy(),
-                ),
-                control=True,
-            )
+        k = self.keys
+        self.bus.publish(k.robot(self.rid, "cmd_vel"), out.cmd_vel, control=True)
+        self.bus.publish(k.robot(self.rid, "pose"), out.pose)
+        self.bus.publish(k.robot(self.rid, "intent"), out.intent)
+        if out.status is not None:
+            self.bus.publish(k.robot(self.rid, "status"), out.status, control=True)
+        return out.cmd_vel
 
     def publish_map(self, stamp: float) -> None:
         """Publish the map's changed tiles, at most ``agent.map_hz`` times per sim second."""

@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from agents.peers import rim_points
-from fleet.params import AgentParams
+from fleet.params import AgentParams, FleetConfig
 from planners.dwa import DWAParams, DWAResult, dwa_control, rollout
 from planners.polyline import densify
 from planners.robot import RobotSpec
@@ -71,6 +71,25 @@ class FollowState:
     @property
     def done(self) -> bool:
         return self.index >= len(self.waypoints)
+
+
+@dataclass(frozen=True)
+class FollowParams:
+    """Everything the follower is tuned by, built once from the config (:meth:`of`): DWA's
+    parameters, the robot, the agent's, the wall follower's (None: no edge pass) and the
+    control period ``dt`` (s)."""
+
+    dwa: DWAParams
+    robot: RobotSpec
+    agent: AgentParams
+    wall: WallFollowParams | None
+    dt: float
+
+    @classmethod
+    def of(cls, cfg: FleetConfig) -> FollowParams:
+        """The control period is the scan period: one step per scan."""
+        wall = cfg.wall_follow if cfg.agent.edge_pass else None
+        return cls(cfg.dwa, cfg.robot, cfg.agent, wall, 1.0 / cfg.lidar.rate_hz)
 
 
 def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowState:

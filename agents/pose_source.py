@@ -1,9 +1,13 @@
-"""Where the agent believes it is. One small interface, so SLAM can replace odometry."""
+"""Where the agent believes it is. One small interface, so SLAM can replace odometry.
+
+A control step feeds its pose source the scan and reads where the robot is (:func:`locate`).
+"""
 
 from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -79,6 +83,32 @@ class OdometryPose:
 
     def occupancy(self) -> SlamMap | None:
         return None
+
+
+@dataclass(frozen=True, eq=False)
+class Located:
+    """What a pose source says after a scan: the pose and its covariance (row-major 3×3), the
+    source's name, and whether it knows where the robot is (see :class:`PoseSource`)."""
+
+    pose: Pose
+    covariance: np.ndarray
+    source: str
+    localized: bool
+    failed: bool
+    reason: str
+
+
+def locate(source: PoseSource, scan: LaserScan) -> Located:
+    """Feed ``source`` the scan and say where the robot is."""
+    source.on_scan(scan)
+    return Located(
+        source.pose(),
+        source.covariance(),
+        source.name,
+        source.localized,
+        source.failed,
+        source.reason,
+    )
 
 
 def odometry_at(history: Sequence[tuple[float, Pose]], stamp: float) -> Pose:

@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agents import control
 from agents.agent import Agent
+from agents.control import Drive
 from agents.follower import FollowState
 from fleet.params import FleetConfig, load_fleet_config
 from fleet.protocol import Intent, Keys, Message, Twist
@@ -81,11 +83,15 @@ def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool
         core.add_robot(rid, start)
         agent = Agent(LoopbackBus(keys, sent), rid, cfg)  # type: ignore[arg-type]
         agent.pose_source = agent._make_pose_source(start)
-        agent.plan_id = 1
-        agent.follow = FollowState(np.array([start[:2], *waypoints], dtype=float))
+        path = np.array([start[:2], *waypoints], dtype=float)
+        agent.drive = Drive(plan_id=1, follow=FollowState(path))
         agents[rid] = agent
     contacts = 0
-    while core.t < SIM_SECONDS and not all(a.follow.done for a in agents.values()):
+
+    def done() -> bool:
+        return all(a.drive.follow is not None and a.drive.follow.done for a in agents.values())
+
+    while core.t < SIM_SECONDS and not done():
         out = core.step()
         contacts += sum(c.kind == "robot" for c in out.collisions)
         for rid, msg in out.odometry:
@@ -100,8 +106,8 @@ def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool
             assert isinstance(msg, Twist)
             core.set_cmd(keys.robot_of(key), msg.v, msg.w)
         sent.clear()
-    skipped = sum(a.follow.skipped for a in agents.values())
-    return contacts, skipped, all(a.follow.done for a in agents.values())
+    skipped = sum(a.drive.follow.skipped for a in agents.values() if a.drive.follow is not None)
+    return contacts, skipped, done()
 
 
 @pytest.fixture(scope="module")
@@ -120,7 +126,7 @@ def test_two_robots_driven_at_each_other_pass_without_contact(
 def test_without_giving_way_the_same_drives_collide(
     scene: str, tmp_path: Path, cfg: FleetConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(Agent, "_peer_centres", lambda *_args, **_kw: np.zeros((0, 2)))
+    monkeypatch.setattr(control, "to_avoid", lambda *_args, **_kw: np.zeros((0, 2)))
     contacts, skipped, _ = _drive(scene, tmp_path, cfg)
     # crossing, they collide; head-on, each stops before the other (it sees it in its scans)
     # and gives up the waypoint the other stands on
