@@ -4,13 +4,13 @@
 
 - *pose*: the scan, with the returns off the peers cut out (:func:`agents.peers.cut_out`), goes
   to the pose source (:mod:`agents.pose_source`: the robot's own SLAM, or odometry);
-- *obstacles*: the scan's points (:func:`agents.follower.scan_points`) and the discs the peers
-  it gives way to will cover, by their intents (:func:`agents.peers.to_avoid`);
+- *obstacles*: the scan's points (:func:`scan_points`) and the discs the peers it gives way to
+  will cover, by their intents (:func:`agents.peers.to_avoid`);
 - *command*: stop while the odometry is stale or the robot does not know where it is; without
-  a path to follow, keep clear of everyone (:func:`agents.follower.keep_clear`); hold for
+  a path to follow, keep clear of everyone (:func:`agents.follow.escape.keep_clear`); hold for
   the peers its plan's order of passage waits for (:func:`agents.passage.hold`); else follow the
-  path (:func:`agents.follower.control_step`) from the pose predicted for when the command
-  takes effect (:func:`agents.follower.predict`);
+  path (:func:`agents.follow.motion.follow_step`) from the pose predicted for when the command
+  takes effect (:func:`agents.follow.motion.predict`);
 - *what to publish*: cmd_vel (with the scan's stamp, which tells the simulator the agent has
   kept up), the pose, the intent, and at ``agent.status_hz`` (and when done) the status.
 
@@ -28,14 +28,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from agents.follower import (
-    FollowParams,
-    FollowState,
-    control_step,
-    keep_clear,
-    predict,
-    scan_points,
-)
+from agents.follow.escape import keep_clear
+from agents.follow.motion import follow_step, predict
+from agents.follow.state import FollowParams, FollowState, Situation
 from agents.market import Won, swept_pieces
 from agents.passage import Holding, Waits, hold
 from agents.peers import cut_out, own_intent, progress, to_avoid
@@ -44,6 +39,8 @@ from agents.time_use import step_kind
 from fleet.params import FleetConfig
 from fleet.plan_chain import chain_of, chain_starts, current_task
 from fleet.protocol import TIME_KINDS, Intent, LaserScan, Plan, PoseEstimate, RobotStatus, Twist
+
+MEDIAN_BEAMS = 5
 
 # a line for the agent's log: its level and its text after the robot's id
 Note = tuple[int, str]
@@ -183,6 +180,20 @@ def control(
     return _outputs(heard, state, params, located, command, notes + command.notes)
 
 
+def scan_points(
+    pose: Pose, ranges: np.ndarray, angle_min: float, angle_increment: float
+) -> np.ndarray:
+    """World-frame obstacle points of a scan; each range is a 5-beam median to damp noise."""
+    r = np.asarray(ranges, dtype=float)
+    half = MEDIAN_BEAMS // 2
+    padded = np.concatenate([r[-half:], r, r[:half]])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, MEDIAN_BEAMS)
+    r = np.median(windows, axis=1)
+    ok = np.isfinite(r)
+    a = pose[2] + angle_min + angle_increment * np.nonzero(ok)[0]
+    return np.column_stack([pose[0] + r[ok] * np.cos(a), pose[1] + r[ok] * np.sin(a)])
+
+
 def _moved(state: ControlState, located: Located) -> tuple[ControlState, tuple[Note, ...]]:
     """The distance driven by the pose estimate, and whether the robot has just found itself."""
     pose = located.pose
@@ -213,10 +224,8 @@ def _command(
         return _lost(state, located, follow)
     if follow is None or follow.done:
         peers = to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, everyone=True)
-        f = params.follow
-        idle, result = keep_clear(
-            state.idle, pose, heard.velocity, obstacles, peers, f.dwa, f.robot, f.dt, f.agent
-        )
+        now = Situation(pose, heard.velocity, obstacles, peers)
+        idle, result = keep_clear(state.idle, now, params.follow)
         mode = "done" if drive.plan_id >= 0 else "waiting"
         return replace(state, idle=idle), Command(result.v, result.w, mode, "idle", follow)
     holding, ahead, notes = hold(
@@ -273,18 +282,8 @@ def _follow(
         skip=ordered,
     )
     predicted = predict(pose, state.command, heard.latency_s)
-    f = params.follow
-    follow, result = control_step(
-        before,
-        predicted,
-        heard.velocity,
-        obstacles,
-        f.dwa,
-        f.robot,
-        f.dt,
-        f.agent,
-        peers,
-        f.wall,
+    follow, result = follow_step(
+        before, Situation(predicted, heard.velocity, obstacles, peers), params.follow
     )
     if follow.skipped > before.skipped:
         at = before.waypoints[before.index]

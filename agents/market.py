@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.follower import FollowState
+from agents.follow.state import FollowState
 from agents.slam.slam_map import SlamMap
 from fleet import plan_chain
 from fleet.protocol import Award, Bid, TaskCall

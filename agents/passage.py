@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.follower import FollowState, advance
+from agents.follow.motion import advance
+from agents.follow.state import FollowState
 from agents.peers import PeerProgress
 from fleet.params import AgentParams
 from fleet.protocol import Plan

@@ -24,16 +24,13 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from agents.follow.state import FollowState
 from fleet.protocol import Intent, LaserScan
 from planners.dwa import rollout
 from planners.robot import RobotSpec
-
-if TYPE_CHECKING:
-    from agents.follower import FollowState
 
 RIM_POINTS = 12
 PEER_MASK_MARGIN_M = 0.05

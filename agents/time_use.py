@@ -1,8 +1,8 @@
 """Where a robot's time goes, one control step at a time.
 
-Each control step of the path follower (:func:`agents.follower.control_step`) is put in one of
-``fleet.protocol.TIME_KINDS`` by the follower's state before and after it, so a run's makespan
-splits into time spent sweeping, driving beside a wall under the wall follower (edge), in
+Each control step of the path follower (:func:`agents.follow.motion.follow_step`) is put in
+one of ``fleet.protocol.TIME_KINDS`` by the follower's state before and after it, so a run's
+makespan splits into time spent sweeping, driving beside a wall under the wall follower (edge), in
 transit to a task, turning in place, giving way to a peer, escaping a dead end, and idle (no
 plan, or its plan finished). The agent sums them and reports the sums in its status; ``fleet
 up`` puts them in report.json.
@@ -10,7 +10,7 @@ up`` puts them in report.json.
 
 from __future__ import annotations
 
-from agents.follower import FollowState
+from agents.follow.state import FollowState
 
 
 def step_kind(before: FollowState | None, after: FollowState | None, sweep_from: int) -> str:

@@ -3,7 +3,7 @@
 What a live agent does on each scan, without the bus: the simulator core (``SimCore``: physics,
 noisy lidar and odometry, the ground-truth cleaning grid) steps; each scan goes to the robot's
 pose source (its own SLAM, as in ``fleet up``, or the true pose); the path follower
-(``agents.follower.control_step``: DWA, turns in place, escapes, give-up) computes the command
+(``agents.follow.motion.follow_step``: DWA, turns in place, escapes, give-up) computes the command
 from the pose predicted ``latency_s`` ahead, and the command takes effect that much later (0
 by default: at ``--speed 0`` the live simulator waits for each answer, and a one-robot
 ``fleet up`` of the small world matched the default within 4 % in time, coverage and time by
@@ -26,7 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.follower import FollowState, control_step, predict, scan_points
+from agents.control import scan_points
+from agents.follow.motion import follow_step, predict
+from agents.follow.state import FollowParams, FollowState, Situation
 from agents.pose_source import SlamPose
 from agents.time_use import step_kind
 from fleet.coordinator.planning import TaskPlanner
@@ -75,7 +77,8 @@ def follow_tour(
     command = (0.0, 0.0)
     pending: list[tuple[float, float, float]] = []
     velocity = (0.0, 0.0)
-    dt = 1.0 / cfg.lidar.rate_hz
+    params = FollowParams.of(cfg)
+    dt = params.dt
     time_use = dict.fromkeys(TIME_KINDS, 0.0)
     tracking: list[float] = []
     contacts: list[tuple[float, float, float]] = []
@@ -103,16 +106,9 @@ def follow_tour(
                 pose = core.truth()[ROBOT]
             obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
             before = follow
-            follow, result = control_step(
-                follow,
-                predict(pose, command, latency_s),
-                velocity,
-                obstacles,
-                cfg.dwa,
-                cfg.robot,
-                dt,
-                cfg.agent,
-                wall=cfg.wall_follow if cfg.agent.edge_pass else None,
+            ahead = predict(pose, command, latency_s)
+            follow, result = follow_step(
+                follow, Situation(ahead, velocity, obstacles, np.zeros((0, 2))), params
             )
             kind = step_kind(before, follow, sweep_from)
             time_use[kind] += dt

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.follower import FollowState
+from agents.follow.state import FollowState
 from agents.market import MarketClient, swept_pieces
 from fleet.protocol import Award, TaskCall
 from planners.grid import GridMap

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from robots import ROBOT
 
-from agents.follower import FollowState, keep_clear
+from agents.follow.escape import keep_clear
+from agents.follow.state import FollowParams, FollowState, Situation
 from agents.peers import (
     PEER_MASK_MARGIN_M,
     gives_way,
@@ -73,9 +74,8 @@ def _idle_among(peer_path: np.ndarray, seconds: float, dt: float = 0.1):
         t = k * dt
         ahead = peer_path[1:][np.hypot(*(peer_path[1:] - peer).T) > 1e-9]
         centres = intent_centres([path_intent(peer, ahead, 0.25, t, 2.0)], t, 0.5)
-        idle, result = keep_clear(
-            idle, pose, velocity, np.zeros((0, 2)), centres, DWA, ROBOT, dt, AGENT
-        )
+        now = Situation(pose, velocity, np.zeros((0, 2)), centres)
+        idle, result = keep_clear(idle, now, FollowParams(DWA, ROBOT, AGENT, None, dt))
         velocity = (result.v, result.w)
         xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([dt]))
         pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))

@@ -11,7 +11,7 @@ import numpy as np
 from robots import ROBOT
 
 from agents.control import ControlParams, ControlState, Drive, Heard, Outputs, control
-from agents.follower import FollowParams
+from agents.follow.state import FollowParams
 from agents.peers import path_intent
 from agents.pose_source import OdometryPose
 from fleet.params import AgentParams

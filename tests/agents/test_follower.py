@@ -10,24 +10,30 @@ import numpy as np
 import pytest
 from robots import ROBOT
 
-from agents.follower import (
-    ESCAPE_MARGIN_M,
-    FollowState,
-    advance,
-    control_step,
-    escape_heading,
-    escape_step,
-    peer_in_the_way,
-    rotate_in_place,
-    start_escape,
-    stop_speed,
-)
+from agents.follow.escape import ESCAPE_MARGIN_M, escape_heading, escape_step, start_escape
+from agents.follow.motion import advance, follow_step, peer_in_the_way, stop_speed
+from agents.follow.primitives import rotate_in_place
+from agents.follow.state import FollowParams, FollowState, Situation
 from fleet.params import AgentParams
-from planners.dwa import DWAParams, rollout
+from planners.dwa import DWAParams, DWAResult, rollout
 
 AGENT = AgentParams()
 DWA = DWAParams()
 DT = 0.1
+PARAMS = FollowParams(DWA, ROBOT, AGENT, None, DT)
+NONE = np.zeros((0, 2))
+
+
+def _step(
+    state: FollowState,
+    pose: tuple[float, float, float],
+    velocity: tuple[float, float],
+    obstacles: np.ndarray,
+    peers: np.ndarray = NONE,
+    agent: AgentParams = AGENT,
+) -> tuple[FollowState, DWAResult | None]:
+    now = Situation(pose, velocity, obstacles, peers)
+    return follow_step(state, now, replace(PARAMS, agent=agent))
 
 
 def test_lane_end_is_reached_along_the_lane_not_within_a_radius() -> None:
@@ -52,11 +58,12 @@ def test_rotate_in_place_brakes_and_turns_within_the_limits() -> None:
 def test_stop_speed_only_on_the_approach_to_a_sharp_corner() -> None:
     corner = FollowState(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 0.3]]), index=1)
     # beyond the braking distance
-    assert stop_speed(corner, np.array([0.5, 0.0]), DWA, ROBOT, 0.03) is None
-    v = stop_speed(corner, np.array([1.9, 0.0]), DWA, ROBOT, 0.03)
+    assert AGENT.along_tolerance == 0.03
+    assert stop_speed(corner, np.array([0.5, 0.0]), PARAMS) is None
+    v = stop_speed(corner, np.array([1.9, 0.0]), PARAMS)
     assert v == pytest.approx(math.sqrt(2 * ROBOT.acc_lim_x * (0.1 - 0.015)))
     gentle = FollowState(np.array([[0.0, 0.0], [2.0, 0.0], [3.0, 1.0]]), index=1)  # 45°
-    assert stop_speed(gentle, np.array([1.9, 0.0]), DWA, ROBOT, 0.03) is None
+    assert stop_speed(gentle, np.array([1.9, 0.0]), PARAMS) is None
 
 
 def _track(path: np.ndarray, pose: tuple[float, float, float], seconds: float):
@@ -64,7 +71,7 @@ def _track(path: np.ndarray, pose: tuple[float, float, float], seconds: float):
     state, velocity = FollowState(path), (0.0, 0.0)
     poses = [pose]
     for _ in range(round(seconds / DT)):
-        state, result = control_step(state, pose, velocity, np.zeros((0, 2)), DWA, ROBOT, DT, AGENT)
+        state, result = _step(state, pose, velocity, NONE)
         if result is None:
             return poses, state, True
         velocity = (result.v, result.w)
@@ -132,9 +139,7 @@ def test_a_peer_overlapping_the_robot_does_not_license_an_escape_into_a_wall() -
     # under way, a move that would close on the table ends, whatever the peers
     east = FollowState(np.array([[1.2, 1.97], [1.79, 1.97]]), index=1, escape_m=0.15)
     east = replace(east, escape_heading=math.pi, escape_sign=-1)
-    moving = escape_step(
-        east, (1.85, 1.2, math.pi), (-0.1, 0.0), table, peers, DWA, ROBOT, DT, AGENT
-    )
+    moving = escape_step(east, Situation((1.85, 1.2, math.pi), (-0.1, 0.0), table, peers), PARAMS)
     assert moving is None
 
 
@@ -142,29 +147,21 @@ def test_escape_turns_first_then_drives_in_the_cheaper_sense() -> None:
     path = np.array([[0.0, 0.0], [-2.0, 0.0]])
     state = FollowState(path, index=1)
     # free all round; the aim is behind the robot, so it reverses without turning
-    none = np.zeros((0, 2))
-    behind = start_escape(state, (0.0, 0.0, 0.0), path[1], none, none, 0.17, AGENT)
+    free = Situation((0.0, 0.0, 0.0), (0.0, 0.0), NONE, NONE)
+    behind = start_escape(state, free, path[1], PARAMS)
     assert behind.escape_sign == -1 and behind.escape_m == AGENT.escape_distance
-    stepped = escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, ROBOT, DT, AGENT)
+    stepped = escape_step(behind, free, PARAMS)
     assert stepped is not None and stepped[1].v < 0 and stepped[1].w == 0.0
     # the aim is to the left: turn in place before driving
     left = start_escape(
-        FollowState(np.array([[0.0, 0.0], [0.0, 2.0]]), index=1),
-        (0.0, 0.0, 0.0),
-        np.array([0.0, 2.0]),
-        none,
-        none,
-        0.17,
-        AGENT,
+        FollowState(np.array([[0.0, 0.0], [0.0, 2.0]]), index=1), free, np.array([0.0, 2.0]), PARAMS
     )
     assert left.escape_sign == 1 and left.escape_heading == pytest.approx(math.pi / 2, abs=0.1)
-    turning = escape_step(left, (0.0, 0.0, 0.0), (0.0, 0.0), none, none, DWA, ROBOT, DT, AGENT)
+    turning = escape_step(left, free, PARAMS)
     assert turning is not None and turning[1].v == 0.0 and turning[1].w > 0
     # the way closes during the move: the escape ends
     wall = np.array([[-0.25, y] for y in np.linspace(-0.5, 0.5, 21)])
-    assert (
-        escape_step(behind, (0.0, 0.0, 0.0), (0.0, 0.0), wall, none, DWA, ROBOT, DT, AGENT) is None
-    )
+    assert escape_step(behind, replace(free, obstacles=wall), PARAMS) is None
 
 
 def test_a_robot_wedged_against_a_wall_escapes_and_then_drives_on() -> None:
@@ -173,7 +170,7 @@ def test_a_robot_wedged_against_a_wall_escapes_and_then_drives_on() -> None:
     path = np.array([[0.0, 0.0], [0.0, 1.0]])
     state, pose, velocity = FollowState(path, index=1), (0.0, 0.0, 1.2), (0.0, 0.0)
     for _ in range(60):
-        state, result = control_step(state, pose, velocity, wall, DWA, ROBOT, DT, AGENT)
+        state, result = _step(state, pose, velocity, wall)
         assert result is not None
         velocity = (result.v, result.w)
         xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([DT]))
@@ -201,7 +198,7 @@ def _stall(peers: np.ndarray, obstacles: np.ndarray, agent: AgentParams) -> floa
     state = FollowState(np.array([[0.0, 0.0], [2.0, 0.0]]), index=1)
     pose, velocity = (0.0, 0.0, 0.0), (0.0, 0.0)
     for k in range(400):
-        state, result = control_step(state, pose, velocity, obstacles, DWA, ROBOT, DT, agent, peers)
+        state, result = _step(state, pose, velocity, obstacles, peers, agent)
         if state.skipped:
             return k * DT
         assert result is not None
@@ -234,8 +231,6 @@ def test_a_waypoint_given_up_far_short_is_missed(at: float, missed: tuple[int, .
     given up 8 cm short, within agent.swept_within, the brush reached the rest."""
     lane = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]])
     state = FollowState(lane, index=1, stalled_s=AGENT.give_up_after_s, best_dist=2.0 - at)
-    state, _ = control_step(
-        state, (at, 0.0, 0.0), (0.0, 0.0), np.zeros((0, 2)), DWA, ROBOT, DT, AGENT
-    )
+    state, _ = _step(state, (at, 0.0, 0.0), (0.0, 0.0), NONE)
     assert state.index == 2 and state.skipped == 1
     assert state.missed == missed

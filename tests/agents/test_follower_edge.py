@@ -1,5 +1,5 @@
 """The edge pass in the path follower: a lane that hugs a wall is driven by the wall follower on
-the scan (agents.follower.wall_beside / edge_step), at the wall follower's distance whatever
+the scan (agents.follow.edge.wall_beside / edge_step), at the wall follower's distance whatever
 the pose estimate's error; lanes away from walls, and robots near peers, stay with DWA."""
 
 from __future__ import annotations
@@ -9,7 +9,10 @@ import math
 import numpy as np
 from robots import ROBOT
 
-from agents.follower import FollowState, control_step, scan_points, wall_beside
+from agents.control import scan_points
+from agents.follow.edge import wall_beside
+from agents.follow.motion import follow_step
+from agents.follow.state import FollowParams, FollowState, Situation
 from agents.time_use import step_kind
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, rollout
@@ -20,6 +23,7 @@ AGENT = AgentParams()
 DWA = DWAParams()
 WALL = WallFollowParams()
 DT = 0.1
+PARAMS = FollowParams(DWA, ROBOT, AGENT, WALL, DT)
 BEAMS = 360
 INCREMENT = 2 * math.pi / BEAMS
 ANGLES = -math.pi + INCREMENT * np.arange(BEAMS)
@@ -38,6 +42,7 @@ def _drive(
     rng = np.random.default_rng(0)
     state = FollowState(np.array([[0.0, lane_y], [3.0, lane_y]]), index=1)
     pose, velocity = (0.0, lane_y, 0.0), (0.0, 0.0)
+    peers = np.zeros((0, 2)) if peers is None else peers
     xy, sides = [], []
     for _ in range(round(seconds / DT)):
         ranges = cast_scans(
@@ -47,9 +52,7 @@ def _drive(
         seen = (pose[0] + pose_error[0], pose[1] + pose_error[1], pose[2])
         obstacles = scan_points(seen, ranges, -math.pi, INCREMENT)
         before = state
-        state, result = control_step(
-            state, seen, velocity, obstacles, DWA, ROBOT, DT, AGENT, peers, WALL
-        )
+        state, result = follow_step(state, Situation(seen, velocity, obstacles, peers), PARAMS)
         if result is None:
             break
         sides.append(state.edge_side)

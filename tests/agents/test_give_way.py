@@ -15,7 +15,7 @@ import pytest
 from agents import control
 from agents.agent import Agent
 from agents.control import Drive
-from agents.follower import FollowState
+from agents.follow.state import FollowState
 from fleet.params import FleetConfig, load_fleet_config
 from fleet.protocol import Intent, Keys, Message, Twist
 from fleet.world import load_world

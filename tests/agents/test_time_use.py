@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from agents.follower import FollowState
+from agents.follow.state import FollowState
 from agents.time_use import step_kind
 from fleet.protocol import TIME_KINDS, RobotStatus, decode, encode
 from fleet.report.summary import time_use_of

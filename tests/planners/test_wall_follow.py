@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from robots import ROBOT
 
-from agents.follower import scan_points
+from agents.control import scan_points
 from planners.dwa import rollout
 from planners.wall_follow import (
     WallFollowParams,
