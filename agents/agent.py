@@ -6,7 +6,8 @@ coordinator sends. Each scan triggers one control step, called with what the age
 returns — the cmd_vel it publishes carries that scan's stamp, which is how the simulator knows
 the agent has kept up — and measures the latency of its commands against the sim clock, from
 which the next step predicts its pose. The shell keeps the bus, the threads and the lock, the
-plan it drives (:class:`agents.control.Drive`), the map it publishes, and the state directory.
+plan it drives (:class:`agents.control.Drive`), and its map, published and saved to the state
+directory by :class:`agents.map_keeper.MapKeeper`.
 
 It takes part in the market (:mod:`agents.market`): it bids on called tasks from its own pose
 and commitments, acknowledges the queue it is awarded, drives only plans for tasks it holds,
@@ -29,10 +30,10 @@ import time
 from pathlib import Path
 
 from agents.control import ControlParams, ControlState, Drive, Heard, control
+from agents.map_keeper import MapKeeper
 from agents.market import MarketClient
 from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
-from agents.slam.persistence import SavedState, load_state, save_pose, save_state
-from agents.slam.slam_map import MapUpdate, PatchTracker, SlamMap
+from agents.slam.persistence import SavedState, load_state
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
@@ -90,10 +91,7 @@ class Agent:
         self.params = ControlParams.of(rid, cfg)
         self.control_state = ControlState()
         self.clock = 0.0
-        self._last_map = -1e9
-        self._map_seq = 0
-        self._map_snapshot: SlamMap | None = None
-        self._patches = PatchTracker(cfg.slam.map_tile, cfg.slam.patch_tolerance)
+        self.maps = MapKeeper(bus, rid, cfg, state_dir)
         self.market = MarketClient(
             rid,
             cfg.agent.transit_speed,
@@ -103,8 +101,6 @@ class Agent:
         )
         self._calls: list[TaskCall] = []
         self._calls_ready = threading.Condition()
-        self._last_save = -1e9
-        self._last_pose_save = -1e9
 
     def spawn(
         self, start: tuple[float, float, float], respawn: bool = False, timeout: float = 30.0
@@ -285,7 +281,7 @@ class Agent:
             calls = [c for c in calls if c.round == latest]
             with self.lock:
                 assert self.pose_source is not None
-                self.market.use_map(self._map_snapshot)
+                self.market.use_map(self.maps.snapshot)
                 drive = self.drive
                 commitment = self.market.commitment(
                     self.pose_source.pose(), drive.follow, list(drive.chain), drive.chain_time_s
@@ -317,12 +313,7 @@ class Agent:
             )
 
     def _on_map_request(self, _req: Request) -> MapPatches:
-        """The whole current map, for whoever joins late or noticed a gap in ``seq``."""
-        snapshot = self._map_snapshot
-        if snapshot is None:
-            raise LookupError(f"{self.rid} has no map yet")
-        update = PatchTracker(self.cfg.slam.map_tile, 0).update(snapshot)
-        return _map_message(self.clock, self._map_seq, self.cfg.slam.map_tile, update)
+        return self.maps.whole(self.clock)
 
     # ---- control ------------------------------------------------------------------------
 
@@ -363,30 +354,6 @@ class Agent:
             self.bus.publish(k.robot(self.rid, "status"), out.status, control=True)
         return out.cmd_vel
 
-    def publish_map(self, stamp: float) -> None:
-        """Publish the map's changed tiles, at most ``agent.map_hz`` times per sim second."""
-        if stamp - self._last_map < 1.0 / self.cfg.agent.map_hz:
-            return
-        assert self.pose_source is not None
-        snapshot = self.pose_source.occupancy()
-        if snapshot is None:
-            return
-        self._last_map = stamp
-        self._map_snapshot = snapshot
-        if self.state_dir is not None and stamp - self._last_save >= self.cfg.agent.state_save_s:
-            self._last_save = stamp
-            try:
-                save_state(self.state_dir, snapshot, self.pose_source.pose(), stamp)
-            except OSError as e:
-                log.warning(
-                    "%s: could not save its map and pose to %s: %s", self.rid, self.state_dir, e
-                )
-        update = self._patches.update(snapshot)
-        if update.full or update.patches:
-            self._map_seq += 1
-            msg = _map_message(stamp, self._map_seq, self.cfg.slam.map_tile, update)
-            self.bus.publish(self.keys.robot(self.rid, "map"), msg)
-
     def run(self) -> None:
         for loop in (self.heartbeat_loop, self.bid_loop):
             threading.Thread(target=loop, name=loop.__name__, daemon=True).start()
@@ -397,25 +364,9 @@ class Agent:
             except queue.Empty:
                 continue
             self.step(scan)
-            self.publish_map(scan.stamp)
-            self.save_pose(scan.stamp)
-
-    def save_pose(self, stamp: float) -> None:
-        """With a state directory, write the pose every ``agent.pose_save_s`` (sim time) once the
-        robot knows where it is, so a respawn searches a small window around it."""
-        src = self.pose_source
-        if (
-            self.state_dir is None
-            or src is None
-            or not src.localized
-            or stamp - self._last_pose_save < self.cfg.agent.pose_save_s
-        ):
-            return
-        self._last_pose_save = stamp
-        try:
-            save_pose(self.state_dir, src.pose(), stamp)
-        except OSError as e:
-            log.warning("%s: could not save its pose to %s: %s", self.rid, self.state_dir, e)
+            assert self.pose_source is not None
+            self.maps.publish(scan.stamp, self.pose_source)
+            self.maps.save_pose(scan.stamp, self.pose_source)
 
 
 def respawn_window(cfg: FleetConfig) -> tuple[float, float]:
@@ -432,16 +383,3 @@ def respawn_window(cfg: FleetConfig) -> tuple[float, float]:
         + RESPAWN_MARGIN_THETA
     )
     return xy, min(theta, math.pi)
-
-
-def _map_message(stamp: float, seq: int, tile: int, update: MapUpdate) -> MapPatches:
-    return MapPatches.pack(
-        stamp,
-        seq,
-        update.full,
-        update.shape,
-        update.resolution,
-        update.origin,
-        tile,
-        [(p.row, p.col, p.data) for p in update.patches],
-    )

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from slam_sim import drifting_odometry, loop_route, room_segments, scan
 
-from agents.agent import _map_message
+from agents.map_keeper import map_message
 from agents.pose_source import OdometryPose, SlamPose, odometry_at
 from agents.slam.slam_map import PatchTracker
 from fleet.protocol import LaserScan, MapPatches, Odometry, decode, encode
@@ -75,7 +75,7 @@ def test_map_messages_rebuild_the_map_exactly() -> None:
         _drive(src, truth[chunk : chunk + 40], odom[chunk : chunk + 40], seed=chunk)
         snapshot = src.occupancy()
         msg = decode(
-            encode(_map_message(0.0, chunk, SlamParams().map_tile, tracker.update(snapshot))),
+            encode(map_message(0.0, chunk, SlamParams().map_tile, tracker.update(snapshot))),
             MapPatches,
         )
         if msg.full or received is None or received.shape != (msg.rows, msg.cols):
