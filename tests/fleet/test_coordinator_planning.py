@@ -104,7 +104,9 @@ def test_a_body_in_the_only_way_cuts_the_far_room_off(corridor):
     assert corridor.near_bodies(through)
     way = corridor.reroute(through)
     assert len(way.paths) == 2 and way.changed
-    assert way.paths[0][:, 0].max() < 3.6 and way.paths[1][:, 0].min() > 4.4
+    reach = corridor.body_radius + corridor.centre_clearance
+    assert way.paths[0][:, 0].max() <= 4.0 - reach + 0.01
+    assert way.paths[1][:, 0].min() >= 4.0 + reach - 0.01
     assert corridor.blocked_m2(way.dropped[0]) > 0.15  # the corridor's floor, 0.3 m wide
     corridor.set_bodies(np.zeros((0, 2)))
     assert corridor.drive(west_xy, [(east, False)])[0].shape[1] == 2
