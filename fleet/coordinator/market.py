@@ -327,6 +327,8 @@ class Market:
                 f"round the body: {len(parts)} part(s) {' '.join(parts)}, {area:.2f} m² blocked",
             )
             self.journal.save_tasks(tid, *parts, *blocked)
+            if (lost_at := self.lost_at.pop(tid, None)) is not None:
+                self.lost_at.update(dict.fromkeys(parts, lost_at))
             if tid in self.region_sale:
                 at = self.region_sale.index(tid)
                 self.region_sale[at : at + 1] = parts

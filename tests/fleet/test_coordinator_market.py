@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from robots import ROBOT
 
+from fleet.bench.recovery import to_reassign
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
@@ -219,6 +220,39 @@ def test_a_body_in_the_way_is_planned_round_and_its_floor_is_blocked(
         c.market.rejoined("robot-1")
         assert all(r.state == OPEN for r in blocked)
         assert not planner.near_bodies(np.array([[2.0, 0.85], [2.01, 0.85]]))
+    finally:
+        planner.set_bodies(np.zeros((0, 2)))
+
+
+def test_the_parts_replacing_a_lost_robots_work_round_its_body_are_reassigned(
+    planner: TaskPlanner,
+) -> None:
+    """robot-1 dies on its own lane: the lane is reopened, then replaced by parts round the
+    body; the parts are what is re-sold, as reassignments timed from the loss, and the
+    recovery bench counts the lost work re-sold once they are."""
+    c = Coordinator(planner, ["robot-0", "robot-1", "robot-2"])
+    job = c.job
+    job.tasks.clear()
+    job.add_tasks((_lane("t00", 0.6), _lane("t01", 0.85)))
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-1", False)
+    job.robots["robot-1"].xy = (2.0, 0.85)
+    try:
+        c.market.lose("robot-1", "its liveliness token is gone")
+        c.bidding = {"robot-0": 10.0, "robot-2": 20.0}
+        c.market.auction(c.auctioneer)
+        parts = [t for t, r in job.tasks.items() if r.parent == "t01" and r.state != "blocked"]
+        assert parts and job.tasks["t01"].state == REPLACED
+        reassigned = {t for _, t, _ in c.events("reassigned")}
+        assert set(parts) <= reassigned and "t01" not in reassigned
+        assert "t01" not in {t for _, t, _ in c.events("awarded")}
+        events = [
+            {"kind": m.kind, "task": m.task, "detail": m.detail}
+            for _, m in c.sent
+            if isinstance(m, FleetEvent)
+        ]
+        assert to_reassign(events, {"t01"}) == set(parts)
+        assert to_reassign(events, {"t05"}) == {"t05"}
     finally:
         planner.set_bodies(np.zeros((0, 2)))
 

@@ -226,7 +226,8 @@ def test_a_fleet_across_hosts_finishes_through_a_router_restart_and_a_link_down(
         for name in names:
             connect = ["--connect", f"tcp/{routers[name]}:{PORT}"]
             if name == "sim":
-                argv = ["sim", "--world", WORLD, "--speed", "0", *connect]
+                # twice real time: the job must outlast the router's restart and the link's fall
+                argv = ["sim", "--world", WORLD, "--speed", "2", *connect]
             elif name == "coordinator":
                 argv = ["coordinator", "--robots", str(ROBOTS), "--world", WORLD]
                 argv += ["--state", str(state), *connect]
@@ -251,6 +252,7 @@ def test_a_fleet_across_hosts_finishes_through_a_router_restart_and_a_link_down(
         procs.start("router", hosts.hub, router_argv)
         rejoined = _wait_for_rejoin(state, names[2:], killed_wall, deadline, procs)
         print(f"router down {DOWN_S:g} s: every robot rejoined {rejoined - back:.1f} s after")
+        assert _phase(state) != "done", f"the job ended before the link went down\n{procs.logs()}"
         link_down_wall = time.time()
         hosts.set_link("robot-1", up=False)
         time.sleep(DOWN_S)
