@@ -138,6 +138,21 @@ class Keys:
         return ""
 
 
+_ID_KEYS = ("plan", "award", "ack", "task", "bid")
+
+
+def key_class(key: str) -> str:
+    """What kind of key ``key`` is, without its fleet and ids: ``fleet/<f>/robot/robot-3/truth``
+    → ``robot/*/truth``; an id after ``coord/plan/``, ``award/``, ``ack/``, ``task/`` or
+    ``bid/`` becomes ``*`` too."""
+    parts = str(key).split("/")[2:]
+    if len(parts) >= 3 and parts[0] == "robot":
+        parts[1] = "*"
+    elif len(parts) >= 3 and parts[0] == "coord" and parts[1] in _ID_KEYS:
+        parts[2:] = ["*"]
+    return "/".join(parts)
+
+
 # ---------------------------------------------------------------------------------------------
 # Messages
 

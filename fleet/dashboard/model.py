@@ -50,6 +50,7 @@ from fleet.protocol import (
     RobotStatus,
     TruthPose,
     decode,
+    key_class,
 )
 from planners.grid import GridMap
 
@@ -144,7 +145,7 @@ class FleetSnapshot:
 
 
 class RateMeter:
-    """Messages per second per key pattern (robot ids replaced by ``*``), over a sliding
+    """Messages per second per key class (:func:`fleet.protocol.key_class`), over a sliding
     window of wall time."""
 
     def __init__(self, window_s: float = RATE_WINDOW_S) -> None:
@@ -154,7 +155,7 @@ class RateMeter:
 
     def count(self, key: str, n: int = 1, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
-        pattern = key_pattern(key)
+        pattern = key_class(key)
         with self._lock:
             self._seen.setdefault(pattern, deque()).append((now, n))
 
@@ -168,17 +169,6 @@ class RateMeter:
                     seen.popleft()
                 out.append((pattern, sum(n for _, n in seen) / self.window_s))
         return sorted(out, key=lambda r: (-r[1], r[0]))
-
-
-def key_pattern(key: str) -> str:
-    """``fleet/<f>/robot/robot-3/truth`` → ``robot/*/truth``; other keys lose their
-    ``fleet/<f>/`` prefix and any id after ``plan/``, ``award/``, ``ack/``."""
-    parts = str(key).split("/")[2:]
-    if len(parts) >= 3 and parts[0] == "robot":
-        parts[1] = "*"
-    elif len(parts) >= 3 and parts[0] == "coord" and parts[1] in ("plan", "award", "ack", "task"):
-        parts[2:] = ["*"]
-    return "/".join(parts)
 
 
 class FleetWatcher:

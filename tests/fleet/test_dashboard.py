@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fleet.bus import Bus, open_router
-from fleet.dashboard.model import BusFeed, FleetWatcher, key_pattern
+from fleet.dashboard.model import BusFeed, FleetWatcher
 from fleet.dashboard.term import DOWN, KILL, QUIT, UP, ViewControl, parse_keys
 from fleet.dashboard.view import LOST_MARK, WALL, heading_arrow, plain, screen
 from fleet.floor_map import pack_grid
@@ -28,6 +28,7 @@ from fleet.protocol import (
     RobotStatus,
     TruthPose,
     decode,
+    key_class,
 )
 from fleet.rundir import ProcessRecord, RunTable, cmdline, write_table
 from fleet.supervisor.launcher import free_port
@@ -151,9 +152,10 @@ def test_the_makespan_runs_from_the_first_plan_to_the_job_done() -> None:
 
 def test_keys_from_a_terminal_and_key_patterns_for_the_rates() -> None:
     assert parse_keys(b"\x1b[A\x1b[Bk\x1bOBrq\x1b[Cx") == [UP, DOWN, KILL, DOWN, "respawn", QUIT]
-    assert key_pattern("fleet/default/robot/robot-3/truth") == "robot/*/truth"
-    assert key_pattern("fleet/default/coord/plan/robot-1") == "coord/plan/*"
-    assert key_pattern("fleet/default/sim/clock") == "sim/clock"
+    assert key_class("fleet/default/robot/robot-3/truth") == "robot/*/truth"
+    assert key_class("fleet/default/coord/plan/robot-1") == "coord/plan/*"
+    assert key_class("fleet/default/coord/bid/t04/robot-1") == "coord/bid/*"
+    assert key_class("fleet/default/sim/clock") == "sim/clock"
 
 
 # ---- a live bus --------------------------------------------------------------------------
