@@ -469,7 +469,8 @@ class Collision(Message):
 
 @dataclass(frozen=True, eq=False)
 class CoverageSummary(Message):
-    """Ground-truth cleaning progress and per-robot counters (sim → dashboard and report)."""
+    """Ground-truth cleaning progress and per-robot counters (sim → dashboard and report), and
+    how many messages the simulator has dropped as malformed and as implausible."""
 
     TYPE: ClassVar[str] = "coverage"
     stamp: float
@@ -482,6 +483,8 @@ class CoverageSummary(Message):
     turns: Annotated[np.ndarray, Arr("<i4")]
     wall_collisions: Annotated[np.ndarray, Arr("<i4")]
     robot_collisions: Annotated[np.ndarray, Arr("<i4")]
+    decode_errors: int = 0
+    implausible: int = 0
 
 
 @dataclass(frozen=True, eq=False)
