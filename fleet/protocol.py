@@ -440,7 +440,8 @@ class FleetState(Message):
     """The coordinator's view of the job: its phase (gathering, auction, cleaning, done, or
     incomplete: finished with work no robot could reach), the robots it plans for, those with
     no work left, those lost, and how many tasks are open (not held by a live robot),
-    assigned, done and left out (blocked by a lost robot's body, or unreachable)."""
+    assigned, done and left out (blocked by a lost robot's body, or unreachable); and how many
+    messages it has dropped as malformed (``decode_errors``) and as implausible."""
 
     TYPE: ClassVar[str] = "fleet_state"
     stamp: float
@@ -452,6 +453,8 @@ class FleetState(Message):
     tasks_assigned: int = 0
     tasks_done: int = 0
     tasks_left_out: int = 0
+    decode_errors: int = 0
+    implausible: int = 0
 
 
 @dataclass(frozen=True, eq=False)

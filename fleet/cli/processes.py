@@ -215,6 +215,7 @@ def coordinator(
     from fleet.coordinator.service import Coordinator
     from fleet.coordinator.store import JobStore, StoreError
     from fleet.coordinator.transits import TransitPlanner
+    from fleet.plausible import Bounds
 
     if robots < 1:
         _fail("--robots must be >= 1")
@@ -233,7 +234,7 @@ def coordinator(
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
-    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits)
+    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=Bounds.of(cfg))
     _stop_on_signals(c.stop)
     try:
         c.run(cfg.coordinator.expected_robots_grace_s)
