@@ -106,7 +106,7 @@ def up(
         time_use_of,
         write_json,
     )
-    from fleet.rundir import RunTable, cmdline, write_table
+    from fleet.rundir import RunTable, cmdline, write_dropped, write_table
     from fleet.supervisor.launcher import Launcher, free_port, wait_for_port
 
     if not 1 <= robots <= MAX_ROBOTS:
@@ -204,6 +204,8 @@ def up(
         with watcher.lock:
             skipped = {rid: v.status.skipped for rid, v in watcher.robots.items() if v.status}
             time_use = {rid: time_use_of(v.status) for rid, v in watcher.robots.items() if v.status}
+        dropped = {**watcher.dropped(), "sim": (summary.decode_errors, summary.implausible)}
+        write_dropped(run_dir, dropped)
         job = job_report(run_dir / "coordinator.sqlite")
         # an agent's own count starts again with each plan: the coordinator's spans them all
         for rid, n in (job["given_up_waypoints"] or {}).items():
@@ -220,6 +222,7 @@ def up(
                 "seed": seed,
                 "deconfliction": deconfliction or cfg.coordinator.deconfliction,
                 "missed": missed_breakdown(image, w.grid(image.resolution)),
+                "dropped": {n: {"malformed": m, "implausible": i} for n, (m, i) in dropped.items()},
                 **job,
             },
             skipped,
@@ -333,6 +336,7 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
     from rich.console import Console
 
     from fleet.dashboard.term import TerminalView, ViewControl
+    from fleet.rundir import write_dropped
     from fleet.supervisor.ops import ProcessActions
 
     console = Console(stderr=True)
@@ -342,6 +346,7 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
         view = TerminalView(watcher, control, console)
     last_line = -1e9
     reported: dict[str, int] = {}
+    dropped: dict[str, tuple[int, int | None]] = {}
 
     def say(text: str, kind: str) -> None:
         if view is not None:
@@ -393,6 +398,9 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
                         "lost",
                     )
             watcher.set_restarts({n: r.restarts for n, r in launcher.records.items()})
+            if watcher.dropped() != dropped:
+                dropped = watcher.dropped()
+                write_dropped(launcher.run_dir, dropped)
             if until_done and watcher.done:
                 return watcher.phase
             if timeout is not None and wall > timeout:

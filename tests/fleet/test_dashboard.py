@@ -16,7 +16,7 @@ import pytest
 from fleet.bus import Bus, open_router
 from fleet.dashboard.model import BusFeed, FleetWatcher
 from fleet.dashboard.term import DOWN, KILL, QUIT, UP, ViewControl, parse_keys
-from fleet.dashboard.view import LOST_MARK, WALL, heading_arrow, plain, screen
+from fleet.dashboard.view import LOST_MARK, WALL, header, heading_arrow, plain, screen
 from fleet.floor_map import pack_grid
 from fleet.protocol import (
     Collision,
@@ -139,6 +139,27 @@ def test_a_view_that_never_saw_the_plan_takes_the_pace_since_it_came() -> None:
     w.on_fleet("", FleetState(30.0, "cleaning", ["robot-0"], [], [], 1, 5, 4))
     # 2 tasks in 30 s since it came, 6 to go: 90 s
     assert w.snapshot(now=came + 30.0).eta_s == pytest.approx(90.0)
+
+
+def test_the_messages_each_process_dropped_show_in_the_header_and_the_line() -> None:
+    w = _watcher()
+    assert w.dropped() == {"robot-0": (0, None), "robot-1": (0, None)}
+    assert "dropped" not in plain([header(w.snapshot())]) and "dropped" not in w.line(1.0)
+    w.on_fleet("", _recorded(FleetState(20.0, "cleaning", ["robot-0"], [], [], 2, 3, 5, 0, 1, 4)))
+    w.on_status(
+        KEYS.robot("robot-1", "status"),
+        _recorded(RobotStatus(13.0, "driving", "t03", 0.5, 4, 10, 5.0, decode_errors=2)),
+    )
+    w.set_own_dropped("up", 0, 0)
+    assert w.dropped() == {
+        "coordinator": (1, 4),
+        "robot-0": (0, None),
+        "robot-1": (2, None),
+        "up": (0, 0),
+    }
+    shown = "dropped: coordinator 1 malformed 4 implausible, robot-1 2 malformed"
+    assert shown in plain([header(w.snapshot())])
+    assert w.line(1.0).endswith(shown)
 
 
 def test_the_makespan_runs_from_the_first_plan_to_the_job_done() -> None:
