@@ -228,7 +228,9 @@ def coordinator(
     except ValueError as e:
         _fail(str(e))
     try:
-        store = JobStore(state) if state is not None else None
+        store = None
+        if state is not None:
+            store = JobStore(state, fleet=fleet, world=w.name, robots=robots)
     except StoreError as e:
         _fail(str(e))
     except (sqlite3.Error, OSError) as e:
