@@ -105,9 +105,12 @@ class SimClock:
             return True
 
     def ahead(self, stamp: float) -> bool:
-        """Whether ``stamp`` is farther ahead of the clock than any robot's can be (never
-        before the clock has synced: until then it knows no time to judge by)."""
-        return self.synced and stamp > self.now + self.step_s
+        """Whether ``stamp`` is farther ahead of the clock than any robot's can be: more than a
+        step past it, and past a jump it may be about to confirm (a receiver catching up after a
+        stop). Never before the clock has synced: until then it knows no time to judge by."""
+        with self._lock:
+            limit = self.now if self._jump is None else max(self.now, self._jump.stamp)
+            return self.synced and stamp > limit + self.step_s
 
     def _settle(self) -> None:
         """A believable message came: the jump before it, never confirmed, was implausible."""

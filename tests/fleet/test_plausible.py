@@ -34,8 +34,8 @@ def test_a_lone_clock_stamp_far_ahead_never_moves_the_clock_and_is_counted() -> 
     drops = Drops()
     clock = SimClock(STEP, drops)
     assert clock.hear(0.05) and clock.synced
-    assert not clock.hear(1e9) and clock.now == 0.05
     assert not clock.ahead(0.05 + STEP) and clock.ahead(1e9)
+    assert not clock.hear(1e9) and clock.now == 0.05
     # the real clock goes on: the jump was implausible
     assert clock.hear(0.10) and clock.now == 0.10
     assert drops.calls and drops.total == 1 and "past the clock" in drops.calls[0][1]
@@ -53,9 +53,15 @@ def test_a_late_or_resumed_clock_catches_up_once_messages_in_a_row_confirm_the_j
     assert moved == [False] * (CONFIRMATIONS - 1) + [True]
     assert clock.now == stamps[-1] and clock.synced and drops.calls == []
     # clock messages lost to congestion: every one a jump past the step, each confirming the last
-    for i in range(1, 2 * CONFIRMATIONS):
+    for i in range(1, 2 * CONFIRMATIONS + 1):
         clock.hear(stamps[-1] + i * (STEP + 0.1))
     assert clock.now > stamps[-1] and drops.calls == []
+    # while a jump waits for confirmation, stamps up to it are not judged ahead
+    now = clock.now
+    clock.hear(now + 100.0)
+    assert clock.now == now and not clock.ahead(now + 100.0) and clock.ahead(now + 100 + 2 * STEP)
+    clock.hear(now + 0.05)
+    assert clock.ahead(now + 100.0) and drops.total == 1
 
 
 def test_a_jump_is_not_confirmed_by_a_stamp_behind_it() -> None:
