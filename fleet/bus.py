@@ -20,6 +20,7 @@ import contextlib
 import json
 import logging
 import threading
+import time
 from collections import Counter
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -215,7 +216,9 @@ class Bus:
 
     def request(self, key: str, msg: Message, reply_cls: type[M], timeout: float = 5.0) -> M:
         """Send a query and return the first valid reply; raises TimeoutError or RuntimeError.
-        A reply that does not decode is counted and dropped."""
+        A reply that does not decode is counted and dropped. A query nothing serves ends at
+        once, without waiting for ``timeout``."""
+        start = time.monotonic()
         for reply in self.session.get(key, payload=msg.encode(), timeout=timeout):
             if reply.ok is None:
                 raise RuntimeError(f"{key}: {reply.err.payload.to_string()}")
@@ -223,7 +226,8 @@ class Bus:
                 return decode(reply.ok.payload.to_bytes(), reply_cls)
             except DecodeError as e:
                 self.drop_malformed(key, e)
-        raise TimeoutError(f"{key}: no valid reply within {timeout} s")
+        waited = time.monotonic() - start
+        raise TimeoutError(f"{key}: no valid reply after {waited:.1f} s (timeout {timeout} s)")
 
     def watch_alive(
         self,

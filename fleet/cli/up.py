@@ -33,8 +33,11 @@ TIMED_OUT_EXIT = 3
 # the job finished, but with work no robot could reach (report.json's left_out)
 INCOMPLETE_EXIT = 4
 # The simulator is asked for the report this long at a time (wall seconds), again while it
-# works (it lives and uses CPU: a starved machine slows it down), for at most REPORT_GIVE_UP_S.
+# works (it lives and uses CPU: a starved machine slows it down), for at most REPORT_GIVE_UP_S;
+# a query nothing serves yet (a simulator still starting) returns at once, and is asked again
+# after REPORT_POLL_S.
 REPORT_WAIT_S = 30.0
+REPORT_POLL_S = 1.0
 REPORT_GIVE_UP_S = 300.0
 # the router's port is waited for this long at a time, again while it works, at most ..._GIVE_UP_S
 ROUTER_WAIT_S = 15.0
@@ -277,28 +280,39 @@ def up(
 
 def _ask_sim(bus: Bus, key: str, cls: type[M], sim: WorkWatch) -> M:
     """The simulator's answer on ``key`` for the report. A starved machine can keep a live
-    simulator from answering within REPORT_WAIT_S, so it is asked again while it works, for at
-    most REPORT_GIVE_UP_S; TimeoutError once it has died, stopped or hung, or then."""
+    simulator from answering (or from serving at all yet: a query nothing serves returns at
+    once) for long, so it is asked again, every REPORT_POLL_S at most, while it works (judged
+    over each REPORT_WAIT_S), for at most REPORT_GIVE_UP_S; TimeoutError once it has exited,
+    has stopped or hung, or then."""
     from fleet.protocol import Request
 
-    waited = 0.0
+    start = looked = time.monotonic()
     while True:
+        asked = time.monotonic()
         try:
             return bus.request(key, Request("up"), cls, timeout=REPORT_WAIT_S)
         except TimeoutError:
-            waited += REPORT_WAIT_S
-            working = sim.working()
-            if not working or waited >= REPORT_GIVE_UP_S:
-                why = "still working" if working else "not working (dead, stopped or hung)"
-                raise TimeoutError(
-                    f"{key}: the simulator has not answered in {waited:.0f} s and is {why}"
-                ) from None
-            print(
-                f"the simulator has not answered in {waited:.0f} s; it works (a busy machine): "
-                "asking again",
-                file=sys.stderr,
-                flush=True,
-            )
+            pass
+        time.sleep(max(0.0, REPORT_POLL_S - (time.monotonic() - asked)))
+        now = time.monotonic()
+        why = ""
+        if not sim.alive():
+            why = "has exited"
+        elif now - looked >= REPORT_WAIT_S:
+            looked = now
+            if not sim.working():
+                why = "is not working (stopped or hung)"
+            elif now - start >= REPORT_GIVE_UP_S:
+                why = "still works but does not answer"
+            else:
+                print(
+                    f"the simulator has not answered in {now - start:.0f} s; it works (a busy "
+                    "machine): asking again",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        if why:
+            raise TimeoutError(f"{key}: no answer in {now - start:.0f} s; the simulator {why}")
 
 
 class MainThreadCalls:

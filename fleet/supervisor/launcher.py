@@ -71,6 +71,9 @@ class WorkWatch:
         self.proc = proc
         self.ticks = cpu_ticks(proc.pid)
 
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
     def working(self) -> bool:
         if self.proc.poll() is not None:
             return False

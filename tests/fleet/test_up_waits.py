@@ -49,7 +49,8 @@ def test_a_busy_process_works_an_idle_stopped_or_dead_one_does_not() -> None:
 
 
 class _SlowBus:
-    """A bus whose query times out ``misses`` times before the answer comes."""
+    """A bus whose query finds no simulator to answer ``misses`` times (and returns at once, as
+    a query nothing serves does) before the answer comes."""
 
     def __init__(self, misses: int) -> None:
         self.misses = misses
@@ -58,28 +59,46 @@ class _SlowBus:
     def request(self, key: str, msg: Request, cls: type, timeout: float) -> object:
         self.asked += 1
         if self.asked <= self.misses:
-            raise TimeoutError(f"{key}: no valid reply within {timeout} s")
+            raise TimeoutError(f"{key}: no valid reply after 0.0 s (timeout {timeout} s)")
         return "the report"
 
 
 class _Sim:
-    def __init__(self, works: bool) -> None:
+    def __init__(self, alive: bool = True, works: bool = True) -> None:
+        self.is_alive = alive
         self.works = works
+
+    def alive(self) -> bool:
+        return self.is_alive
 
     def working(self) -> bool:
         return self.works
 
 
-def test_a_working_simulator_is_asked_again_until_it_answers() -> None:
-    bus = _SlowBus(misses=3)
-    answer = up._ask_sim(bus, "sim/report", CoverageSummary, _Sim(True))  # type: ignore[arg-type]
-    assert answer == "the report" and bus.asked == 4
+@pytest.fixture
+def quick(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The report's waits, a hundred times shorter."""
+    monkeypatch.setattr(up, "REPORT_POLL_S", 0.01)
+    monkeypatch.setattr(up, "REPORT_WAIT_S", 0.05)
+    monkeypatch.setattr(up, "REPORT_GIVE_UP_S", 0.3)
 
 
-def test_a_simulator_that_does_not_work_is_given_up_at_once_one_that_never_answers_later() -> None:
+def test_a_simulator_not_serving_yet_is_asked_again_until_it_answers(quick: None) -> None:
+    bus = _SlowBus(misses=20)
+    t0 = time.monotonic()
+    answer = up._ask_sim(bus, "sim/report", CoverageSummary, _Sim())  # type: ignore[arg-type]
+    assert answer == "the report" and bus.asked == 21
+    # a query nothing serves returns at once: it is not asked again sooner than the poll
+    assert time.monotonic() - t0 >= 20 * up.REPORT_POLL_S
+
+
+def test_a_simulator_that_exited_or_does_not_work_is_given_up(quick: None) -> None:
+    with pytest.raises(TimeoutError, match="has exited"):
+        up._ask_sim(_SlowBus(5), "sim/report", CoverageSummary, _Sim(alive=False))  # type: ignore[arg-type]
+    bus = _SlowBus(1000)
     with pytest.raises(TimeoutError, match="not working"):
-        up._ask_sim(_SlowBus(misses=5), "sim/report", CoverageSummary, _Sim(False))  # type: ignore[arg-type]
-    bus = _SlowBus(misses=1000)
-    with pytest.raises(TimeoutError, match="still working"):
-        up._ask_sim(bus, "sim/report", CoverageSummary, _Sim(True))  # type: ignore[arg-type]
-    assert bus.asked == up.REPORT_GIVE_UP_S / up.REPORT_WAIT_S
+        up._ask_sim(bus, "sim/report", CoverageSummary, _Sim(works=False))  # type: ignore[arg-type]
+    # judged over a whole REPORT_WAIT_S, not at the first miss
+    assert bus.asked > 1
+    with pytest.raises(TimeoutError, match="still works but does not answer"):
+        up._ask_sim(_SlowBus(1000), "sim/report", CoverageSummary, _Sim())  # type: ignore[arg-type]
