@@ -5,17 +5,19 @@ the robot can drive, is dropped and counted (:meth:`fleet.bus.Bus.drop_implausib
 malformed payload. No single message moves a clock or a position by more than one step could:
 
 - :class:`SimClock` follows the simulator's clock messages. One at most ``step_s`` past the
-  clock moves it; one farther ahead moves it only once ``CONFIRMATIONS`` such messages in a row,
-  none behind the one before, say that time has moved on that far (a receiver that started late,
-  was stopped for a while or lost clock messages to congestion catches up within a few
-  messages; a lone stamp far ahead never moves it).
+  clock moves it; one farther ahead is believed only once ``CONFIRMATIONS`` such messages, each
+  within ``step_s`` of the others, say that time has moved on that far (a receiver that started
+  late, was stopped for a while or lost clock messages catches up within a few messages; a lone
+  stamp far ahead never moves it, nor does it keep the real clock's jump from being believed).
 - :class:`PoseTrack` follows one robot's reported positions the same way: a position the robot
   can have driven to since the last one believed (``speed`` × the time between their stamps +
-  ``margin_m``) is believed; a jump is believed once ``CONFIRMATIONS`` positions in a row, each
-  within reach of the one before, agree with it (a re-localized robot, a SLAM correction).
+  ``margin_m``) is believed; a jump is believed once ``CONFIRMATIONS`` positions, each within
+  reach of the one before, agree with it (a re-localized robot, a SLAM correction).
 
-A jump never confirmed is reported to ``dropped`` once a believable message supersedes it, with
-how many messages it held, so what is counted is what was really implausible.
+Messages not believed yet wait in chains of messages that agree with each other (at most
+``MAX_CHAINS``). A chain never confirmed is reported to ``dropped``, with how many messages it
+held, once a believable message or a confirmed chain supersedes it, so what is counted is what
+was really implausible.
 """
 
 from __future__ import annotations
@@ -27,8 +29,10 @@ from dataclasses import dataclass
 
 from fleet.params import AgentParams, FleetConfig, SimParams
 
-# a jump is believed once this many messages in a row agree with it: one is never enough
+# a jump is believed once this many messages agree with it: one is never enough
 CONFIRMATIONS = 3
+# chains of messages not believed yet that a receiver keeps; the oldest beyond goes
+MAX_CHAINS = 4
 
 # dropped(n, why): n messages were dropped as implausible, for this reason
 Dropped = Callable[[int, str], None]
@@ -61,13 +65,51 @@ class Bounds:
 
 @dataclass
 class _Jump:
-    """Messages in a row that the receiver does not believe yet: the newest one's stamp (and
-    position), how many, and why the first was not believed."""
+    """Messages that agree with each other and that the receiver does not believe yet: the
+    newest one's stamp (and position), how many, and why the first was not believed."""
 
     stamp: float
     xy: tuple[float, float] | None
     count: int
     why: str
+
+
+class _Jumps:
+    """The chains of messages not believed yet (see the module docstring)."""
+
+    def __init__(self, dropped: Dropped) -> None:
+        self.dropped = dropped
+        self.chains: list[_Jump] = []
+
+    def hear(self, jump: _Jump, agrees: Callable[[_Jump], bool]) -> _Jump | None:
+        """Add one message (``jump``, count 1) to the first chain it ``agrees`` with, or start
+        a chain with it; the chain it confirmed (the others then settled), else None."""
+        for chain in self.chains:
+            if agrees(chain):
+                chain.stamp = max(chain.stamp, jump.stamp)
+                chain.xy = jump.xy
+                chain.count += 1
+                if chain.count < CONFIRMATIONS:
+                    return None
+                self.chains.remove(chain)
+                self.settle()
+                return chain
+        self.chains.append(jump)
+        if len(self.chains) > MAX_CHAINS:
+            oldest = self.chains.pop(0)
+            self.dropped(oldest.count, oldest.why)
+        return None
+
+    def settle(self) -> None:
+        """A believable message came: the chains before it, never confirmed, were
+        implausible."""
+        for chain in self.chains:
+            self.dropped(chain.count, chain.why)
+        self.chains.clear()
+
+    def newest(self) -> float | None:
+        """The newest stamp of a chain that may be confirmed next."""
+        return max((c.stamp for c in self.chains), default=None)
 
 
 class SimClock:
@@ -76,32 +118,27 @@ class SimClock:
 
     def __init__(self, step_s: float, dropped: Dropped, now: float = 0.0) -> None:
         self.step_s = step_s
-        self.dropped = dropped
         self.now = now
         self.synced = False
-        self._jump: _Jump | None = None
+        self._jumps = _Jumps(dropped)
         self._lock = threading.Lock()
 
     def hear(self, stamp: float) -> bool:
         """Take one clock message; whether it moved the clock."""
         with self._lock:
             if stamp <= self.now + self.step_s:
-                self._settle()
+                self._jumps.settle()
                 self.synced = True
                 moved = stamp > self.now
                 self.now = max(self.now, stamp)
                 return moved
-            jump = self._jump
-            if jump is None or stamp < jump.stamp:
-                self._settle()
-                why = f"sim time {stamp:.3f} s, {stamp - self.now:.3f} s past the clock"
-                self._jump = _Jump(stamp, None, 1, why)
+            why = f"sim time {stamp:.3f} s, {stamp - self.now:.3f} s past the clock"
+            confirmed = self._jumps.hear(
+                _Jump(stamp, None, 1, why), lambda c: abs(stamp - c.stamp) <= self.step_s
+            )
+            if confirmed is None:
                 return False
-            jump.stamp, jump.count = stamp, jump.count + 1
-            if jump.count < CONFIRMATIONS:
-                return False
-            self._jump = None
-            self.now, self.synced = stamp, True
+            self.now, self.synced = confirmed.stamp, True
             return True
 
     def ahead(self, stamp: float) -> bool:
@@ -109,14 +146,9 @@ class SimClock:
         step past it, and past a jump it may be about to confirm (a receiver catching up after a
         stop). Never before the clock has synced: until then it knows no time to judge by."""
         with self._lock:
-            limit = self.now if self._jump is None else max(self.now, self._jump.stamp)
+            pending = self._jumps.newest()
+            limit = self.now if pending is None else max(self.now, pending)
             return self.synced and stamp > limit + self.step_s
-
-    def _settle(self) -> None:
-        """A believable message came: the jump before it, never confirmed, was implausible."""
-        if self._jump is not None:
-            self.dropped(self._jump.count, self._jump.why)
-            self._jump = None
 
 
 class PoseTrack:
@@ -126,9 +158,8 @@ class PoseTrack:
     def __init__(self, speed: float, margin_m: float, dropped: Dropped) -> None:
         self.speed = speed
         self.margin_m = margin_m
-        self.dropped = dropped
         self.last: tuple[float, tuple[float, float]] | None = None
-        self._jump: _Jump | None = None
+        self._jumps = _Jumps(dropped)
 
     def hear(self, stamp: float, xy: tuple[float, float]) -> bool:
         """Take one position reported at sim time ``stamp``; whether it is believed. One older
@@ -141,23 +172,17 @@ class PoseTrack:
             return False
         why = self._out_of_reach(t0, xy0, stamp, xy)
         if why is None:
-            self._settle()
+            self._jumps.settle()
             self.last = (stamp, xy)
             return True
-        jump = self._jump
-        if (
-            jump is not None
-            and jump.xy is not None
-            and self._out_of_reach(jump.stamp, jump.xy, stamp, xy) is None
-        ):
-            jump.stamp, jump.xy, jump.count = stamp, xy, jump.count + 1
-            if jump.count >= CONFIRMATIONS:
-                self._jump, self.last = None, (stamp, xy)
-                return True
+        confirmed = self._jumps.hear(
+            _Jump(stamp, xy, 1, why),
+            lambda c: c.xy is not None and self._out_of_reach(c.stamp, c.xy, stamp, xy) is None,
+        )
+        if confirmed is None:
             return False
-        self._settle()
-        self._jump = _Jump(stamp, xy, 1, why)
-        return False
+        self.last = (stamp, xy)
+        return True
 
     def _out_of_reach(
         self, t0: float, xy0: tuple[float, float], stamp: float, xy: tuple[float, float]
@@ -169,8 +194,3 @@ class PoseTrack:
         if stamp >= t0 and gap <= reach:
             return None
         return f"moved {gap:.2f} m in {stamp - t0:.3f} s sim, farther than {reach:.2f} m"
-
-    def _settle(self) -> None:
-        if self._jump is not None:
-            self.dropped(self._jump.count, self._jump.why)
-            self._jump = None

@@ -19,12 +19,14 @@ A robot is lost when its liveliness token goes (a dead process) or its wall-cloc
 silent for ``coordinator.heartbeat_timeout_s`` (a hung one); one heard from again rejoins. The
 coordinator never reads truth.
 
-Its clock is the simulator's (``sim/clock``), as :class:`fleet.plausible.SimClock` believes it.
-Each receiver checks what it hears against what it knows (:mod:`fleet.plausible`) and drops,
-counts and logs what cannot be: a pose, status, heartbeat or acknowledgement from a robot not in
-the job (no liveliness token heard) or stamped more than a clock step ahead of the clock, and a
-pose the robot cannot have driven to since its last. Its counts of malformed and implausible
-messages go out in ``coord/state`` and to the store's meta (``dropped``).
+Its clock is the simulator's (``sim/clock``), as :class:`fleet.plausible.SimClock` believes it;
+no robot's message moves it. Each receiver checks what it hears against what it knows
+(:mod:`fleet.plausible`) and drops, counts and logs what cannot be: a pose, status, heartbeat or
+acknowledgement from a robot not in the job (no liveliness token heard), a pose or status
+stamped (with the scan it answers) more than a clock step ahead of the clock, and a pose the
+robot cannot have driven to since its last. Heartbeats and acknowledgements carry the agent's
+clock, which moves nothing here; they are not judged by it. Its counts of malformed and
+implausible messages go out in ``coord/state`` and to the store's meta (``dropped``).
 """
 
 from __future__ import annotations
@@ -187,13 +189,13 @@ class Coordinator:
         if self.sim_clock.hear(msg.stamp):
             self.journal.heard(self.sim_clock.now)
 
-    def _implausible(self, key: str, rid: str, stamp: float) -> bool:
-        """Drop (count and log) a message from ``rid`` that is not in the job, or stamped
-        farther ahead of the clock than a robot's can be; whether it was dropped. Call with
-        the lock held."""
+    def _implausible(self, key: str, rid: str, stamp: float | None = None) -> bool:
+        """Drop (count and log) a message from ``rid`` that is not in the job, or with a sensor
+        ``stamp`` farther ahead of the clock than a robot's can be; whether it was dropped.
+        Call with the lock held."""
         if rid not in self.job.robots:
             why = "not in the job: no liveliness token of it heard"
-        elif self.sim_clock.ahead(stamp):
+        elif stamp is not None and self.sim_clock.ahead(stamp):
             why = f"stamped {stamp:.3f} s, past the sim clock at {self.sim_clock.now:.3f} s"
         else:
             return False
@@ -218,7 +220,9 @@ class Coordinator:
     def _on_heartbeat(self, key: str, msg: Heartbeat) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            if self._implausible(key, rid, msg.stamp):
+            # stamped with the agent's clock, which moves nothing here: a wrong one must not
+            # turn a working robot into a lost one
+            if self._implausible(key, rid):
                 return
             r = self.job.robots[rid]
             r.heartbeat_wall = time.time()
@@ -262,7 +266,7 @@ class Coordinator:
     def _on_ack(self, key: str, msg: AwardAck) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            if self._implausible(key, rid, msg.stamp):
+            if self._implausible(key, rid):
                 return
             if self.awards.acked(rid, msg):
                 self.wake.set()
