@@ -20,7 +20,7 @@ from fleet.coordinator.job import (
     GivenUpWaypoints,
     Job,
 )
-from fleet.coordinator.store import JobStore
+from fleet.coordinator.store import STORE_VERSION, JobStore
 from fleet.protocol import Plan
 from fleet.supervisor.runner import read_events
 from planners.auction import Task
@@ -163,7 +163,7 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     assert again.tasks["t02.1"].tried == {"robot-1"}
     assert again.tasks["t03.1"].state == BLOCKED and again.tasks["t03.1"].blocked_by == "robot-2"
     assert store.plans()["robot-0"] == plan
-    assert store.meta() == {"phase": "cleaning", "plan_seq": 7, "store_version": 2}
+    assert store.meta() == {"phase": "cleaning", "plan_seq": 7, "store_version": STORE_VERSION}
     assert [e["kind"] for e in read_events(tmp_path / "job.sqlite")] == ["awarded"]
     store.close()
 
@@ -184,7 +184,7 @@ def test_a_state_file_of_another_layout_is_refused(tmp_path):
     )
     db.commit()
     db.close()
-    with pytest.raises(StoreError, match=r"old\.sqlite.*layout version none, not 2"):
+    with pytest.raises(StoreError, match=rf"old\.sqlite.*layout version none, not {STORE_VERSION}"):
         JobStore(path)
 
 
