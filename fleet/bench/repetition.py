@@ -9,7 +9,15 @@ from typing import Any
 
 import numpy as np
 
-from fleet.report.repetition import CAUSE_LABELS, CAUSES, ELEMENTS, KINDS, breakdown
+from fleet.report.repetition import (
+    CAUSE_LABELS,
+    CAUSES,
+    ELEMENTS,
+    GROUP_LABELS,
+    GROUPS,
+    KINDS,
+    breakdown,
+)
 from fleet.report.summary import REPORT_FILE, ReportError
 
 
@@ -58,6 +66,7 @@ def bench_repetition(
             "repetition": _median([r["repetition"] for r in mine]),
             "replay_repetition": _median([r["replay_repetition"] for r in mine]),
             "causes": {c: _median([r["causes"][c] for r in mine]) for c in CAUSES},
+            "groups": {g: _median([r["groups"][g] for r in mine]) for g in GROUPS},
             "kinds": {k: _median([r["kinds"][k] for r in mine]) for k in KINDS},
             "elements": {e: _median([r["elements"][e] for r in mine]) for e in ELEMENTS},
             "tour": mine[0]["tour"],
@@ -93,6 +102,17 @@ def table_lines(result: dict[str, Any]) -> list[str]:
             f"{w['tour']['repetition']:.1f} |",
             f"| simulator (report.json) | {sim} | {w['repetition']:.1f} | "
             f"{w['tour']['own'].get('repetition', float('nan')) * 100:.1f} (own grid) |",
+            "",
+            "| by what would remove it | " + " | ".join(heads) + " | median | the tour alone |",
+            "| --- |" + " --- |" * (len(heads) + 2),
+        ]
+        for g in GROUPS:
+            cells = " | ".join(f"{r['groups'][g]:.1f}" for r in mine)
+            lines.append(
+                f"| {GROUP_LABELS[g]} | {cells} | {w['groups'][g]:.1f} | "
+                f"{w['tour']['groups'][g]:.1f} |"
+            )
+        lines += [
             "",
             "  by step kind (median): "
             + ", ".join(f"{k} {v:.1f}" for k, v in w["kinds"].items() if v >= 0.05),

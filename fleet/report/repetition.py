@@ -25,11 +25,11 @@ The headline **cause** of a re-entry is the first of:
   wobble, or the lane driven again);
 * **passes side by side**: the cell lies between the line of this move and the line of the move
   that swept it last, on opposite sides of it, at least ``SIDE_SHARE`` of the brush width from
-  each: where neighbouring passes overlap, whatever elements of the tour they are (lane overlap,
-  and a lane beside a hop that runs where a lane would);
+  each: where neighbouring passes of the tour overlap, two lanes (**lane overlap**) or a hop
+  (or another pass) beside a lane or a hop;
 * for a lane, what swept the cell last: a turn or a hop ≤ ``SHORT_HOP_M`` (**lane ends**: the
-  U-turn's floor), anything else (**lane over swept floor**: a longer hop, a transit, a crossing
-  lane, a pass, an escape);
+  U-turn's floor), a longer hop, a transit, another lane not beside it (a crossing lane, or a
+  drift onto the neighbour's floor), or anything else (a pass, an escape, a detour);
 * else the element itself (hops by length, turns, passes, transits, ...).
 
 Causes are in points of repetition (re-entries / swept cells × 100) and sum to the replay's
@@ -116,9 +116,13 @@ KIND_CAUSES = {
 }
 # the headline causes, in the order the tables show them
 CAUSES = (
-    "side_by_side",
+    "lanes_side_by_side",
+    "hop_side_by_side",
     "lane_ends",
-    "lane_over_swept",
+    "lane_over_hop",
+    "lane_over_transit",
+    "lane_over_lane",
+    "lane_over_other",
     "lane_own",
     "turn",
     "pass",
@@ -136,9 +140,13 @@ CAUSES = (
     "idle",
 )
 CAUSE_LABELS = {
-    "side_by_side": "passes side by side (lane overlap)",
+    "lanes_side_by_side": "lanes side by side (lane overlap)",
+    "hop_side_by_side": "a hop or pass side by side with a lane or hop",
     "lane_ends": "lane over its U-turn's floor (lane ends)",
-    "lane_over_swept": "lane over floor swept before (hop, transit, crossing lane)",
+    "lane_over_hop": f"lane over floor a hop > {SHORT_HOP_M:g} m swept",
+    "lane_over_transit": "lane over floor a transit swept",
+    "lane_over_lane": "lane over another lane's floor, not beside it",
+    "lane_over_other": "lane over floor a pass, escape or detour swept",
     "lane_own": "lane over its own line (wobble, driven again)",
     "turn": "turns inside lane groups",
     "pass": "other passes (fill-in, strips)",
@@ -154,6 +162,34 @@ CAUSE_LABELS = {
     "give_way": "giving way",
     "hold": "holding for a peer",
     "idle": "idle (stepping aside)",
+}
+
+# the causes by what would remove them: the tour's hops, its lanes' spacing and tracking, its
+# U-turns, the transits between tasks, its other passes, and the follower and its peers
+GROUPS = {
+    "hops": ("hop_long", "hop_mid", "hop_side_by_side", "lane_over_hop"),
+    "lanes_over_lanes": ("lanes_side_by_side", "lane_over_lane", "lane_own"),
+    "u_turns": ("hop_short", "lane_ends", "turn"),
+    "transits": ("transit", "lane_over_transit"),
+    "passes": ("pass", "lane_over_other"),
+    "execution": (
+        "off_path",
+        "turn_in_place",
+        "escape",
+        "give_way",
+        "hold",
+        "idle",
+        "no_plan",
+        "detour",
+    ),
+}
+GROUP_LABELS = {
+    "hops": "the tour's hops (> 0.35 m), with the floor lanes sweep after them",
+    "lanes_over_lanes": "lanes over lanes (side by side, drifted onto, crossing)",
+    "u_turns": "U-turns and lane ends",
+    "transits": "transits between tasks, with the floor lanes sweep after them",
+    "passes": "fill-in and other passes",
+    "execution": "the follower and its peers (turns in place, escapes, giving way, off path)",
 }
 
 
@@ -596,7 +632,7 @@ def _causes(
     index = {c: i for i, c in enumerate(CAUSES)}
     by_element = np.array(
         [
-            index["lane_over_swept"],
+            index["lane_over_other"],
             index["turn"],
             index["pass"],
             index["hop_long"],
@@ -608,11 +644,17 @@ def _causes(
             index["no_plan"],
         ]
     )
-    cause = by_element[el]
+    # a lane by what swept the cell before it
+    after = np.full(len(ELEMENTS), index["lane_over_other"])
+    after[[E_TURN, E_HOP_SHORT]] = index["lane_ends"]
+    after[[E_HOP_MID, E_HOP_LONG]] = index["lane_over_hop"]
+    after[E_TRANSIT] = index["lane_over_transit"]
+    after[E_LANE] = index["lane_over_lane"]
     lane = el == E_LANE
-    cause[lane & ((prev_el == E_TURN) | (prev_el == E_HOP_SHORT))] = index["lane_ends"]
-    planned = el < E_TRANSIT
-    cause[beside & planned & (prev_el < E_TRANSIT)] = index["side_by_side"]
+    cause = np.where(lane, after[prev_el], by_element[el])
+    beside &= (el < E_TRANSIT) & (prev_el < E_TRANSIT)
+    cause[beside] = index["hop_side_by_side"]
+    cause[beside & lane & (prev_el == E_LANE)] = index["lanes_side_by_side"]
     cause[lane & (prev_el == E_LANE) & (prev_run == run) & (run >= 0)] = index["lane_own"]
     for name, c in KIND_CAUSES.items():
         cause[kind == TIME_KINDS.index(name)] = index[c]
@@ -626,6 +668,11 @@ def _points(counts: np.ndarray, names: Sequence[str], swept: int) -> dict[str, f
     return {
         n: round(100.0 * float(c) / max(swept, 1), 3) for n, c in zip(names, counts, strict=True)
     }
+
+
+def grouped(causes: dict[str, float]) -> dict[str, float]:
+    """Points of repetition by ``GROUPS``: what would remove them."""
+    return {g: round(sum(causes[c] for c in members), 3) for g, members in GROUPS.items()}
 
 
 def breakdown(run_dir: Path, subdivide: int = 1) -> dict[str, Any]:
@@ -673,7 +720,8 @@ def breakdown(run_dir: Path, subdivide: int = 1) -> dict[str, Any]:
         "replay_gap": round(100.0 * float(report["repetition"]) - replay, 3),
         "replay_coverage": round(swept / max(total, 1), 5),
         "cells_as_simulated": same,
-        "causes": _points(live["cause"], CAUSES, swept),
+        "causes": (causes := _points(live["cause"], CAUSES, swept)),
+        "groups": grouped(causes),
         "kinds": _points(live["kind"], KINDS, swept),
         "elements": _points(live["element"], ELEMENTS, swept),
         "kind_element": {
@@ -684,7 +732,8 @@ def breakdown(run_dir: Path, subdivide: int = 1) -> dict[str, Any]:
         "tour": {
             "repetition": round(100.0 * planned["re_entries"] / max(planned["swept_cells"], 1), 3),
             "coverage": round(planned["swept_cells"] / max(total, 1), 5),
-            "causes": _points(planned["cause"], CAUSES, planned["swept_cells"]),
+            "causes": (alone := _points(planned["cause"], CAUSES, planned["swept_cells"])),
+            "groups": grouped(alone),
             "own": tour.figures,
         },
     }
