@@ -67,6 +67,7 @@ class TourSpec:
         return plan_coverage(grid, starts, self.params, robot, wall_clearance=self.wall_clearance)
 
     def to_json(self) -> dict[str, float]:
+        """The parameters that set the plan apart: cell size, lane overlap, wall clearance."""
         return {
             "resolution_m": self.resolution,
             "lane_overlap": self.params.overlap,
