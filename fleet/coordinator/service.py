@@ -386,7 +386,7 @@ class Coordinator:
         with self.lock:
             self.job.add_tasks(tasks)
             self.journal.save_tasks(*self.job.tasks)
-            self.journal.set_meta(expected_robots=self.expected)
+            self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
             self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:

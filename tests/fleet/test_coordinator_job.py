@@ -208,10 +208,12 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
         rejected_bids={"late": 2},
         estimate_s=123.4,
         given_up_waypoints={"by_robot": {"robot-1": 2}, "seen": {"robot-1/3": 2}},
+        tour={"coverage": 0.995, "repetition": 0.285},
     )
     store.close()
     report = job_report(tmp_path / "job.sqlite")
     assert report["plan_estimate_s"] == 123.4
+    assert report["plan"] == {"coverage": 0.995, "repetition": 0.285}
     assert report["given_up_waypoints"] == {"robot-1": 2}
     owners = {t["id"]: t["owners"] for t in report["tasks"]}
     assert owners["t00"] == [["robot-0", 1.0, 5.0], ["robot-1", 5.1, None]]
@@ -227,6 +229,7 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
     assert job_report(tmp_path / "job.sqlite")["overlaps"] == ["t01"]
     assert job_report(tmp_path / "missing.sqlite")["tasks"] is None
     assert job_report(tmp_path / "missing.sqlite")["plan_estimate_s"] is None
+    assert job_report(tmp_path / "missing.sqlite")["plan"] is None
 
 
 def test_given_up_waypoints_are_counted_across_plans_cuts_and_a_restart() -> None:
