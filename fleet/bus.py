@@ -7,7 +7,11 @@
   user and password (``fleet certs`` writes them); mode, endpoints and scouting are set here.
 * Control traffic (plans, cmd_vel, spawn) is reliable with congestion control BLOCK; sensor
   streams use DROP so a slow subscriber never stalls the simulator.
-* A malformed payload is counted per key and logged once per key, never raised.
+* A malformed payload is counted per key and logged (the first and every 100th per key), never
+  raised. A well-formed message its receiver finds implausible (a stamp far ahead of its clock,
+  a pose jump no robot can drive, a sender not in the job) is dropped through
+  :meth:`Bus.drop_implausible`: counted per key class, logged the same way, naming the sender.
+* A reply to a query that does not decode is counted and the next reply waited for.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import contextlib
 import json
 import logging
 import threading
+import time
 from collections import Counter
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -23,7 +28,7 @@ from typing import Any, TypeVar
 
 import zenoh
 
-from fleet.protocol import DEFAULT_FLEET, DecodeError, Keys, Message, decode
+from fleet.protocol import DEFAULT_FLEET, DecodeError, Keys, Message, decode, key_class
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +108,7 @@ class Bus:
         self.ident = ident
         self.session = zenoh.open(make_config(mode, connect=connect, zenoh_config=zenoh_config))
         self.decode_errors: Counter[str] = Counter()
+        self.implausible: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._handles: list[Any] = []
@@ -140,6 +146,29 @@ class Bus:
             n = self.decode_errors[key]
         if n == 1 or n % 100 == 0:
             log.warning("dropped malformed payload on %s (%d so far): %s", key, n, err)
+
+    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
+        """Count ``n`` well-formed messages on ``key`` from ``sender`` that their receiver
+        dropped as implausible, per key class; log the first and every 100th per class."""
+        cls = key_class(key)
+        with self._lock:
+            before = self.implausible[cls]
+            self.implausible[cls] += n
+            total = self.implausible[cls]
+        if before == 0 or total // 100 > before // 100:
+            log.warning(
+                "dropped %d implausible message(s) on %s from %s (%d so far): %s",
+                n,
+                cls,
+                sender or "an unknown sender",
+                total,
+                why,
+            )
+
+    def dropped(self) -> tuple[int, int]:
+        """(malformed, implausible) messages this process dropped so far."""
+        with self._lock:
+            return sum(self.decode_errors.values()), sum(self.implausible.values())
 
     def subscribe(self, key: str, cls: type[M], callback: Callable[[str, M], None]) -> None:
         """Call ``callback(key, message)`` for each valid ``cls`` message on ``key``."""
@@ -186,12 +215,19 @@ class Bus:
         self._handles.append(self.session.declare_queryable(key, on_query))
 
     def request(self, key: str, msg: Message, reply_cls: type[M], timeout: float = 5.0) -> M:
-        """Send a query and return the first valid reply; raises TimeoutError or RuntimeError."""
+        """Send a query and return the first valid reply; raises TimeoutError or RuntimeError.
+        A reply that does not decode is counted and dropped. A query nothing serves ends at
+        once, without waiting for ``timeout``."""
+        start = time.monotonic()
         for reply in self.session.get(key, payload=msg.encode(), timeout=timeout):
-            if reply.ok is not None:
+            if reply.ok is None:
+                raise RuntimeError(f"{key}: {reply.err.payload.to_string()}")
+            try:
                 return decode(reply.ok.payload.to_bytes(), reply_cls)
-            raise RuntimeError(f"{key}: {reply.err.payload.to_string()}")
-        raise TimeoutError(f"{key}: no reply within {timeout} s")
+            except DecodeError as e:
+                self.drop_malformed(key, e)
+        waited = time.monotonic() - start
+        raise TimeoutError(f"{key}: no valid reply after {waited:.1f} s (timeout {timeout} s)")
 
     def watch_alive(
         self,

@@ -138,6 +138,21 @@ class Keys:
         return ""
 
 
+_ID_KEYS = ("plan", "award", "ack", "task", "bid")
+
+
+def key_class(key: str) -> str:
+    """What kind of key ``key`` is, without its fleet and ids: ``fleet/<f>/robot/robot-3/truth``
+    → ``robot/*/truth``; an id after ``coord/plan/``, ``award/``, ``ack/``, ``task/`` or
+    ``bid/`` becomes ``*`` too."""
+    parts = str(key).split("/")[2:]
+    if len(parts) >= 3 and parts[0] == "robot":
+        parts[1] = "*"
+    elif len(parts) >= 3 and parts[0] == "coord" and parts[1] in _ID_KEYS:
+        parts[2:] = ["*"]
+    return "/".join(parts)
+
+
 # ---------------------------------------------------------------------------------------------
 # Messages
 
@@ -425,7 +440,8 @@ class FleetState(Message):
     """The coordinator's view of the job: its phase (gathering, auction, cleaning, done, or
     incomplete: finished with work no robot could reach), the robots it plans for, those with
     no work left, those lost, and how many tasks are open (not held by a live robot),
-    assigned, done and left out (blocked by a lost robot's body, or unreachable)."""
+    assigned, done and left out (blocked by a lost robot's body, or unreachable); and how many
+    messages it has dropped as malformed (``decode_errors``) and as implausible."""
 
     TYPE: ClassVar[str] = "fleet_state"
     stamp: float
@@ -437,6 +453,8 @@ class FleetState(Message):
     tasks_assigned: int = 0
     tasks_done: int = 0
     tasks_left_out: int = 0
+    decode_errors: int = 0
+    implausible: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -454,7 +472,8 @@ class Collision(Message):
 
 @dataclass(frozen=True, eq=False)
 class CoverageSummary(Message):
-    """Ground-truth cleaning progress and per-robot counters (sim → dashboard and report)."""
+    """Ground-truth cleaning progress and per-robot counters (sim → dashboard and report), and
+    how many messages the simulator has dropped as malformed and as implausible."""
 
     TYPE: ClassVar[str] = "coverage"
     stamp: float
@@ -467,6 +486,8 @@ class CoverageSummary(Message):
     turns: Annotated[np.ndarray, Arr("<i4")]
     wall_collisions: Annotated[np.ndarray, Arr("<i4")]
     robot_collisions: Annotated[np.ndarray, Arr("<i4")]
+    decode_errors: int = 0
+    implausible: int = 0
 
 
 @dataclass(frozen=True, eq=False)

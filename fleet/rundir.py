@@ -14,6 +14,14 @@ fleet from another terminal:
 ``argv`` holds the arguments after ``python -m fleet.cli``; ``up_cmdline`` is the whole command
 line of ``fleet up`` itself. A pid is only trusted while ``/proc/<pid>/cmdline`` still shows
 that command line, so a pid the kernel has given to another program is never signalled.
+
+``fleet up`` also writes ``<run_dir>/dropped.json`` whenever the counts change: the messages
+each process has dropped as malformed and as implausible, as the processes tell them on the
+bus (``implausible`` is null for a process that does not count them):
+
+```
+{"sim": {"malformed": 0, "implausible": 3}, "robot-0": {"malformed": 1, "implausible": null}}
+```
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 TABLE_NAME = "processes.json"
+DROPPED_NAME = "dropped.json"
 RUNS_ROOT = Path("runs")
 CLI_MODULE = "fleet.cli"
 # /proc/<pid>/stat states: T stopped by a signal, t stopped by a tracer, Z zombie, X dead.
@@ -64,14 +73,42 @@ class RunTable:
         return [n for n, p in self.processes.items() if p.argv[:1] == ["agent"]]
 
 
+# process name -> (malformed, implausible) messages it dropped; implausible None if not told
+Dropped = dict[str, tuple[int, int | None]]
+
+
 def write_table(run_dir: Path, table: RunTable) -> Path:
     """Write ``run_dir/processes.json`` atomically: a reader sees the old table or the new one,
     never a part of one."""
-    path = run_dir / TABLE_NAME
-    fd, tmp = tempfile.mkstemp(prefix=f".{TABLE_NAME}.", dir=run_dir)
+    return _write_json(run_dir / TABLE_NAME, asdict(table))
+
+
+def write_dropped(run_dir: Path, dropped: Dropped) -> Path:
+    """Write ``run_dir/dropped.json`` atomically."""
+    counts = {name: {"malformed": m, "implausible": i} for name, (m, i) in dropped.items()}
+    return _write_json(run_dir / DROPPED_NAME, counts)
+
+
+def read_dropped(run_dir: Path) -> Dropped:
+    """What ``run_dir/dropped.json`` holds; empty if there is none (yet) or it cannot be read
+    (the counts then show as unknown)."""
+    try:
+        raw = read_json_object(run_dir / DROPPED_NAME, RunDirError)
+    except RunDirError:
+        return {}
+    out: Dropped = {}
+    for name, counts in raw.items():
+        if isinstance(counts, dict) and isinstance(counts.get("malformed"), int):
+            implausible = counts.get("implausible")
+            out[name] = (counts["malformed"], implausible if isinstance(implausible, int) else None)
+    return out
+
+
+def _write_json(path: Path, value: Any) -> Path:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as f:
-            json.dump(asdict(table), f, indent=1)
+            json.dump(value, f, indent=1)
             f.write("\n")
         os.replace(tmp, path)
     except BaseException:

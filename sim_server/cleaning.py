@@ -76,6 +76,13 @@ class CleaningGrid:
         were not on the floor at ``start`` (all their cells enter). An index appears once per
         brush it enters, so one cell may appear several times.
         """
+        return self.swept_by(start, end, fresh)[0]
+
+    def swept_by(
+        self, start: np.ndarray, end: np.ndarray, fresh: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`swept`'s cells, and beside each the index (0 … M − 1) of the brush whose move
+        it entered (the run report charges each entry to what that brush was doing)."""
         g = self.grid
         start = np.asarray(start, dtype=np.float64).reshape(-1, 2)
         end = np.asarray(end, dtype=np.float64).reshape(-1, 2)
@@ -93,7 +100,7 @@ class CleaningGrid:
         at_start = np.einsum("mwk,mwk->mw", rel, rel) < inner * inner
         entered = in_capsule & (np.asarray(fresh, dtype=bool)[:, None] | ~at_start)
         entered &= g.in_bounds(rc)
-        return rc[entered, 0] * g.shape[1] + rc[entered, 1]
+        return rc[entered, 0] * g.shape[1] + rc[entered, 1], np.nonzero(entered)[0]
 
     def update(self, robots: list[str], xy: np.ndarray) -> None:
         """Sweep each robot's brush from its previous update to ``xy`` ((N, 2), one per robot).

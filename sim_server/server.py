@@ -6,10 +6,17 @@ sensor stamp each live agent has answered with a cmd_vel. An agent whose livelin
 disappears, or that has been silent for ``agent_timeout_s`` of wall time
 (``first_answer_timeout_s`` before its first answer, while it starts up), no longer holds the
 clock back; its robot stops and stays in the world as an obstacle until it respawns.
+
+A cmd_vel answers the newest scan its robot was sent, so it is dropped as implausible (counted,
+its sender named) when it is stamped later than that scan, or asks for more than the robot's top
+speeds (``robot.max_vel_x``, ``robot.max_vel_theta``) plus what it can gain in one scan period
+at its acceleration limits; a command within that is clamped to the top speeds. No message
+moves the lockstep past the newest scan.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -31,7 +38,7 @@ from fleet.protocol import (
     Twist,
 )
 from fleet.world import World
-from sim_server.core import SimCore
+from sim_server.core import SimCore, StepOutput
 from sim_server.recorder import CarmenRecorder
 
 log = logging.getLogger("sim")
@@ -73,6 +80,12 @@ class SimServer:
         self.core = SimCore(world, cfg, seed=seed, starts_xy=starts_xy)
         self.lock = threading.Lock()
         self.links: dict[str, AgentLink] = {}
+        # the stamp of the newest scan sent to each robot: what a command can answer
+        self.scan_stamps: dict[str, float] = {}
+        rp = cfg.robot
+        scan_period = 1.0 / cfg.lidar.rate_hz
+        self.max_v = rp.max_vel_x + rp.acc_lim_x * scan_period
+        self.max_w = rp.max_vel_theta + rp.acc_lim_theta * scan_period
         self.stop = threading.Event()
         self.wall0 = time.monotonic()
         bus.subscribe(self.keys.all_robots("cmd_vel"), Twist, self._on_cmd)
@@ -88,17 +101,31 @@ class SimServer:
         rid = self.keys.robot_of(key)
         with self.lock:
             link = self.links.get(rid)
-            if link is None or rid not in self.core.robots:
-                return
-            if not link.alive and msg.stamp <= link.released_at:
-                # sent before the agent was let go, overtaken by its leaving (a dying agent's
-                # last command): taking it as a sign of life would refuse its respawn
-                return
-            link.ack = max(link.ack, msg.stamp)
-            link.last_wall = time.monotonic()
-            link.alive = True
-            link.answered = True
-            self.core.set_cmd(rid, msg.v, msg.w)
+            why = self._implausible(rid, msg)
+            if not why and link is not None:
+                if not link.alive and msg.stamp <= link.released_at:
+                    # sent before the agent was let go, overtaken by its leaving (a dying agent's
+                    # last command): taking it as a sign of life would refuse its respawn
+                    return
+                link.ack = max(link.ack, msg.stamp)
+                link.last_wall = time.monotonic()
+                link.alive = True
+                link.answered = True
+                self.core.set_cmd(rid, msg.v, msg.w)
+        if why:
+            self.bus.drop_implausible(key, rid, why)
+
+    def _implausible(self, rid: str, msg: Twist) -> str:
+        """Why a command for ``rid`` cannot be its agent's answer to a scan ("" if it can)."""
+        if rid not in self.links or rid not in self.core.robots:
+            return f"there is no robot {rid!r} in the world"
+        newest = self.scan_stamps.get(rid)
+        if newest is None or msg.stamp > newest + 1e-9:
+            sent = "no scan" if newest is None else f"the newest scan sent at {newest:.3f} s"
+            return f"stamped {msg.stamp:.3f} s, later than {sent}"
+        if abs(msg.v) > self.max_v or abs(msg.w) > self.max_w:
+            return f"v {msg.v:.3g} m/s, w {msg.w:.3g} rad/s: beyond what the robot can drive"
+        return ""
 
     def _on_spawn(self, req: SpawnRequest) -> SpawnReply:
         with self.lock:
@@ -150,7 +177,12 @@ class SimServer:
 
     def summary(self) -> CoverageSummary:
         with self.lock:
-            return self.core.summary(time.monotonic() - self.wall0)
+            return self._counted(self.core.summary(time.monotonic() - self.wall0))
+
+    def _counted(self, summary: CoverageSummary) -> CoverageSummary:
+        """``summary`` with the messages this process has dropped."""
+        malformed, implausible = self.bus.dropped()
+        return dataclasses.replace(summary, decode_errors=malformed, implausible=implausible)
 
     def coverage_image(self) -> CoverageImage:
         with self.lock:
@@ -188,6 +220,21 @@ class SimServer:
                 return True
         return False
 
+    def _tick(self) -> tuple[StepOutput, int]:
+        """One physics step, and what it tells the links; its output and the step count."""
+        with self.lock:
+            out = self.core.tick(time.monotonic() - self.wall0)
+            for rid, msg in out.scans:
+                self.scan_stamps[rid] = msg.stamp
+                link = self.links.get(rid)
+                if link is not None and not link.scanned:
+                    # The first scan is the first thing to answer: hold the clock there.
+                    link.scanned = True
+                    link.ack = max(link.ack, msg.stamp - self.cfg.sim.max_lag_s)
+            if self.recorder is not None:
+                self.recorder.record(out.odometry, out.scans, self.core.truth)
+            return out, self.core.steps
+
     def run(self) -> None:
         sim = self.cfg.sim
         clock_every = max(1, round(sim.physics_hz / sim.clock_hz))
@@ -214,17 +261,7 @@ class SimServer:
                     continue
                 if ahead < -0.2:
                     pace_wall, pace_sim = now, self.core.t
-            with self.lock:
-                out = self.core.tick(time.monotonic() - self.wall0)
-                for rid, msg in out.scans:
-                    link = self.links.get(rid)
-                    if link is not None and not link.scanned:
-                        # The first scan is the first thing to answer: hold the clock there.
-                        link.scanned = True
-                        link.ack = max(link.ack, msg.stamp - sim.max_lag_s)
-                if self.recorder is not None:
-                    self.recorder.record(out.odometry, out.scans, self.core.truth)
-                steps = self.core.steps
+            out, steps = self._tick()
             k = self.keys
             for c in out.collisions:
                 log.warning(
@@ -240,4 +277,4 @@ class SimServer:
             if steps % clock_every == 0:
                 self.bus.publish(k.clock(), Clock(self.core.t, self.speed, False))
             if out.summary is not None:
-                self.bus.publish(k.coverage(), out.summary)
+                self.bus.publish(k.coverage(), self._counted(out.summary))

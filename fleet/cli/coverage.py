@@ -14,13 +14,37 @@ import typer
 if TYPE_CHECKING:
     from rich.status import Status
 
-    from planners.coverage import CoverageParams
+    from fleet.coordinator.planning import TourSpec
+    from fleet.params import FleetConfig
     from planners.robot import RobotSpec
 
 APARTMENT = Path(__file__).resolve().parents[3] / "shared" / "data" / "maps"
-# `fleet plan coverage` and its bench plan for the bare robot radius; the coordinator adds
-# coordinator.wall_clearance
-PLAN_WALL_CLEARANCE = 0.0
+
+BareOpt = Annotated[
+    bool,
+    typer.Option(
+        "--bare",
+        help="Plan as the planner alone: 5 cm, coverage.overlap, the bare robot radius (the "
+        "figures BENCHMARKS.md gave before the fleet's plan). Default: the coordinator's plan "
+        "(2.5 cm, coordinator.lane_overlap, radius + coordinator.wall_clearance), the tour the "
+        "fleet drives.",
+    ),
+]
+
+
+def _spec(cfg: FleetConfig, bare: bool) -> TourSpec:
+    """The plan to make: the coordinator's (the fleet drives it) or, with ``bare``, the
+    planner's own defaults."""
+    from fleet.coordinator.planning import bare_tour_spec, fleet_tour_spec
+
+    return bare_tour_spec(cfg) if bare else fleet_tour_spec(cfg)
+
+
+def _spec_text(spec: TourSpec) -> str:
+    return (
+        f"{100 * spec.resolution:g} cm, lane overlap {spec.params.overlap:g}, radius + "
+        f"{100 * spec.wall_clearance:g} cm"
+    )
 
 
 def register(
@@ -94,7 +118,13 @@ def plan_coverage_cmd(
             "pass, nothing left). Default: coverage.fill_in_target in configs/fleet.yaml.",
         ),
     ] = None,
-    resolution: Annotated[float, typer.Option(min=0.01, help="Grid cell size (m).")] = 0.05,
+    resolution: Annotated[
+        float | None,
+        typer.Option(
+            min=0.01, help="Grid cell size (m). Default: the plan's (2.5 cm; --bare 5 cm)."
+        ),
+    ] = None,
+    bare: BareOpt = False,
     out: Annotated[
         Path, typer.Option(help="Directory for paths.json and plan.png (created if missing).")
     ] = Path("coverage_plan"),
@@ -107,8 +137,12 @@ def plan_coverage_cmd(
 ) -> None:
     """Plan coverage paths on MAP and report coverage, repetition, length, turns and time.
 
-    Rooms are segmented, each swept in the direction of its dominant walls (boustrophedon cell
-    decomposition, Choset 2000); with several robots the work is split to minimize the makespan.
+    By default the plan is the coordinator's: the same function, grid (2.5 cm), lane overlap
+    (coordinator.lane_overlap) and wall clearance (coordinator.wall_clearance), so with one
+    robot from the dock it is the tour the fleet cuts into tasks and drives; --bare plans as
+    the planner alone. Rooms are segmented, each swept in the direction of its dominant walls
+    (boustrophedon cell decomposition, Choset 2000); with several robots the work is split to
+    minimize the makespan.
     Writes DIR/paths.json (world metres) and DIR/plan.png (regions coloured, paths drawn, free
     space no robot can clean hatched red), and prints the table per robot and in total.
 
@@ -125,17 +159,23 @@ def plan_coverage_cmd(
     from fleet.config import ConfigError, resolve_world
     from fleet.params import load_fleet_config
     from fleet.world import load_world
-    from planners.coverage import PlanningError, plan_coverage
+    from planners.coverage import PlanningError
     from planners.coverage.render import render_plan
 
     try:
         cfg = load_fleet_config(config)
         path = resolve_world(map_path)
         world = load_world(path, cfg.robot.radius)
-        grid = world.grid(resolution)
     except ConfigError as err:
         _fail(str(err))
-    params, robot = cfg.coverage, cfg.robot
+    spec = _spec(cfg, bare)
+    if resolution is not None:
+        spec = dataclasses.replace(spec, resolution=resolution)
+    try:
+        grid = spec.grid(world)
+    except ConfigError as err:
+        _fail(str(err))
+    params, robot = spec.params, cfg.robot
     if method is not None:
         if method not in ("bcd", "spiral"):
             _fail(f"--method must be bcd or spiral, got {method!r}")
@@ -144,6 +184,7 @@ def plan_coverage_cmd(
         params = dataclasses.replace(params, edge_pass=edge_pass)
     if coverage_target is not None:
         params = dataclasses.replace(params, fill_in_target=coverage_target)
+    spec = dataclasses.replace(spec, params=params)
     if start:
         starts = [_parse_start(s) for s in start]
         if robots not in (1, len(starts)):
@@ -156,7 +197,7 @@ def plan_coverage_cmd(
             _fail(str(err))
     try:
         with _status(f"planning coverage of {path.name} for {robots} robot(s)"):
-            plan = plan_coverage(grid, starts, params, robot, wall_clearance=PLAN_WALL_CLEARANCE)
+            plan = spec.plan(grid, starts, robot)
     except PlanningError as err:
         _fail(f"{path}: {err}")
     out.mkdir(parents=True, exist_ok=True)
@@ -173,11 +214,17 @@ def plan_coverage_cmd(
     render_plan(grid, plan.room_labels, list(plan.paths), plan.unreachable).save(out / "plan.png")
     summary = _summary(plan)
     summary["map"] = str(path)
+    summary["plan"] = {**spec.to_json(), "bare": bare}
     summary["files"] = {"paths": str(out / "paths.json"), "plan": str(out / "plan.png")}
     if as_json:
         print(json.dumps(summary))
         return
-    _print_table(plan, f"Coverage of {path.name}: {robots} robot(s), {params.method}")
+    which = "the planner alone" if bare else "the fleet's plan"
+    _print_table(
+        plan,
+        f"Coverage of {path.name}: {robots} robot(s), {params.method}; {which} "
+        f"({_spec_text(spec)})",
+    )
     from rich.console import Console
 
     console = Console()
@@ -251,13 +298,6 @@ def _print_table(plan: Any, title: str) -> None:
     Console().print(table)
 
 
-def _plan_time(grid, starts, params, robot) -> float:
-    from planners.coverage import plan_coverage
-
-    plan = plan_coverage(grid, starts, params, robot, wall_clearance=PLAN_WALL_CLEARANCE)
-    return plan.plan_time_s
-
-
 def bench_coverage(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     repeat: Annotated[
@@ -270,21 +310,24 @@ def bench_coverage(
             "disturbed one; single runs vary by up to 1.6x there). 1 for a quick look.",
         ),
     ] = 3,
+    bare: BareOpt = False,
 ) -> None:
     """Coverage quality and planning time on the built-in home and the real apartment map.
 
-    For each map: 1 robot and 3 robots with the boustrophedon planner, 1 robot with the spiral,
-    and as the baseline the coordinator's strip-and-lanes planner (planners/lanes.py) judged by
-    the same metrics. Reports coverage of the cleanable area, repetition, length, turns, the
-    makespan ratio of 3 robots to 1, and planning time (wall clock, the fastest of --repeat
-    runs; the machine may be shared). The apartment (../shared/data/maps/cob_ipa_apartment.yaml)
+    Every plan is made as the coordinator makes its tour (2.5 cm, coordinator.lane_overlap,
+    radius + coordinator.wall_clearance; --bare: the planner alone at 5 cm). For each map: 1
+    robot and 3 robots with the boustrophedon planner, 1 robot with the spiral, and as the
+    baseline the old strip-and-lanes planner (planners/lanes.py) judged by the same metrics.
+    Reports coverage of the cleanable area, repetition, length, turns, the makespan ratio of 3
+    robots to 1, and planning time (wall clock, the fastest of --repeat runs; the machine may
+    be shared). The apartment (../shared/data/maps/cob_ipa_apartment.yaml)
     is skipped if absent.
     """
     from fleet.config import configs_dir
     from fleet.params import load_fleet_config
 
     cfg = load_fleet_config()
-    params, robot = cfg.coverage, cfg.robot
+    spec, robot = _spec(cfg, bare), cfg.robot
     maps = [("home", configs_dir() / "worlds" / "home.yaml")]
     apt = APARTMENT / "cob_ipa_apartment.yaml"
     if apt.exists():
@@ -294,16 +337,16 @@ def bench_coverage(
     rows: list[dict[str, Any]] = []
     with _status("fleet bench coverage") as status:
         for name, path in maps:
-            _bench_map(name, path, params, robot, repeat, rows, status)
+            _bench_map(name, path, spec, robot, repeat, rows, status)
     if as_json:
-        print(json.dumps({"results": rows}))
+        print(json.dumps({"plan": {**spec.to_json(), "bare": bare}, "results": rows}))
         return
     from rich.console import Console
     from rich.table import Table
 
     table = Table(
         title=f"fleet bench coverage (cleaning width {robot.cleaning_width:.2f} m, "
-        f"robot radius {robot.radius:.2f} m, 5 cm)"
+        f"robot radius {robot.radius:.2f} m; {_spec_text(spec)})"
     )
     cols = (
         "map",
@@ -339,7 +382,7 @@ def bench_coverage(
 def _bench_map(
     name: str,
     path: Path,
-    params: CoverageParams,
+    spec: TourSpec,
     robot: RobotSpec,
     repeat: int,
     rows: list[dict[str, Any]],
@@ -347,25 +390,29 @@ def _bench_map(
 ) -> None:
     """Append the bench rows of one map to ``rows``, telling ``status`` which case runs."""
     from fleet.world import load_world
-    from planners.coverage import plan_coverage, plan_metrics
+    from planners.coverage import plan_metrics
     from planners.lanes import plan_lanes
 
     world = load_world(path, robot.radius)
-    grid = world.grid(0.05)
+    grid = spec.grid(world)
     s1 = [p[:2] for p in world.start_poses(1, robot.radius)]
     s3 = [p[:2] for p in world.start_poses(3, robot.radius)]
     single = None
-    for label, starts, p in (
-        ("bcd k=1", s1, params),
-        ("bcd k=3", s3, params),
-        ("spiral k=1", s1, dataclasses.replace(params, method="spiral")),
+    for label, starts, case in (
+        ("bcd k=1", s1, spec),
+        ("bcd k=3", s3, spec),
+        (
+            "spiral k=1",
+            s1,
+            dataclasses.replace(spec, params=dataclasses.replace(spec.params, method="spiral")),
+        ),
     ):
         status.update(f"fleet bench coverage: {name}, {label}, run 1 of {repeat}")
-        plan = plan_coverage(grid, starts, p, robot, wall_clearance=PLAN_WALL_CLEARANCE)
+        plan = case.plan(grid, starts, robot)
         fastest = plan.plan_time_s
         for run in range(2, repeat + 1):
             status.update(f"fleet bench coverage: {name}, {label}, run {run} of {repeat}")
-            fastest = min(fastest, _plan_time(grid, starts, p, robot))
+            fastest = min(fastest, case.plan(grid, starts, robot).plan_time_s)
         row = {
             "map": name,
             "planner": label,
@@ -386,14 +433,14 @@ def _bench_map(
         dt = math.inf
         for _ in range(repeat):
             t0 = time.perf_counter()
-            paths = plan_lanes(grid, starts, robot, params.overlap)
+            paths = plan_lanes(grid, starts, robot, spec.params.overlap)
             dt = min(dt, time.perf_counter() - t0)
         m = plan_metrics(
             grid,
             paths,
-            params,
+            spec.params,
             robot,
-            wall_clearance=PLAN_WALL_CLEARANCE,
+            wall_clearance=spec.wall_clearance,
             cleanable_mask=single.cleanable if single is not None else None,
         )
         rows.append(

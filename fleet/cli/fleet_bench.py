@@ -166,8 +166,61 @@ def bench_follow(
         )
 
 
+def bench_repetition(
+    run_dirs: Annotated[
+        list[Path],
+        typer.Argument(
+            metavar="RUN_DIR...",
+            help="Run dirs of `fleet up`, or dirs of them (`fleet bench fleet --run-root`).",
+        ),
+    ],
+    subdivide: Annotated[
+        int,
+        typer.Option(
+            "--subdivide",
+            min=1,
+            help="Count on the run's cleaning grid with every cell cut N x N (the simulator's "
+            "5 cm cells hide or show lane overlap as lanes fall on them); 1: the simulator's.",
+        ),
+    ] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Where each run's repetition comes from: every re-entry of a cell under the brush,
+    charged to what the robot was doing and to the element of the coordinator's tour it drove.
+
+    Replays each robot's true track (tracks.csv) with the simulator's brush over the run's
+    cleaning grid (coverage.npz) and charges every entry of a cell after its first to the step
+    kind in force (status.csv) and to the tour element driven (plans.jsonl, and the tour's
+    elements in coordinator.sqlite): lanes (over another lane, over their own U-turn's floor,
+    over floor a hop or transit swept, over their own line), turns inside lane groups, other
+    passes (fill-in, strips), hops between passes by length, transits, detours, or turning in
+    place, escapes, giving way, holding. The same for the tour alone (no follower, no peers)
+    is the planned part. Figures are points of repetition; they sum to the replay's repetition,
+    shown beside the simulator's. Needs the files `fleet up` writes since report format 2.
+
+    Examples: `fleet bench repetition runs/20250101-120000`;
+    `fleet bench repetition runs/bench-fleet-x --json`.
+    """
+    from fleet.bench.repetition import bench_repetition as run
+    from fleet.bench.repetition import table_lines
+    from fleet.report.summary import ReportError
+
+    def progress(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    try:
+        result = run(run_dirs, subdivide, progress)
+    except ReportError as e:
+        _fail(str(e))
+    if as_json:
+        print(json.dumps(result))
+    else:
+        typer.echo("\n".join(table_lines(result)))
+
+
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
     bench_app.command("fleet", help=reflow(bench_fleet.__doc__ or ""))(bench_fleet)
     bench_app.command("follow", help=reflow(bench_follow.__doc__ or ""))(bench_follow)
+    bench_app.command("repetition", help=reflow(bench_repetition.__doc__ or ""))(bench_repetition)

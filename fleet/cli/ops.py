@@ -3,7 +3,8 @@
 
 Each reads the run dir's process table (``processes.json``, written by `fleet up`, see
 :mod:`fleet.rundir`); `fleet status` also reads the coordinator's state file
-(``coordinator.sqlite``) read-only. By default they act on the newest run under ``runs/``.
+(``coordinator.sqlite``) read-only, and the messages each process dropped (``dropped.json``).
+By default they act on the newest run under ``runs/``.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from fleet.rundir import (
     is_alive,
     newest_run_dir,
     process_state,
+    read_dropped,
     read_table,
 )
 from fleet.supervisor.ops import (
@@ -165,18 +167,22 @@ def status(
         bool,
         typer.Option(
             "--json",
-            help="Print one JSON object: run_dir, fleet, endpoint; up {pid, state}; processes "
-            "{name: {pid, state, restarts, started, log}}; coordinator (null until its state "
+            help="Print one JSON object: run_dir, fleet, endpoint; up {pid, state, malformed, "
+            "implausible}; processes {name: {pid, state, restarts, started, log, malformed, "
+            "implausible}}; coordinator (null until its state "
             "file exists) {phase, expected_robots, tasks {open, assigned, done}, robots {id: "
             "{liveness, state, task, progress, heartbeat_age_s, restarts}}}; coordinator_note "
-            "(why coordinator is null, else empty). States: running, stopped, zombie, gone.",
+            "(why coordinator is null, else empty). States: running, stopped, zombie, gone. "
+            "malformed and implausible count the messages a process dropped (null: not told; "
+            "agents do not count implausible ones).",
         ),
     ] = False,
     run_dir: RunDirOpt = None,
 ) -> None:
-    """Show every process of the fleet (running, stopped or gone, and how often it was
-    respawned) and the coordinator's view of the job: its phase, each robot's liveness, state,
-    task, progress and heartbeat age, and how many tasks are open, assigned and done.
+    """Show every process of the fleet (running, stopped or gone, how often it was respawned,
+    and how many messages it dropped as malformed or implausible) and the coordinator's view of
+    the job: its phase, each robot's liveness, state, task, progress and heartbeat age, and how
+    many tasks are open, assigned and done.
 
     Examples: `fleet status`; `fleet status --json | jq .coordinator.tasks`.
     """
@@ -196,6 +202,12 @@ def status(
 
 def collect_status(run_dir: Path, table: RunTable) -> dict[str, Any]:
     """What `fleet status --json` prints."""
+    dropped = read_dropped(run_dir)
+
+    def counts(name: str) -> dict[str, int | None]:
+        malformed, implausible = dropped.get(name, (None, None))
+        return {"malformed": malformed, "implausible": implausible}
+
     processes = {
         name: {
             "pid": p.pid,
@@ -203,6 +215,7 @@ def collect_status(run_dir: Path, table: RunTable) -> dict[str, Any]:
             "restarts": p.restarts,
             "started": p.started,
             "log": str(run_dir / p.log),
+            **counts(name),
         }
         for name, p in table.processes.items()
     }
@@ -211,7 +224,7 @@ def collect_status(run_dir: Path, table: RunTable) -> dict[str, Any]:
         "run_dir": str(run_dir),
         "fleet": table.fleet,
         "endpoint": table.endpoint,
-        "up": {"pid": table.up_pid, "state": _up_state(table)},
+        "up": {"pid": table.up_pid, "state": _up_state(table), **counts("up")},
         "processes": processes,
         "coordinator": coordinator,
         "coordinator_note": note,
@@ -279,7 +292,7 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
-PROCESS_COLUMNS = ("process", "pid", "state", "restarts")
+PROCESS_COLUMNS = ("process", "pid", "state", "restarts", "malformed", "implausible")
 ROBOT_COLUMNS = ("robot", "liveness", "state", "task", "progress", "heartbeat s", "restarts")
 ROBOT_FIELDS = ("liveness", "state", "task", "progress", "heartbeat_age_s", "restarts")
 
@@ -287,6 +300,7 @@ ROBOT_FIELDS = ("liveness", "state", "task", "progress", "heartbeat_age_s", "res
 def _rows(result: dict[str, Any]) -> tuple[list[list[str]], list[list[str]]]:
     procs = [
         [name, str(p["pid"]), p["state"], str(p["restarts"])]
+        + [_cell(p[k]) for k in ("malformed", "implausible")]
         for name, p in result["processes"].items()
     ]
     coord = result["coordinator"] or {"robots": {}}

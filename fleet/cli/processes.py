@@ -215,6 +215,7 @@ def coordinator(
     from fleet.coordinator.service import Coordinator
     from fleet.coordinator.store import JobStore, StoreError
     from fleet.coordinator.transits import TransitPlanner
+    from fleet.plausible import Bounds
 
     if robots < 1:
         _fail("--robots must be >= 1")
@@ -227,13 +228,15 @@ def coordinator(
     except ValueError as e:
         _fail(str(e))
     try:
-        store = JobStore(state) if state is not None else None
+        store = None
+        if state is not None:
+            store = JobStore(state, fleet=fleet, world=w.name, robots=robots)
     except StoreError as e:
         _fail(str(e))
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
-    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits)
+    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=Bounds.of(cfg))
     _stop_on_signals(c.stop)
     try:
         c.run(cfg.coordinator.expected_robots_grace_s)

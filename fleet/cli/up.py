@@ -15,7 +15,7 @@ from collections.abc import Callable
 from concurrent import futures
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import numpy as np
 import typer
@@ -32,9 +32,16 @@ from fleet.cli.common import (
 TIMED_OUT_EXIT = 3
 # the job finished, but with work no robot could reach (report.json's left_out)
 INCOMPLETE_EXIT = 4
-# A simulator that is still starting (a loaded machine, a short --timeout) may take this long to
-# answer for the report.
+# The simulator is asked for the report this long at a time (wall seconds), again while it
+# works (it lives and uses CPU: a starved machine slows it down), for at most REPORT_GIVE_UP_S;
+# a query nothing serves yet (a simulator still starting) returns at once, and is asked again
+# after REPORT_POLL_S.
 REPORT_WAIT_S = 30.0
+REPORT_POLL_S = 1.0
+REPORT_GIVE_UP_S = 300.0
+# the router's port is waited for this long at a time, again while it works, at most ..._GIVE_UP_S
+ROUTER_WAIT_S = 15.0
+ROUTER_GIVE_UP_S = 120.0
 # an operator's respawn waits this long for the main loop, which looks every REDRAW_S
 RESPAWN_WAIT_S = 5.0
 MAX_ROBOTS = 64
@@ -45,9 +52,12 @@ REDRAW_S = 0.2
 FATAL_PROCESSES = ("router", "sim")
 
 if TYPE_CHECKING:
-    from fleet.protocol import OpsReply, OpsRequest
+    from fleet.bus import Bus
+    from fleet.protocol import Message, OpsReply, OpsRequest
     from fleet.rundir import ProcessRecord
-    from fleet.supervisor.launcher import Launcher
+    from fleet.supervisor.launcher import Launcher, WorkWatch
+
+M = TypeVar("M", bound="Message")
 
 
 def up(
@@ -94,7 +104,7 @@ def up(
     from fleet.bus import Bus
     from fleet.config import resolve_world
     from fleet.dashboard.model import FINISHED_PHASES, BusFeed, FleetWatcher
-    from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest, Request
+    from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest
     from fleet.report.figures import render_report
     from fleet.report.summary import (
         ReportError,
@@ -106,8 +116,8 @@ def up(
         time_use_of,
         write_json,
     )
-    from fleet.rundir import RunTable, cmdline, write_table
-    from fleet.supervisor.launcher import Launcher, free_port, wait_for_port
+    from fleet.rundir import RunTable, cmdline, write_dropped, write_table
+    from fleet.supervisor.launcher import Launcher, WorkWatch, free_port, wait_for_port
 
     if not 1 <= robots <= MAX_ROBOTS:
         _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
@@ -162,16 +172,18 @@ def up(
         signal.signal(sig, on_signal)
     out = typer.echo
     status = "interrupted"
+    report_failed = False
     bus = None
     t0 = time.monotonic()
     try:
-        launcher.start("router", ["router", "--listen", endpoint])
-        if not wait_for_port("127.0.0.1", port, 15.0):
-            _fail(f"the Zenoh router did not start; see {run_dir / 'router.log'}")
-        launcher.start(
-            "sim",
-            ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed), *common],
-        )
+        router = WorkWatch(launcher.start("router", ["router", "--listen", endpoint]))
+        waited = 0.0
+        while not wait_for_port("127.0.0.1", port, ROUTER_WAIT_S):
+            waited += ROUTER_WAIT_S
+            if not router.working() or waited >= ROUTER_GIVE_UP_S:
+                _fail(f"the Zenoh router did not start; see {run_dir / 'router.log'}")
+        sim_args = ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed)]
+        sim = WorkWatch(launcher.start("sim", [*sim_args, *common]))
         state = ["--state", str(run_dir / "coordinator.sqlite")]
         if deconfliction:
             state += ["--deconfliction", deconfliction]
@@ -194,16 +206,14 @@ def up(
         feed.pump()
         feed.close()
         wall_s = time.monotonic() - t0
-        summary = bus.request(
-            bus.keys.sim_report(), Request("up"), CoverageSummary, timeout=REPORT_WAIT_S
-        )
-        image = bus.request(
-            bus.keys.coverage_image(), Request("up"), CoverageImage, timeout=REPORT_WAIT_S
-        )
+        summary = _ask_sim(bus, bus.keys.sim_report(), CoverageSummary, sim)
+        image = _ask_sim(bus, bus.keys.coverage_image(), CoverageImage, sim)
         makespan = watcher.makespan() if status in FINISHED_PHASES else None
         with watcher.lock:
             skipped = {rid: v.status.skipped for rid, v in watcher.robots.items() if v.status}
             time_use = {rid: time_use_of(v.status) for rid, v in watcher.robots.items() if v.status}
+        dropped = {**watcher.dropped(), "sim": (summary.decode_errors, summary.implausible)}
+        write_dropped(run_dir, dropped)
         job = job_report(run_dir / "coordinator.sqlite")
         # an agent's own count starts again with each plan: the coordinator's spans them all
         for rid, n in (job["given_up_waypoints"] or {}).items():
@@ -220,6 +230,7 @@ def up(
                 "seed": seed,
                 "deconfliction": deconfliction or cfg.coordinator.deconfliction,
                 "missed": missed_breakdown(image, w.grid(image.resolution)),
+                "dropped": {n: {"malformed": m, "implausible": i} for n, (m, i) in dropped.items()},
                 **job,
             },
             skipped,
@@ -251,17 +262,57 @@ def up(
         typer.secho(
             f"error: could not collect the report: {e}; logs in {run_dir}/", fg="red", err=True
         )
-        status = "error"
+        report_failed = True
     finally:
         if bus is not None:
             bus.close()
         launcher.stop_all()
+    # the floor was not finished, whether the report could be collected or not
     if status == "timeout" and until_done:
         raise typer.Exit(TIMED_OUT_EXIT)
+    if report_failed:
+        raise typer.Exit(1)
     if status == "incomplete":
         raise typer.Exit(INCOMPLETE_EXIT)
     if status not in ("done", "stopped", "timeout"):
         raise typer.Exit(1 if status != "interrupted" else 130)
+
+
+def _ask_sim(bus: Bus, key: str, cls: type[M], sim: WorkWatch) -> M:
+    """The simulator's answer on ``key`` for the report. A starved machine can keep a live
+    simulator from answering (or from serving at all yet: a query nothing serves returns at
+    once) for long, so it is asked again, every REPORT_POLL_S at most, while it works (judged
+    over each REPORT_WAIT_S), for at most REPORT_GIVE_UP_S; TimeoutError once it has exited,
+    has stopped or hung, or then."""
+    from fleet.protocol import Request
+
+    start = looked = time.monotonic()
+    while True:
+        asked = time.monotonic()
+        try:
+            return bus.request(key, Request("up"), cls, timeout=REPORT_WAIT_S)
+        except TimeoutError:
+            pass
+        time.sleep(max(0.0, REPORT_POLL_S - (time.monotonic() - asked)))
+        now = time.monotonic()
+        why = ""
+        if not sim.alive():
+            why = "has exited"
+        elif now - looked >= REPORT_WAIT_S:
+            looked = now
+            if not sim.working():
+                why = "is not working (stopped or hung)"
+            elif now - start >= REPORT_GIVE_UP_S:
+                why = "still works but does not answer"
+            else:
+                print(
+                    f"the simulator has not answered in {now - start:.0f} s; it works (a busy "
+                    "machine): asking again",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        if why:
+            raise TimeoutError(f"{key}: no answer in {now - start:.0f} s; the simulator {why}")
 
 
 class MainThreadCalls:
@@ -333,6 +384,7 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
     from rich.console import Console
 
     from fleet.dashboard.term import TerminalView, ViewControl
+    from fleet.rundir import write_dropped
     from fleet.supervisor.ops import ProcessActions
 
     console = Console(stderr=True)
@@ -342,6 +394,7 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
         view = TerminalView(watcher, control, console)
     last_line = -1e9
     reported: dict[str, int] = {}
+    dropped: dict[str, tuple[int, int | None]] = {}
 
     def say(text: str, kind: str) -> None:
         if view is not None:
@@ -393,6 +446,9 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
                         "lost",
                     )
             watcher.set_restarts({n: r.restarts for n, r in launcher.records.items()})
+            if watcher.dropped() != dropped:
+                dropped = watcher.dropped()
+                write_dropped(launcher.run_dir, dropped)
             if until_done and watcher.done:
                 return watcher.phase
             if timeout is not None and wall > timeout:

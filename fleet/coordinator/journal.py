@@ -3,7 +3,8 @@
 Every change of the job is an event (planned, auction, awarded, done, lost, ...): kept in the
 store, published on ``coord/events`` for the views and the report, and logged for the kinds an
 operator looks for. Events and everything the coordinator sends are stamped with ``clock``, the
-newest sim time it has heard (robots' poses): the coordinator has no clock of its own. Changed
+newest sim time it has heard from the simulator's clock (as the service believes it): the
+coordinator has no clock of its own. Changed
 tasks, plans, robots and counters go to the :class:`~fleet.coordinator.store.JobStore` when
 there is one; without one (no ``--state``) the job lives in memory only.
 """
@@ -44,7 +45,7 @@ class Journal:
         self.clock = clock
 
     def heard(self, stamp: float) -> None:
-        """A robot reported sim time ``stamp``."""
+        """The sim time is ``stamp`` (or later)."""
         self.clock = max(self.clock, stamp)
 
     def event(self, kind: str, robot: str, task: str, detail: str) -> None:

@@ -10,12 +10,20 @@ Plans: the transit from where the robot reports itself to the end of the task it
 on the floor plan inflated by the robot, ``planners.coverage.transit``), then the task's sweep
 in the direction it won it, and the sweeps of the tasks queued after it that begin where it
 ends (a region's run of the tour is one plan: the robot does not stop between its tasks).
+
+The tour is planned by :func:`fleet_tour_spec`'s :meth:`TourSpec.plan`, which ``fleet plan
+coverage`` and ``fleet bench coverage`` call too, so the figures a user reads are those of the
+plan the fleet drives. The coordinator keeps the tour's own figures and its elements (lanes,
+turns, passes, hops: ``planners.tour_elements``) for the run's report (:attr:`TaskPlanner.meta`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,32 +31,98 @@ from fleet.params import FleetConfig
 from fleet.world import World
 from planners.auction import Task, split_tour
 from planners.bodies import Rerouted, reroute, with_bodies
-from planners.coverage import plan_coverage
+from planners.coverage import CoverageParams, CoveragePlan, plan_coverage
 from planners.coverage.metrics import swath
 from planners.coverage.transit import Transit
-from planners.grid import clearance, dilate, reachable
+from planners.grid import GridMap, clearance, dilate, reachable
 from planners.polyline import densify, without_straight_vertices
+from planners.robot import RobotSpec
+from planners.tour_elements import plan_elements
 
 PLAN_RESOLUTION = 0.025
+# the bare planner (`fleet plan coverage --bare`): the coverage section as it is, on the
+# simulator's cleaning grid, for the bare robot radius
+BARE_RESOLUTION = 0.05
 
 log = logging.getLogger("coordinator")
+
+
+@dataclass(frozen=True)
+class TourSpec:
+    """How a coverage plan is made: the grid's cell size (m), the planner's parameters, and
+    what a robot centre keeps from obstacles beyond the robot's radius (m)."""
+
+    resolution: float
+    params: CoverageParams
+    wall_clearance: float
+
+    def grid(self, world: World) -> GridMap:
+        """The world's floor plan at :attr:`resolution`."""
+        return world.grid(self.resolution)
+
+    def plan(
+        self, grid: GridMap, starts: Sequence[tuple[float, float]], robot: RobotSpec
+    ) -> CoveragePlan:
+        """The coverage plan of ``grid`` (:meth:`grid`) for ``robot`` from ``starts``."""
+        return plan_coverage(grid, starts, self.params, robot, wall_clearance=self.wall_clearance)
+
+    def to_json(self) -> dict[str, float]:
+        """The parameters that set the plan apart: cell size, lane overlap, wall clearance."""
+        return {
+            "resolution_m": self.resolution,
+            "lane_overlap": self.params.overlap,
+            "wall_clearance_m": self.wall_clearance,
+        }
+
+
+def fleet_tour_spec(cfg: FleetConfig) -> TourSpec:
+    """The coordinator's plan: 2.5 cm, lanes ``coordinator.lane_overlap`` of the brush apart
+    (a real robot tracks its lane only to a few centimetres), centres kept
+    ``coordinator.wall_clearance`` beyond the radius (the DWA needs clearance above the radius
+    plus the noise of a median-filtered scan)."""
+    params = dataclasses.replace(cfg.coverage, overlap=cfg.coordinator.lane_overlap)
+    return TourSpec(PLAN_RESOLUTION, params, cfg.coordinator.wall_clearance)
+
+
+def bare_tour_spec(cfg: FleetConfig) -> TourSpec:
+    """The planner alone: 5 cm, the ``coverage`` section as it is (``coverage.overlap``), the
+    bare robot radius. Not what the fleet drives; kept to compare with earlier figures."""
+    return TourSpec(BARE_RESOLUTION, cfg.coverage, 0.0)
+
+
+def tour_figures(plan: CoveragePlan, tasks: Sequence[Task], spec: TourSpec) -> dict[str, Any]:
+    """The one-robot tour's own figures, judged on its own floor (robot centres kept radius +
+    wall clearance from obstacles, at its resolution): coverage, repetition, path length,
+    turns, the planner's time estimate, and the tasks' summed drive time (what the market
+    prices), with the parameters that made it."""
+    m = plan.metrics
+    return {
+        "coverage": round(m.total.coverage, 5),
+        "repetition": round(m.total.repetition, 5),
+        "path_length_m": round(m.total.path_length_m, 3),
+        "turns": m.total.turns,
+        "estimate_s": round(m.makespan_s, 2),
+        "task_time_s": round(sum(t.time_s for t in tasks), 2),
+        "tasks": len(tasks),
+        **spec.to_json(),
+    }
 
 
 class TaskPlanner:
     """Tasks of the known floor plan, and plans that drive them."""
 
     def __init__(self, world: World, cfg: FleetConfig) -> None:
-        self.grid = world.grid(PLAN_RESOLUTION)
+        self.spec = fleet_tour_spec(cfg)
+        self.grid = self.spec.grid(world)
         self.dock = tuple(float(v) for v in world.start_poses(1, cfg.robot.radius)[0][:2])
         self.target_s = cfg.coordinator.task_target_s
         self.robot = cfg.robot
-        # Paths keep wall_clearance more than the robot radius from obstacles: the DWA needs
-        # clearance above the radius plus the noise of a median-filtered scan. Lanes overlap by
-        # lane_overlap, as a real robot tracks its lane only to a few centimetres.
-        self.wall_clearance = cfg.coordinator.wall_clearance
+        self.wall_clearance = self.spec.wall_clearance
         # what a robot centre keeps from obstacles, and from the bodies of lost robots
         self.centre_clearance = self.robot.radius + self.wall_clearance
-        self.params = dataclasses.replace(cfg.coverage, overlap=cfg.coordinator.lane_overlap)
+        self.params = self.spec.params
+        # what the run's report reads from the job's store: the tour's figures and elements
+        self.meta: dict[str, Any] = {}
         centres = clearance(self.grid) >= self.centre_clearance
         start = self.grid.world_to_cell(np.array([self.dock]))
         self.reachable = reachable(centres, start)
@@ -63,13 +137,19 @@ class TaskPlanner:
         self._counted = np.zeros(self.grid.shape, dtype=bool)
 
     def tasks(self) -> tuple[Task, ...]:
-        result = plan_coverage(
-            self.grid, [self.dock], self.params, self.robot, wall_clearance=self.wall_clearance
-        )
+        """The tour from the dock cut into tasks; fills :attr:`meta` (``tour``: its figures,
+        ``tour_elements``: its elements, None when they cannot be told apart)."""
+        result = self.spec.plan(self.grid, [self.dock], self.robot)
         m = result.metrics
         tasks = split_tour(
             result.paths[0], result.cell_labels, self.grid, self.target_s, self.params, self.robot
         )
+        try:
+            elements: dict[str, Any] | None = plan_elements(result).to_json()
+        except ValueError as e:
+            log.warning("the tour's elements cannot be told apart: %s", e)
+            elements = None
+        self.meta = {"tour": tour_figures(result, tasks, self.spec), "tour_elements": elements}
         # judged on the plan's own floor: centres kept radius + wall clearance from obstacles
         log.info(
             "tour: coverage %.1f %%, repetition %.1f %%, %.1f m, %.0f s for one robot, "

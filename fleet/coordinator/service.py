@@ -18,6 +18,15 @@ and runs the main loop; each part has one job:
 A robot is lost when its liveliness token goes (a dead process) or its wall-clock heartbeat is
 silent for ``coordinator.heartbeat_timeout_s`` (a hung one); one heard from again rejoins. The
 coordinator never reads truth.
+
+Its clock is the simulator's (``sim/clock``), as :class:`fleet.plausible.SimClock` believes it;
+no robot's message moves it. Each receiver checks what it hears against what it knows
+(:mod:`fleet.plausible`) and drops, counts and logs what cannot be: a pose, status, heartbeat or
+acknowledgement from a robot not in the job (no liveliness token heard), a pose or status
+stamped (with the scan it answers) more than a clock step ahead of the clock, and a pose the
+robot cannot have driven to since its last. Heartbeats and acknowledgements carry the agent's
+clock, which moves nothing here; they are not judged by it. Its counts of malformed and
+implausible messages go out in ``coord/state`` and to the store's meta (``dropped``).
 """
 
 from __future__ import annotations
@@ -47,9 +56,11 @@ from fleet.coordinator.store import JobStore
 from fleet.coordinator.transits import TransitPlanner
 from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
+from fleet.plausible import Bounds, PoseTrack, SimClock
 from fleet.protocol import (
     AwardAck,
     Bid,
+    Clock,
     FleetState,
     Heartbeat,
     Plan,
@@ -76,6 +87,8 @@ class Coordinator:
         params: CoordinatorParams,
         store: JobStore | None = None,
         transits: TransitPlanner | None = None,
+        *,
+        bounds: Bounds,
     ) -> None:
         self.bus = bus
         self.keys = bus.keys
@@ -113,9 +126,24 @@ class Coordinator:
             int(meta.get("round_seq", 0)),
             meta.get("rejected_bids", {}),  # type: ignore[arg-type]
         )
+        self.bounds = bounds
+        clock_key = self.keys.clock()
+        self.sim_clock = SimClock(
+            bounds.clock_step_s,
+            lambda n, why: bus.drop_implausible(clock_key, "sim", why, n),
+            self.journal.clock,
+        )
+        self.tracks: dict[str, PoseTrack] = {}
+        # the messages the coordinators before this one dropped on the bus in this job
+        before = meta.get("dropped")
+        before = before if isinstance(before, dict) else {}
+        self.dropped_before = (int(before.get("malformed", 0)), int(before.get("implausible", 0)))
         if resumed is not None:
             assert store is not None
             self._resume(store, resumed)
+        # robots join by their liveliness tokens, heard before anything they send
+        bus.watch_alive("agent", self._on_join, self._on_leave)
+        bus.subscribe(clock_key, Clock, self._on_clock)
         bus.subscribe(self.keys.all_robots("pose"), PoseEstimate, self._on_pose)
         bus.subscribe(self.keys.all_robots("status"), RobotStatus, self._on_status)
         bus.subscribe(self.keys.all_robots("heartbeat"), Heartbeat, self._on_heartbeat)
@@ -124,7 +152,6 @@ class Coordinator:
         bus.serve(self.keys.plan("*"), Request, self._on_plan_query)
         floor = pack_grid(planner.grid)
         bus.serve(self.keys.floor_map(), Request, lambda _req: floor)
-        bus.watch_alive("agent", self._on_join, self._on_leave)
 
     # ---- restart ------------------------------------------------------------------------
 
@@ -158,16 +185,46 @@ class Coordinator:
 
     # ---- bus callbacks ------------------------------------------------------------------
 
+    def _on_clock(self, _key: str, msg: Clock) -> None:
+        if self.sim_clock.hear(msg.stamp):
+            self.journal.heard(self.sim_clock.now)
+
+    def _implausible(self, key: str, rid: str, stamp: float | None = None) -> bool:
+        """Drop (count and log) a message from ``rid`` that is not in the job, or with a sensor
+        ``stamp`` farther ahead of the clock than a robot's can be; whether it was dropped.
+        Call with the lock held."""
+        if rid not in self.job.robots:
+            why = "not in the job: no liveliness token of it heard"
+        elif stamp is not None and self.sim_clock.ahead(stamp):
+            why = f"stamped {stamp:.3f} s, past the sim clock at {self.sim_clock.now:.3f} s"
+        else:
+            return False
+        self.bus.drop_implausible(key, rid, why)
+        return True
+
     def _on_pose(self, key: str, msg: PoseEstimate) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            self.journal.heard(msg.stamp)
-            self.job.robot(rid).xy = (msg.x, msg.y)
+            if self._implausible(key, rid, msg.stamp):
+                return
+            track = self.tracks.get(rid)
+            if track is None:
+                track = self.tracks[rid] = PoseTrack(
+                    self.bounds.speed,
+                    self.bounds.margin_m,
+                    lambda n, why: self.bus.drop_implausible(key, rid, why, n),
+                )
+            if track.hear(msg.stamp, (msg.x, msg.y)):
+                self.job.robots[rid].xy = (msg.x, msg.y)
 
     def _on_heartbeat(self, key: str, msg: Heartbeat) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            r = self.job.robot(rid)
+            # stamped with the agent's clock, which moves nothing here: a wrong one must not
+            # turn a working robot into a lost one
+            if self._implausible(key, rid):
+                return
+            r = self.job.robots[rid]
             r.heartbeat_wall = time.time()
             was_ready = r.ready
             r.ready = msg.ready
@@ -196,7 +253,9 @@ class Coordinator:
     def _on_status(self, key: str, msg: RobotStatus) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            r = self.job.robot(rid)
+            if self._implausible(key, rid, msg.stamp):
+                return
+            r = self.job.robots[rid]
             r.state, r.task, r.progress = msg.state, msg.task, msg.progress
             self.dispatcher.heard(rid, msg.plan_id, msg.waypoint)
             if msg.plan_id >= 0 and self.given_up.report(rid, msg.plan_id, msg.skipped):
@@ -207,8 +266,12 @@ class Coordinator:
     def _on_ack(self, key: str, msg: AwardAck) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
+            if self._implausible(key, rid):
+                return
             if self.awards.acked(rid, msg):
                 self.wake.set()
+            else:
+                self.bus.drop_implausible(key, rid, f"acknowledges for {msg.robot!r}")
 
     def _on_plan_query(self, req: Request) -> Plan:
         with self.lock:
@@ -291,11 +354,29 @@ class Coordinator:
     def _persist(self, store: JobStore) -> None:
         """What changes too often to save at each change: the robots, the counters."""
         store.save_robots(list(self.job.robots.values()))
+        malformed, implausible = self._bus_dropped()
         store.set_meta(
             phase=self.phase,
             clock=self.journal.clock,
             rejected_bids=self.auctioneer.rejected(),
             given_up_waypoints=self.given_up.to_json(),
+            dropped={"malformed": malformed, "implausible": implausible},
+        )
+
+    def _bus_dropped(self) -> tuple[int, int]:
+        """(malformed, implausible) messages dropped on the bus in this job, by this process
+        and the coordinators before it."""
+        malformed, implausible = self.bus.dropped()
+        return malformed + self.dropped_before[0], implausible + self.dropped_before[1]
+
+    def _dropped(self) -> tuple[int, int]:
+        """(malformed, implausible) messages dropped in this job: those dropped on the bus, and
+        the bids the auctioneer refused as malformed or from a robot not in the market (late
+        and duplicate bids are no one's fault)."""
+        malformed, implausible = self._bus_dropped()
+        rejected = self.auctioneer.rejected()
+        return malformed, implausible + rejected.get("malformed", 0) + rejected.get(
+            "not in the market", 0
         )
 
     def _plan_tasks(self) -> None:
@@ -305,7 +386,7 @@ class Coordinator:
         with self.lock:
             self.job.add_tasks(tasks)
             self.journal.save_tasks(*self.job.tasks)
-            self.journal.set_meta(expected_robots=self.expected)
+            self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
             self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
@@ -321,6 +402,7 @@ class Coordinator:
             counts[ASSIGNED],
             counts["done"],
             counts[BLOCKED] + counts[UNREACHABLE],
+            *self._dropped(),
         )
         self.bus.publish(self.keys.coord_state(), state, control=True)
 

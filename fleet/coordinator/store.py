@@ -5,8 +5,12 @@ direction, swept pieces), ``robots`` (liveness, last report, heartbeat, restarts
 sequence numbers), ``plans`` (the plan each robot drives, so a restarted coordinator serves the
 same plan id and the robot keeps driving), ``events`` and ``bids`` (the auction log). WAL
 journal, so ``fleet status`` reads while the coordinator writes. The file names the version
-of its layout (``meta.store_version``); a file of another layout is refused, naming the file
-and both versions, never resumed as if it were this one.
+of its layout (``meta.store_version``) and the job's fleet, world and robot count
+(``meta.fleet``, ``world``, ``expected_robots``). A coordinator started on an existing file
+resumes it only if it is whole and its own: a file that is empty, not SQLite, cut short
+(smaller than its header says), damaged (``PRAGMA quick_check``), of another layout or of
+another fleet, world or robot count is refused with :class:`StoreError`, naming the file and
+why; it is never resumed as if it were this job's, nor replaced by a fresh start.
 """
 
 from __future__ import annotations
@@ -22,7 +26,9 @@ from fleet.coordinator.job import Job, RobotRecord, TaskRecord
 from fleet.protocol import Plan
 from planners.auction import Task
 
-STORE_VERSION = 2
+STORE_VERSION = 3
+SQLITE_MAGIC = b"SQLite format 3\x00"
+SQLITE_HEADER_BYTES = 100
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
 CREATE TABLE IF NOT EXISTS tasks (
@@ -48,27 +54,107 @@ class StoreError(ValueError):
     """A state file that cannot be resumed; the message names the file and why."""
 
 
+FRESH = "remove it (or keep it aside) to start the job afresh"
+
+
+def _check_whole(path: Path) -> None:
+    """Refuse a file that is not a whole SQLite database: empty, something else, or shorter
+    than its header says (checked where the header's size is valid and no write-ahead log holds
+    pages beyond the file)."""
+    size = path.stat().st_size
+    if size == 0:
+        raise StoreError(f"{path}: empty (0 bytes), not a job state file; {FRESH}")
+    with path.open("rb") as f:
+        head = f.read(SQLITE_HEADER_BYTES)
+    if not head.startswith(SQLITE_MAGIC):
+        raise StoreError(f"{path}: not an SQLite database (it begins {head[:16]!r}); {FRESH}")
+    if len(head) < SQLITE_HEADER_BYTES:
+        raise StoreError(f"{path}: cut short: {size} bytes, less than an SQLite header; {FRESH}")
+    page_size = int.from_bytes(head[16:18], "big")
+    page_size = 65536 if page_size == 1 else page_size
+    pages = int.from_bytes(head[28:32], "big")
+    size_valid = head[24:28] == head[92:96]
+    wal = path.with_name(path.name + "-wal")
+    if size_valid and not wal.exists() and size < pages * page_size:
+        raise StoreError(
+            f"{path}: cut short: {size} bytes of the {pages * page_size} its header names; {FRESH}"
+        )
+
+
+def _identity(values: dict[str, object]) -> str:
+    parts = []
+    if "fleet" in values:
+        parts.append(f"fleet {values['fleet']!r}")
+    if "world" in values:
+        parts.append(f"world {values['world']!r}")
+    if "expected_robots" in values:
+        parts.append(f"{values['expected_robots']} robots")
+    return ", ".join(parts)
+
+
 class JobStore:
     """One SQLite file; every ``save_*`` commits, so a SIGKILL loses at most the change in
     flight."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(
+        self,
+        path: Path,
+        *,
+        fleet: str | None = None,
+        world: str | None = None,
+        robots: int | None = None,
+    ) -> None:
+        """Open (or start) the job state in ``path``. ``fleet``, ``world`` and ``robots``, when
+        given, are the job's: a new file records them, an existing one must hold the same."""
         self.path = path
         path.parent.mkdir(parents=True, exist_ok=True)
+        existing = path.exists()
+        if existing:
+            _check_whole(path)
         self.db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
+        ours = {"fleet": fleet, "world": world, "expected_robots": robots}
+        ours = {k: v for k, v in ours.items() if v is not None}
+        try:
+            self._open(existing, ours)
+        except StoreError:
+            self.db.close()
+            raise
+        except (sqlite3.DatabaseError, json.JSONDecodeError) as e:
+            self.db.close()
+            raise StoreError(f"{path}: damaged ({e}); {FRESH}") from None
+
+    def _open(self, existing: bool, ours: dict[str, object]) -> None:
+        path = self.path
+        if existing:
+            problems = [row[0] for row in self.db.execute("PRAGMA quick_check").fetchall()]
+            if problems != ["ok"]:
+                raise StoreError(f"{path}: damaged ({problems[0]}); {FRESH}")
+            tables = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master")}
+            if "meta" not in tables:
+                names = ", ".join(sorted(tables)) or "none"
+                raise StoreError(
+                    f"{path}: not a job state file of the coordinator (its tables: {names}); "
+                    f"{FRESH}"
+                )
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(SCHEMA)
-        version = self.db.execute("SELECT value FROM meta WHERE key = 'store_version'").fetchone()
-        has_tasks = self.db.execute("SELECT 1 FROM tasks LIMIT 1").fetchone() is not None
-        if version is None and not has_tasks:
-            self.set_meta(store_version=STORE_VERSION)
-        elif version is None or json.loads(version[0]) != STORE_VERSION:
-            found = "none" if version is None else json.loads(version[0])
-            self.db.close()
+        meta = self.meta()
+        if not existing:
+            self.set_meta(store_version=STORE_VERSION, **ours)
+            return
+        found = meta.get("store_version", "none")
+        if found != STORE_VERSION:
             raise StoreError(
                 f"{path}: a job state file of layout version {found}, not {STORE_VERSION}: "
                 "it was written by another version of fleet; start the job with a new state file"
+            )
+        theirs = {k: meta.get(k) for k in ours}
+        if theirs != ours:
+            raise StoreError(
+                f"{path}: the job of {_identity(theirs)}, not of {_identity(ours)}: a coordinator "
+                "resumes only its own fleet's job; give it the same --fleet, --world and --robots, "
+                "or another state file"
             )
 
     def close(self) -> None:

@@ -50,7 +50,9 @@ from fleet.protocol import (
     RobotStatus,
     TruthPose,
     decode,
+    key_class,
 )
+from fleet.rundir import Dropped
 from planners.grid import GridMap
 
 log = logging.getLogger(__name__)
@@ -141,10 +143,11 @@ class FleetSnapshot:
     collisions: int
     note: str = ""
     left_out: int = 0
+    dropped: Dropped = field(default_factory=dict)
 
 
 class RateMeter:
-    """Messages per second per key pattern (robot ids replaced by ``*``), over a sliding
+    """Messages per second per key class (:func:`fleet.protocol.key_class`), over a sliding
     window of wall time."""
 
     def __init__(self, window_s: float = RATE_WINDOW_S) -> None:
@@ -154,7 +157,7 @@ class RateMeter:
 
     def count(self, key: str, n: int = 1, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
-        pattern = key_pattern(key)
+        pattern = key_class(key)
         with self._lock:
             self._seen.setdefault(pattern, deque()).append((now, n))
 
@@ -168,17 +171,6 @@ class RateMeter:
                     seen.popleft()
                 out.append((pattern, sum(n for _, n in seen) / self.window_s))
         return sorted(out, key=lambda r: (-r[1], r[0]))
-
-
-def key_pattern(key: str) -> str:
-    """``fleet/<f>/robot/robot-3/truth`` → ``robot/*/truth``; other keys lose their
-    ``fleet/<f>/`` prefix and any id after ``plan/``, ``award/``, ``ack/``."""
-    parts = str(key).split("/")[2:]
-    if len(parts) >= 3 and parts[0] == "robot":
-        parts[1] = "*"
-    elif len(parts) >= 3 and parts[0] == "coord" and parts[1] in ("plan", "award", "ack", "task"):
-        parts[2:] = ["*"]
-    return "/".join(parts)
 
 
 class FleetWatcher:
@@ -204,6 +196,8 @@ class FleetWatcher:
         self.started_wall: float | None = None
         self._first_state: tuple[float, int] | None = None
         self.finished_at: float | None = None
+        # the messages this view's own process dropped: (name, malformed, implausible)
+        self.own_dropped: tuple[str, int, int] | None = None
 
     def _robot(self, rid: str) -> RobotView:
         return self.robots.setdefault(rid, RobotView())
@@ -314,6 +308,32 @@ class FleetWatcher:
         with self.lock:
             self.cleaned = m
 
+    def set_own_dropped(self, name: str, malformed: int, implausible: int) -> None:
+        """The messages the view's own process (``name``) has dropped."""
+        with self.lock:
+            self.own_dropped = (name, malformed, implausible)
+
+    def dropped(self) -> Dropped:
+        """The messages each process has dropped as malformed and as implausible, as far as it
+        has told: the simulator (coverage), the coordinator (its state), each agent (its status:
+        malformed only) and this view's own process."""
+        with self.lock:
+            return self._dropped()
+
+    def _dropped(self) -> Dropped:
+        out: Dropped = {}
+        if self.coverage is not None:
+            out["sim"] = (self.coverage.decode_errors, self.coverage.implausible)
+        if self.fleet is not None:
+            out["coordinator"] = (self.fleet.decode_errors, self.fleet.implausible)
+        for rid, v in sorted(self.robots.items()):
+            if v.status is not None:
+                out[rid] = (v.status.decode_errors, None)
+        if self.own_dropped is not None:
+            name, malformed, implausible = self.own_dropped
+            out[name] = (malformed, implausible)
+        return out
+
     def set_restarts(self, restarts: dict[str, int]) -> None:
         """How often each process was restarted, from the run's process table."""
         with self.lock:
@@ -376,6 +396,7 @@ class FleetWatcher:
                 cleaned=self.cleaned,
                 collisions=len(self.collisions),
                 left_out=f.tasks_left_out if f else 0,
+                dropped=self._dropped(),
             )
 
     def _row(self, rid: str, v: RobotView, lost: bool, now: float) -> RobotRow:
@@ -445,10 +466,24 @@ class FleetWatcher:
                 if f
                 else ""
             )
+            dropped = dropped_text(self._dropped())
             return (
                 f"[{wall_s:6.1f} s] {phase} sim={self.clock:.1f}s "
                 f"coverage={100 * cov.coverage if cov else 0:.1f}%{tasks}{lost} {states}"
+                + (f" dropped: {dropped}" if dropped else "")
             )
+
+
+def dropped_text(dropped: Dropped) -> str:
+    """``sim 3 implausible, robot-1 2 malformed``: the processes that dropped messages; "" if
+    none did."""
+    parts = []
+    for name, (malformed, implausible) in dropped.items():
+        counts = [f"{malformed} malformed"] if malformed else []
+        counts += [f"{implausible} implausible"] if implausible else []
+        if counts:
+            parts.append(f"{name} {' '.join(counts)}")
+    return ", ".join(parts)
 
 
 def _event_text(e: FleetEvent) -> str:
@@ -542,7 +577,11 @@ class BusFeed:
                 except DecodeError as e:
                     self.bus.drop_malformed(key, e)
                     continue
-                handler(key, msg)
+                try:
+                    handler(key, msg)
+                except Exception:
+                    log.exception("the view's handler for %s failed", key)
+        self.watcher.set_own_dropped(self.bus.ident, *self.bus.dropped())
         return seen
 
     def fetch_once(self) -> None:

@@ -28,7 +28,7 @@ from rich.color import ColorSystem
 from rich.style import Style
 
 from fleet.colours import robot_colour
-from fleet.dashboard.model import FleetSnapshot, RobotRow
+from fleet.dashboard.model import FleetSnapshot, RobotRow, dropped_text
 
 Line = list[tuple[str, str]]
 
@@ -299,7 +299,8 @@ def duration(seconds: float) -> str:
 
 def header(snap: FleetSnapshot) -> Line:
     """The view's note (if any), phase, coverage with its bar, the ETA, tasks, sim time,
-    repetition and contacts on one line, most wanted first (a narrow terminal cuts the end)."""
+    repetition, contacts and the messages processes dropped on one line, most wanted first (a
+    narrow terminal cuts the end)."""
     cov = snap.coverage or 0.0
     parts = [f"fleet {snap.fleet}", snap.phase]
     parts.append(f"coverage {progress_bar(cov)} {100 * cov:4.1f} %")
@@ -317,6 +318,9 @@ def header(snap: FleetSnapshot) -> Line:
     if snap.collisions:
         parts.append(f"contacts {snap.collisions}")
     line: Line = [(" · ".join(parts), "bold")]
+    dropped = dropped_text(snap.dropped)
+    if dropped:
+        line.append((f" · dropped: {dropped}", "bold yellow"))
     if snap.note:
         line.insert(0, (f"{snap.note} · ", "bold yellow"))
     return line

@@ -8,9 +8,19 @@ need, so ``fleet report RUN_DIR`` can draw them again from the run dir alone:
 
 * ``coverage.npz``: the simulator's final cleaning grid (visits and cleanable cells, row 0 at
   ``origin_y``), its resolution and origin in metres, and the brush width;
-* ``tracks.csv``: ``sim_s,robot,x,y``, each robot's true position every ``TRACK_STEP_M``;
+* ``tracks.csv``: ``sim_s,robot,x,y``, each robot's true position every ``TRACK_STEP_M``
+  (1.25 cm; 5 cm before report format 2);
 * ``coverage.csv``: ``sim_s,coverage,repetition``, the fleet's cleaning over time;
-* ``collisions.csv``: ``sim_s,kind,robot,other,x,y``, every contact.
+* ``collisions.csv``: ``sim_s,kind,robot,other,x,y``, every contact;
+* ``status.csv``: ``sim_s,robot,plan_id,waypoint`` and the sim seconds per kind of control
+  step (``fleet.protocol.TIME_KINDS``) of every status an agent sent: the plan it drove, the
+  waypoint it headed for, and (from the growth of those sums) what it was doing when;
+* ``plans.jsonl``: every plan the coordinator sent, one JSON object a line (``sim_s``,
+  ``robot``, ``plan_id``, ``task``, ``sweep_from``, ``chain``, ``chain_starts``,
+  ``waypoints``).
+
+The last two (since report format 2) are what ``fleet bench repetition`` charges each
+re-entry of the brush with (``fleet.report.repetition``).
 """
 
 from __future__ import annotations
@@ -33,6 +43,7 @@ from fleet.protocol import (
     Collision,
     CoverageImage,
     CoverageSummary,
+    Plan,
     RobotStatus,
     TruthPose,
 )
@@ -49,11 +60,20 @@ GRID_FILE = "coverage.npz"
 TRACKS_FILE = "tracks.csv"
 COVERAGE_FILE = "coverage.csv"
 COLLISIONS_FILE = "collisions.csv"
-# a robot's track keeps a true position when it is this far from the last one kept
-TRACK_STEP_M = 0.05
+STATUS_FILE = "status.csv"
+PLANS_FILE = "plans.jsonl"
+# report.json's format: 2 added the tour's own figures (``plan``) and the files status.csv and
+# plans.jsonl
+REPORT_FORMAT = 2
+# a robot's track keeps a true position when it is this far (L1) from the last one kept: a
+# quarter of the simulator's 5 cm cleaning cell, the rule by which the simulator moves a
+# brush (``sim_server.cleaning.CleaningGrid.update``, at the rate truth is sent), so the
+# track replays the simulator's own cleaning
+TRACK_STEP_M = 0.0125
 TRACK_COLUMNS = ("sim_s", "robot", "x", "y")
 COVERAGE_COLUMNS = ("sim_s", "coverage", "repetition")
 COLLISION_COLUMNS = ("sim_s", "kind", "robot", "other", "x", "y")
+STATUS_COLUMNS = ("sim_s", "robot", "plan_id", "waypoint", *TIME_KINDS)
 # report.json's "missed" splits the floor never cleaned by its clearance from walls and
 # furniture: under 0.1 m only a pass hugging them sweeps, beyond 0.3 m it is open floor
 MISSED_BANDS_M = (0.1, 0.3)
@@ -130,6 +150,7 @@ def build_report(
         for i, rid in enumerate(summary.robots)
     }
     return {
+        "format": REPORT_FORMAT,
         "status": status,
         "coverage": round(summary.coverage, 5),
         "repetition": round(summary.repetition, 5),
@@ -159,9 +180,11 @@ def job_report(state: Path) -> dict[str, Any]:
     coordinator counted them (robots that gave up none are left out); ``left_out`` the work no
     robot could do (state ``blocked``: under or behind the body of ``blocked_by``; or
     ``unreachable``: every robot in ``tried`` tried it), each with its area and path, and
-    ``left_out_m2`` their area."""
+    ``left_out_m2`` their area; ``plan`` the one-robot tour's own figures as the coordinator
+    computed them when it planned (``fleet.coordinator.planning.tour_figures``)."""
     if not state.exists():
         return {
+            "plan": None,
             "events": None,
             "tasks": None,
             "overlaps": None,
@@ -224,6 +247,7 @@ def job_report(state: Path) -> dict[str, Any]:
         )
     ]
     return {
+        "plan": json.loads(meta.get("tour", "null")),
         "events": events,
         "tasks": list(tasks.values()),
         "overlaps": overlaps,
@@ -255,10 +279,14 @@ class RunRecorder:
         self.tracks: dict[str, list[tuple[float, float, float]]] = {}
         self.coverage: list[tuple[float, float, float]] = []
         self.collisions: list[Collision] = []
+        self.status: list[tuple[Any, ...]] = []
+        self.plans: list[dict[str, Any]] = []
         self._robot_of = bus.keys.robot_of
         bus.subscribe(bus.keys.all_robots("truth"), TruthPose, self._on_truth)
         bus.subscribe(bus.keys.coverage(), CoverageSummary, self._on_coverage)
         bus.subscribe(bus.keys.collisions(), Collision, self._on_collision)
+        bus.subscribe(bus.keys.all_robots("status"), RobotStatus, self._on_status)
+        bus.subscribe(bus.keys.plan("*"), Plan, self._on_plan)
 
     def _on_truth(self, key: str, m: TruthPose) -> None:
         with self.lock:
@@ -275,16 +303,44 @@ class RunRecorder:
         with self.lock:
             self.collisions.append(m)
 
+    def _on_status(self, key: str, m: RobotStatus) -> None:
+        if len(m.time_s) != len(TIME_KINDS):
+            return
+        row = (m.stamp, self._robot_of(key), m.plan_id, m.waypoint, *m.time_s.tolist())
+        with self.lock:
+            self.status.append(row)
+
+    def _on_plan(self, key: str, m: Plan) -> None:
+        record = {
+            "sim_s": round(m.stamp, 4),
+            "robot": key.rsplit("/", 1)[-1],
+            "plan_id": m.plan_id,
+            "task": m.task,
+            "sweep_from": m.sweep_from,
+            "chain": list(m.chain),
+            "chain_starts": m.chain_starts.tolist(),
+            # exact: the tasks' paths in the job's store are the same floats
+            "waypoints": m.waypoints.tolist(),
+        }
+        with self.lock:
+            self.plans.append(record)
+
     def write(self, run_dir: Path, image: CoverageImage, cleaning_width_m: float) -> None:
         """Write the grid, tracks, coverage and collision files into ``run_dir``."""
         with self.lock:
             tracks = [(t, rid, x, y) for rid, tr in sorted(self.tracks.items()) for t, x, y in tr]
             coverage = list(self.coverage)
             collisions = [(c.stamp, c.kind, c.robot, c.other, c.x, c.y) for c in self.collisions]
+            status = sorted(self.status, key=lambda r: (r[1], r[0]))
+            plans = list(self.plans)
         write_grid(run_dir / GRID_FILE, image, cleaning_width_m)
         _write_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS, tracks)
         _write_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS, coverage)
         _write_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS, collisions)
+        _write_csv(run_dir / STATUS_FILE, STATUS_COLUMNS, status)
+        tmp = run_dir / (PLANS_FILE + ".tmp")
+        tmp.write_text("".join(json.dumps(p) + "\n" for p in plans))
+        os.replace(tmp, run_dir / PLANS_FILE)
 
 
 def write_grid(path: Path, image: CoverageImage, cleaning_width_m: float) -> None:
@@ -342,15 +398,15 @@ def load_run(run_dir: Path) -> RunData:
     report = _read_report(run_dir / REPORT_FILE)
     grid = _read_grid(run_dir / GRID_FILE)
     tracks: dict[str, list[tuple[float, float, float]]] = {}
-    for line, row in _read_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS):
+    for line, row in read_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS):
         t, x, y = (_number(row, k, run_dir / TRACKS_FILE, line) for k in ("sim_s", "x", "y"))
         tracks.setdefault(row["robot"], []).append((t, x, y))
     coverage = [
         tuple(_number(row, k, run_dir / COVERAGE_FILE, line) for k in COVERAGE_COLUMNS)
-        for line, row in _read_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS)
+        for line, row in read_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS)
     ]
     collisions = []
-    for line, row in _read_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS):
+    for line, row in read_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS):
         path = run_dir / COLLISIONS_FILE
         collisions.append(
             {
@@ -415,7 +471,7 @@ def _read_grid(path: Path) -> dict[str, Any]:
     }
 
 
-def _read_csv(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
+def read_csv(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
     """The rows of a CSV file with ``columns`` as its header, each with its line number."""
     try:
         with path.open(newline="") as f:

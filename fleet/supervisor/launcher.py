@@ -51,6 +51,38 @@ def wait_for_port(host: str, port: int, timeout: float) -> bool:
     return False
 
 
+def cpu_ticks(pid: int) -> int | None:
+    """The CPU time process ``pid`` has used, user and system, in clock ticks; None when there
+    is no such process."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    # the fields after the command name: state is the 3rd field of the line, utime the 14th
+    fields = stat.rsplit(")", 1)[1].split()
+    return int(fields[11]) + int(fields[12])
+
+
+class WorkWatch:
+    """Whether a process is at work: alive, and using CPU since it was last looked at. A
+    starved process is slow but works; a dead, stopped or blocked one does not."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc = proc
+        self.ticks = cpu_ticks(proc.pid)
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def working(self) -> bool:
+        if self.proc.poll() is not None:
+            return False
+        ticks = cpu_ticks(self.proc.pid)
+        moved = ticks is not None and self.ticks is not None and ticks > self.ticks
+        self.ticks = ticks
+        return moved
+
+
 class Launcher:
     """The processes of one run, in start order."""
 

@@ -22,6 +22,7 @@ from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
 from fleet.params import load_fleet_config
+from fleet.plausible import Bounds
 from fleet.protocol import Award, AwardAck
 from fleet.supervisor.launcher import free_port
 from fleet.world import load_world
@@ -33,7 +34,7 @@ pytestmark = pytest.mark.timeout(60)
 def _coordinator(bus: Bus, store: JobStore) -> Coordinator:
     cfg = load_fleet_config()
     planner = TaskPlanner(load_world(resolve_world("small"), cfg.robot.radius), cfg)
-    coord = Coordinator(bus, planner, 1, cfg.coordinator, store)
+    coord = Coordinator(bus, planner, 1, cfg.coordinator, store, bounds=Bounds.of(cfg))
     path = np.array([[0.5, 0.5], [1.5, 0.5]])
     coord.job.add_tasks((Task("t00", path, 1.0, 4.0, (1,)),))
     robot = coord.job.robot("robot-0")

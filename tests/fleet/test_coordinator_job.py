@@ -20,7 +20,7 @@ from fleet.coordinator.job import (
     GivenUpWaypoints,
     Job,
 )
-from fleet.coordinator.store import JobStore
+from fleet.coordinator.store import STORE_VERSION, JobStore
 from fleet.protocol import Plan
 from fleet.supervisor.runner import read_events
 from planners.auction import Task
@@ -163,7 +163,7 @@ def test_the_store_gives_back_the_job_and_the_plans(job: Job, tmp_path):
     assert again.tasks["t02.1"].tried == {"robot-1"}
     assert again.tasks["t03.1"].state == BLOCKED and again.tasks["t03.1"].blocked_by == "robot-2"
     assert store.plans()["robot-0"] == plan
-    assert store.meta() == {"phase": "cleaning", "plan_seq": 7, "store_version": 2}
+    assert store.meta() == {"phase": "cleaning", "plan_seq": 7, "store_version": STORE_VERSION}
     assert [e["kind"] for e in read_events(tmp_path / "job.sqlite")] == ["awarded"]
     store.close()
 
@@ -184,7 +184,7 @@ def test_a_state_file_of_another_layout_is_refused(tmp_path):
     )
     db.commit()
     db.close()
-    with pytest.raises(StoreError, match=r"old\.sqlite.*layout version none, not 2"):
+    with pytest.raises(StoreError, match=rf"old\.sqlite.*layout version none, not {STORE_VERSION}"):
         JobStore(path)
 
 
@@ -208,10 +208,12 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
         rejected_bids={"late": 2},
         estimate_s=123.4,
         given_up_waypoints={"by_robot": {"robot-1": 2}, "seen": {"robot-1/3": 2}},
+        tour={"coverage": 0.995, "repetition": 0.285},
     )
     store.close()
     report = job_report(tmp_path / "job.sqlite")
     assert report["plan_estimate_s"] == 123.4
+    assert report["plan"] == {"coverage": 0.995, "repetition": 0.285}
     assert report["given_up_waypoints"] == {"robot-1": 2}
     owners = {t["id"]: t["owners"] for t in report["tasks"]}
     assert owners["t00"] == [["robot-0", 1.0, 5.0], ["robot-1", 5.1, None]]
@@ -227,6 +229,7 @@ def test_the_report_rebuilds_owners_over_time_and_finds_a_task_held_twice(tmp_pa
     assert job_report(tmp_path / "job.sqlite")["overlaps"] == ["t01"]
     assert job_report(tmp_path / "missing.sqlite")["tasks"] is None
     assert job_report(tmp_path / "missing.sqlite")["plan_estimate_s"] is None
+    assert job_report(tmp_path / "missing.sqlite")["plan"] is None
 
 
 def test_given_up_waypoints_are_counted_across_plans_cuts_and_a_restart() -> None:

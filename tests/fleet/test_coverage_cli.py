@@ -93,3 +93,41 @@ def test_a_lower_coverage_target_gives_a_shorter_path(tmp_path):
     assert less["path_length_m"] < full["path_length_m"]
     res = _plan("small", "--coverage-target", "1.5", "--out", tmp_path / "c")
     assert res.exit_code == 2 and "coverage-target" in res.output
+
+
+def test_plans_the_tour_the_coordinator_cuts_into_tasks(tmp_path):
+    from fleet.config import resolve_world
+    from fleet.coordinator.planning import TaskPlanner
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
+
+    res = _plan("small", "--out", tmp_path, "--json")
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)
+    path = np.array(json.loads((tmp_path / "paths.json").read_text())["robots"][0]["path"])
+    cfg = load_fleet_config()
+    planner = TaskPlanner(load_world(resolve_world("small"), cfg.robot.radius), cfg)
+    tasks = planner.tasks()
+    tour = np.vstack([tasks[0].path] + [t.path[1:] for t in tasks[1:]])
+    assert path.shape == tour.shape and np.allclose(path, tour, atol=1e-4)
+    figures = planner.meta["tour"]
+    for key in ("coverage", "repetition", "path_length_m", "turns"):
+        assert summary[key] == figures[key]
+    assert summary["plan"] == {
+        "resolution_m": 0.025,
+        "lane_overlap": cfg.coordinator.lane_overlap,
+        "wall_clearance_m": cfg.coordinator.wall_clearance,
+        "bare": False,
+    }
+
+
+def test_bare_plans_as_the_planner_alone(tmp_path):
+    res = _plan("small", "--bare", "--out", tmp_path, "--json")
+    assert res.exit_code == 0, res.output
+    plan = json.loads(res.stdout)["plan"]
+    assert plan == {
+        "resolution_m": 0.05,
+        "lane_overlap": 0.0,
+        "wall_clearance_m": 0.0,
+        "bare": True,
+    }

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from fleet.bus import Bus, open_router
-from fleet.dashboard.model import BusFeed, FleetWatcher, key_pattern
+from fleet.dashboard.model import BusFeed, FleetWatcher
 from fleet.dashboard.term import DOWN, KILL, QUIT, UP, ViewControl, parse_keys
-from fleet.dashboard.view import LOST_MARK, WALL, heading_arrow, plain, screen
+from fleet.dashboard.view import LOST_MARK, WALL, header, heading_arrow, plain, screen
 from fleet.floor_map import pack_grid
 from fleet.protocol import (
     Collision,
@@ -28,6 +28,7 @@ from fleet.protocol import (
     RobotStatus,
     TruthPose,
     decode,
+    key_class,
 )
 from fleet.rundir import ProcessRecord, RunTable, cmdline, write_table
 from fleet.supervisor.launcher import free_port
@@ -140,6 +141,27 @@ def test_a_view_that_never_saw_the_plan_takes_the_pace_since_it_came() -> None:
     assert w.snapshot(now=came + 30.0).eta_s == pytest.approx(90.0)
 
 
+def test_the_messages_each_process_dropped_show_in_the_header_and_the_line() -> None:
+    w = _watcher()
+    assert w.dropped() == {"robot-0": (0, None), "robot-1": (0, None)}
+    assert "dropped" not in plain([header(w.snapshot())]) and "dropped" not in w.line(1.0)
+    w.on_fleet("", _recorded(FleetState(20.0, "cleaning", ["robot-0"], [], [], 2, 3, 5, 0, 1, 4)))
+    w.on_status(
+        KEYS.robot("robot-1", "status"),
+        _recorded(RobotStatus(13.0, "driving", "t03", 0.5, 4, 10, 5.0, decode_errors=2)),
+    )
+    w.set_own_dropped("up", 0, 0)
+    assert w.dropped() == {
+        "coordinator": (1, 4),
+        "robot-0": (0, None),
+        "robot-1": (2, None),
+        "up": (0, 0),
+    }
+    shown = "dropped: coordinator 1 malformed 4 implausible, robot-1 2 malformed"
+    assert shown in plain([header(w.snapshot())])
+    assert w.line(1.0).endswith(shown)
+
+
 def test_the_makespan_runs_from_the_first_plan_to_the_job_done() -> None:
     w = _watcher()
     w.on_plan("", Plan(4.0, 1, "t00", np.zeros((2, 2))))
@@ -151,9 +173,10 @@ def test_the_makespan_runs_from_the_first_plan_to_the_job_done() -> None:
 
 def test_keys_from_a_terminal_and_key_patterns_for_the_rates() -> None:
     assert parse_keys(b"\x1b[A\x1b[Bk\x1bOBrq\x1b[Cx") == [UP, DOWN, KILL, DOWN, "respawn", QUIT]
-    assert key_pattern("fleet/default/robot/robot-3/truth") == "robot/*/truth"
-    assert key_pattern("fleet/default/coord/plan/robot-1") == "coord/plan/*"
-    assert key_pattern("fleet/default/sim/clock") == "sim/clock"
+    assert key_class("fleet/default/robot/robot-3/truth") == "robot/*/truth"
+    assert key_class("fleet/default/coord/plan/robot-1") == "coord/plan/*"
+    assert key_class("fleet/default/coord/bid/t04/robot-1") == "coord/bid/*"
+    assert key_class("fleet/default/sim/clock") == "sim/clock"
 
 
 # ---- a live bus --------------------------------------------------------------------------

@@ -36,6 +36,7 @@ from fleet.protocol import (
     Num,
     Plan,
     PoseEstimate,
+    Request,
     Twist,
     decode,
     encode,
@@ -554,3 +555,36 @@ def test_liveliness_join_and_leave(router_endpoint: str) -> None:
         assert wait_until(lambda: "late" in left), f"leave not observed: {left}"
         assert "c" not in joined, "watch_alive('agent') reported another role"
         assert "early" not in left
+
+
+@pytest.mark.timeout(60)
+def test_implausible_messages_are_counted_by_key_class_and_a_garbage_reply_is_skipped(
+    router_endpoint: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    fleet = f"t{free_port()}"
+    with (
+        Bus("coordinator", "c", connect=[router_endpoint], fleet=fleet) as bus,
+        Bus("sim", "s", connect=[router_endpoint], fleet=fleet) as server,
+    ):
+        k = bus.keys
+        with caplog.at_level("WARNING", logger="fleet.bus"):
+            bus.drop_implausible(k.robot("robot-1", "pose"), "robot-1", "a jump")
+            bus.drop_implausible(k.robot("robot-2", "pose"), "robot-2", "a jump", n=2)
+            bus.drop_implausible(k.clock(), "sim", "far ahead")
+        assert bus.implausible == {"robot/*/pose": 3, "sim/clock": 1}
+        assert bus.dropped() == (0, 4)
+        # the first of each class is logged, naming the sender
+        logged = [r.getMessage() for r in caplog.records]
+        assert len(logged) == 2 and "from robot-1" in logged[0] and "from sim" in logged[1]
+
+        key = k.sim_report()
+        queryable = server.session.declare_queryable(key, lambda q: q.reply(key, b"\x93garbage"))
+
+        def ask() -> bool:
+            with pytest.raises(TimeoutError, match="no valid reply"):
+                bus.request(key, Request("c"), CoverageSummary, timeout=0.5)
+            return bus.decode_errors[key] > 0
+
+        assert wait_until(ask, timeout=10.0), "no reply came"
+        assert bus.dropped() == (bus.decode_errors[key], 4)
+        queryable.undeclare()

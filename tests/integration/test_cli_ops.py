@@ -27,6 +27,7 @@ from fleet.rundir import (
     newest_run_dir,
     process_state,
     read_table,
+    write_dropped,
     write_table,
 )
 from fleet.supervisor.runner import descendants
@@ -405,7 +406,12 @@ def test_status_json_reads_the_table_and_the_coordinator_state(fake_run: dict) -
     assert result.exit_code == 0, result.output
     s = json.loads(result.stdout)
     assert s["run_dir"] == str(d) and s["fleet"] == "test"
-    assert s["up"] == {"pid": fake_run["up"].pid, "state": "running"}
+    assert s["up"] == {
+        "pid": fake_run["up"].pid,
+        "state": "running",
+        "malformed": None,
+        "implausible": None,
+    }
     robot0 = s["processes"]["robot-0"]
     assert robot0["pid"] == fake_run["robot0"].pid and robot0["state"] == "running"
     assert robot0["restarts"] == 0 and robot0["log"] == str(d / "robot-0.log")
@@ -442,7 +448,24 @@ def test_status_without_the_coordinator_state(fake_run: dict) -> None:
     assert "coordinator state: not written yet" in result.stdout
     lines = result.stdout.splitlines()
     robot0 = next(line for line in lines if line.startswith("robot-0 "))
-    assert robot0.split() == ["robot-0", str(fake_run["robot0"].pid), "running", "0"]
+    assert robot0.split() == ["robot-0", str(fake_run["robot0"].pid), "running", "0", "-", "-"]
+
+
+def test_status_shows_the_messages_each_process_dropped(fake_run: dict) -> None:
+    d = fake_run["dir"]
+    write_dropped(d, {"coordinator": (2, 5), "robot-0": (1, None), "up": (0, 0)})
+    result = runner.invoke(app, ["status", "--json", "--run-dir", str(d)])
+    s = json.loads(result.stdout)
+    coord, robot0 = s["processes"]["coordinator"], s["processes"]["robot-0"]
+    assert (coord["malformed"], coord["implausible"]) == (2, 5)
+    assert (robot0["malformed"], robot0["implausible"]) == (1, None)
+    assert s["processes"]["robot-1"]["malformed"] is None
+    assert (s["up"]["malformed"], s["up"]["implausible"]) == (0, 0)
+    result = runner.invoke(app, ["status", "--run-dir", str(d)])
+    lines = result.stdout.splitlines()
+    assert lines[1].split() == ["process", "pid", "state", "restarts", "malformed", "implausible"]
+    row = next(line for line in lines if line.startswith("coordinator "))
+    assert row.split()[-2:] == ["2", "5"]
 
 
 def test_status_plain_text_shows_the_robots(fake_run: dict) -> None:

@@ -17,6 +17,9 @@ CMD = Keys().robot("robot-0", "cmd_vel")
 class _NoBus:
     keys = Keys()
 
+    def __init__(self) -> None:
+        self.dropped: list[tuple[str, str, str]] = []
+
     def subscribe(self, *_args: object) -> None:
         return None
 
@@ -26,6 +29,9 @@ class _NoBus:
     def watch_alive(self, *_args: object) -> None:
         return None
 
+    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
+        self.dropped.append((key, sender, why))
+
 
 def _server_with_robot() -> SimServer:
     cfg = load_fleet_config(None)
@@ -34,13 +40,13 @@ def _server_with_robot() -> SimServer:
     x, y, th = world.start_poses(1, cfg.robot.radius)[0]
     assert server._on_spawn(SpawnRequest("robot-0", x, y, th)).ok
     for _ in range(20):
-        server.core.step()
+        server._tick()
     return server
 
 
 def test_a_command_sent_before_the_agent_left_does_not_refuse_its_respawn() -> None:
     server = _server_with_robot()
-    last_scan = server.core.t
+    last_scan = server.scan_stamps["robot-0"]
     server._on_cmd(CMD, Twist(last_scan, 0.2, 0.0))
     server._on_agent_left("robot-0")
     # the dying agent's last command, overtaken on the way by the news that it left
@@ -53,8 +59,9 @@ def test_a_command_sent_before_the_agent_left_does_not_refuse_its_respawn() -> N
 def test_a_hung_agent_let_go_is_live_again_on_its_first_new_command() -> None:
     server = _server_with_robot()
     server._release("robot-0", "was lost to the coordinator")
-    server.core.step()
-    server._on_cmd(CMD, Twist(server.core.t, 0.2, 0.0))
+    for _ in range(10):
+        server._tick()
+    server._on_cmd(CMD, Twist(server.scan_stamps["robot-0"], 0.2, 0.0))
     assert server.links["robot-0"].alive
     reply = server._on_spawn(SpawnRequest("robot-0", 0.0, 0.0, 0.0, rejoin=True))
     assert not reply.ok and "still live" in reply.error

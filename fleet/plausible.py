@@ -1,0 +1,196 @@
+"""What a receiver may believe of a well-formed message, judged by what it already knows.
+
+A stamp far ahead of the receiver's sim clock, or a pose farther from the robot's last one than
+the robot can drive, is dropped and counted (:meth:`fleet.bus.Bus.drop_implausible`) like a
+malformed payload. No single message moves a clock or a position by more than one step could:
+
+- :class:`SimClock` follows the simulator's clock messages. One at most ``step_s`` past the
+  clock moves it; one farther ahead is believed only once ``CONFIRMATIONS`` such messages, each
+  within ``step_s`` of the others, say that time has moved on that far (a receiver that started
+  late, was stopped for a while or lost clock messages catches up within a few messages; a lone
+  stamp far ahead never moves it, nor does it keep the real clock's jump from being believed).
+- :class:`PoseTrack` follows one robot's reported positions the same way: a position the robot
+  can have driven to since the last one believed (``speed`` × the time between their stamps +
+  ``margin_m``) is believed; a jump is believed once ``CONFIRMATIONS`` positions, each within
+  reach of the one before, agree with it (a re-localized robot, a SLAM correction).
+
+Messages not believed yet wait in chains of messages that agree with each other (at most
+``MAX_CHAINS``). A chain never confirmed is reported to ``dropped``, with how many messages it
+held, once a believable message or a confirmed chain supersedes it, so what is counted is what
+was really implausible.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from fleet.params import AgentParams, FleetConfig, SimParams
+
+# a jump is believed once this many messages agree with it: one is never enough
+CONFIRMATIONS = 3
+# chains of messages not believed yet that a receiver keeps; the oldest beyond goes
+MAX_CHAINS = 4
+
+# dropped(n, why): n messages were dropped as implausible, for this reason
+Dropped = Callable[[int, str], None]
+
+
+def clock_step_s(sim: SimParams, agent: AgentParams) -> float:
+    """How far one message may move a receiver's sim clock, and how far ahead of it a robot's
+    stamp may be: a receiver's copy of the clock lags the simulator's by a clock period
+    (1 / ``sim.clock_hz``) when no clock message is lost, and a robot acts on its newest data
+    for at most ``agent.stale_after_s`` before it stops. A stamp farther ahead was not stamped
+    by this simulator's clock."""
+    return max(1.0 / sim.clock_hz, agent.stale_after_s)
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """What one message may move: the sim clock by ``clock_step_s``; a robot's position by
+    ``speed`` (its top speed, m/s) × the sim time since its last one, + ``margin_m``."""
+
+    clock_step_s: float
+    speed: float
+    margin_m: float
+
+    @classmethod
+    def of(cls, cfg: FleetConfig) -> Bounds:
+        """From the fleet's parameters: the margin is the farthest the SLAM tracking moves a
+        pose from its odometry prediction in one scan (``slam.search_window_xy``)."""
+        return cls(clock_step_s(cfg.sim, cfg.agent), cfg.robot.max_vel_x, cfg.slam.search_window_xy)
+
+
+@dataclass
+class _Jump:
+    """Messages that agree with each other and that the receiver does not believe yet: the
+    newest one's stamp (and position), how many, and why the first was not believed."""
+
+    stamp: float
+    xy: tuple[float, float] | None
+    count: int
+    why: str
+
+
+class _Jumps:
+    """The chains of messages not believed yet (see the module docstring)."""
+
+    def __init__(self, dropped: Dropped) -> None:
+        self.dropped = dropped
+        self.chains: list[_Jump] = []
+
+    def hear(self, jump: _Jump, agrees: Callable[[_Jump], bool]) -> _Jump | None:
+        """Add one message (``jump``, count 1) to the first chain it ``agrees`` with, or start
+        a chain with it; the chain it confirmed (the others then settled), else None."""
+        for chain in self.chains:
+            if agrees(chain):
+                chain.stamp = max(chain.stamp, jump.stamp)
+                chain.xy = jump.xy
+                chain.count += 1
+                if chain.count < CONFIRMATIONS:
+                    return None
+                self.chains.remove(chain)
+                self.settle()
+                return chain
+        self.chains.append(jump)
+        if len(self.chains) > MAX_CHAINS:
+            oldest = self.chains.pop(0)
+            self.dropped(oldest.count, oldest.why)
+        return None
+
+    def settle(self) -> None:
+        """A believable message came: the chains before it, never confirmed, were
+        implausible."""
+        for chain in self.chains:
+            self.dropped(chain.count, chain.why)
+        self.chains.clear()
+
+    def newest(self) -> float | None:
+        """The newest stamp of a chain that may be confirmed next."""
+        return max((c.stamp for c in self.chains), default=None)
+
+
+class SimClock:
+    """The newest sim time a receiver believes the simulator's clock messages (see the module
+    docstring); ``synced`` once it has believed one since it started. Thread-safe."""
+
+    def __init__(self, step_s: float, dropped: Dropped, now: float = 0.0) -> None:
+        self.step_s = step_s
+        self.now = now
+        self.synced = False
+        self._jumps = _Jumps(dropped)
+        self._lock = threading.Lock()
+
+    def hear(self, stamp: float) -> bool:
+        """Take one clock message; whether it moved the clock."""
+        with self._lock:
+            if stamp <= self.now + self.step_s:
+                self._jumps.settle()
+                self.synced = True
+                moved = stamp > self.now
+                self.now = max(self.now, stamp)
+                return moved
+            why = f"sim time {stamp:.3f} s, {stamp - self.now:.3f} s past the clock"
+            confirmed = self._jumps.hear(
+                _Jump(stamp, None, 1, why), lambda c: abs(stamp - c.stamp) <= self.step_s
+            )
+            if confirmed is None:
+                return False
+            self.now, self.synced = confirmed.stamp, True
+            return True
+
+    def ahead(self, stamp: float) -> bool:
+        """Whether ``stamp`` is farther ahead of the clock than any robot's can be: more than a
+        step past it, and past a jump it may be about to confirm (a receiver catching up after a
+        stop). Never before the clock has synced: until then it knows no time to judge by."""
+        with self._lock:
+            pending = self._jumps.newest()
+            limit = self.now if pending is None else max(self.now, pending)
+            return self.synced and stamp > limit + self.step_s
+
+
+class PoseTrack:
+    """One robot's positions as a receiver believes them (see the module docstring). Not
+    thread-safe: the receiver holds its own lock."""
+
+    def __init__(self, speed: float, margin_m: float, dropped: Dropped) -> None:
+        self.speed = speed
+        self.margin_m = margin_m
+        self.last: tuple[float, tuple[float, float]] | None = None
+        self._jumps = _Jumps(dropped)
+
+    def hear(self, stamp: float, xy: tuple[float, float]) -> bool:
+        """Take one position reported at sim time ``stamp``; whether it is believed. One older
+        than the last believed is dropped as stale, not counted."""
+        if self.last is None:
+            self.last = (stamp, xy)
+            return True
+        t0, xy0 = self.last
+        if stamp < t0:
+            return False
+        why = self._out_of_reach(t0, xy0, stamp, xy)
+        if why is None:
+            self._jumps.settle()
+            self.last = (stamp, xy)
+            return True
+        confirmed = self._jumps.hear(
+            _Jump(stamp, xy, 1, why),
+            lambda c: c.xy is not None and self._out_of_reach(c.stamp, c.xy, stamp, xy) is None,
+        )
+        if confirmed is None:
+            return False
+        self.last = (stamp, xy)
+        return True
+
+    def _out_of_reach(
+        self, t0: float, xy0: tuple[float, float], stamp: float, xy: tuple[float, float]
+    ) -> str | None:
+        """Why ``xy`` at ``stamp`` is out of the robot's reach from ``xy0`` at ``t0``; None if
+        it is within."""
+        gap = math.dist(xy0, xy)
+        reach = self.speed * max(stamp - t0, 0.0) + self.margin_m
+        if stamp >= t0 and gap <= reach:
+            return None
+        return f"moved {gap:.2f} m in {stamp - t0:.3f} s sim, farther than {reach:.2f} m"

@@ -1,0 +1,194 @@
+"""The coordinator's receivers on a real router: its clock is the simulator's as far as one step
+can move it, a robot's pose is believed only where the robot can have driven, messages from
+robots not in the job are dropped and counted, and a robot lost by its liveliness token or its
+silent heartbeat gives its work back to the market."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from waits import wait_until
+
+from fleet.bus import Bus
+from fleet.config import resolve_world
+from fleet.coordinator.job import LOST, OPEN, REPLACED
+from fleet.coordinator.planning import TaskPlanner
+from fleet.coordinator.service import Coordinator
+from fleet.coordinator.store import JobStore
+from fleet.params import load_fleet_config
+from fleet.plausible import Bounds
+from fleet.protocol import AwardAck, Clock, Heartbeat, PoseEstimate, RobotStatus
+from fleet.supervisor.launcher import free_port
+from fleet.world import load_world
+from planners.auction import Task
+
+pytestmark = pytest.mark.timeout(60)
+
+CFG = load_fleet_config()
+STEP = Bounds.of(CFG).clock_step_s
+
+
+@pytest.fixture(scope="module")
+def planner() -> TaskPlanner:
+    return TaskPlanner(load_world(resolve_world("small"), CFG.robot.radius), CFG)
+
+
+@pytest.fixture
+def buses(router_endpoint: str) -> Iterator[tuple[Bus, Bus, Bus]]:
+    """The coordinator's, the simulator's and robot-0's agent's buses, on a fleet of their own."""
+    fleet = f"t{free_port()}"
+    with (
+        Bus("coordinator", "coordinator", connect=[router_endpoint], fleet=fleet) as coord,
+        Bus("sim", "sim", connect=[router_endpoint], fleet=fleet) as sim,
+        Bus("agent", "robot-0", connect=[router_endpoint], fleet=fleet) as agent,
+    ):
+        yield coord, sim, agent
+
+
+def _coordinator(
+    bus: Bus, planner: TaskPlanner, store: JobStore | None = None, rid: str = "robot-0"
+) -> Coordinator:
+    """A coordinator cleaning, ``rid`` (in the job by its liveliness token) holding t00, t01."""
+    coord = Coordinator(bus, planner, 1, CFG.coordinator, store, bounds=Bounds.of(CFG))
+    assert wait_until(lambda: rid in coord.job.robots), f"{rid}'s token not heard"
+    path = np.array([[0.5, 0.5], [1.5, 0.5]])
+    coord.job.add_tasks((Task("t00", path, 1.0, 4.0, (1,)), Task("t01", path + 1, 1.0, 4.0, (2,))))
+    robot = coord.job.robots[rid]
+    robot.ready, robot.xy = True, (0.5, 0.5)
+    coord.job.award("t00", rid, False)
+    coord.job.award("t01", rid, False)
+    coord.phase = "cleaning"
+    return coord
+
+
+def test_a_pose_stamped_far_ahead_moves_neither_the_clock_nor_the_robot(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner
+) -> None:
+    cbus, sim, agent = buses
+    coord = _coordinator(cbus, planner)
+    k = cbus.keys
+
+    def tick() -> bool:
+        sim.publish(k.clock(), Clock(5.0, 1.0))
+        return coord.journal.clock == 5.0
+
+    assert wait_until(tick), "the sim clock did not reach the coordinator"
+    pose = k.robot("robot-0", "pose")
+
+    def heard() -> bool:
+        agent.publish(pose, PoseEstimate(5.0, 0.6, 0.5, 0.0))
+        return coord.job.robots["robot-0"].xy == (0.6, 0.5)
+
+    assert wait_until(heard), "the pose did not reach the coordinator"
+    agent.publish(pose, PoseEstimate(1e9, 0.6, 0.5, 0.0))
+    assert wait_until(
+        lambda: coord.journal.clock != 5.0 or cbus.implausible["robot/*/pose"] == 1
+    ), "the pose stamped 1e9 s did not reach the coordinator"
+    assert coord.journal.clock == 5.0
+    assert cbus.implausible["robot/*/pose"] == 1
+    # nor does one clock message far ahead; the next real one shows it was implausible
+    sim.publish(k.clock(), Clock(1e9, 1.0))
+    sim.publish(k.clock(), Clock(5.05, 1.0))
+    assert wait_until(lambda: coord.journal.clock == 5.05)
+    assert cbus.implausible["sim/clock"] == 1
+    # a status stamped far ahead is dropped too
+    coord._on_status(
+        k.robot("robot-0", "status"), RobotStatus(1e9, "driving", "t00", 0.5, 1, 2, 1.0)
+    )
+    assert coord.job.robots["robot-0"].state == ""
+    # a heartbeat or an acknowledgement carries the agent's clock, which moves nothing here: a
+    # wrong one (an agent that heard a forged clock) must not make a working robot lost
+    robot = coord.job.robots["robot-0"]
+    robot.heartbeat_wall = 0.0
+    coord._on_heartbeat(k.robot("robot-0", "heartbeat"), Heartbeat(1e9, 1, True))
+    coord._on_ack(k.ack("robot-0"), AwardAck(1e9, robot.award_seq, "robot-0"))
+    assert robot.heartbeat_wall > 0.0 and robot.acked_seq == robot.award_seq
+    assert coord.journal.clock == 5.05
+    assert cbus.implausible == {"robot/*/pose": 1, "sim/clock": 1, "robot/*/status": 1}
+    assert coord._dropped() == (0, 3)
+
+
+def test_a_pose_jump_no_robot_can_drive_is_dropped(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner
+) -> None:
+    cbus, _, _ = buses
+    coord = _coordinator(cbus, planner)
+    key = cbus.keys.robot("robot-0", "pose")
+    coord._on_clock(cbus.keys.clock(), Clock(10.0, 1.0))
+    coord._on_pose(key, PoseEstimate(10.0, 1.0, 0.5, 0.0))
+    coord._on_pose(key, PoseEstimate(10.1, 1.0 + CFG.robot.max_vel_x * 0.1, 0.5, 0.0))
+    assert coord.job.robots["robot-0"].xy == pytest.approx((1.05, 0.5))
+    coord._on_pose(key, PoseEstimate(10.2, 9.0, 9.0, 0.0))
+    assert coord.job.robots["robot-0"].xy == pytest.approx((1.05, 0.5))
+    coord._on_pose(key, PoseEstimate(10.3, 1.1, 0.5, 0.0))
+    assert coord.job.robots["robot-0"].xy == pytest.approx((1.1, 0.5))
+    assert cbus.implausible["robot/*/pose"] == 1
+
+
+def test_messages_from_a_robot_not_in_the_job_are_dropped(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner
+) -> None:
+    cbus, _, _ = buses
+    coord = _coordinator(cbus, planner)
+    k = cbus.keys
+    coord._on_pose(k.robot("robot-9", "pose"), PoseEstimate(0.0, 1.0, 1.0, 0.0))
+    coord._on_status(k.robot("robot-9", "status"), RobotStatus(0.0, "driving", "t00", 0.5, 1, 2, 1))
+    coord._on_heartbeat(k.robot("robot-9", "heartbeat"), Heartbeat(0.0, 1, True))
+    coord._on_ack(k.ack("robot-9"), AwardAck(0.0, 1, "robot-9"))
+    # robot-0 acknowledging for another robot
+    coord._on_ack(k.ack("robot-0"), AwardAck(0.0, 1, "robot-9"))
+    assert sorted(coord.job.robots) == ["robot-0"]
+    assert sum(cbus.implausible.values()) == 5
+
+
+def test_a_robot_whose_token_goes_is_lost_and_its_work_goes_back_on_sale(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner, router_endpoint: str
+) -> None:
+    cbus, _, _ = buses
+    with Bus("agent", "robot-1", connect=[router_endpoint], fleet=cbus.keys.fleet):
+        coord = _coordinator(cbus, planner, rid="robot-1")
+    assert wait_until(lambda: coord.job.robots["robot-1"].liveness == LOST), "not lost"
+    with coord.lock:
+        assert coord.job.queue("robot-1") == []
+        assert coord.job.tasks["t01"].state == OPEN
+        assert coord.job.tasks["t00"].state in (OPEN, REPLACED)
+        assert coord.market.need_auction
+
+
+def test_a_robot_whose_heartbeat_goes_silent_is_lost_and_its_work_goes_back_on_sale(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner
+) -> None:
+    cbus, _, _ = buses
+    coord = _coordinator(cbus, planner)
+    robot = coord.job.robots["robot-0"]
+    with coord.lock:
+        robot.heartbeat_wall = time.time()
+        coord._check_heartbeats()
+        assert robot.liveness != LOST
+        robot.heartbeat_wall = time.time() - 2 * CFG.coordinator.heartbeat_timeout_s
+        coord._check_heartbeats()
+        assert robot.liveness == LOST
+        assert coord.job.queue("robot-0") == [] and coord.job.tasks["t01"].state == OPEN
+        assert coord.market.need_auction
+
+
+def test_the_counts_survive_a_restart(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner, tmp_path: Path
+) -> None:
+    cbus, _, _ = buses
+    store = JobStore(tmp_path / "job.sqlite")
+    coord = _coordinator(cbus, planner, store)
+    coord.journal.save_tasks("t00", "t01")
+    coord._on_pose(cbus.keys.robot("robot-9", "pose"), PoseEstimate(0.0, 1.0, 1.0, 0.0))
+    coord._persist(store)
+    assert store.meta()["dropped"] == {"malformed": 0, "implausible": 1}
+    store.close()
+    again = JobStore(tmp_path / "job.sqlite")
+    restarted = Coordinator(cbus, planner, 1, CFG.coordinator, again, bounds=Bounds.of(CFG))
+    # one pose from robot-9 dropped by each
+    assert restarted._dropped() == (0, 2)
+    again.close()

@@ -1,0 +1,107 @@
+"""What a receiver believes: the sim clock and a robot's positions move by what one step can
+move them; a jump is believed only once messages in a row confirm it, and a jump never
+confirmed is counted once a believable message supersedes it."""
+
+from __future__ import annotations
+
+from fleet.params import AgentParams, SimParams, load_fleet_config
+from fleet.plausible import CONFIRMATIONS, Bounds, PoseTrack, SimClock, clock_step_s
+
+STEP = 0.5
+
+
+class Drops:
+    def __init__(self) -> None:
+        self.calls: list[tuple[int, str]] = []
+
+    def __call__(self, n: int, why: str) -> None:
+        self.calls.append((n, why))
+
+    @property
+    def total(self) -> int:
+        return sum(n for n, _ in self.calls)
+
+
+def test_the_step_is_the_clock_period_or_the_agents_staleness_whichever_is_longer() -> None:
+    assert clock_step_s(SimParams(clock_hz=20.0), AgentParams(stale_after_s=0.5)) == 0.5
+    assert clock_step_s(SimParams(clock_hz=1.0), AgentParams(stale_after_s=0.5)) == 1.0
+    cfg = load_fleet_config()
+    b = Bounds.of(cfg)
+    assert b.speed == cfg.robot.max_vel_x and b.margin_m == cfg.slam.search_window_xy
+
+
+def test_a_lone_clock_stamp_far_ahead_never_moves_the_clock_and_is_counted() -> None:
+    drops = Drops()
+    clock = SimClock(STEP, drops)
+    assert clock.hear(0.05) and clock.synced
+    assert not clock.ahead(0.05 + STEP) and clock.ahead(1e9)
+    assert not clock.hear(1e9) and clock.now == 0.05
+    # the real clock goes on: the jump was implausible
+    assert clock.hear(0.10) and clock.now == 0.10
+    assert drops.calls and drops.total == 1 and "past the clock" in drops.calls[0][1]
+    for t in (1e9, 2e9, 0.15, 1e9 + 1):
+        clock.hear(t)
+    assert clock.now == 0.15 and drops.total == 3
+
+
+def test_a_late_or_resumed_clock_catches_up_once_messages_confirm_the_jump() -> None:
+    drops = Drops()
+    clock = SimClock(STEP, drops, now=100.0)
+    assert not clock.synced and not clock.ahead(1e9)
+    stamps = [130.0 + 0.05 * i for i in range(CONFIRMATIONS)]
+    moved = [clock.hear(t) for t in stamps]
+    assert moved == [False] * (CONFIRMATIONS - 1) + [True]
+    assert clock.now == stamps[-1] and clock.synced and drops.calls == []
+    # clock messages lost (up to a step's worth), or one overtaken by the next
+    for t in (130.5, 130.95, 130.9, 131.3):
+        clock.hear(t)
+    assert clock.now == 131.3 and drops.calls == []
+    # while a jump waits for confirmation, stamps up to it are not judged ahead
+    clock.hear(231.3)
+    assert clock.now == 131.3 and not clock.ahead(231.3) and clock.ahead(231.3 + 2 * STEP)
+    clock.hear(131.35)
+    assert clock.ahead(231.3) and drops.total == 1
+
+
+def test_a_forged_stamp_amid_a_jump_neither_spoils_nor_delays_its_confirmation() -> None:
+    drops = Drops()
+    clock = SimClock(STEP, drops, now=100.0)
+    for t in (130.0, 1e9, 130.05, 2e9, 130.1):
+        clock.hear(t)
+    assert clock.now == 130.1 and drops.total == 2
+    assert all("past the clock" in why for _, why in drops.calls)
+
+
+def test_messages_that_agree_with_no_other_are_never_believed() -> None:
+    drops = Drops()
+    clock = SimClock(STEP, drops)
+    clock.hear(0.0)
+    for i in range(10):
+        clock.hear(10.0 * (i + 1))
+    assert clock.now == 0.0
+    # the oldest chains beyond MAX_CHAINS are counted as they go, the rest when the clock moves
+    clock.hear(0.05)
+    assert clock.now == 0.05 and drops.total == 10
+
+
+def test_a_pose_the_robot_cannot_have_driven_to_is_dropped_and_counted_once_superseded() -> None:
+    drops = Drops()
+    track = PoseTrack(0.5, 0.2, drops)
+    assert track.hear(10.0, (1.0, 1.0))
+    assert track.hear(11.0, (1.6, 1.0))  # 0.6 m in 1 s: within 0.5 m/s × 1 s + 0.2 m
+    assert not track.hear(11.1, (500.0, 1.0))
+    assert drops.calls == []
+    assert track.hear(11.2, (1.65, 1.0))
+    assert drops.total == 1 and "moved" in drops.calls[0][1]
+    # older than the last believed: stale, neither believed nor counted
+    assert not track.hear(5.0, (1.65, 1.0)) and drops.total == 1
+    assert track.last == (11.2, (1.65, 1.0))
+
+
+def test_a_real_jump_a_relocalization_is_believed_once_confirmed_and_not_counted() -> None:
+    drops = Drops()
+    track = PoseTrack(0.5, 0.2, drops)
+    track.hear(0.0, (0.0, 0.0))
+    heard = [track.hear(0.1 * i, (3.0 + 0.01 * i, 0.0)) for i in range(1, CONFIRMATIONS + 1)]
+    assert heard == [False] * (CONFIRMATIONS - 1) + [True]
+    assert track.last is not None and track.last[1][0] > 3.0 and drops.calls == []
