@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bus_stand_in import NoBus
+
 from fleet.params import load_fleet_config
 from fleet.protocol import Keys, SpawnRequest, Twist
 from fleet.world import load_world
@@ -14,29 +16,10 @@ WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "small.yaml
 CMD = Keys().robot("robot-0", "cmd_vel")
 
 
-class _NoBus:
-    keys = Keys()
-
-    def __init__(self) -> None:
-        self.dropped: list[tuple[str, str, str]] = []
-
-    def subscribe(self, *_args: object) -> None:
-        return None
-
-    def serve(self, *_args: object) -> None:
-        return None
-
-    def watch_alive(self, *_args: object) -> None:
-        return None
-
-    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
-        self.dropped.append((key, sender, why))
-
-
 def _server_with_robot() -> SimServer:
     cfg = load_fleet_config(None)
     world = load_world(WORLD, cfg.robot.radius)
-    server = SimServer(_NoBus(), world, cfg)  # type: ignore[arg-type]
+    server = SimServer(NoBus(), world, cfg)  # type: ignore[arg-type]
     x, y, th = world.start_poses(1, cfg.robot.radius)[0]
     assert server._on_spawn(SpawnRequest("robot-0", x, y, th)).ok
     for _ in range(20):

@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from bus_stand_in import NoBus
 from waits import wait_until
 
 from fleet.bus import Bus
@@ -23,27 +24,8 @@ CMD = Keys().robot("robot-0", "cmd_vel")
 CFG = load_fleet_config(None)
 
 
-class _NoBus:
-    keys = Keys()
-
-    def __init__(self) -> None:
-        self.dropped: list[tuple[str, str, str]] = []
-
-    def subscribe(self, *_args: object) -> None:
-        return None
-
-    def serve(self, *_args: object) -> None:
-        return None
-
-    def watch_alive(self, *_args: object) -> None:
-        return None
-
-    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
-        self.dropped.append((key, sender, why))
-
-
-def _server() -> tuple[SimServer, _NoBus]:
-    bus = _NoBus()
+def _server() -> tuple[SimServer, NoBus]:
+    bus = NoBus()
     world = load_world(WORLD, CFG.robot.radius)
     server = SimServer(bus, world, CFG)  # type: ignore[arg-type]
     x, y, th = world.start_poses(1, CFG.robot.radius)[0]
