@@ -146,6 +146,14 @@ class Auctioneer:
             (auction.Bid(b.task, b.robot, b.marginal_s, b.total_s, b.reverse) for b in live),
             self.params.objective,
         )
+        if best is None and rnd.bids:
+            log.info(
+                "auction round %d: %d bid(s), none may win (its robot left the market, its lot "
+                "changed meanwhile, or its robot tried it)",
+                rnd.number,
+                len(rnd.bids),
+            )
+            return None
         if best is None:
             log.warning(
                 "auction round %d: no bids from %s within %.1f s",

@@ -137,7 +137,13 @@ class Market:
                 break
             rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
             with self.lock:
-                sale = auctioneer.award(rnd, set(self.job.market()), self._untried)
+                sale = auctioneer.award(rnd, set(self.job.market()), self._may_win)
+                changed = any(
+                    any(self.job.tasks[t].state != OPEN for t in lot.tasks)
+                    for lot in rnd.lots.values()
+                )
+            if sale is None and changed:
+                continue  # a loss replaced or took a lot's tasks while the round ran
             if sale is None:
                 break
             committed.append(sale.best.total_s)
@@ -182,9 +188,11 @@ class Market:
         self.journal.set_meta(round_seq=sale.round)
         self.awards.send()
 
-    def _untried(self, lot: auction.Lot, robot: str) -> bool:
-        """Whether ``robot`` may win ``lot``: it has tried none of its tasks."""
-        return not any(robot in self.job.tasks[t].tried for t in lot.tasks)
+    def _may_win(self, lot: auction.Lot, robot: str) -> bool:
+        """Whether ``robot`` may win ``lot``: its tasks are all still open (none was replaced
+        round a body or sold while the round ran) and it has tried none of them."""
+        recs = [self.job.tasks[t] for t in lot.tasks]
+        return all(r.state == OPEN and robot not in r.tried for r in recs)
 
     def _settle(self) -> None:
         """Open tasks every robot in the market has tried are unreachable, and said so."""

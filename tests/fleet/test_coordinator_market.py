@@ -257,6 +257,39 @@ def test_the_parts_replacing_a_lost_robots_work_round_its_body_are_reassigned(
         planner.set_bodies(np.zeros((0, 2)))
 
 
+def test_a_lot_replaced_round_a_body_while_its_round_runs_is_not_sold(
+    planner: TaskPlanner,
+) -> None:
+    """t00 is on sale when robot-1 dies beside it: while the round waits for bids, t00 is
+    replaced by parts round the body. The round's bids for t00 may not win it (the coordinator
+    crashed on awarding a replaced task); the parts are sold instead."""
+    c = Coordinator(planner, ["robot-0", "robot-1", "robot-2"])
+    job = c.job
+    job.tasks.clear()
+    job.add_tasks((_lane("t00", 0.6), _lane("t01", 0.85)))
+    job.award("t01", "robot-1", False)
+    job.robots["robot-1"].xy = (2.0, 0.85)
+    c.bidding = {"robot-0": 10.0, "robot-2": 20.0}
+    answer = c.publish
+
+    def publish(key: str, msg: Message, control: bool) -> None:
+        if isinstance(msg, TaskCall) and job.robots["robot-1"].liveness != LOST:
+            c.market.lose("robot-1", "its liveliness token is gone")
+        answer(key, msg, control)
+
+    c.publish = publish  # type: ignore[method-assign]
+    c.auctioneer.publish = publish
+    try:
+        c.market.auction(c.auctioneer)
+        assert job.tasks["t00"].state == REPLACED and job.tasks["t00"].owner is None
+        parts = [t for t, r in job.tasks.items() if r.parent in ("t00", "t01")]
+        sold = [t for s in c.sales for t in s.lot.tasks]
+        assert "t00" not in sold
+        assert {t for t in parts if job.tasks[t].state != "blocked"} <= set(sold)
+    finally:
+        planner.set_bodies(np.zeros((0, 2)))
+
+
 def test_a_stuck_robots_work_is_sold_to_an_idle_one(planner: TaskPlanner) -> None:
     """robot-0 is alive and reports its plan, but reaches no waypoint of it for stall_s while
     it escapes and gives them up one by one: its work goes back on sale, and although it bids
