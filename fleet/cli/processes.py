@@ -241,9 +241,8 @@ def coordinator(
     try:
         c.run(cfg.coordinator.expected_robots_grace_s)
     finally:
+        c.close()
         bus.close()
-        if store is not None:
-            store.close()
 
 
 def register(

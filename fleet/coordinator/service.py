@@ -247,6 +247,8 @@ class Coordinator:
 
     def _on_leave(self, rid: str) -> None:
         with self.lock:
+            if self.stop.is_set():
+                return  # the fleet is shutting down: its tokens going are no losses
             if rid in self.job.robots and self.job.robots[rid].liveness != LOST:
                 self.market.lose(rid, "its liveliness token is gone")
 
@@ -297,6 +299,15 @@ class Coordinator:
         return False
 
     # ---- main loop ----------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Stop, and close the store: what the handlers still hear (the robots' tokens going as
+        the fleet shuts down) is no longer part of the job."""
+        self.stop.set()
+        with self.lock:
+            store, self.store, self.journal.store = self.store, None, None
+            if store is not None:
+                store.close()
 
     def run(self, grace_s: float) -> None:
         """Plan the tasks (unless resumed) while the robots start, then run the job."""

@@ -23,6 +23,7 @@ from fleet.params import load_fleet_config
 from fleet.plausible import Bounds
 from fleet.protocol import AwardAck, Clock, Heartbeat, PoseEstimate, RobotStatus
 from fleet.supervisor.launcher import free_port
+from fleet.supervisor.runner import read_events
 from fleet.world import load_world
 from planners.auction import Task
 
@@ -157,6 +158,31 @@ def test_a_robot_whose_token_goes_is_lost_and_its_work_goes_back_on_sale(
         assert coord.job.tasks["t01"].state == OPEN
         assert coord.job.tasks["t00"].state in (OPEN, REPLACED)
         assert coord.market.need_auction
+
+
+def test_a_token_that_goes_after_the_coordinator_closed_is_no_loss(
+    buses: tuple[Bus, Bus, Bus],
+    planner: TaskPlanner,
+    router_endpoint: str,
+    tmp_path: Path,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The fleet shuts down: the coordinator stops and closes its store, then the robots'
+    tokens go. None of that is a loss, and nothing is written to the closed store (it was:
+    "liveliness handler failed ... Cannot operate on a closed database")."""
+    cbus, _, _ = buses
+    store = JobStore(tmp_path / "job.sqlite")
+    robot = Bus("agent", "robot-1", connect=[router_endpoint], fleet=cbus.keys.fleet)
+    try:
+        coord = _coordinator(cbus, planner, store, rid="robot-1")
+        coord.close()
+    finally:
+        robot.close()
+    with caplog.at_level("ERROR"):
+        time.sleep(1.0)
+    assert coord.job.robots["robot-1"].liveness != LOST
+    assert not [r for r in caplog.records if r.levelname == "ERROR"]
+    assert "lost" not in [e["kind"] for e in read_events(tmp_path / "job.sqlite")]
 
 
 def test_a_robot_whose_heartbeat_goes_silent_is_lost_and_its_work_goes_back_on_sale(
