@@ -504,6 +504,10 @@ def _in_sight(ok: np.ndarray, owner: np.ndarray, sources: np.ndarray, cells: np.
     fine = np.argwhere(ok & (owner >= 0))
     own = point_of[owner[fine[:, 0], fine[:, 1]]]
     target = np.column_stack(np.divmod(own, cols))
+    # a possible centre within the disc of possible centres round its cell's point sees it
+    room = ndimage.distance_transform_edt(ok)[target[:, 0], target[:, 1]]
+    doubt = np.hypot(*(fine - target).T) + 1.5 > room
+    fine, target = fine[doubt], target[doubt]
     blind = fine[~_sees(ok, fine.astype(float), target.astype(float))]
     if not len(blind):
         return
