@@ -124,3 +124,18 @@ def test_points_of_one_region_locate_to_one_component() -> None:
     cells = graph.locate(grid.cell_to_world(fine))
     assert all(c is not None for c in cells)
     assert len({int(graph.component[c]) for c in cells}) == 1
+
+
+def test_goals_in_a_corridor_whose_centres_straddle_a_cell_border_are_reachable() -> None:
+    # corridor_wide: 0.6 m between the faces (y 1.7-2.3), robot centres at y 1.885-2.115 across
+    # the cells' border at y 1.95; the graph had the corridor's goals in a component of their
+    # own, and a transit to (7.76, 2.09) "cannot be reached" even from the rooms
+    world = load_world(resolve_world("corridor_wide"))
+    graph = build_transit_graph(world.grid(RES), RADIUS, CLEARANCE)
+    from planners.deconfliction import TransitRequest, plan_round
+
+    for start in [(6.03, 2.05), (1.0, 1.0), (11.0, 3.0), (6.03, 1.87)]:
+        plan = plan_round(graph, [TransitRequest("r", start, (7.76, 2.09))], 0.25)
+        assert plan.status == "success", plan.message
+    rooms = graph.locate(np.array([[1.0, 1.0], [11.0, 3.0], [7.5, 2.0]]))
+    assert len({int(graph.component[c]) for c in rooms}) == 1
