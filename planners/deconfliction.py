@@ -393,12 +393,14 @@ def _prioritized(
             # and one step after each stay: no robot follows another nose to tail
             for t in range(len(path) - 1):
                 table.add_vertex(path[t], t + 1)
+            if not crowd.keys().isdisjoint(path):
                 # nor stands in a cell whose point is too near (a bridge's neighbours)
-                for other in crowd.get(path[t], ()):
-                    table.add_vertex(other, t)
-                    table.add_vertex(other, t + 1)
-            for other in crowd.get(path[-1], ()):
-                table.add_parked(other, len(path) - 1)
+                for t in range(len(path) - 1):
+                    for other in crowd.get(path[t], ()):
+                        table.add_vertex(other, t)
+                        table.add_vertex(other, t + 1)
+                for other in crowd.get(path[-1], ()):
+                    table.add_parked(other, len(path) - 1)
         for j, start in enumerate(starts):
             if j != i and paths[j] is None:
                 for t in range(holds[j] + 2):

@@ -164,9 +164,9 @@ class TransitGraph:
             else:
                 pool = np.nonzero((regions == self.cell_region.flat[own]) & (flat != own))[0]
             d = np.hypot(*(pts[pool] - p).T)
-            best = [(int(r), int(c)) for r, c in cells[pool[np.argsort(d, kind="stable")]]]
             first = [divmod(own, self.shape[1])] if own >= 0 else []
-            out.append((first + best)[:k])
+            nearest = pool[np.argsort(d, kind="stable")[: k - len(first)]]
+            out.append(first + [(int(r), int(c)) for r, c in cells[nearest]])
         return out
 
     def crowding(self) -> dict[int, tuple[int, ...]]:
