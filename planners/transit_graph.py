@@ -381,13 +381,14 @@ def _bridge(
 ) -> np.ndarray:
     """Cells added (in place: ``usable``, ``fr``, ``fc``) where a region of possible centres falls
     apart in the graph: an unused cell holding possible centres of a region, 4-adjacent to cells
-    of two or more of that region's components, gets the point of its block that stands
-    farthest from the points round it. Such a step happens where a passage narrower than a cell
-    bends or runs along a cell border: its cells' points step diagonally, and no point of the
-    cell between them stands clear of both. A bridge's point is nearer its neighbours' than
+    of two or more of that region's components, or failing those, two 4-adjacent unused cells
+    each next to another of its components, get the points of their blocks that stand farthest
+    from the points round them. Such a step happens where a passage narrower than a cell bends
+    or runs along a cell border: its cells' points step diagonally, and no point of the cell
+    between them stands clear of both. A bridge's point is nearer its neighbours' than
     ``2 · (radius + clearance)``: ``planners.deconfliction`` keeps a robot out of a bridge's
-    neighbours while another is in it. Bridges are not 4-adjacent to each other within one
-    round; returns the cells added."""
+    neighbours while another is in it. Single bridges are not 4-adjacent to each other within
+    one round; returns the cells added."""
     crow, ccol = usable.shape
     region = np.where(usable, fine_region.ravel()[(fr * (ccol * k) + fc)], -1)
     pad_c = np.pad(component, 1, constant_values=-1)
@@ -400,30 +401,64 @@ def _bridge(
     for i in range(4):
         for j in range(i + 1, 4):
             split |= (regs[i] >= 0) & (regs[i] == regs[j]) & (comps[i] != comps[j])
-    candidates = np.argwhere(split & has_centre & ~usable)
+    unused = has_centre & ~usable
     added = np.zeros_like(usable)
-    for r, c in candidates.tolist():
+    for r, c in np.argwhere(split & unused).tolist():
         if added[max(r - 1, 0) : r + 2, c].any() or added[r, max(c - 1, 0) : c + 2].any():
             continue
-        near = usable[max(r - 1, 0) : r + 2, max(c - 1, 0) : c + 2]
-        others = np.column_stack(
-            [
-                fr[max(r - 1, 0) : r + 2, max(c - 1, 0) : c + 2][near],
-                fc[max(r - 1, 0) : r + 2, max(c - 1, 0) : c + 2][near],
-            ]
-        )
-        wanted = set(regs[:, r, c][regs[:, r, c] >= 0].tolist())
-        rr, cc = np.nonzero(ok[r * k : (r + 1) * k, c * k : (c + 1) * k])
-        rr, cc = rr + r * k, cc + c * k
-        mine = np.isin(fine_region[rr, cc], list(wanted))
-        if not mine.any():
+        wanted = regs[:, r, c][regs[:, r, c] >= 0]
+        _place(ok, usable, fr, fc, fine_region, k, r, c, wanted, added)
+    if added.any():
+        return added
+    # two unused cells side by side, each next to another component of one region
+    side = np.argmax(np.where(regs >= 0, comps, -1), axis=0)
+    rep_c = np.take_along_axis(comps, side[None], axis=0)[0]
+    rep_r = np.take_along_axis(regs, side[None], axis=0)[0]
+    rep_c = np.where(unused & (rep_r >= 0), rep_c, -1)
+    pairs = []
+    for dr, dc in ((0, 1), (1, 0)):
+        a_c, b_c = rep_c[: crow - dr, : ccol - dc], rep_c[dr:, dc:]
+        a_r, b_r = rep_r[: crow - dr, : ccol - dc], rep_r[dr:, dc:]
+        hit = (a_c >= 0) & (b_c >= 0) & (a_c != b_c) & (a_r == b_r)
+        pairs += [(r, c, r + dr, c + dc) for r, c in np.argwhere(hit).tolist()]
+    for r0, c0, r1, c1 in pairs:
+        if added[max(r0 - 1, 0) : r1 + 2, max(c0 - 1, 0) : c1 + 2].any():
             continue
-        rr, cc = rr[mine], cc[mine]
-        gap = np.hypot(rr[:, None] - others[None, :, 0], cc[:, None] - others[None, :, 1])
-        best = int(np.argmax(gap.min(axis=1))) if len(others) else 0
-        usable[r, c], added[r, c] = True, True
-        fr[r, c], fc[r, c] = rr[best], cc[best]
+        wanted = np.array([rep_r[r0, c0]])
+        for r, c in ((r0, c0), (r1, c1)):
+            _place(ok, usable, fr, fc, fine_region, k, r, c, wanted, added)
     return added
+
+
+def _place(
+    ok: np.ndarray,
+    usable: np.ndarray,
+    fr: np.ndarray,
+    fc: np.ndarray,
+    fine_region: np.ndarray,
+    k: int,
+    r: int,
+    c: int,
+    regions: np.ndarray,
+    added: np.ndarray,
+) -> None:
+    """Make coarse cell (r, c) a bridge (in place), its point the possible centre of its block in
+    one of ``regions`` farthest from the points of the cells round it; nothing if it has
+    none."""
+    rows = slice(max(r - 1, 0), r + 2)
+    cols = slice(max(c - 1, 0), c + 2)
+    near = usable[rows, cols]
+    others = np.column_stack([fr[rows, cols][near], fc[rows, cols][near]])
+    rr, cc = np.nonzero(ok[r * k : (r + 1) * k, c * k : (c + 1) * k])
+    rr, cc = rr + r * k, cc + c * k
+    mine = np.isin(fine_region[rr, cc], regions)
+    if not mine.any():
+        return
+    rr, cc = rr[mine], cc[mine]
+    gap = np.hypot(rr[:, None] - others[None, :, 0], cc[:, None] - others[None, :, 1])
+    best = int(np.argmax(gap.min(axis=1))) if len(others) else 0
+    usable[r, c], added[r, c] = True, True
+    fr[r, c], fc[r, c] = rr[best], cc[best]
 
 
 def _owners(ok: np.ndarray, sources: np.ndarray, cells: np.ndarray, res: float) -> np.ndarray:

@@ -120,16 +120,15 @@ def _centres(grid: GridMap) -> tuple[np.ndarray, np.ndarray]:
     return ok, labels - 1
 
 
-def _straight(ok: np.ndarray, grid: GridMap, a: np.ndarray, b: np.ndarray) -> bool:
+def _straight(near: np.ndarray, grid: GridMap, a: np.ndarray, b: np.ndarray) -> bool:
     """Whether the segment a-b runs through possible centres (sampled at a quarter cell), give
     or take the one fine cell of the grid's rasterization: a sample may fall in a cell next to
-    a possible centre (the tip of a sliver of possible centres sees nothing along the grid's
-    diagonals), never farther."""
+    a possible centre (``near``; the tip of a sliver of possible centres sees nothing along the
+    grid's diagonals), never farther."""
     n = max(2, int(np.ceil(np.hypot(*(b - a)) / (RES / 4))) + 1)
     rc = grid.world_to_cell(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a))
     if not grid.in_bounds(rc).all():
         return False
-    near = ndimage.binary_dilation(ok, structure=np.ones((3, 3), dtype=bool))
     return bool(near[rc[:, 0], rc[:, 1]].all())
 
 
@@ -142,6 +141,7 @@ def _violations(graph: TransitGraph, grid: GridMap, seed: int) -> list[str]:
     fine = fine[rng.permutation(len(fine))[:POINTS_PER_WORLD]]
     xy = grid.cell_to_world(fine)
     cells = graph.locate(xy)
+    near = ndimage.binary_dilation(ok, structure=np.ones((3, 3), dtype=bool))
     out = []
     component_of: dict[int, int] = {}
     for p, rc, cell in zip(xy, fine, cells, strict=True):
@@ -149,7 +149,7 @@ def _violations(graph: TransitGraph, grid: GridMap, seed: int) -> list[str]:
         if cell is None:
             out.append(f"{where} is located to no cell")
             continue
-        if not _straight(ok, grid, p, np.array(graph.point(cell))):
+        if not _straight(near, grid, p, np.array(graph.point(cell))):
             out.append(f"{where} does not reach the point {graph.point(cell)} of {cell} straight")
         reg, comp = int(region[rc[0], rc[1]]), int(graph.component[cell])
         if component_of.setdefault(reg, comp) != comp:
