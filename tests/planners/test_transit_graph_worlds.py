@@ -28,7 +28,7 @@ from planners.grid import GridMap, clearance
 from planners.transit_graph import TransitGraph, build_transit_graph
 
 RES, RADIUS, CLEARANCE, SPEED = 0.05, 0.17, 0.015, 0.25
-WORLDS = 40
+WORLDS = 60
 POINTS_PER_WORLD = 250
 ROUNDS_PER_WORLD = 12
 
