@@ -27,12 +27,14 @@ Construction, from an occupancy grid (``GridMap``) and a disc robot's radius plu
   cells' points can step diagonally, and no point of the cell between them stands clear of
   both: the region falls apart. An unused cell 4-adjacent to two components of one region then
   becomes a bridge, its point the possible centre of its cell farthest from the points round
-  it (up to ``BRIDGE_ROUNDS`` rounds). A bridge's point stands nearer its neighbours' than the
-  spacing: ``crowded`` lists those pairs, and prioritized planning
-  (``planners.deconfliction``) reserves them together, so no two robots stand in a crowded
-  pair at one step (the joint CBS/ECBS fallback does not know them). On the generated worlds
-  of ``tests/planners/test_transit_graph_worlds.py`` every region is one component after
-  bridging; home has 4 bridges.
+  it; failing such a cell, two unused cells side by side, each next to another component (a
+  passage one fine cell wide at a bend); up to ``BRIDGE_ROUNDS`` rounds. A bridge's point
+  stands nearer its neighbours' than the spacing: ``crowded`` lists those pairs, and
+  prioritized planning (``planners.deconfliction``) reserves them together, so no two robots
+  stand in a crowded pair at one step (the joint CBS/ECBS fallback does not know them). On the
+  generated worlds of ``tests/planners/test_transit_graph_worlds.py`` (and on 800 of them)
+  every region is one component after bridging; home has 4 bridges, the warehouse of ``fleet bench
+  deconfliction`` 2.
 - **Locating.** Each possible centre is located to the cell, of its region's largest
   component (all of it, once bridged), nearest it along the floor: a geodesic Voronoi
   partition of the possible centres round the cells' points, by one multi-source Dijkstra on
