@@ -23,6 +23,8 @@ Stern et al., SoCS 2019, which ``planners.mapf`` solves and validates).
   priorities and the start cells of robots that have not left yet. A reserved cell stays
   reserved one step after its robot left it: no robot follows another nose to tail, so robots
   never rotate round a block of cells in one step, and the order of passage below has no cycle.
+  A cell whose point stands too near another's (a bridge of the graph and its neighbours,
+  ``TransitGraph.crowding``) is reserved with it.
 - **Joint fallback.** When no order works, all robots of the round are planned jointly under
   ``joint_time_limit_s``: by CBS (``planners.mapf``'s ICBS, optimal) for rounds of at most
   ``cbs_max_robots`` robots, by ECBS with suboptimality bound ``ECBS_W`` (Barer et al. 2014)
@@ -378,6 +380,7 @@ def _prioritized(
     (cells per step), or the index of the first robot that found none."""
     mg = graph.graph
     n = mg.num_cells
+    crowd = graph.crowding()
     planned: list[list[int]] = []
     paths: list[list[Cell] | None] = [None] * len(starts)
     stats = SearchStats()
@@ -390,10 +393,19 @@ def _prioritized(
             # and one step after each stay: no robot follows another nose to tail
             for t in range(len(path) - 1):
                 table.add_vertex(path[t], t + 1)
+            if not crowd.keys().isdisjoint(path):
+                # nor stands in a cell whose point is too near (a bridge's neighbours)
+                for t in range(len(path) - 1):
+                    for other in crowd.get(path[t], ()):
+                        table.add_vertex(other, t)
+                        table.add_vertex(other, t + 1)
+                for other in crowd.get(path[-1], ()):
+                    table.add_parked(other, len(path) - 1)
         for j, start in enumerate(starts):
             if j != i and paths[j] is None:
                 for t in range(holds[j] + 2):
-                    table.add_vertex(start, t)
+                    for cell in (start, *crowd.get(start, ())):
+                        table.add_vertex(cell, t)
         # a robot that starts later may not leave its start cell before its start step
         for t in range(1, holds[i] + 1):
             for nb in mg.neighbours[starts[i]]:
