@@ -138,10 +138,7 @@ class Market:
             rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
             with self.lock:
                 sale = auctioneer.award(rnd, set(self.job.market()), self._may_win)
-                changed = any(
-                    any(self.job.tasks[t].state != OPEN for t in lot.tasks)
-                    for lot in rnd.lots.values()
-                )
+                changed = not all(self.job.all_open(lot.tasks) for lot in rnd.lots.values())
             if sale is None and changed:
                 continue  # a loss replaced or took a lot's tasks while the round ran
             if sale is None:
@@ -191,8 +188,8 @@ class Market:
     def _may_win(self, lot: auction.Lot, robot: str) -> bool:
         """Whether ``robot`` may win ``lot``: its tasks are all still open (none was replaced
         round a body or sold while the round ran) and it has tried none of them."""
-        recs = [self.job.tasks[t] for t in lot.tasks]
-        return all(r.state == OPEN and robot not in r.tried for r in recs)
+        tried = any(robot in self.job.tasks[t].tried for t in lot.tasks)
+        return self.job.all_open(lot.tasks) and not tried
 
     def _settle(self) -> None:
         """Open tasks every robot in the market has tried are unreachable, and said so."""
