@@ -96,7 +96,7 @@ def test_fleet_sim_records_until_sigterm(tmp_path: Path) -> None:
     readable while the sim runs (flushed per scan), and after SIGTERM it parses to the end and
     every scan has its truth row."""
     from fleet.bus import Bus, open_router
-    from fleet.protocol import SpawnReply, SpawnRequest, Twist
+    from fleet.protocol import LaserScan, SpawnReply, SpawnRequest, Twist
     from fleet.supervisor.launcher import free_port
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -118,9 +118,18 @@ def test_fleet_sim_records_until_sigterm(tmp_path: Path) -> None:
                 except (TimeoutError, RuntimeError):
                     time.sleep(0.3)
             assert reply is not None and reply.ok, "the sim did not answer the spawn request"
-            # A stamp far ahead acknowledges all sensor data, so the sim never waits for us.
-            bus.publish(bus.keys.robot("r0", "cmd_vel"), Twist(1e9, 0.2, 0.4), control=True)
-            time.sleep(2.5)
+            # answer every scan as an agent does (the command stamped with the scan it
+            # answers), so the lockstep lets the sim run on
+            cmd_vel = bus.keys.robot("r0", "cmd_vel")
+            answered: list[float] = []
+
+            def answer(_key: str, scan: LaserScan) -> None:
+                bus.publish(cmd_vel, Twist(scan.stamp, 0.2, 0.4), control=True)
+                answered.append(scan.stamp)
+
+            bus.subscribe(bus.keys.robot("r0", "scan"), LaserScan, answer)
+            while len(answered) < 20 and time.monotonic() < deadline + 30:
+                time.sleep(0.1)
         running = read_log(path)
         running_truth = read_truth(truth_path_for(path))
         assert len(running.scans) >= 10, "scans are not flushed while the sim runs"
