@@ -39,6 +39,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +54,8 @@ from fleet.protocol import Plan, RobotStatus
 from planners import auction
 
 log = logging.getLogger("coordinator")
+# called with the market's lock held
+Hook = Callable[[], None]
 # robot states in which reaching no waypoint is no sign of being stuck
 WAITING_STATES = ("holding", "done", "waiting", "localizing", "unlocalized")
 
@@ -108,8 +111,9 @@ class Market:
 
     # ---- selling --------------------------------------------------------------------------
 
-    def auction(self, auctioneer: Auctioneer) -> None:
-        """Sequential single-item auctions over the bus until nothing is open or no robot bids.
+    def auction(self, auctioneer: Auctioneer, each_round: Hook = lambda: None) -> None:
+        """Sequential single-item auctions over the bus until nothing is open or no robot bids,
+        ``each_round`` (the heartbeat watch, else held up by a long auction) called first in each.
 
         Runs of the tour are sold as regions, one per robot in the market
         (``planners.auction.regions``): all tasks in the first allocation, and the work a lost
@@ -129,6 +133,7 @@ class Market:
         regions = auction.regions(runs, len(bidders)) if bidders else ()
         while not self.stop.is_set():
             with self.lock:
+                each_round()
                 self.need_auction = False
                 self._settle()
                 lots = self._lots(regions)
@@ -186,8 +191,7 @@ class Market:
         self.awards.send()
 
     def _may_win(self, lot: auction.Lot, robot: str) -> bool:
-        """Whether ``robot`` may win ``lot``: its tasks are all still open (none was replaced
-        round a body or sold while the round ran) and it has tried none of them."""
+        """Whether ``robot`` may win ``lot``: all its tasks still open, none tried by it."""
         tried = any(robot in self.job.tasks[t].tried for t in lot.tasks)
         return self.job.all_open(lot.tasks) and not tried
 
@@ -256,8 +260,7 @@ class Market:
         reopened, made = self.job.lose(rid)
         self.version += 1
         self.journal.event("lost", rid, "", why)
-        now = time.monotonic()
-        self.lost_at.update(dict.fromkeys(reopened, now))
+        self.lost_at.update(dict.fromkeys(reopened, time.monotonic()))
         self.region_sale += reopened
         for tid in reopened:
             self.journal.event("reopened", rid, tid, "remainder" if tid in made else "unstarted")

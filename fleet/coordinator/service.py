@@ -331,7 +331,7 @@ class Coordinator:
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
             if self.phase != "gathering" and auction_due:
-                self.market.auction(self.auctioneer)
+                self.market.auction(self.auctioneer, self._check_heartbeats)
             with self.lock:
                 if self.phase != "gathering":
                     self._send_due()

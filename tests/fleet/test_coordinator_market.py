@@ -290,6 +290,31 @@ def test_a_lot_replaced_round_a_body_while_its_round_runs_is_not_sold(
         planner.set_bodies(np.zeros((0, 2)))
 
 
+def test_a_robot_lost_between_the_rounds_of_a_long_auction_wins_nothing_after(
+    planner: TaskPlanner,
+) -> None:
+    """The coordinator's heartbeat watch runs before each round of an auction, not only after
+    it: a robot that falls silent while many lots are sold (a link down for 5 s hid in a 5.7 s
+    auction) is lost at the next round and wins no more lots."""
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.bidding = {"robot-0": 30.0, "robot-1": 10.0}
+    rounds: list[int] = []
+
+    def watch() -> None:
+        rounds.append(len(rounds))
+        if len(rounds) == 3 and c.job.robots["robot-1"].liveness != LOST:
+            c.market.lose("robot-1", "no heartbeat for 1.2 s")
+
+    c.market.region_sale = []
+    for tid in c.job.tasks:
+        c.job.tasks[tid].state = OPEN
+    c.market.auction(c.auctioneer, watch)
+    winners = [s.best.robot for s in c.sales]
+    assert len(rounds) >= 3 and winners[:2] == ["robot-1", "robot-1"]
+    assert set(winners[2:]) == {"robot-0"}
+    assert all(r.owner == "robot-0" for r in c.job.tasks.values() if r.owner is not None)
+
+
 def test_a_stuck_robots_work_is_sold_to_an_idle_one(planner: TaskPlanner) -> None:
     """robot-0 is alive and reports its plan, but reaches no waypoint of it for stall_s while
     it escapes and gives them up one by one: its work goes back on sale, and although it bids
