@@ -128,6 +128,8 @@ class Agent:
             start = saved.pose
         self._subscribe()
         reply = self._request_spawn(SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
+        if reply.stamp >= 0:
+            self.rx.start(reply.stamp)
         with self.lock:
             self.control_state = ControlState(localized=saved is None)
             self.pose_source = self._pose_source(saved, (reply.x, reply.y, reply.theta))

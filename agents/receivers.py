@@ -18,9 +18,10 @@ three agreeing messages confirm it. Nothing else moves it. Then, with the sender
   driven to since its last intent believed, is dropped: one stamped far ahead would stand in
   everyone's way for good.
 
-The agent does not take its peers' poses (their intents say where they are). Until the clock
-has heard the simulator once nothing is judged by it: the receiver knows no time yet. Pure: no
-bus; the agent passes ``drop`` (:meth:`fleet.bus.Bus.drop_implausible`).
+The agent does not take its peers' poses (their intents say where they are). The clock starts
+at the sim time of the simulator's answer to the agent's spawn request (:meth:`start`); until
+then nothing is judged by it and no odometry is tracked (the agent has no pose source yet and
+takes none). Pure: no bus; the agent passes ``drop`` (:meth:`fleet.bus.Bus.drop_implausible`).
 """
 
 from __future__ import annotations
@@ -117,6 +118,10 @@ class Receivers:
             self._drop(key, sender, why, 1)
         return not why
 
+    def start(self, now: float) -> None:
+        """The simulator answered the spawn request at sim time ``now``: the clock is there."""
+        self.clock.start(now)
+
     def on_clock(self, key: str, stamp: float) -> None:
         """A clock message from the simulator."""
         self._clock_key = key
@@ -134,6 +139,8 @@ class Receivers:
         """Whether to believe the robot's odometry ``msg``."""
         if not self._judge(key, SIM, self._ahead(msg.stamp)):
             return False
+        if not self.clock.synced:
+            return True
         with self._lock:
             if self._odometry is None:
                 self._odometry = self._track(key, SIM)

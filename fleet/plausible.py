@@ -123,6 +123,13 @@ class SimClock:
         self._jumps = _Jumps(dropped)
         self._lock = threading.Lock()
 
+    def start(self, now: float) -> None:
+        """Believe ``now``, told by the simulator itself (its answer to a query, not a message
+        anyone may publish): the clock is synced there, and what waits for confirmation goes."""
+        with self._lock:
+            self._jumps.chains.clear()
+            self.now, self.synced = now, True
+
     def hear(self, stamp: float) -> bool:
         """Take one clock message; whether it moved the clock."""
         with self._lock:

@@ -517,7 +517,8 @@ class SpawnRequest(Message):
 class SpawnReply(Message):
     """``ok`` false with ``error`` set when the pose is not free (or, on a rejoin, there is no
     body to rejoin); x, y, theta the pose granted (on a rejoin: the request's, never the body's
-    true pose, which a robot cannot know)."""
+    true pose, which a robot cannot know); ``stamp`` the sim time when it answered, from
+    which the agent's clock starts."""
 
     TYPE: ClassVar[str] = "spawn_reply"
     ok: bool
@@ -525,6 +526,7 @@ class SpawnReply(Message):
     x: float
     y: float
     theta: float
+    stamp: float = -1.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -16,11 +17,10 @@ import pytest
 
 from agents.agent import Agent
 from agents.peers import path_intent
-from agents.pose_source import OdometryPose
 from agents.receivers import Receivers, ScanShape
 from fleet.params import load_fleet_config
 from fleet.plausible import Bounds
-from fleet.protocol import Clock, Intent, Keys, LaserScan, Message, Odometry, Twist
+from fleet.protocol import Clock, Intent, Keys, LaserScan, Message, Odometry, SpawnReply, Twist
 
 CFG = load_fleet_config()
 STEP = Bounds.of(CFG).clock_step_s
@@ -137,6 +137,18 @@ def test_before_the_clock_is_heard_nothing_is_judged_by_it() -> None:
     assert rx.now == pytest.approx(300.2) and drops.count == 0
 
 
+def test_the_clock_starts_at_the_spawn_reply_and_odometry_before_it_is_not_tracked() -> None:
+    """Odometry forged far ahead before the agent knows the time is not held against the real
+    odometry that follows once the simulator's answer has set its clock."""
+    drops = Drops()
+    rx = Receivers.of("robot-1", CFG, drops)
+    assert rx.odometry(ODOM, _odom(1e9, 5.0))  # not judged: the agent knows no time yet
+    rx.start(10.0)
+    assert rx.clock.synced and rx.now == 10.0
+    assert rx.odometry(ODOM, _odom(10.02))
+    assert not rx.odometry(ODOM, _odom(1e9, 5.0)) and drops.count == 1
+
+
 def test_intents_of_a_robot_not_in_the_job_or_stamped_ahead_are_dropped() -> None:
     rx, drops = _rx()
     assert not rx.intent(INTENT, "robot-0", _intent(10.0))
@@ -185,7 +197,14 @@ class StandInBus:
         self.published.append((key, msg))
 
     def request(self, key: str, msg: Message, reply_cls: type, timeout: float = 5.0) -> Message:
+        if key == KEYS.sim_spawn():
+            return SpawnReply(True, "", 1.0, 2.0, 0.0, 10.0)
         raise TimeoutError(f"{key}: nothing serves it here")
+
+    def subscribe(self, *_args: object) -> None:
+        return None
+
+    serve = watch_alive = subscribe
 
     def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
         self.implausible[key] += n
@@ -198,11 +217,12 @@ class StandInBus:
 
 
 def _agent(tmp_path: Path) -> tuple[Agent, StandInBus]:
+    """An agent spawned by the simulator's answer at sim time 10 s, on odometry."""
     bus = StandInBus()
-    agent = Agent(bus, "robot-1", CFG, tmp_path)  # type: ignore[arg-type]
-    agent.pose_source = OdometryPose((1.0, 2.0, 0.0))
-    for stamp in (9.9, 9.95, 10.0):
-        agent._on_clock(KEYS.clock(), Clock(stamp, 0.0, False))
+    cfg = replace(CFG, agent=replace(CFG.agent, pose_source="odometry"))
+    agent = Agent(bus, "robot-1", cfg, tmp_path)  # type: ignore[arg-type]
+    agent.spawn((1.0, 2.0, 0.0))
+    assert agent.clock == 10.0
     return agent, bus
 
 
