@@ -6,7 +6,8 @@ most (the longer of 1 / ``sim.clock_hz`` and ``agent.stale_after_s``), a jump fu
 three agreeing messages confirm it. Nothing else moves it. Then, with the sender named:
 
 - **odometry** stamped more than a clock step past the clock, or at a position its robot cannot
-  have driven to since the last one believed (:class:`fleet.plausible.PoseTrack`), is dropped:
+  have driven to since the last one believed (:class:`fleet.plausible.PoseTrack`; the first
+  position too only once three agreeing ones confirm it), is dropped:
   the pose source keeps the newest odometry stamp, so one stamped far ahead would make it drop
   every real one as older;
 - a **scan** stamped more than a clock step past the clock, or whose geometry (beam count, first
@@ -193,8 +194,11 @@ class Receivers:
         return ""
 
     def _track(self, key: str, sender: str) -> PoseTrack:
+        """A robot's positions as believed here; the first too only once confirmed: a forged
+        first one would be held against every real one."""
         return PoseTrack(
             self.bounds.speed,
             self.bounds.margin_m,
             lambda n, why: self._drop(key, sender, why, n),
+            confirm_first=True,
         )

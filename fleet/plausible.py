@@ -159,19 +159,26 @@ class SimClock:
 
 
 class PoseTrack:
-    """One robot's positions as a receiver believes them (see the module docstring). Not
-    thread-safe: the receiver holds its own lock."""
+    """One robot's positions as a receiver believes them (see the module docstring). With
+    ``confirm_first`` the first position too is believed only once ``CONFIRMATIONS`` agreeing
+    ones confirm it (a receiver that would otherwise hold a forged first one against the real
+    ones). Not thread-safe: the receiver holds its own lock."""
 
-    def __init__(self, speed: float, margin_m: float, dropped: Dropped) -> None:
+    def __init__(
+        self, speed: float, margin_m: float, dropped: Dropped, confirm_first: bool = False
+    ) -> None:
         self.speed = speed
         self.margin_m = margin_m
         self.last: tuple[float, tuple[float, float]] | None = None
+        self.confirm_first = confirm_first
         self._jumps = _Jumps(dropped)
 
     def hear(self, stamp: float, xy: tuple[float, float]) -> bool:
         """Take one position reported at sim time ``stamp``; whether it is believed. One older
         than the last believed is dropped as stale, not counted."""
         if self.last is None:
+            if self.confirm_first:
+                return self._confirm(stamp, xy, "not confirmed by a second position yet")
             self.last = (stamp, xy)
             return True
         t0, xy0 = self.last
@@ -182,6 +189,10 @@ class PoseTrack:
             self._jumps.settle()
             self.last = (stamp, xy)
             return True
+        return self._confirm(stamp, xy, why)
+
+    def _confirm(self, stamp: float, xy: tuple[float, float], why: str) -> bool:
+        """A position not believable yet: whether it confirms a chain of agreeing ones."""
         confirmed = self._jumps.hear(
             _Jump(stamp, xy, 1, why),
             lambda c: c.xy is not None and self._out_of_reach(c.stamp, c.xy, stamp, xy) is None,

@@ -70,6 +70,13 @@ def _scan(stamp: float, **change: Any) -> LaserScan:
     return LaserScan(stamp, **fields)
 
 
+def _first_odometry(rx: Receivers, until: float = 10.0) -> None:
+    """The robot's first odometry: believed once the third agreeing one confirms it."""
+    assert not rx.odometry(ODOM, _odom(until - 0.04))
+    assert not rx.odometry(ODOM, _odom(until - 0.02))
+    assert rx.odometry(ODOM, _odom(until))
+
+
 def _intent(stamp: float, x: float = 1.0) -> Intent:
     points = path_intent(np.array([x, 1.0]), np.array([[x + 1.0, 1.0]]), 0.3, stamp, 2.0)
     return Intent(stamp, points, 4, 2)
@@ -86,7 +93,7 @@ def test_a_clock_message_far_ahead_does_not_move_the_clock_and_scans_do_a_step_a
 
 def test_odometry_stamped_far_ahead_is_dropped_and_real_odometry_still_believed() -> None:
     rx, drops = _rx()
-    assert rx.odometry(ODOM, _odom(10.0))
+    _first_odometry(rx)
     assert not rx.odometry(ODOM, _odom(1e9))
     assert drops.rows[0][:2] == (ODOM, "sim") and "past the sim clock" in drops.rows[0][2]
     # the pose source behind the receiver never sees it: the next real odometry is newer
@@ -97,10 +104,17 @@ def test_odometry_stamped_far_ahead_is_dropped_and_real_odometry_still_believed(
 
 def test_odometry_the_robot_cannot_have_driven_to_is_dropped() -> None:
     rx, drops = _rx()
-    assert rx.odometry(ODOM, _odom(10.0))
+    _first_odometry(rx)
     assert not rx.odometry(ODOM, _odom(10.02, 4.0))
     assert rx.odometry(ODOM, _odom(10.04, 1.01))
     assert drops.count == 1 and "farther than" in drops.rows[0][2]
+
+
+def test_a_forged_first_odometry_is_not_held_against_the_real_ones() -> None:
+    rx, drops = _rx()
+    assert not rx.odometry(ODOM, _odom(9.95, 40.0))
+    _first_odometry(rx)
+    assert drops.count == 1 and drops.rows[0][:2] == (ODOM, "sim")
 
 
 @pytest.mark.parametrize(
@@ -145,7 +159,7 @@ def test_the_clock_starts_at_the_spawn_reply_and_odometry_before_it_is_not_track
     assert rx.odometry(ODOM, _odom(1e9, 5.0))  # not judged: the agent knows no time yet
     rx.start(10.0)
     assert rx.clock.synced and rx.now == 10.0
-    assert rx.odometry(ODOM, _odom(10.02))
+    _first_odometry(rx, 10.04)
     assert not rx.odometry(ODOM, _odom(1e9, 5.0)) and drops.count == 1
 
 
@@ -154,6 +168,9 @@ def test_intents_of_a_robot_not_in_the_job_or_stamped_ahead_are_dropped() -> Non
     assert not rx.intent(INTENT, "robot-0", _intent(10.0))
     assert "not in the job" in drops.rows[-1][2] and drops.rows[-1][1] == "robot-0"
     rx.joined("robot-0")
+    # the first position of a peer is believed once three agreeing intents confirm it
+    assert not rx.intent(INTENT, "robot-0", _intent(9.8))
+    assert not rx.intent(INTENT, "robot-0", _intent(9.9))
     assert rx.intent(INTENT, "robot-0", _intent(10.0))
     assert not rx.intent(INTENT, "robot-0", _intent(1e9))
     assert "past the sim clock" in drops.rows[-1][2]
@@ -165,6 +182,9 @@ def test_intents_of_a_robot_not_in_the_job_or_stamped_ahead_are_dropped() -> Non
 def test_intents_no_robot_announces_are_dropped() -> None:
     rx, drops = _rx()
     rx.joined("robot-0")
+    # the first position of a peer is believed once three agreeing intents confirm it
+    assert not rx.intent(INTENT, "robot-0", _intent(9.8))
+    assert not rx.intent(INTENT, "robot-0", _intent(9.9))
     assert rx.intent(INTENT, "robot-0", _intent(10.0))
     late = _intent(10.1)
     # points 100 s after the stamp: it would stand in everyone's way for good
@@ -228,7 +248,8 @@ def _agent(tmp_path: Path) -> tuple[Agent, StandInBus]:
 
 def test_the_agent_keeps_its_odometry_after_a_forged_one(tmp_path: Path) -> None:
     agent, bus = _agent(tmp_path)
-    agent._on_odom(ODOM, _odom(10.0))
+    for stamp in (9.96, 9.98, 10.0):
+        agent._on_odom(ODOM, _odom(stamp))
     agent._on_odom(ODOM, Odometry(1e9, 9.0, 9.0, 0.0, 5.0, 0.0))
     agent._on_odom(ODOM, _odom(10.02, 1.005))
     agent._on_clock(KEYS.clock(), Clock(1e9, 0.0, False))
