@@ -128,6 +128,13 @@ def bench_chaos(
             "--faults 0: what implausible and fuzzed messages alone cost a run).",
         ),
     ] = False,
+    base_makespan: Annotated[
+        float | None,
+        typer.Option(
+            "--base-makespan",
+            help="The no-fault run's makespan (sim s), if known: the no-fault run is skipped.",
+        ),
+    ] = None,
     run_root: Annotated[
         Path | None,
         typer.Option(
@@ -175,7 +182,9 @@ def bench_chaos(
     def progress(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    result = run_bench(root, world_path, robots, seed, runs, faults, rogue, progress)
+    if base_makespan is not None and base_makespan <= 0:
+        _fail("--base-makespan must be > 0")
+    result = run_bench(root, world_path, robots, seed, runs, faults, rogue, progress, base_makespan)
     if as_json:
         print(json.dumps(result))
     else:
