@@ -109,7 +109,9 @@ class Receivers:
         self._drop(self._clock_key, SIM, why, n)
 
     def _ahead(self, stamp: float) -> str:
-        if not self.clock.ahead(stamp):
+        # strict: a forged clock message waiting for confirmation must not let a message
+        # forged with its stamp through; a real jump is confirmed within three clock messages
+        if not self.clock.ahead(stamp, strict=True):
             return ""
         return f"stamped {stamp:.3f} s, past the sim clock at {self.clock.now:.3f} s"
 

@@ -148,12 +148,14 @@ class SimClock:
             self.now, self.synced = confirmed.stamp, True
             return True
 
-    def ahead(self, stamp: float) -> bool:
+    def ahead(self, stamp: float, strict: bool = False) -> bool:
         """Whether ``stamp`` is farther ahead of the clock than any robot's can be: more than a
         step past it, and past a jump it may be about to confirm (a receiver catching up after a
-        stop). Never before the clock has synced: until then it knows no time to judge by."""
+        stop) unless ``strict``: then a jump not confirmed yet does not count (a forged clock
+        message would let a message forged with the same stamp through). Never before the clock
+        has synced: until then it knows no time to judge by."""
         with self._lock:
-            pending = self._jumps.newest()
+            pending = None if strict else self._jumps.newest()
             limit = self.now if pending is None else max(self.now, pending)
             return self.synced and stamp > limit + self.step_s
 

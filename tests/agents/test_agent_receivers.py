@@ -102,6 +102,15 @@ def test_odometry_stamped_far_ahead_is_dropped_and_real_odometry_still_believed(
     assert drops.count == 2
 
 
+def test_a_forged_clock_message_does_not_let_odometry_forged_with_its_stamp_through() -> None:
+    rx, drops = _rx()
+    _first_odometry(rx)
+    rx.on_clock(KEYS.clock(), 1e9)  # waits for confirmation; it must not widen the bound
+    assert not rx.odometry(ODOM, _odom(1e9 + 0.01, 0.0))
+    assert rx.odometry(ODOM, _odom(10.02))
+    assert drops.rows[-1][:2] == (ODOM, "sim") and "past the sim clock" in drops.rows[-1][2]
+
+
 def test_odometry_the_robot_cannot_have_driven_to_is_dropped() -> None:
     rx, drops = _rx()
     _first_odometry(rx)
