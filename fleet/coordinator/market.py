@@ -39,6 +39,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,8 @@ from planners import auction
 log = logging.getLogger("coordinator")
 # robot states in which reaching no waypoint is no sign of being stuck
 WAITING_STATES = ("holding", "done", "waiting", "localizing", "unlocalized")
+# how often the auction looks whether the last winner has acknowledged its award (wall s)
+ACK_POLL_S = 0.002
 
 
 @dataclass
@@ -137,10 +140,14 @@ class Market:
                 break
             rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
             with self.lock:
+                if self._changed(rnd.lots):
+                    # a robot lost meanwhile took lots off the market: call what is on it now
+                    continue
                 sale = auctioneer.award(rnd, set(self.job.market()), self._untried)
             if sale is None:
                 break
             committed.append(sale.best.total_s)
+            self._await_ack(sale.best.robot, auctioneer.params.bid_timeout_s)
         if first and committed:
             with self.lock:
                 if not self.job.open_tasks():
@@ -150,6 +157,18 @@ class Market:
             log.info("auction: %d lots sold in %.0f ms", len(committed), ms)
             with self.lock:
                 self.journal.event("auction", "", "", f"{len(committed)} lots in {ms:.0f} ms")
+
+    def _await_ack(self, rid: str, timeout_s: float) -> None:
+        """Wait (``timeout_s`` at most) until ``rid`` has acknowledged the award of the lot it
+        just won: a robot that bids in the next round before its award reaches it prices that
+        round without what it won, and wins lots it cannot do in time."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and not self.stop.is_set():
+            with self.lock:
+                r = self.job.robots.get(rid)
+                if r is None or r.acked_seq >= r.award_seq or rid not in self.job.market():
+                    return
+            time.sleep(ACK_POLL_S)
 
     def sell(self, sale: Sale) -> None:
         """The auctioneer's result: award the lot's tasks to the winner (in the order it drives
@@ -181,6 +200,16 @@ class Market:
         )
         self.journal.set_meta(round_seq=sale.round)
         self.awards.send()
+
+    def _changed(self, lots: Mapping[str, auction.Lot]) -> bool:
+        """Whether a task of ``lots`` is no longer open: the job changed while they were called
+        (a robot lost, its body planned round), and selling them would award a task that is
+        gone."""
+        open_ids = {r.task.id for r in self.job.open_tasks()}
+        changed = [lot.id for lot in lots.values() if not set(lot.tasks) <= open_ids]
+        if changed:
+            log.info("lots %s changed while they were called; calling again", " ".join(changed))
+        return bool(changed)
 
     def _untried(self, lot: auction.Lot, robot: str) -> bool:
         """Whether ``robot`` may win ``lot``: it has tried none of its tasks."""
