@@ -47,7 +47,7 @@ import numpy as np
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import ASSIGNED, LOST, OPEN
+from fleet.coordinator.job import ASSIGNED, LOST, OPEN, Job
 from fleet.coordinator.journal import Journal
 from fleet.plan_chain import chain_pieces, piece_count
 from fleet.protocol import Plan, RobotStatus
@@ -140,14 +140,14 @@ class Market:
                 break
             rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
             with self.lock:
-                if self._changed(rnd.lots):
+                if changed(self.job, rnd.lots):
                     # a robot lost meanwhile took lots off the market: call what is on it now
                     continue
                 sale = auctioneer.award(rnd, set(self.job.market()), self._untried)
             if sale is None:
                 break
             committed.append(sale.best.total_s)
-            self._await_ack(sale.best.robot, auctioneer.params.bid_timeout_s)
+            await_ack(self.lock, self.job, sale.best.robot, auctioneer.params.bid_timeout_s)
         if first and committed:
             with self.lock:
                 if not self.job.open_tasks():
@@ -157,18 +157,6 @@ class Market:
             log.info("auction: %d lots sold in %.0f ms", len(committed), ms)
             with self.lock:
                 self.journal.event("auction", "", "", f"{len(committed)} lots in {ms:.0f} ms")
-
-    def _await_ack(self, rid: str, timeout_s: float) -> None:
-        """Wait (``timeout_s`` at most) until ``rid`` has acknowledged the award of the lot it
-        just won: a robot that bids in the next round before its award reaches it prices that
-        round without what it won, and wins lots it cannot do in time."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and not self.stop.is_set():
-            with self.lock:
-                r = self.job.robots.get(rid)
-                if r is None or r.acked_seq >= r.award_seq or rid not in self.job.market():
-                    return
-            time.sleep(ACK_POLL_S)
 
     def sell(self, sale: Sale) -> None:
         """The auctioneer's result: award the lot's tasks to the winner (in the order it drives
@@ -200,16 +188,6 @@ class Market:
         )
         self.journal.set_meta(round_seq=sale.round)
         self.awards.send()
-
-    def _changed(self, lots: Mapping[str, auction.Lot]) -> bool:
-        """Whether a task of ``lots`` is no longer open: the job changed while they were called
-        (a robot lost, its body planned round), and selling them would award a task that is
-        gone."""
-        open_ids = {r.task.id for r in self.job.open_tasks()}
-        changed = [lot.id for lot in lots.values() if not set(lot.tasks) <= open_ids]
-        if changed:
-            log.info("lots %s changed while they were called; calling again", " ".join(changed))
-        return bool(changed)
 
     def _untried(self, lot: auction.Lot, robot: str) -> bool:
         """Whether ``robot`` may win ``lot``: it has tried none of its tasks."""
@@ -443,6 +421,29 @@ class Market:
         self.awards.send()
         self.need_auction = True
         self.wake.set()
+
+
+def changed(job: Job, lots: Mapping[str, auction.Lot]) -> bool:
+    """Whether a task of ``lots`` is no longer open: the job changed while they were called (a
+    robot lost, its body planned round), and selling them would award a task that is gone."""
+    open_ids = {r.task.id for r in job.open_tasks()}
+    gone = [lot.id for lot in lots.values() if not set(lot.tasks) <= open_ids]
+    if gone:
+        log.info("lots %s changed while they were called; calling again", " ".join(gone))
+    return bool(gone)
+
+
+def await_ack(lock: threading.RLock, job: Job, rid: str, timeout_s: float) -> None:
+    """Wait (``timeout_s`` at most) until ``rid`` has acknowledged the award of the lot it just
+    won, or has left the market: a robot that bids in the next round before its award reaches
+    it prices that round without what it won, and wins lots it cannot do in time."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with lock:
+            r = job.robots.get(rid)
+            if r is None or r.acked_seq >= r.award_seq or rid not in job.market():
+                return
+        time.sleep(ACK_POLL_S)
 
 
 def _tour_key(task_id: str) -> tuple[int, ...]:
