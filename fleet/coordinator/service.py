@@ -336,6 +336,7 @@ class Coordinator:
         """Send the awards and plans due, and move the phase on."""
         self.awards.send()
         self.dispatcher.dispatch()
+        self.dispatcher.resend_unheard(time.monotonic())
         if self.job.finished and self.phase not in ("done", "incomplete"):
             left = self.job.left_out()
             self.phase = "incomplete" if left else "done"

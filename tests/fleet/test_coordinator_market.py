@@ -16,7 +16,7 @@ from fleet.bench.recovery import to_reassign
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
-from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.dispatcher import PLAN_RESEND_S, Dispatcher
 from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.market import Market
@@ -156,6 +156,29 @@ def test_a_lot_whose_task_went_while_its_round_was_called_is_not_sold(
     sold = [t for s in c.sales for t in s.lot.tasks]
     assert "t00" not in sold and sorted(sold) == ["t01", "t02", "t03", "t04", "t05"]
     assert c.job.tasks["t00"].state == REPLACED and not c.job.open_tasks()
+
+
+def test_a_plan_its_robot_does_not_drive_is_sent_again(planner: TaskPlanner) -> None:
+    """A plan lost, or dropped by an agent that did not hold its task yet when it came, left
+    the robot idle with its work assigned for good (a chaos run hung so): while the robot's
+    statuses show another plan, its plan goes out again every PLAN_RESEND_S."""
+    c = Coordinator(planner, ["robot-0"])
+    c.job.robots["robot-0"].xy = (0.5, 0.5)
+    c.job.award("t00", "robot-0", False)
+    c.awards.send()
+    c.dispatcher.dispatch()
+    plans = [m for _, m in c.sent if isinstance(m, Plan)]
+    assert len(plans) == 1
+    sent = c.dispatcher.sent_wall["robot-0"]
+    c.dispatcher.heard("robot-0", plans[0].plan_id - 1, 3)  # it drives an older plan
+    c.dispatcher.resend_unheard(sent + 0.5)  # not yet: it may not have said so yet
+    c.dispatcher.resend_unheard(sent + PLAN_RESEND_S + 0.1)
+    c.dispatcher.resend_unheard(sent + PLAN_RESEND_S + 0.2)  # once per PLAN_RESEND_S
+    again = [m for _, m in c.sent if isinstance(m, Plan)]
+    assert len(again) == 2 and again[1].plan_id == plans[0].plan_id
+    c.dispatcher.heard("robot-0", plans[0].plan_id, 1)  # now it drives it
+    c.dispatcher.resend_unheard(sent + 3 * PLAN_RESEND_S)
+    assert len([m for _, m in c.sent if isinstance(m, Plan)]) == 2
 
 
 def test_a_lost_robots_remainder_and_unstarted_tasks_go_back_on_sale_as_regions(
