@@ -72,6 +72,9 @@ ROGUE_S = 10.0
 # a rogue sends a burst of messages every this many wall seconds
 ROGUE_PERIOD_S = 0.2
 DETECT_TIMEOUT_S = 10.0
+# a loss of the target noticed later than this (wall s) after its fault is not that fault's:
+# the fault went unnoticed (a robot back before its silence was checked), the loss is another
+NOTICED_WITHIN_S = 30.0
 START_TIMEOUT_S = 120.0
 # a stamp no sim clock reaches in a run
 FAR_AHEAD_S = 1e9
@@ -270,7 +273,11 @@ def fault_outcome(events: list[dict[str, Any]], made: dict[str, Any]) -> dict[st
         return out
     if made["kind"] == "rogue" or not out["fired"]:
         return out
-    lost = _after(events, seq, "lost", target)
+    lost = [
+        e
+        for e in _after(events, seq, "lost", target)
+        if e["wall"] - made["sent"] <= NOTICED_WITHIN_S
+    ]
     out["detection_s"] = round(lost[0]["wall"] - made["sent"], 3) if lost else None
     out["reassignment_s"] = None
     out["rejoined"] = bool(_after(events, seq, "rejoined", target))

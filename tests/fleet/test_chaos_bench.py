@@ -10,6 +10,7 @@ from fleet.bench.chaos import (
     FIRST,
     KINDS,
     LAST,
+    NOTICED_WITHIN_S,
     Fault,
     aggregate,
     crashed,
@@ -106,6 +107,9 @@ def test_a_faults_detection_reassignment_and_the_coordinators_resumption() -> No
     # a loss never detected has no times; only the half re-sold is not all re-sold
     unseen = fault_outcome(EVENTS, {**made, "seq": 8})
     assert unseen["detection_s"] is None and unseen["reassignment_s"] is None
+    # a loss long after the fault (the robot's token going at the run's end) is not its own
+    late = fault_outcome(EVENTS, {**made, "sent": 101.2 - NOTICED_WITHIN_S - 1.0})
+    assert late["detection_s"] is None
     half = fault_outcome(EVENTS[:5], made)
     assert half["reassignment_s"] == pytest.approx(0.3) and not half["all_reassigned"]
 
