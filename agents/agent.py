@@ -16,6 +16,13 @@ time, so a hung agent falls silent. With a state directory it saves its SLAM map
 ``agent.state_save_s`` and its pose alone every ``agent.pose_save_s``; started with
 ``respawn`` it takes over its robot's body where it stands, finds itself in the saved map
 (first within ``respawn_window`` of the saved pose), and bids only once it has.
+
+What it takes is judged first (:mod:`agents.receivers`): its clock is the simulator's, believed
+one clock step at a time from clock messages and scans; odometry and scans stamped past it, a
+scan that is not its lidar's, odometry its robot cannot have driven, and intents of robots not
+in the job or that no robot could announce are dropped and counted (the count goes out in its
+status beside the malformed one). A message whose handling raises is dropped, never the process:
+a scan whose control step fails is answered with a stop, so the simulator's lockstep goes on.
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ from agents.control import ControlParams, ControlState, Drive, Heard, control
 from agents.map_keeper import MapKeeper
 from agents.market import MarketClient
 from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
+from agents.receivers import Receivers
 from agents.slam.persistence import SavedState, load_state
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
@@ -90,7 +98,8 @@ class Agent:
         self.peers: dict[str, Intent] = {}
         self.params = ControlParams.of(rid, cfg)
         self.control_state = ControlState()
-        self.clock = 0.0
+        # its sim clock, and what it believes of each message it takes
+        self.rx = Receivers.of(rid, cfg, bus.drop_implausible)
         self.maps = MapKeeper(bus, rid, cfg, state_dir)
         self.market = MarketClient(
             rid,
@@ -119,6 +128,8 @@ class Agent:
             start = saved.pose
         self._subscribe()
         reply = self._request_spawn(SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
+        if reply.stamp >= 0:
+            self.rx.start(reply.stamp)
         with self.lock:
             self.control_state = ControlState(localized=saved is None)
             self.pose_source = self._pose_source(saved, (reply.x, reply.y, reply.theta))
@@ -138,8 +149,15 @@ class Agent:
                 self.pose_source.name,
             )
 
+    @property
+    def clock(self) -> float:
+        """The sim time the agent believes (:class:`agents.receivers.Receivers`)."""
+        return self.rx.now
+
     def _subscribe(self) -> None:
         k = self.keys
+        # peers are in the job by their liveliness tokens, heard before their intents
+        self.bus.watch_alive("agent", self.rx.joined, self.rx.left)
         self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
         self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
@@ -190,7 +208,9 @@ class Agent:
 
     # ---- bus callbacks ------------------------------------------------------------------
 
-    def _on_odom(self, _key: str, msg: Odometry) -> None:
+    def _on_odom(self, key: str, msg: Odometry) -> None:
+        if not self.rx.odometry(key, msg):
+            return
         with self.lock:
             if self.pose_source is None:
                 return
@@ -198,19 +218,21 @@ class Agent:
             self.odom_stamp = msg.stamp
             self.velocity = (msg.v, msg.w)
 
-    def _on_scan(self, _key: str, msg: LaserScan) -> None:
+    def _on_scan(self, key: str, msg: LaserScan) -> None:
+        if not self.rx.scan(key, msg):
+            return
         with contextlib.suppress(queue.Empty):
             self.scans.get_nowait()
         self.scans.put_nowait(msg)
 
     def _on_intent(self, key: str, msg: Intent) -> None:
         rid = self.keys.robot_of(key)
-        if rid != self.rid:
+        if rid != self.rid and self.rx.intent(key, rid, msg):
             with self.lock:
                 self.peers[rid] = msg
 
-    def _on_clock(self, _key: str, msg: Clock) -> None:
-        self.clock = max(self.clock, msg.stamp)
+    def _on_clock(self, key: str, msg: Clock) -> None:
+        self.rx.on_clock(key, msg.stamp)
 
     def _on_plan(self, _key: str, msg: Plan) -> None:
         with self.lock:
@@ -264,7 +286,8 @@ class Agent:
         return src is not None and src.localized
 
     def bid_loop(self) -> None:
-        """Answer the task calls of each auction round, all of a round's calls in one go."""
+        """Answer the task calls of each auction round, all of a round's calls in one go; a
+        round whose bids fail to be made is lost, never the loop."""
         while not self.stop.is_set():
             with self._calls_ready:
                 if not self._calls:
@@ -273,22 +296,28 @@ class Agent:
             time.sleep(BID_GATHER_S)
             with self._calls_ready:
                 calls, self._calls = self._calls, []
-            if not self.ready:
-                continue
-            if not self.market.has_floor:
-                self._fetch_floor()
-            latest = max(c.round for c in calls)
-            calls = [c for c in calls if c.round == latest]
-            with self.lock:
-                assert self.pose_source is not None
-                self.market.use_map(self.maps.snapshot)
-                drive = self.drive
-                commitment = self.market.commitment(
-                    self.pose_source.pose(), drive.follow, list(drive.chain), drive.chain_time_s
-                )
-                bids = self.market.bids(calls, commitment)
-            for b in bids:
-                self.bus.publish(self.keys.bid(b.task, self.rid), b, control=True)
+            try:
+                self._bid(calls)
+            except Exception:
+                self.bus.handler_failed("coord/task/*")
+
+    def _bid(self, calls: list[TaskCall]) -> None:
+        if not self.ready:
+            return
+        if not self.market.has_floor:
+            self._fetch_floor()
+        latest = max(c.round for c in calls)
+        calls = [c for c in calls if c.round == latest]
+        with self.lock:
+            assert self.pose_source is not None
+            self.market.use_map(self.maps.snapshot)
+            drive = self.drive
+            commitment = self.market.commitment(
+                self.pose_source.pose(), drive.follow, list(drive.chain), drive.chain_time_s
+            )
+            bids = self.market.bids(calls, commitment)
+        for b in bids:
+            self.bus.publish(self.keys.bid(b.task, self.rid), b, control=True)
 
     def _fetch_floor(self) -> None:
         try:
@@ -308,9 +337,12 @@ class Agent:
         seq = 0
         while not self.stop.wait(period):
             seq += 1
-            self.bus.publish(
-                self.keys.robot(self.rid, "heartbeat"), Heartbeat(self.clock, seq, self.ready)
-            )
+            try:
+                self.bus.publish(
+                    self.keys.robot(self.rid, "heartbeat"), Heartbeat(self.clock, seq, self.ready)
+                )
+            except Exception:
+                self.bus.handler_failed("heartbeat")
 
     def _on_map_request(self, _req: Request) -> MapPatches:
         return self.maps.whole(self.clock)
@@ -335,7 +367,7 @@ class Agent:
                 self.drive,
                 dict(self.peers),
                 self.latency_s,
-                sum(self.bus.decode_errors.values()),
+                *self.bus.dropped(),
             )
             self.control_state, out = control(
                 heard, self.control_state, self.params, self.pose_source
@@ -363,10 +395,25 @@ class Agent:
                 scan = self.scans.get(timeout=0.1)
             except queue.Empty:
                 continue
+            self.handle(scan)
+
+    def handle(self, scan: LaserScan) -> None:
+        """One scan: the control step, then the map. A step that raises costs this scan, which
+        is answered with a stop (the simulator holds its clock until the scan is answered)."""
+        try:
             self.step(scan)
+        except Exception:
+            self.bus.handler_failed("robot/*/scan")
+            with contextlib.suppress(Exception):
+                stop = Twist(scan.stamp, 0.0, 0.0)
+                self.bus.publish(self.keys.robot(self.rid, "cmd_vel"), stop, control=True)
+            return
+        try:
             assert self.pose_source is not None
             self.maps.publish(scan.stamp, self.pose_source)
             self.maps.save_pose(scan.stamp, self.pose_source)
+        except Exception:
+            self.bus.handler_failed("robot/*/map")
 
 
 def respawn_window(cfg: FleetConfig) -> tuple[float, float]:

@@ -94,7 +94,8 @@ class Drive:
 class Heard:
     """What a control step is given: the scan, the stamp and velocity (v, ω) of the latest
     odometry, the plan being driven, each peer's latest intent, the latency of a command (sim
-    s from its scan until it is sent) and how many payloads the bus has dropped as malformed."""
+    s from its scan until it is sent) and how many messages the bus has dropped as malformed and
+    as implausible."""
 
     scan: LaserScan
     odom_stamp: float
@@ -103,6 +104,7 @@ class Heard:
     peers: Mapping[str, Intent]
     latency_s: float
     decode_errors: int
+    implausible: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -360,4 +362,5 @@ def _status(heard: Heard, state: ControlState, follow: FollowState | None) -> Ro
         drive.plan_id,
         swept_pieces(follow, drive.sweep_from),
         np.array(state.time_s),
+        heard.implausible,
     )

@@ -12,6 +12,8 @@
   a pose jump no robot can drive, a sender not in the job) is dropped through
   :meth:`Bus.drop_implausible`: counted per key class, logged the same way, naming the sender.
 * A reply to a query that does not decode is counted and the next reply waited for.
+* A handler that raises costs the message it was handling, never the process
+  (:meth:`Bus.handler_failed`: counted per kind, the traceback logged the first time).
 """
 
 from __future__ import annotations
@@ -109,6 +111,7 @@ class Bus:
         self.session = zenoh.open(make_config(mode, connect=connect, zenoh_config=zenoh_config))
         self.decode_errors: Counter[str] = Counter()
         self.implausible: Counter[str] = Counter()
+        self.handler_errors: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._handles: list[Any] = []
@@ -165,6 +168,18 @@ class Bus:
                 why,
             )
 
+    def handler_failed(self, kind: str) -> None:
+        """Count a message of ``kind`` (a key class, or a loop's name) whose handler raised;
+        call it from the ``except`` block. The message is lost, never the process: the
+        traceback is logged the first time per kind, a line every 100th."""
+        with self._lock:
+            self.handler_errors[kind] += 1
+            n = self.handler_errors[kind]
+        if n == 1:
+            log.exception("handling a message of %s failed; the message is dropped", kind)
+        elif n % 100 == 0:
+            log.error("handling a message of %s failed again (%d so far)", kind, n)
+
     def dropped(self) -> tuple[int, int]:
         """(malformed, implausible) messages this process dropped so far."""
         with self._lock:
@@ -183,7 +198,7 @@ class Bus:
             try:
                 callback(k, msg)
             except Exception:
-                log.exception("handler for %s failed", k)
+                self.handler_failed(key_class(k))
 
         self._handles.append(self.session.declare_subscriber(key, on_sample))
 
@@ -207,7 +222,7 @@ class Bus:
                 query.reply_err(str(e))
                 return
             except Exception as e:
-                log.exception("query handler for %s failed", k)
+                self.handler_failed(key_class(k))
                 query.reply_err(str(e))
                 return
             query.reply(k, reply.encode())
@@ -245,7 +260,7 @@ class Bus:
                 else:
                     on_leave(ident)
             except Exception:
-                log.exception("liveliness handler failed")
+                self.handler_failed("liveliness")
 
         sub = self.session.liveliness().declare_subscriber(
             self.keys.alive_all(role), on_sample, history=True

@@ -123,6 +123,13 @@ class SimClock:
         self._jumps = _Jumps(dropped)
         self._lock = threading.Lock()
 
+    def start(self, now: float) -> None:
+        """Believe ``now``, told by the simulator itself (its answer to a query, not a message
+        anyone may publish): the clock is synced there, and what waits for confirmation goes."""
+        with self._lock:
+            self._jumps.chains.clear()
+            self.now, self.synced = now, True
+
     def hear(self, stamp: float) -> bool:
         """Take one clock message; whether it moved the clock."""
         with self._lock:
@@ -141,30 +148,39 @@ class SimClock:
             self.now, self.synced = confirmed.stamp, True
             return True
 
-    def ahead(self, stamp: float) -> bool:
+    def ahead(self, stamp: float, strict: bool = False) -> bool:
         """Whether ``stamp`` is farther ahead of the clock than any robot's can be: more than a
         step past it, and past a jump it may be about to confirm (a receiver catching up after a
-        stop). Never before the clock has synced: until then it knows no time to judge by."""
+        stop) unless ``strict``: then a jump not confirmed yet does not count (a forged clock
+        message would let a message forged with the same stamp through). Never before the clock
+        has synced: until then it knows no time to judge by."""
         with self._lock:
-            pending = self._jumps.newest()
+            pending = None if strict else self._jumps.newest()
             limit = self.now if pending is None else max(self.now, pending)
             return self.synced and stamp > limit + self.step_s
 
 
 class PoseTrack:
-    """One robot's positions as a receiver believes them (see the module docstring). Not
-    thread-safe: the receiver holds its own lock."""
+    """One robot's positions as a receiver believes them (see the module docstring). With
+    ``confirm_first`` the first position too is believed only once ``CONFIRMATIONS`` agreeing
+    ones confirm it (a receiver that would otherwise hold a forged first one against the real
+    ones). Not thread-safe: the receiver holds its own lock."""
 
-    def __init__(self, speed: float, margin_m: float, dropped: Dropped) -> None:
+    def __init__(
+        self, speed: float, margin_m: float, dropped: Dropped, confirm_first: bool = False
+    ) -> None:
         self.speed = speed
         self.margin_m = margin_m
         self.last: tuple[float, tuple[float, float]] | None = None
+        self.confirm_first = confirm_first
         self._jumps = _Jumps(dropped)
 
     def hear(self, stamp: float, xy: tuple[float, float]) -> bool:
         """Take one position reported at sim time ``stamp``; whether it is believed. One older
         than the last believed is dropped as stale, not counted."""
         if self.last is None:
+            if self.confirm_first:
+                return self._confirm(stamp, xy, "not confirmed by a second position yet")
             self.last = (stamp, xy)
             return True
         t0, xy0 = self.last
@@ -175,6 +191,10 @@ class PoseTrack:
             self._jumps.settle()
             self.last = (stamp, xy)
             return True
+        return self._confirm(stamp, xy, why)
+
+    def _confirm(self, stamp: float, xy: tuple[float, float], why: str) -> bool:
+        """A position not believable yet: whether it confirms a chain of agreeing ones."""
         confirmed = self._jumps.hear(
             _Jump(stamp, xy, 1, why),
             lambda c: c.xy is not None and self._out_of_reach(c.stamp, c.xy, stamp, xy) is None,

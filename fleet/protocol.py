@@ -269,7 +269,8 @@ class RobotStatus(Message):
     ``swept`` (one 0/1 per piece of that plan's task, see :class:`Plan`) the pieces it has swept
     by its own pose estimate, so the coordinator knows the exact remainder of the task.
     ``time_s`` is the sim time its control steps have spent on each of ``TIME_KINDS`` since it
-    started."""
+    started. ``decode_errors`` and ``implausible`` count the messages its agent dropped as
+    malformed and as implausible."""
 
     TYPE: ClassVar[str] = "status"
     stamp: float
@@ -288,6 +289,7 @@ class RobotStatus(Message):
     time_s: Annotated[np.ndarray, Arr("<f8")] = field(
         default_factory=lambda: np.zeros(0, dtype=np.float64)
     )
+    implausible: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -515,7 +517,8 @@ class SpawnRequest(Message):
 class SpawnReply(Message):
     """``ok`` false with ``error`` set when the pose is not free (or, on a rejoin, there is no
     body to rejoin); x, y, theta the pose granted (on a rejoin: the request's, never the body's
-    true pose, which a robot cannot know)."""
+    true pose, which a robot cannot know); ``stamp`` the sim time when it answered, from
+    which the agent's clock starts."""
 
     TYPE: ClassVar[str] = "spawn_reply"
     ok: bool
@@ -523,6 +526,7 @@ class SpawnReply(Message):
     x: float
     y: float
     theta: float
+    stamp: float = -1.0
 
 
 @dataclass(frozen=True, eq=False)

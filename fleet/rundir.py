@@ -20,7 +20,7 @@ each process has dropped as malformed and as implausible, as the processes tell 
 bus (``implausible`` is null for a process that does not count them):
 
 ```
-{"sim": {"malformed": 0, "implausible": 3}, "robot-0": {"malformed": 1, "implausible": null}}
+{"sim": {"malformed": 0, "implausible": 3}, "robot-0": {"malformed": 1, "implausible": 2}}
 ```
 """
 

@@ -143,17 +143,17 @@ class SimServer:
                 elif link is not None and link.alive:
                     why = f"the agent of {req.robot} is still live"
                 if why:
-                    return SpawnReply(False, why, req.x, req.y, req.theta)
+                    return SpawnReply(False, why, req.x, req.y, req.theta, self.core.t)
                 self.links[req.robot] = AgentLink(self.core.t, time.monotonic())
                 log.info("a new agent took over robot %s where it stood", req.robot)
-                return SpawnReply(True, "", req.x, req.y, req.theta)
+                return SpawnReply(True, "", req.x, req.y, req.theta, self.core.t)
             try:
                 x, y, th = self.core.add_robot(req.robot, (req.x, req.y, req.theta))
             except ValueError as e:
-                return SpawnReply(False, str(e), req.x, req.y, req.theta)
+                return SpawnReply(False, str(e), req.x, req.y, req.theta, self.core.t)
             self.links[req.robot] = AgentLink(self.core.t, time.monotonic())
             log.info("robot %s spawned at (%.2f, %.2f, %.2f)", req.robot, x, y, th)
-            return SpawnReply(True, "", x, y, th)
+            return SpawnReply(True, "", x, y, th, self.core.t)
 
     def _on_agent_left(self, rid: str) -> None:
         self._release(rid, "left")

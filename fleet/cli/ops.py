@@ -173,8 +173,7 @@ def status(
             "file exists) {phase, expected_robots, tasks {open, assigned, done}, robots {id: "
             "{liveness, state, task, progress, heartbeat_age_s, restarts}}}; coordinator_note "
             "(why coordinator is null, else empty). States: running, stopped, zombie, gone. "
-            "malformed and implausible count the messages a process dropped (null: not told; "
-            "agents do not count implausible ones).",
+            "malformed and implausible count the messages a process dropped (null: not told).",
         ),
     ] = False,
     run_dir: RunDirOpt = None,

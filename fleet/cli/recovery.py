@@ -1,4 +1,5 @@
-"""`fleet bench recovery`: failure detection, reassignment and what failures cost the job."""
+"""`fleet bench recovery`: failure detection, reassignment and what failures cost the job;
+`fleet bench chaos`: random faults in real runs, and whether the job survives them."""
 
 from __future__ import annotations
 
@@ -105,7 +106,93 @@ def bench_recovery(
         typer.echo("\n".join(table_lines(result)))
 
 
+def bench_chaos(
+    runs: Annotated[int, typer.Option("--runs", help="Runs with faults (each a whole job).")] = 5,
+    faults: Annotated[
+        int, typer.Option("--faults", help="Faults per run, at random sim moments (0: none).")
+    ] = 5,
+    world: WorldOpt = "small",
+    robots: Annotated[int, typer.Option("--robots", "-n", help="Robots in each run.")] = 3,
+    seed: Annotated[
+        int,
+        typer.Option(
+            "--seed",
+            help="Sensor-noise seed of every run; run k draws its faults from (seed, k).",
+        ),
+    ] = 0,
+    rogue: Annotated[
+        bool,
+        typer.Option(
+            "--rogue",
+            help="Also run a rogue client from each job's first auction to its end (with "
+            "--faults 0: what implausible and fuzzed messages alone cost a run).",
+        ),
+    ] = False,
+    base_makespan: Annotated[
+        float | None,
+        typer.Option(
+            "--base-makespan",
+            help="The no-fault run's makespan (sim s), if known: the no-fault run is skipped.",
+        ),
+    ] = None,
+    run_root: Annotated[
+        Path | None,
+        typer.Option(
+            "--run-root", help="Where each run's dir goes (default: runs/bench-chaos-<time>)."
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Throw faults at real fleets and see whether the job survives: a no-fault run, then RUNS
+    runs of `fleet up --speed 0 --until-done`, each with FAULTS faults at random sim moments
+    (between 10 % and 80 % of the no-fault makespan) drawn from a seeded RNG among: SIGKILL of
+    an agent then `fleet respawn`; SIGSTOP of an agent, SIGCONT 5 s later; SIGKILL of the
+    coordinator, respawned 2 s later; a rogue client on the run's router that for 10 s sends
+    fuzzed payloads on every key class and well-formed messages no receiver may believe
+    (stamps far ahead of the sim clock, positions no robot can reach, scans not from the
+    lidar, commands beyond the robot's speeds, senders not in the job). Router restarts are
+    not among them: `fleet up` stops the fleet when its router dies.
+
+    Per run: finished or not, status, coverage, makespan against the no-fault run, tasks lost
+    (never done, not left out as blocked or unreachable), per fault its detection (signal →
+    the coordinator's `lost`) and reassignment (`lost` → its work re-sold) times, or the
+    restarted coordinator's time to `resumed`; processes that exited other than by the bench's
+    SIGKILLs, and the logs that hold tracebacks. A table on stdout (progress on stderr),
+    `--json` for scripts; everything also goes to RUN_ROOT/bench.json.
+
+    Examples: `fleet bench chaos --runs 5 --faults 5 --world small`;
+    `fleet bench chaos --runs 1 --faults 0 --rogue --json` (a clean run against one with a
+    rogue throughout).
+    """
+    from fleet.bench.chaos import run_bench, table_lines
+    from fleet.config import ConfigError, resolve_world
+
+    if runs < 1:
+        _fail("--runs must be >= 1")
+    if faults < 0:
+        _fail("--faults must be >= 0")
+    if robots < 2:
+        _fail("--robots must be >= 2: a lost robot's work needs another robot to go to")
+    try:
+        world_path = str(resolve_world(world))
+    except ConfigError as e:
+        _fail(str(e))
+    root = run_root or Path("runs") / datetime.now().strftime("bench-chaos-%Y%m%d-%H%M%S")
+
+    def progress(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    if base_makespan is not None and base_makespan <= 0:
+        _fail("--base-makespan must be > 0")
+    result = run_bench(root, world_path, robots, seed, runs, faults, rogue, progress, base_makespan)
+    if as_json:
+        print(json.dumps(result))
+    else:
+        typer.echo("\n".join(table_lines(result)))
+
+
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
     bench_app.command("recovery", help=reflow(bench_recovery.__doc__ or ""))(bench_recovery)
+    bench_app.command("chaos", help=reflow(bench_chaos.__doc__ or ""))(bench_chaos)

@@ -33,6 +33,10 @@ from fleet.params import CoordinatorParams
 from fleet.plan_chain import chain_length, chain_of, cut_plan, driven_ends
 from fleet.protocol import Keys, Plan
 
+# a robot's current plan that its statuses do not show it driving goes out again this many wall
+# seconds after it was last sent
+PLAN_RESEND_S = 2.0
+
 log = logging.getLogger("coordinator")
 
 
@@ -62,6 +66,8 @@ class Dispatcher:
         self.schedules: dict[str, tuple[int, np.ndarray]] = {}
         # robot -> (plan id, waypoint it heads for), from its status
         self.progress_of: dict[str, tuple[int, int]] = {}
+        # robot -> wall time (monotonic) its plan was last sent
+        self.sent_wall: dict[str, float] = {}
         self.last_transit_round = -math.inf
         # told when no transit takes a robot to its task: (robot, task, why)
         self.on_unreachable: Callable[[str, str, str], None] = lambda *_: None
@@ -82,6 +88,23 @@ class Dispatcher:
         if plan is None or current is None or current.task.id not in chain_of(plan):
             return None
         return plan
+
+    def resend_unheard(self, now: float) -> None:
+        """Send a robot its current plan again when its statuses do not show it driving it
+        ``PLAN_RESEND_S`` after it was last sent: a plan lost, or dropped by an agent that did
+        not hold its task yet when it came, would leave the robot idle with work assigned (and
+        a robot without a plan is never stuck)."""
+        for rid, plan in self.plans.items():
+            at, r = self.progress_of.get(rid), self.job.robots.get(rid)
+            if at is not None and at[0] == plan.plan_id:
+                continue
+            if r is None or r.liveness == LOST or r.acked_seq < r.award_seq:
+                continue
+            if self.current(rid) is None or now - self.sent_wall.get(rid, 0.0) < PLAN_RESEND_S:
+                continue
+            log.info("%s does not drive plan %d; sending it again", rid, plan.plan_id)
+            self.sent_wall[rid] = now
+            self.publish(self.keys.plan(rid), plan, True)
 
     def forget(self, rid: str) -> None:
         """``rid`` is lost: it drives no plan."""
@@ -257,6 +280,7 @@ class Dispatcher:
             self.schedules.pop(rid, None)
         self.journal.save_plan(rid, plan)
         self.journal.set_meta(plan_seq=self.plan_seq)
+        self.sent_wall[rid] = time.monotonic()
         self.publish(self.keys.plan(rid), plan, True)
 
 

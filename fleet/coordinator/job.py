@@ -344,10 +344,6 @@ class Job:
                 out.append(rec.task.id)
         return out
 
-    def all_open(self, ids: Sequence[str]) -> bool:
-        """Whether the tasks ``ids`` are all still open."""
-        return all(self.tasks[t].state == OPEN for t in ids)
-
     def _next_id(self, task_id: str) -> str:
         base, _, n = task_id.partition(".")
         k = int(n) + 1 if n.isdigit() else 1

@@ -39,7 +39,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,7 +47,7 @@ import numpy as np
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import ASSIGNED, LOST, OPEN
+from fleet.coordinator.job import ASSIGNED, LOST, OPEN, Job
 from fleet.coordinator.journal import Journal
 from fleet.plan_chain import chain_pieces, piece_count
 from fleet.protocol import Plan, RobotStatus
@@ -58,6 +58,8 @@ log = logging.getLogger("coordinator")
 Hook = Callable[[], None]
 # robot states in which reaching no waypoint is no sign of being stuck
 WAITING_STATES = ("holding", "done", "waiting", "localizing", "unlocalized")
+# how often the auction looks whether the last winner has acknowledged its award (wall s)
+ACK_POLL_S = 0.002
 
 
 @dataclass
@@ -142,13 +144,14 @@ class Market:
                 break
             rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
             with self.lock:
-                sale = auctioneer.award(rnd, set(self.job.market()), self._may_win)
-                changed = not all(self.job.all_open(lot.tasks) for lot in rnd.lots.values())
-            if sale is None and changed:
-                continue  # a loss replaced or took a lot's tasks while the round ran
+                if changed(self.job, rnd.lots):
+                    # a robot lost meanwhile took lots off the market: call what is on it now
+                    continue
+                sale = auctioneer.award(rnd, set(self.job.market()), self._untried)
             if sale is None:
                 break
             committed.append(sale.best.total_s)
+            await_ack(self.lock, self.job, sale.best.robot, auctioneer.params.bid_timeout_s)
         if first and committed:
             with self.lock:
                 if not self.job.open_tasks():
@@ -190,10 +193,9 @@ class Market:
         self.journal.set_meta(round_seq=sale.round)
         self.awards.send()
 
-    def _may_win(self, lot: auction.Lot, robot: str) -> bool:
-        """Whether ``robot`` may win ``lot``: all its tasks still open, none tried by it."""
-        tried = any(robot in self.job.tasks[t].tried for t in lot.tasks)
-        return self.job.all_open(lot.tasks) and not tried
+    def _untried(self, lot: auction.Lot, robot: str) -> bool:
+        """Whether ``robot`` may win ``lot``: it has tried none of its tasks."""
+        return not any(robot in self.job.tasks[t].tried for t in lot.tasks)
 
     def _settle(self) -> None:
         """Open tasks every robot in the market has tried are unreachable, and said so."""
@@ -422,6 +424,29 @@ class Market:
         self.awards.send()
         self.need_auction = True
         self.wake.set()
+
+
+def changed(job: Job, lots: Mapping[str, auction.Lot]) -> bool:
+    """Whether a task of ``lots`` is no longer open: the job changed while they were called (a
+    robot lost, its body planned round), and selling them would award a task that is gone."""
+    open_ids = {r.task.id for r in job.open_tasks()}
+    gone = [lot.id for lot in lots.values() if not set(lot.tasks) <= open_ids]
+    if gone:
+        log.info("lots %s changed while they were called; calling again", " ".join(gone))
+    return bool(gone)
+
+
+def await_ack(lock: threading.RLock, job: Job, rid: str, timeout_s: float) -> None:
+    """Wait (``timeout_s`` at most) until ``rid`` has acknowledged the award of the lot it just
+    won, or has left the market: a robot that bids in the next round before its award reaches
+    it prices that round without what it won, and wins lots it cannot do in time."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with lock:
+            r = job.robots.get(rid)
+            if r is None or r.acked_seq >= r.award_seq or rid not in job.market():
+                return
+        time.sleep(ACK_POLL_S)
 
 
 def _tour_key(task_id: str) -> tuple[int, ...]:

@@ -195,7 +195,7 @@ class Coordinator:
         Call with the lock held."""
         if rid not in self.job.robots:
             why = "not in the job: no liveliness token of it heard"
-        elif stamp is not None and self.sim_clock.ahead(stamp):
+        elif stamp is not None and self.sim_clock.ahead(stamp, strict=True):
             why = f"stamped {stamp:.3f} s, past the sim clock at {self.sim_clock.now:.3f} s"
         else:
             return False
@@ -347,6 +347,7 @@ class Coordinator:
         """Send the awards and plans due, and move the phase on."""
         self.awards.send()
         self.dispatcher.dispatch()
+        self.dispatcher.resend_unheard(time.monotonic())
         if self.job.finished and self.phase not in ("done", "incomplete"):
             left = self.job.left_out()
             self.phase = "incomplete" if left else "done"

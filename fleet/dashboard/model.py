@@ -315,8 +315,8 @@ class FleetWatcher:
 
     def dropped(self) -> Dropped:
         """The messages each process has dropped as malformed and as implausible, as far as it
-        has told: the simulator (coverage), the coordinator (its state), each agent (its status:
-        malformed only) and this view's own process."""
+        has told: the simulator (coverage), the coordinator (its state), each agent (its status)
+        and this view's own process."""
         with self.lock:
             return self._dropped()
 
@@ -328,7 +328,7 @@ class FleetWatcher:
             out["coordinator"] = (self.fleet.decode_errors, self.fleet.implausible)
         for rid, v in sorted(self.robots.items()):
             if v.status is not None:
-                out[rid] = (v.status.decode_errors, None)
+                out[rid] = (v.status.decode_errors, v.status.implausible)
         if self.own_dropped is not None:
             name, malformed, implausible = self.own_dropped
             out[name] = (malformed, implausible)

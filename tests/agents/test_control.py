@@ -44,14 +44,14 @@ def _scan(
     return LaserScan(stamp, -math.pi, INCREMENT, 0.1, 8.0, ranges.astype(np.float32))
 
 
-def _plan(waits: tuple[list, list, list, list] = ([], [], [], [])) -> Plan:
+def _plan(waits: tuple[list, list, list, list] = ([], [], [], []), sweep_from: int = 0) -> Plan:
     at, peers, plans, passed = waits
     return Plan(
         0.0,
         3,
         "t01",
         np.array(LANE),
-        0,
+        sweep_from,
         wait_at=np.array(at, dtype=np.int32),
         wait_for=peers,
         wait_plan=np.array(plans, dtype=np.int32),
@@ -137,6 +137,22 @@ def test_holding_is_given_up_after_hold_max_s() -> None:
     state, out = _step(_heard(late, replace(drive, follow=out.follow)), state)
     assert state.mode == "driving" and out.notes[0][0] == logging.WARNING
     assert state.holding.given_up == frozenset({(3, 1)})
+
+
+def test_on_a_transit_a_robot_keeps_the_order_of_passage_not_the_rank() -> None:
+    """Its transit (sweep_from past the lane) orders it after robot-0's waypoint 1, which
+    robot-0 has passed: it drives on across robot-0's intent instead of giving way to it by
+    rank. The same transit without that order gives way to robot-0 as to any peer above it."""
+    cruising = (0.3, 0.0)
+    crossing = {"robot-0": _crossing(10.0, plan_id=7, waypoint=2)}
+    ordered = Drive.of(_plan(([1], ["robot-0"], [7], [1]), sweep_from=len(LANE)), [])
+    unordered = Drive.of(_plan(sweep_from=len(LANE)), [])
+    alone = _step(_heard(10.0, unordered, velocity=cruising))[1].cmd_vel
+    keeps_order = _step(_heard(10.0, ordered, crossing, cruising))
+    gives_way = _step(_heard(10.0, unordered, crossing, cruising))[1].cmd_vel
+    assert keeps_order[0].mode == "driving"
+    assert (keeps_order[1].cmd_vel.v, keeps_order[1].cmd_vel.w) == (alone.v, alone.w)
+    assert gives_way.v < alone.v - 0.02
 
 
 def test_a_robot_gives_way_to_a_peer_ranked_above_it_and_not_to_one_below() -> None:

@@ -64,9 +64,16 @@ class LoopbackBus:
         self.keys = keys
         self.decode_errors: dict[str, int] = {}
         self._deliver = deliver
+        self.implausible = 0
 
     def publish(self, key: str, msg: Message, control: bool = False) -> None:
         self._deliver.setdefault(type(msg).__name__, []).append((key, msg))
+
+    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
+        self.implausible += n
+
+    def dropped(self) -> tuple[int, int]:
+        return sum(self.decode_errors.values()), self.implausible
 
 
 def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool]:
@@ -86,6 +93,9 @@ def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool
         path = np.array([start[:2], *waypoints], dtype=float)
         agent.drive = Drive(plan_id=1, follow=FollowState(path))
         agents[rid] = agent
+    for agent in agents.values():  # each is in the job for the others, as its token says
+        for rid in agents:
+            agent.rx.joined(rid)
     contacts = 0
 
     def done() -> bool:

@@ -6,6 +6,7 @@ handler, as the bus's thread would."""
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -15,13 +16,23 @@ from fleet.bench.recovery import to_reassign
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
-from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.dispatcher import PLAN_RESEND_S, Dispatcher
 from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
 from fleet.params import CoordinatorParams, load_fleet_config
-from fleet.protocol import Award, Bid, FleetEvent, Keys, Message, Plan, RobotStatus, TaskCall
+from fleet.protocol import (
+    Award,
+    AwardAck,
+    Bid,
+    FleetEvent,
+    Keys,
+    Message,
+    Plan,
+    RobotStatus,
+    TaskCall,
+)
 from fleet.world import load_world
 from planners.auction import Task
 from planners.coverage.params import CoverageParams
@@ -55,6 +66,12 @@ class Coordinator:
         self.sent: list[tuple[str, Message]] = []
         self.sales: list[Sale] = []
         self.bidding: dict[str, float] = {}  # robot -> its price for any lot
+        # robots acknowledge each award at once, or this many wall seconds after it is sent
+        self.ack_after_s = 0.0
+        # at each auction call, the robots that had not acknowledged their last award
+        self.unacked_at_call: list[list[str]] = []
+        # called with each auction call before the robots bid on it
+        self.on_call: Callable[[TaskCall], None] = lambda _call: None
         params = CoordinatorParams(bid_timeout_s=0.2)
         self.journal = Journal(self.job, None, KEYS, self.publish)
         self.awards = Awards(self.journal, KEYS, self.publish)
@@ -74,9 +91,24 @@ class Coordinator:
         self.sales.append(sale)
         self.market.sell(sale)
 
+    def _ack(self, award: Award) -> None:
+        with self.market.lock:
+            self.awards.acked(award.robot, AwardAck(0.0, award.seq, award.robot))
+
     def publish(self, key: str, msg: Message, _control: bool) -> None:
         self.sent.append((key, msg))
+        if isinstance(msg, Award):
+            if self.ack_after_s > 0:
+                threading.Timer(self.ack_after_s, self._ack, (msg,)).start()
+            else:
+                self._ack(msg)
         if isinstance(msg, TaskCall):
+            self.on_call(msg)
+            with self.market.lock:
+                robots = self.job.robots.values()
+                self.unacked_at_call.append(
+                    sorted(r.id for r in robots if r.acked_seq < r.award_seq)
+                )
             for rid, price in sorted(self.bidding.items()):
                 bid = Bid(0.0, msg.round, msg.task, rid, price, price, False)
                 self.auctioneer.on_bid(KEYS.bid(msg.task, rid), bid)
@@ -90,6 +122,63 @@ class Coordinator:
 
     def calls(self) -> list[TaskCall]:
         return [m for _, m in self.sent if isinstance(m, TaskCall)]
+
+
+def test_a_round_is_called_only_once_the_last_winner_has_acknowledged_its_award(
+    planner: TaskPlanner,
+) -> None:
+    """Sequential auctions price each round from what the robots have won: a robot that bids
+    before its award reaches it bids as if it held nothing and wins again. Here each robot
+    acknowledges 50 ms after its award is sent, as a loaded one does."""
+    c = Coordinator(planner, ["robot-0", "robot-1", "robot-2"])
+    c.bidding = {"robot-0": 1.0, "robot-1": 2.0, "robot-2": 3.0}
+    c.ack_after_s = 0.05
+    c.market.auction(c.auctioneer)
+    assert len(c.sales) == 3 and len(c.unacked_at_call) == 3 + 2 + 1
+    assert all(unacked == [] for unacked in c.unacked_at_call), c.unacked_at_call
+
+
+def test_a_lot_whose_task_went_while_its_round_was_called_is_not_sold(
+    planner: TaskPlanner,
+) -> None:
+    """A robot lost while a round waits for bids can take its lots off the market (a body in
+    the way replaces the tasks near it): the round is called again with what is on sale, and
+    the task that went is never awarded (it was: ValueError, and the coordinator died)."""
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.bidding = {"robot-0": 1.0, "robot-1": 2.0}
+
+    def replace_t00(call: TaskCall) -> None:
+        if c.job.tasks["t00"].state == OPEN:
+            c.job.tasks["t00"].state = REPLACED
+
+    c.on_call = replace_t00
+    c.market.auction(c.auctioneer)
+    sold = [t for s in c.sales for t in s.lot.tasks]
+    assert "t00" not in sold and sorted(sold) == ["t01", "t02", "t03", "t04", "t05"]
+    assert c.job.tasks["t00"].state == REPLACED and not c.job.open_tasks()
+
+
+def test_a_plan_its_robot_does_not_drive_is_sent_again(planner: TaskPlanner) -> None:
+    """A plan lost, or dropped by an agent that did not hold its task yet when it came, left
+    the robot idle with its work assigned for good (a chaos run hung so): while the robot's
+    statuses show another plan, its plan goes out again every PLAN_RESEND_S."""
+    c = Coordinator(planner, ["robot-0"])
+    c.job.robots["robot-0"].xy = (0.5, 0.5)
+    c.job.award("t00", "robot-0", False)
+    c.awards.send()
+    c.dispatcher.dispatch()
+    plans = [m for _, m in c.sent if isinstance(m, Plan)]
+    assert len(plans) == 1
+    sent = c.dispatcher.sent_wall["robot-0"]
+    c.dispatcher.heard("robot-0", plans[0].plan_id - 1, 3)  # it drives an older plan
+    c.dispatcher.resend_unheard(sent + 0.5)  # not yet: it may not have said so yet
+    c.dispatcher.resend_unheard(sent + PLAN_RESEND_S + 0.1)
+    c.dispatcher.resend_unheard(sent + PLAN_RESEND_S + 0.2)  # once per PLAN_RESEND_S
+    again = [m for _, m in c.sent if isinstance(m, Plan)]
+    assert len(again) == 2 and again[1].plan_id == plans[0].plan_id
+    c.dispatcher.heard("robot-0", plans[0].plan_id, 1)  # now it drives it
+    c.dispatcher.resend_unheard(sent + 3 * PLAN_RESEND_S)
+    assert len([m for _, m in c.sent if isinstance(m, Plan)]) == 2
 
 
 def test_a_lost_robots_remainder_and_unstarted_tasks_go_back_on_sale_as_regions(

@@ -143,21 +143,23 @@ def test_a_view_that_never_saw_the_plan_takes_the_pace_since_it_came() -> None:
 
 def test_the_messages_each_process_dropped_show_in_the_header_and_the_line() -> None:
     w = _watcher()
-    assert w.dropped() == {"robot-0": (0, None), "robot-1": (0, None)}
+    assert w.dropped() == {"robot-0": (0, 0), "robot-1": (0, 0)}
     assert "dropped" not in plain([header(w.snapshot())]) and "dropped" not in w.line(1.0)
     w.on_fleet("", _recorded(FleetState(20.0, "cleaning", ["robot-0"], [], [], 2, 3, 5, 0, 1, 4)))
     w.on_status(
         KEYS.robot("robot-1", "status"),
-        _recorded(RobotStatus(13.0, "driving", "t03", 0.5, 4, 10, 5.0, decode_errors=2)),
+        _recorded(
+            RobotStatus(13.0, "driving", "t03", 0.5, 4, 10, 5.0, decode_errors=2, implausible=3)
+        ),
     )
     w.set_own_dropped("up", 0, 0)
     assert w.dropped() == {
         "coordinator": (1, 4),
-        "robot-0": (0, None),
-        "robot-1": (2, None),
+        "robot-0": (0, 0),
+        "robot-1": (2, 3),
         "up": (0, 0),
     }
-    shown = "dropped: coordinator 1 malformed 4 implausible, robot-1 2 malformed"
+    shown = "dropped: coordinator 1 malformed 4 implausible, robot-1 2 malformed 3 implausible"
     assert shown in plain([header(w.snapshot())])
     assert w.line(1.0).endswith(shown)
 

@@ -59,6 +59,7 @@ def test_a_late_or_resumed_clock_catches_up_once_messages_confirm_the_jump() -> 
     # while a jump waits for confirmation, stamps up to it are not judged ahead
     clock.hear(231.3)
     assert clock.now == 131.3 and not clock.ahead(231.3) and clock.ahead(231.3 + 2 * STEP)
+    assert clock.ahead(231.3, strict=True)  # strict: an unconfirmed jump does not count
     clock.hear(131.35)
     assert clock.ahead(231.3) and drops.total == 1
 
