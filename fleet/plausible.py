@@ -28,6 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from fleet.params import AgentParams, FleetConfig, SimParams
+from fleet.protocol import Clock
 
 # a jump is believed once this many messages agree with it: one is never enough
 CONFIRMATIONS = 3
@@ -214,3 +215,32 @@ class PoseTrack:
         if stamp >= t0 and gap <= reach:
             return None
         return f"moved {gap:.2f} m in {stamp - t0:.3f} s sim, farther than {reach:.2f} m"
+
+
+# drop(key, sender, why, n): a receiver drops n messages on ``key`` from ``sender`` as
+# implausible (:meth:`fleet.bus.Bus.drop_implausible`)
+Drop = Callable[..., None]
+
+
+class StampWatch:
+    """The judge of a receiver that only watches the fleet (the live view, the run's recorder):
+    its own :class:`SimClock`, fed every clock message (``hear_clock``), and messages stamped
+    farther past it than any robot's can be, dropped through ``drop`` (``ahead``). Such a
+    message would otherwise stand as a robot's newest status or pose, or the newest coverage,
+    and hide every real one after it."""
+
+    def __init__(self, step_s: float, drop: Drop, clock_key: str) -> None:
+        self.drop = drop
+        self.clock = SimClock(step_s, lambda n, why: drop(clock_key, "sim", why, n))
+
+    def hear_clock(self, _key: str, msg: Clock) -> None:
+        self.clock.hear(msg.stamp)
+
+    def ahead(self, key: str, sender: str, stamp: float) -> bool:
+        """Whether to drop the message on ``key`` from ``sender`` stamped ``stamp``: it is
+        stamped past the clock (see :meth:`SimClock.ahead`, strict); then it is counted."""
+        if not self.clock.ahead(stamp, strict=True):
+            return False
+        why = f"stamped {stamp:.3f} s, past the sim clock at {self.clock.now:.3f} s"
+        self.drop(key, sender, why)
+        return True

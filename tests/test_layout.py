@@ -280,3 +280,20 @@ def test_params_reach_no_robot_or_simulator_software() -> None:
         bad = sorted(i for i in graph[m] if i.split(".")[0] in ("agents", "sim_server"))
         assert not bad, f"{m} (imported by fleet.params) imports {bad}"
     assert "fleet.slam_params" in seen
+
+
+def duplicate_test_names(root: Path) -> list[str]:
+    """Test file names used in more than one folder under ``root``: pytest imports test files
+    by their bare name (no packages), so the second one fails to be collected at all."""
+    seen: dict[str, list[Path]] = {}
+    for path in sorted(root.rglob("test_*.py")):
+        seen.setdefault(path.name, []).append(path)
+    return [name for name, paths in seen.items() if len(paths) > 1]
+
+
+def test_no_two_test_files_share_a_name(tmp_path: Path) -> None:
+    assert duplicate_test_names(ROOT / "tests") == []
+    for folder in ("fleet", "integration"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "test_chaos_bench.py").write_text("")
+    assert duplicate_test_names(tmp_path) == ["test_chaos_bench.py"]

@@ -80,7 +80,8 @@ def dashboard(
 
     from fleet.dashboard.model import BusFeed, FleetWatcher
     from fleet.dashboard.term import TerminalView, ViewControl
-    from fleet.protocol import DEFAULT_FLEET
+    from fleet.plausible import Bounds, StampWatch
+    from fleet.protocol import DEFAULT_FLEET, Clock
     from fleet.rundir import RunDirError, RunTable, newest_run_dir, read_table
     from fleet.supervisor.ops import ProcessActions
 
@@ -95,7 +96,9 @@ def dashboard(
     name = fleet or (table.fleet if table is not None else DEFAULT_FLEET)
     bus = _bus("dashboard", f"view-{os.getpid()}", endpoints, name, zenoh_config)
     cfg, _ = _load(config)
-    watcher = FleetWatcher(name, cfg.coordinator.heartbeat_timeout_s)
+    watch = StampWatch(Bounds.of(cfg).clock_step_s, bus.drop_implausible, bus.keys.clock())
+    bus.subscribe(bus.keys.clock(), Clock, watch.hear_clock)
+    watcher = FleetWatcher(name, cfg.coordinator.heartbeat_timeout_s, watch)
     if run_dir is not None:
         _past_events(watcher, run_dir / STATE_FILE)
     feed = BusFeed(bus, watcher)

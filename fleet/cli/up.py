@@ -104,6 +104,7 @@ def up(
     from fleet.bus import Bus
     from fleet.config import resolve_world
     from fleet.dashboard.model import FINISHED_PHASES, BusFeed, FleetWatcher
+    from fleet.plausible import Bounds
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest
     from fleet.report.figures import render_report
     from fleet.report.summary import (
@@ -198,9 +199,9 @@ def up(
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
-        watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s)
+        recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s)
+        watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s, recorder.watch)
         feed = BusFeed(bus, watcher, fetch=not headless)
-        recorder = RunRecorder(bus)
         out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
         status = _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, t0)
         feed.pump()

@@ -32,6 +32,7 @@ import numpy as np
 
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
+from fleet.plausible import StampWatch
 from fleet.protocol import (
     Clock,
     Collision,
@@ -177,8 +178,17 @@ class FleetWatcher:
     """The dashboard's model of a fleet (see the module docstring). Thread-safe: callbacks
     on Zenoh threads and the view's thread both go through ``lock``."""
 
-    def __init__(self, fleet: str = "default", silent_after_s: float = SILENT_AFTER_S) -> None:
+    def __init__(
+        self,
+        fleet: str = "default",
+        silent_after_s: float = SILENT_AFTER_S,
+        watch: StampWatch | None = None,
+    ) -> None:
+        """``watch``: the sim clock the view judges stamps by (messages stamped past it are
+        dropped and counted); None takes every stamp as it comes (tests, the dashboard bench).
+        """
         self.keys = Keys(fleet)
+        self.watch = watch
         self.silent_after_s = silent_after_s
         self.lock = threading.Lock()
         self.clock = 0.0
@@ -209,15 +219,26 @@ class FleetWatcher:
 
     # ---- messages in ----------------------------------------------------------------------
 
+    def _ahead(self, key: str, sender: str, stamp: float) -> bool:
+        return self.watch is not None and self.watch.ahead(key, sender, stamp)
+
     def on_clock(self, _key: str, m: Clock) -> None:
+        # the view samples the clock at each redraw; its watch hears every clock message and
+        # has counted a forged one already
+        if self.watch is not None and self.watch.clock.ahead(m.stamp, strict=True):
+            return
         with self.lock:
             self.clock = max(self.clock, m.stamp)
 
-    def on_coverage(self, _key: str, m: CoverageSummary) -> None:
+    def on_coverage(self, key: str, m: CoverageSummary) -> None:
+        if self._ahead(key, "sim", m.stamp):
+            return
         with self.lock:
             self.coverage = m
 
-    def on_fleet(self, _key: str, m: FleetState) -> None:
+    def on_fleet(self, key: str, m: FleetState) -> None:
+        if self._ahead(key, "coordinator", m.stamp):
+            return
         with self.lock:
             self.fleet = m
             if self._first_state is None:
@@ -229,6 +250,8 @@ class FleetWatcher:
 
     def on_status(self, key: str, m: RobotStatus) -> None:
         rid = self.keys.robot_of(key)
+        if self._ahead(key, rid, m.stamp):
+            return
         with self.lock:
             robot = self._robot(rid)
             prev = robot.status
@@ -249,6 +272,8 @@ class FleetWatcher:
 
     def on_truth(self, key: str, m: TruthPose) -> None:
         rid = self.keys.robot_of(key)
+        if self._ahead(key, "sim", m.stamp):
+            return
         with self.lock:
             robot = self._robot(rid)
             if robot.pose is not None and m.stamp < robot.pose_stamp:

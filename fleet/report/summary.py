@@ -38,8 +38,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fleet.plausible import StampWatch
 from fleet.protocol import (
     TIME_KINDS,
+    Clock,
     Collision,
     CoverageImage,
     CoverageSummary,
@@ -274,14 +276,18 @@ class RunRecorder:
     """Records, during a run, what the report pictures need and the live view does not keep:
     true tracks with their sim times, the fleet's coverage over time, and the contacts."""
 
-    def __init__(self, bus: Bus) -> None:
+    def __init__(self, bus: Bus, clock_step_s: float) -> None:
+        """``clock_step_s``: how far past the sim clock (``fleet.plausible.Bounds``) a message
+        may be stamped before it is dropped (``watch``, shared with the live view)."""
         self.lock = threading.Lock()
+        self.watch = StampWatch(clock_step_s, bus.drop_implausible, bus.keys.clock())
         self.tracks: dict[str, list[tuple[float, float, float]]] = {}
         self.coverage: list[tuple[float, float, float]] = []
         self.collisions: list[Collision] = []
         self.status: list[tuple[Any, ...]] = []
         self.plans: list[dict[str, Any]] = []
         self._robot_of = bus.keys.robot_of
+        bus.subscribe(bus.keys.clock(), Clock, self.watch.hear_clock)
         bus.subscribe(bus.keys.all_robots("truth"), TruthPose, self._on_truth)
         bus.subscribe(bus.keys.coverage(), CoverageSummary, self._on_coverage)
         bus.subscribe(bus.keys.collisions(), Collision, self._on_collision)
@@ -289,28 +295,36 @@ class RunRecorder:
         bus.subscribe(bus.keys.plan("*"), Plan, self._on_plan)
 
     def _on_truth(self, key: str, m: TruthPose) -> None:
+        if self.watch.ahead(key, "sim", m.stamp):
+            return
         with self.lock:
             track = self.tracks.setdefault(self._robot_of(key), [])
             if not track or abs(track[-1][1] - m.x) + abs(track[-1][2] - m.y) >= TRACK_STEP_M:
                 track.append((m.stamp, m.x, m.y))
 
-    def _on_coverage(self, _key: str, m: CoverageSummary) -> None:
+    def _on_coverage(self, key: str, m: CoverageSummary) -> None:
+        if self.watch.ahead(key, "sim", m.stamp):
+            return
         with self.lock:
             if not self.coverage or m.stamp > self.coverage[-1][0]:
                 self.coverage.append((m.stamp, m.coverage, m.repetition))
 
-    def _on_collision(self, _key: str, m: Collision) -> None:
+    def _on_collision(self, key: str, m: Collision) -> None:
+        if self.watch.ahead(key, "sim", m.stamp):
+            return
         with self.lock:
             self.collisions.append(m)
 
     def _on_status(self, key: str, m: RobotStatus) -> None:
-        if len(m.time_s) != len(TIME_KINDS):
+        if len(m.time_s) != len(TIME_KINDS) or self.watch.ahead(key, self._robot_of(key), m.stamp):
             return
         row = (m.stamp, self._robot_of(key), m.plan_id, m.waypoint, *m.time_s.tolist())
         with self.lock:
             self.status.append(row)
 
     def _on_plan(self, key: str, m: Plan) -> None:
+        if self.watch.ahead(key, "coordinator", m.stamp):
+            return
         record = {
             "sim_s": round(m.stamp, 4),
             "robot": key.rsplit("/", 1)[-1],

@@ -18,7 +18,9 @@ from fleet.dashboard.model import BusFeed, FleetWatcher
 from fleet.dashboard.term import DOWN, KILL, QUIT, UP, ViewControl, parse_keys
 from fleet.dashboard.view import LOST_MARK, WALL, header, heading_arrow, plain, screen
 from fleet.floor_map import pack_grid
+from fleet.plausible import StampWatch
 from fleet.protocol import (
+    Clock,
     Collision,
     FleetEvent,
     FleetState,
@@ -348,3 +350,23 @@ def test_without_a_terminal_fleet_dashboard_prints_plain_lines_until_the_fleet_s
     assert any(" starting sim=" in ln for ln in lines), lines
     assert "fleet up has exited: the fleet is stopped" in lines
     assert "\x1b[" not in done.stderr + done.stdout  # no screen drawn
+
+
+def test_the_view_drops_what_is_stamped_past_the_sim_clock() -> None:
+    """A status or a clock stamped 1e9 s would stand as the newest for good: the robot's real
+    statuses and the real clock after it would never show. With its watch on the sim clock the
+    view drops them, and counts them through the watch."""
+    dropped: list[tuple[str, str]] = []
+    watch = StampWatch(0.5, lambda key, who, why, n=1: dropped.append((key, who)), KEYS.clock())
+    for t in (9.9, 10.0, 10.1):
+        watch.hear_clock(KEYS.clock(), Clock(t, 1.0))
+    w = FleetWatcher(watch=watch)
+    key = KEYS.robot("robot-1", "status")
+    for t in (1e9, 10.2):
+        w.on_status(key, _recorded(RobotStatus(t, "driving", f"t{t:.0f}", 0.4, 3, 10, 4.2)))
+    w.on_clock(KEYS.clock(), Clock(1e9, 1.0))
+    w.on_clock(KEYS.clock(), Clock(10.1, 1.0))
+    status = w.robots["robot-1"].status
+    assert status is not None and status.stamp == 10.2
+    assert w.clock == 10.1
+    assert dropped == [(key, "robot-1")]

@@ -15,7 +15,15 @@ import pytest
 from typer.testing import CliRunner
 
 from fleet.cli import app
-from fleet.protocol import TIME_KINDS, CoverageImage, Keys, Plan, RobotStatus
+from fleet.protocol import (
+    TIME_KINDS,
+    Clock,
+    CoverageImage,
+    CoverageSummary,
+    Keys,
+    Plan,
+    RobotStatus,
+)
 from fleet.report.repetition import CAUSES, breakdown, read_plans, read_status
 from fleet.report.summary import STATUS_COLUMNS, ReportError, RunRecorder
 from planners.grid import GridMap
@@ -193,14 +201,18 @@ class _Bus:
     def __init__(self) -> None:
         self.keys = Keys("test")
         self.handlers: dict[str, Callable] = {}
+        self.dropped: list[tuple[str, str, str]] = []
 
     def subscribe(self, key: str, _type: type, handler: Callable) -> None:
         self.handlers[key] = handler
 
+    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
+        self.dropped.append((key, sender, why))
+
 
 def test_the_recorder_writes_the_statuses_and_plans_the_breakdown_reads(tmp_path: Path) -> None:
     bus = _Bus()
-    recorder = RunRecorder(bus)  # type: ignore[arg-type]
+    recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
     keys = bus.keys
     seconds = np.arange(len(TIME_KINDS), dtype=float)
     for t in (1.5, 1.0):
@@ -218,3 +230,29 @@ def test_the_recorder_writes_the_statuses_and_plans_the_breakdown_reads(tmp_path
     assert np.allclose(status["robot-1"][1, 3:], 1.5 * seconds)
     plans = read_plans(tmp_path / "plans.jsonl", {})
     assert np.array_equal(plans["robot-1", 7]["waypoints"], TOUR)
+
+
+def test_the_recorder_drops_what_is_stamped_past_the_sim_clock() -> None:
+    """A status or a coverage summary stamped far ahead would stand as the newest and hide the
+    real ones after it; the recorder drops it, counted, once it knows the sim clock."""
+    bus = _Bus()
+    recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
+    keys = bus.keys
+    seconds = np.arange(len(TIME_KINDS), dtype=float)
+    for t in (9.9, 10.0, 10.1):  # a receiver started late believes the clock once confirmed
+        bus.handlers[keys.clock()](keys.clock(), Clock(t, 1.0))
+    on_status = bus.handlers[keys.all_robots("status")]
+    for t in (1e9, 10.2):
+        status = RobotStatus(t, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=seconds)
+        on_status(keys.robot("robot-1", "status"), status)
+    on_coverage = bus.handlers[keys.coverage()]
+    for t in (1e9, 10.3):
+        none = np.zeros(0)
+        summary = CoverageSummary(t, 1.0, 0.5, 0.1, 10.0, [], none, none, none, none)
+        on_coverage(keys.coverage(), summary)
+    assert [row[0] for row in recorder.status] == [10.2]
+    assert [row[0] for row in recorder.coverage] == [10.3]
+    assert [(k, who) for k, who, _ in bus.dropped] == [
+        (keys.robot("robot-1", "status"), "robot-1"),
+        (keys.coverage(), "sim"),
+    ]
