@@ -11,10 +11,12 @@ the lane then lies in the square of a robot-centre cell.
 
 Placing every cell's lanes on one lattice per room means cells stacked on each other never sweep
 the same strip: the lattice lane between the top row of a cell and the row above belongs to the
-lower cell and spans where both rows are reachable. Each cell's lattice lanes are balanced in
-its reachable band (the first and the last equally far inside it, so what the lattice leaves
-along the two walls is split evenly between them); as stacked cells share the lattice, a room
-takes the balanced phase of whichever of its cells gives the least total lane length. A cell
+lower cell and spans where both rows are reachable. The room's phase is the one of least total
+lane length (shoulder lanes priced as separate tasks) among the phases that balance one of its
+cells' lattice in its reachable band (the first and the last lane equally far inside it) and
+the phases that put a lane on every whole row: balancing alone leaves a margin at both walls,
+which often costs a clamp lane at each where a lattice laid against one wall needs one (measured
+in BENCHMARKS.md, Cleaning efficiency); ties go to the balanced phases. A cell
 adds a lane off the lattice (a clamp lane, as close to the wall as the uncovered floor needs and
 only as long as it) only where cleanable floor it owns lies below its first or above its last
 lattice lane — typically along a wall. Where the cell's width changes (a shoulder beside
@@ -75,7 +77,7 @@ def room_lanes(
     half_width: float,
 ) -> RoomLanes:
     """The room's lanes, ``spacing`` rows apart on one lattice (the phase of least total lane
-    length, ties to the most balanced).
+    length, ties to a balanced one).
 
     ``rot`` is the room's robot-centre mask in its rotated frame, ``clean_rot`` the cleanable
     floor the room is responsible for, ``cell_labels_rot`` the cells' label image (1..n) and
@@ -103,7 +105,8 @@ def _phases(cells: list[MonotoneCell], spacing: float) -> list[float]:
     """Candidate lattice phases in ``[0, spacing)``: per cell (largest first) the two that
     centre its lattice lanes in its reachable band, both margins equal — with as many lanes as
     fit (margins under half a spacing) and with one fewer (margins of half to one spacing,
-    which its clamp lanes share evenly at the two walls)."""
+    which its clamp lanes share evenly at the two walls); then those that put a lane on every
+    whole row from the room's first row on (half a row above it, as lanes between two rows)."""
     phases: list[float] = []
     for cell in sorted(cells, key=lambda c: -c.cells):
         height = cell.rows - 1
@@ -112,6 +115,11 @@ def _phases(cells: list[MonotoneCell], spacing: float) -> list[float]:
             p = math.fmod(p, spacing)
             if all(min(abs(p - q), spacing - abs(p - q)) > _ROW_SNAP for q in phases):
                 phases.append(p)
+    first = min(c.row0 for c in cells)
+    for k in range(math.ceil(spacing)):
+        p = math.fmod(first + 0.5 + k, spacing)
+        if all(min(abs(p - q), spacing - abs(p - q)) > _ROW_SNAP for q in phases):
+            phases.append(p)
     return phases
 
 

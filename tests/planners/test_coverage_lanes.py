@@ -1,4 +1,5 @@
-"""Lanes in continuous coordinates: exact spacing, balanced margins, robot-centre cells only."""
+"""Lanes in continuous coordinates: exact spacing, no lattice lane left out, robot-centre cells
+only."""
 
 from __future__ import annotations
 
@@ -51,7 +52,7 @@ def _place(mask: np.ndarray, width: float, overlap: float, res: float):
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(rooms())
-def test_lattice_lanes_are_spacing_apart_balanced_and_on_robot_centre_cells(room):
+def test_lattice_lanes_are_spacing_apart_and_on_robot_centre_cells(room):
     mask, width, overlap, res = room
     cells, placed = _place(mask, width, overlap, res)
     spacing_m = width * (1 - overlap)
@@ -60,9 +61,12 @@ def test_lattice_lanes_are_spacing_apart_balanced_and_on_robot_centre_cells(room
         gaps_m = np.diff(lattice[:, 0]) * res
         assert np.all(np.abs(gaps_m - spacing_m) < 1e-3), (gaps_m, spacing_m)
     if len(cells) == 1 and len(placed.lattice[0]) and cells[0].rows > 1:
-        # one cell: its first and last lattice lanes equally far inside its band of rows
+        # one cell: no room for another lattice lane between its first or last row and the
+        # lattice (what is left along the walls is narrower than the spacing)
         cell, ys = cells[0], placed.lattice[0][:, 0]
-        assert math.isclose(ys[0] - cell.row0, cell.row0 + cell.rows - 1 - ys[-1], abs_tol=1e-6)
+        spacing = spacing_m / res
+        assert ys[0] - cell.row0 < spacing + 1e-6
+        assert cell.row0 + cell.rows - 1 - ys[-1] < spacing + 1e-6
     for lanes in (*placed.lattice, *placed.clamps, *placed.shoulders):
         for y, lo, hi in lanes:
             # every point of the lane lies between two robot-centre cells of its columns
