@@ -153,7 +153,7 @@ class AgentParams:
 @dataclass(frozen=True)
 class CoordinatorParams:
     wall_clearance: float = 0.015
-    lane_overlap: float = 0.1
+    lane_overlap: float = 0.1667
     expected_robots_grace_s: float = 20.0
     task_target_s: float = 20.0
     heartbeat_timeout_s: float = 1.0

@@ -15,8 +15,11 @@ the processes cost, and is deterministic for a seed, so changes to the follower 
 can be judged over many seeds and maps quickly. Per run: coverage and repetition (the
 simulator's grid), sim time against the plan's estimate, contacts (with where they were),
 waypoints given up (with where), the tracking error of the sweep (distance of the true centre
-from the planned segment), and the sim seconds per kind of control step; each contact is given
-with the kind of the control step in force when it happened (edge: the wall follower's).
+from the planned segment), the cross-track error on lanes (the true centre's distance across
+the lane, where the follower sweeps a segment the tour labels a lane, ``planners.tour_elements``,
+and the centre is abreast of it: what the lanes' overlap has to absorb), and the sim seconds per
+kind of control step; each contact is given with the kind of the control step in force when it
+happened (edge: the wall follower's).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from fleet.coordinator.planning import TaskPlanner
 from fleet.params import FleetConfig
 from fleet.protocol import TIME_KINDS
 from fleet.world import World
+from planners.tour_elements import LANE, TourElements
 from sim_server.core import SimCore
 
 ROBOT = "robot-0"
@@ -45,6 +49,46 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     denom = float(ab @ ab)
     t = 0.0 if denom == 0 else min(max(float((p - a) @ ab) / denom, 0.0), 1.0)
     return float(np.hypot(*(p - (a + t * ab))))
+
+
+def _cross_track(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float | None:
+    """The distance of ``p`` across the line through segment ``a``–``b``, or None when ``p``
+    is not abreast of the segment (its foot falls outside it)."""
+    ab = b - a
+    length = float(np.hypot(*ab))
+    if length == 0:
+        return None
+    along = float((p - a) @ ab) / length
+    if along < 0 or along > length:
+        return None
+    return abs(float(ab[0] * (p - a)[1] - ab[1] * (p - a)[0])) / length
+
+
+def _lane_segments(
+    waypoints: np.ndarray, sweep_from: int, elements: TourElements | None
+) -> np.ndarray:
+    """Per waypoint segment, whether the tour labels it a lane: the sweeps from ``sweep_from``
+    on are the tour itself (its tasks one after the other), so a segment's midpoint lies at
+    its own arc length from there."""
+    n = max(len(waypoints) - 1, 0)
+    out = np.zeros(n, dtype=bool)
+    if elements is None or n <= sweep_from:
+        return out
+    seg = np.hypot(*np.diff(waypoints, axis=0).T)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    mid = (cum[sweep_from:-1] + cum[sweep_from + 1 :]) / 2 - cum[sweep_from]
+    i = elements.at(mid)
+    out[sweep_from:] = (i >= 0) & (elements.kind[np.clip(i, 0, None)] == LANE)
+    return out
+
+
+def _figures(errors: list[float]) -> dict[str, float]:
+    e = np.array(errors) if errors else np.zeros(1)
+    return {
+        "mean": round(float(e.mean()), 4),
+        "p95": round(float(np.percentile(e, 95)), 4),
+        "max": round(float(e.max()), 4),
+    }
 
 
 def follow_tour(
@@ -65,6 +109,8 @@ def follow_tour(
     start = tuple(float(v) for v in world.start_poses(1, cfg.robot.radius)[0])
     waypoints, starts = planner.drive(start[:2], [(t, False) for t in tasks])
     sweep_from = starts[0]
+    raw = planner.meta.get("tour_elements")
+    on_lane = _lane_segments(waypoints, sweep_from, TourElements.from_json(raw) if raw else None)
     estimate = sum(t.time_s for t in tasks)
     core = SimCore(world, cfg, seed=seed)
     core.add_robot(ROBOT, start)
@@ -81,6 +127,7 @@ def follow_tour(
     dt = params.dt
     time_use = dict.fromkeys(TIME_KINDS, 0.0)
     tracking: list[float] = []
+    cross: list[float] = []
     contacts: list[tuple[float, float, float]] = []
     given_up: list[tuple[float, float]] = []
     limit = time_factor * estimate + 60.0
@@ -117,11 +164,11 @@ def follow_tour(
                 given_up.append((round(float(wp[0]), 3), round(float(wp[1]), 3)))
             if kind == "sweep" and 0 < follow.index < len(waypoints):
                 truth_xy = np.array(core.truth()[ROBOT][:2])
-                tracking.append(
-                    _segment_distance(
-                        truth_xy, waypoints[follow.index - 1], waypoints[follow.index]
-                    )
-                )
+                a, b = waypoints[follow.index - 1], waypoints[follow.index]
+                tracking.append(_segment_distance(truth_xy, a, b))
+                across = _cross_track(truth_xy, a, b) if on_lane[follow.index - 1] else None
+                if across is not None:
+                    cross.append(across)
             command = (0.0, 0.0) if result is None else (result.v, result.w)
             pending.append((scan.stamp + latency_s, *command))
             if result is None and finished_at is None:
@@ -129,7 +176,6 @@ def follow_tour(
         if finished_at is not None:
             break
     summary = core.summary(time.perf_counter() - wall0)
-    errors = np.array(tracking) if tracking else np.zeros(1)
     return {
         "world": world.name,
         "seed": seed,
@@ -144,11 +190,8 @@ def follow_tour(
         "contact_points": contacts,
         "given_up": len(given_up),
         "given_up_points": given_up,
-        "tracking_m": {
-            "mean": round(float(errors.mean()), 4),
-            "p95": round(float(np.percentile(errors, 95)), 4),
-            "max": round(float(errors.max()), 4),
-        },
+        "tracking_m": _figures(tracking),
+        "lane_cross_track_m": {**_figures(cross), "steps": len(cross)},
         "time_s": {k: round(v, 1) for k, v in time_use.items()},
         "path_m": round(float(summary.path_length_m[0]), 2),
         "wall_s": round(time.perf_counter() - wall0, 1),
@@ -157,7 +200,8 @@ def follow_tour(
 
 def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Per world: medians of coverage, repetition and time over estimate; totals of contacts
-    and waypoints given up; the worst tracking error."""
+    and waypoints given up; the worst tracking error and the worst cross-track error on lanes
+    (p95 of each run)."""
     out: dict[str, Any] = {}
     for name in dict.fromkeys(r["world"] for r in runs):
         mine = [r for r in runs if r["world"] == name]
@@ -172,6 +216,7 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
             "contacts": sum(r["contacts"] for r in mine),
             "given_up": sum(r["given_up"] for r in mine),
             "tracking_p95_m": round(max(r["tracking_m"]["p95"] for r in mine), 4),
+            "lane_cross_track_p95_m": round(max(r["lane_cross_track_m"]["p95"] for r in mine), 4),
         }
     return out
 
@@ -183,7 +228,8 @@ def run_line(r: dict[str, Any]) -> str:
         f"{r['sim_s']} s sim (plan {r['plan_estimate_s']} s, ×{r['time_over_estimate']}), "
         f"coverage {100 * r['coverage']:.1f} %, repetition {100 * r['repetition']:.1f} %, "
         f"contacts {r['contacts']} {r['contact_points'][:3]}, given up {r['given_up']} "
-        f"{r['given_up_points'][:3]}, tracking p95 {100 * r['tracking_m']['p95']:.1f} cm; "
+        f"{r['given_up_points'][:3]}, tracking p95 {100 * r['tracking_m']['p95']:.1f} cm, "
+        f"across lanes p95 {100 * r['lane_cross_track_m']['p95']:.1f} cm; "
         + ", ".join(f"{k} {t[k]:.0f}" for k in TIME_KINDS if t[k] > 0)
         + f" s; {r['wall_s']} s wall"
     )

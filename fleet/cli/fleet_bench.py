@@ -120,10 +120,12 @@ def bench_follow(
     lose on the floor, apart from peers, the market and the processes.
 
     Per run: coverage and repetition (the simulator's grid), sim time against the plan's
-    estimate, contacts and waypoints given up (with where), the sweep's tracking error, and
-    the sim seconds per kind of control step (sweep, transit, turn in place, escape, ...);
-    per world the medians and totals. Deterministic for a seed, and fast (the small world in
-    seconds), so a change to the follower or the plan can be judged over many seeds and maps.
+    estimate, contacts and waypoints given up (with where), the sweep's tracking error, the
+    cross-track error on lanes (what the lanes' overlap, coordinator.lane_overlap, has to
+    absorb), and the sim seconds per kind of control step (sweep, transit, turn in place,
+    escape, ...); per world the medians and totals. Deterministic for a seed, and fast (the
+    small world in seconds), so a change to the follower or the plan can be judged over many
+    seeds and maps.
 
     Examples: `fleet bench follow`; `fleet bench follow --worlds home --seeds 0-9 --json`;
     `fleet bench follow --worlds ../shared/data/maps/cob_ipa_apartment.yaml --pose truth`.
@@ -162,7 +164,8 @@ def bench_follow(
             f"{name}: {s['finished']}/{s['runs']} finished; medians: coverage "
             f"{100 * s['coverage']:.1f} %, repetition {100 * s['repetition']:.1f} %, time "
             f"×{s['time_over_estimate']} the plan's estimate; contacts {s['contacts']}, given "
-            f"up {s['given_up']} in all; worst tracking p95 {100 * s['tracking_p95_m']:.1f} cm"
+            f"up {s['given_up']} in all; worst tracking p95 {100 * s['tracking_p95_m']:.1f} cm, "
+            f"across lanes {100 * s['lane_cross_track_p95_m']:.1f} cm"
         )
 
 

@@ -1,24 +1,37 @@
-"""Lane placement on one lattice per room, with extra lanes only where the lattice leaves floor.
+"""Lanes in continuous coordinates on one lattice per room, with extra lanes only where the
+lattice leaves floor.
 
-Lanes lie between two rows of the room's rotated frame (half-integer row coordinates) and sweep
-exactly ``step`` rows each. Placing every cell's lanes on one lattice per room (row
-coordinates ``phase + k·step``) means cells stacked on each other never sweep the same strip:
-the lattice lane that straddles the border between a cell and the cell above belongs to the
-lower cell and spans where both rows are reachable. A cell adds a lane off the lattice (a clamp
-lane, as close to the wall as the uncovered floor needs and only as long as it) only where
-cleanable floor it owns lies below its first or above its last lattice lane — typically along a
-wall. Where the cell's width changes (a shoulder beside furniture or a doorway: the lattice lane
-stops short of a wall that steps out), a short shoulder lane, as close to the missed floor as the
-cell allows and only as long as it, sweeps each patch of at least ``SHOULDER_CELLS`` missed
-cells; shoulder lanes are tasks of their own, so the tour reaches them from whichever lane end
-is nearest. What is left (mostly single cells at lane ends) is for targeted fill-in passes.
-The phase is chosen per room among the ``step`` possible ones to minimise the total lane
-length.
+Swaths are laid out in continuous coordinates, as Fields2Cover (Mier et al. 2023) does, inside
+the cells of a boustrophedon decomposition (Choset 2000): a lane is ``(y, first col, last col)``
+in the room's rotated frame, ``y`` any real row coordinate, and the lattice lanes of a room lie
+at ``phase + k·spacing``, ``spacing`` being the robot's ``cleaning_width · (1 − overlap)`` in
+rows, not rounded to whole rows. A robot centre may take a lane at ``y`` where both rows next to
+it (``floor(y)`` and ``ceil(y)``) are robot-centre cells (``sweeps.lane_extent``): every point of
+the lane then lies in the square of a robot-centre cell.
+
+Placing every cell's lanes on one lattice per room means cells stacked on each other never sweep
+the same strip: the lattice lane between the top row of a cell and the row above belongs to the
+lower cell and spans where both rows are reachable. The room's phase is the one of least total
+lane length (shoulder lanes priced as separate tasks) among the phases that balance one of its
+cells' lattice in its reachable band (the first and the last lane equally far inside it) and
+the phases that put a lane on every whole row: balancing alone leaves a margin at both walls,
+which often costs a clamp lane at each where a lattice laid against one wall needs one (measured
+in BENCHMARKS.md, Cleaning efficiency); ties go to the balanced phases. A cell
+adds a lane off the lattice (a clamp lane, as close to the wall as the uncovered floor needs and
+only as long as it) only where cleanable floor it owns lies below its first or above its last
+lattice lane — typically along a wall. Where the cell's width changes (a shoulder beside
+furniture or a doorway: the lattice lane stops short of a wall that steps out), a short shoulder
+lane, as close to the missed floor as the cell allows and only as long as it, sweeps each patch
+of at least ``SHOULDER_CELLS`` missed cells; shoulder lanes are tasks of their own, so the tour
+reaches them from whichever lane end is nearest. What is left (mostly single cells at lane ends)
+is for targeted fill-in passes.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -30,6 +43,29 @@ from planners.grid import extend_labels
 SHOULDER_CELLS = 20
 # what a separate task costs beyond its lane, in cells of lane length, when choosing the phase
 TASK_COST_CELLS = 20
+# lane row coordinates this close to a whole row are that row (a lane on a row needs only it)
+_ROW_SNAP = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class RoomLanes:
+    """A room's lanes, per cell (n, 3) arrays ``(y, first col, last col)`` sorted by ``y``:
+    ``lattice`` its lanes on the room's lattice (``phase + k·spacing``, in rows), ``clamps``
+    its lanes off the lattice along its walls, ``shoulders`` its shoulder lanes."""
+
+    lattice: tuple[np.ndarray, ...]
+    clamps: tuple[np.ndarray, ...]
+    shoulders: tuple[np.ndarray, ...]
+    phase: float
+    spacing: float
+
+    def lanes(self) -> list[np.ndarray]:
+        """Per cell its lattice and clamp lanes together, sorted by ``y``: its boustrophedon."""
+        out = []
+        for lat, cl in zip(self.lattice, self.clamps, strict=True):
+            both = np.vstack([lat, cl])
+            out.append(both[np.argsort(both[:, 0], kind="stable")])
+        return out
 
 
 def room_lanes(
@@ -37,63 +73,107 @@ def room_lanes(
     rot: np.ndarray,
     clean_rot: np.ndarray,
     cell_labels_rot: np.ndarray,
-    step: int,
+    spacing: float,
     half_width: float,
-) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Per cell an (n, 3) array of lanes ``(y, first col, last col)`` sorted by ``y``, and per
-    cell an (m, 3) array of its shoulder lanes.
+) -> RoomLanes:
+    """The room's lanes, ``spacing`` rows apart on one lattice (the phase of least total lane
+    length, ties to a balanced one).
 
     ``rot`` is the room's robot-centre mask in its rotated frame, ``clean_rot`` the cleanable
     floor the room is responsible for, ``cell_labels_rot`` the cells' label image (1..n) and
-    ``half_width`` the swath half-width in cells.
+    ``half_width`` the swath half-width, both in rows.
     """
     if not cells:
-        return [], []
+        return RoomLanes((), (), (), 0.0, spacing)
     owner = extend_labels(cell_labels_rot, clean_rot)
-    rmin = min(c.row0 for c in cells)
-    best: tuple[float, tuple[list[np.ndarray], list[np.ndarray]]] | None = None
-    for shift in range(step):
-        lanes = _lanes_for_phase(cells, rot, clean_rot, owner, rmin + 0.5 + shift, step, half_width)
-        cost = float(
-            sum((ln[:, 2] - ln[:, 1] + 1).sum() + TASK_COST_CELLS * len(ln) for ln in lanes[1])
-            + sum((ln[:, 2] - ln[:, 1] + 1).sum() + len(ln) for ln in lanes[0])
-        )
-        if best is None or cost < best[0]:
+    best: tuple[float, RoomLanes] | None = None
+    for phase in _phases(cells, spacing):
+        lanes = _lanes_for_phase(cells, rot, clean_rot, owner, phase, spacing, half_width)
+        cost = _cost(lanes.shoulders, TASK_COST_CELLS) + _cost(lanes.lanes(), 1)
+        if best is None or cost < best[0] - 1e-9:
             best = (cost, lanes)
     assert best is not None
     return best[1]
 
 
+def _cost(lanes: Sequence[np.ndarray], per_lane: float) -> float:
+    """Total length of ``lanes`` in cells, plus ``per_lane`` cells for each."""
+    return float(sum((ln[:, 2] - ln[:, 1] + 1).sum() + per_lane * len(ln) for ln in lanes))
+
+
+def _phases(cells: list[MonotoneCell], spacing: float) -> list[float]:
+    """Candidate lattice phases in ``[0, spacing)``: per cell (largest first) the two that
+    centre its lattice lanes in its reachable band, both margins equal — with as many lanes as
+    fit (margins under half a spacing) and with one fewer (margins of half to one spacing,
+    which its clamp lanes share evenly at the two walls); then those that put a lane on every
+    whole row from the room's first row on (half a row above it, as lanes between two rows)."""
+    phases: list[float] = []
+    for cell in sorted(cells, key=lambda c: -c.cells):
+        height = cell.rows - 1
+        margin = (height - math.floor(height / spacing + 1e-9) * spacing) / 2
+        for p in (cell.row0 + margin, cell.row0 + margin + spacing / 2):
+            p = math.fmod(p, spacing)
+            if all(min(abs(p - q), spacing - abs(p - q)) > _ROW_SNAP for q in phases):
+                phases.append(p)
+    first = min(c.row0 for c in cells)
+    for k in range(math.ceil(spacing)):
+        p = math.fmod(first + 0.5 + k, spacing)
+        if all(min(abs(p - q), spacing - abs(p - q)) > _ROW_SNAP for q in phases):
+            phases.append(p)
+    return phases
+
+
 def _lanes_for_phase(
-    cells, rot, clean_rot, owner, phase, step, hw
-) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    cells: list[MonotoneCell],
+    rot: np.ndarray,
+    clean_rot: np.ndarray,
+    owner: np.ndarray,
+    phase: float,
+    spacing: float,
+    hw: float,
+) -> RoomLanes:
     lattice: list[list[tuple[float, int, int]]] = []
     covered = np.zeros(rot.shape, dtype=bool)
     for cell in cells:
-        lanes = _lattice_lanes(cell, rot, phase, step)
+        lanes = _lattice_lanes(cell, rot, phase, spacing)
         for y, lo, hi in lanes:
             _sweep(covered, y, lo, hi, hw)
         lattice.append(lanes)
-    out = []
+    clamps = []
     for k, (cell, lanes) in enumerate(zip(cells, lattice, strict=True), start=1):
         mine = clean_rot & (owner == k) & ~covered
+        extra: list[tuple[float, int, int]] = []
         for below in (True, False):
-            ys = [ln[0] for ln in lanes]
+            ys = [ln[0] for ln in lanes + extra]
             lane = _clamp_lane(cell, mine, ys, below, hw)
             if lane is not None:
                 _sweep(covered, *lane, hw)
                 mine &= ~covered
-                lanes.append(lane)
-        lanes.sort()
-        out.append(np.array(lanes, dtype=float).reshape(-1, 3))
+                extra.append(lane)
+        clamps.append(extra)
     shoulders = []
     for k, cell in enumerate(cells, start=1):
         mine = clean_rot & (owner == k) & ~covered
         extra = _shoulder_lanes(cell, mine, hw)
         for lane in extra:
             _sweep(covered, *lane, hw)
-        shoulders.append(np.array(extra, dtype=float).reshape(-1, 3))
-    return out, shoulders
+        shoulders.append(extra)
+    return RoomLanes(
+        tuple(_array(ln) for ln in lattice),
+        tuple(_array(ln) for ln in clamps),
+        tuple(_array(ln) for ln in shoulders),
+        phase,
+        spacing,
+    )
+
+
+def _array(lanes: list[tuple[float, int, int]]) -> np.ndarray:
+    return np.array(sorted(lanes), dtype=float).reshape(-1, 3)
+
+
+def _centre_band(cell: MonotoneCell) -> tuple[float, float]:
+    """The row coordinates a lane of the cell may take: its first to its last row."""
+    return float(cell.row0), float(cell.row0 + cell.rows - 1)
 
 
 def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
@@ -106,8 +186,8 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
         return []
     sizes = np.bincount(labels.ravel())[1:]
     boxes = ndimage.find_objects(labels)
-    reach = math.ceil(hw - 1e-9) - 0.5
-    top = cell.row0 + cell.rows - 1
+    reach = hw - 0.5
+    bottom, top = _centre_band(cell)
     out = []
     left = mine.copy()
     for lab in np.argsort(-sizes) + 1:
@@ -125,10 +205,7 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
         wants = [*edges, *np.arange(rr.min() - reach, rr.max() + reach + 1).tolist()]
         c_lo, c_hi = int(cc.min()) - 1, int(cc.max()) + 1
         for want in wants:
-            if cell.rows == 1:
-                y = float(cell.row0)
-            else:
-                y = float(min(max(want, cell.row0 + 0.5), top - 0.5))
+            y = float(min(max(want, bottom), top))
             lo, hi = lane_extent(cell, y)
             if lo > hi:
                 continue
@@ -144,24 +221,35 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
     return out
 
 
-def _lattice_lanes(cell: MonotoneCell, rot: np.ndarray, phase: float, step: int):
-    """The lattice lanes inside the cell, and the one straddling its top border if any."""
+def _lattice_lanes(
+    cell: MonotoneCell, rot: np.ndarray, phase: float, spacing: float
+) -> list[tuple[float, int, int]]:
+    """The lattice lanes inside the cell, and the one between its top row and the row above
+    if any."""
     if cell.rows == 1:
         return [(float(cell.row0), int(cell.left[0]), int(cell.right[0]))]
-    top = cell.row0 + cell.rows - 1
-    k0 = math.ceil((cell.row0 + 0.5 - phase) / step - 1e-9)
+    bottom, top = _centre_band(cell)
+    k = math.ceil((bottom - phase) / spacing - 1e-9)
     lanes = []
-    y = phase + k0 * step
-    while y <= top - 0.5 + 1e-9:
+    while True:
+        y = _snap(phase + k * spacing)
+        if y > top:
+            break
         lo, hi = lane_extent(cell, y)
         if lo <= hi:
-            lanes.append((float(y), lo, hi))
-        y += step
-    if abs(y - (top + 0.5)) < 1e-9 and top + 1 < rot.shape[0]:
-        span = _single_run(rot[top + 1], int(cell.left[-1]), int(cell.right[-1]))
+            lanes.append((y, lo, hi))
+        k += 1
+    row = int(top) + 1
+    if y < row and row < rot.shape[0]:
+        span = _single_run(rot[row], int(cell.left[-1]), int(cell.right[-1]))
         if span is not None:
-            lanes.append((float(y), *span))
+            lanes.append((y, *span))
     return lanes
+
+
+def _snap(y: float) -> float:
+    r = round(y)
+    return float(r) if abs(y - r) < _ROW_SNAP else y
 
 
 def _single_run(row: np.ndarray, lo: int, hi: int) -> tuple[int, int] | None:
@@ -180,19 +268,20 @@ def _clamp_lane(cell: MonotoneCell, mine: np.ndarray, ys: list[float], below: bo
     rr, cc = np.nonzero(mine)
     if len(rr) == 0:
         return None
-    reach = math.ceil(hw - 1e-9) - 0.5
+    reach = hw - 0.5
     if ys:
-        sel = rr < min(ys) - reach if below else rr > max(ys) + reach
+        # the rows the nearest lane leaves: at least hw away from it
+        sel = rr <= min(ys) - hw + 1e-9 if below else rr >= max(ys) + hw - 1e-9
         rr, cc = rr[sel], cc[sel]
     if len(rr) == 0:
         return None
-    top = cell.row0 + cell.rows - 1
+    bottom, top = _centre_band(cell)
     if cell.rows == 1:
-        y = float(cell.row0)
+        y = bottom
         lo, hi = int(cell.left[0]), int(cell.right[0])
     else:
         want = rr.min() + reach if below else rr.max() - reach
-        y = float(np.clip(want, cell.row0 + 0.5, top - 0.5))
+        y = float(np.clip(want, bottom, top))
         lo, hi = lane_extent(cell, y)
     if lo > hi:
         return None

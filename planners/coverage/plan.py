@@ -226,7 +226,7 @@ def _room_sweeps(
     doors = _dead_end_doors(grid, rooms)
     cell_labels = np.zeros(grid.shape, dtype=np.int32)
     room_img = extend_labels(rooms, floor.clean)
-    step = max(1, math.floor(params.lane_spacing(robot) / res + 1e-9))
+    spacing = params.lane_spacing(robot) / res
     hw = robot.cleaning_width / 2 / res
     room_tasks: list[list[SweepTask]] = []
     blocks: list[list[tuple[int, int]]] = []
@@ -241,7 +241,9 @@ def _room_sweeps(
         options = []
         for a in (angle, angle + math.pi / 2) if strips else (angle,):
             options.extend(
-                _room_options(grid, mask, room_mask, room, base, a, step, hw, params, robot, strips)
+                _room_options(
+                    grid, mask, room_mask, room, base, a, spacing, hw, params, robot, strips
+                )
             )
         best, tour = 0, []
         if len(options) > 1:
@@ -394,7 +396,7 @@ def _room_options(
     room: int,
     base: int,
     angle: float,
-    step: int,
+    spacing: float,
     hw: float,
     params: CoverageParams,
     robot: RobotSpec,
@@ -406,12 +408,13 @@ def _room_options(
     rot = resample(grid, mask, frame)
     # stacked cells always merge: the lattice, clamp lanes and fill-in take their shoulders
     labels, cells = decompose(rot, max_step=max(rot.shape))
-    lanes, shoulders = room_lanes(cells, rot, resample(grid, clean_mask, frame), labels, step, hw)
+    placed = room_lanes(cells, rot, resample(grid, clean_mask, frame), labels, spacing, hw)
+    lanes, shoulders = placed.lanes(), list(placed.shoulders)
     plain = _cell_tasks(room, base, cells, lanes, shoulders, None, frame, params, robot)
     out = [_RoomOption(plain, frame, labels, len(cells))]
     if strips:
         for high in (False, True):
-            clipped, cell_strips = return_strips(lanes, rot, step, high)
+            clipped, cell_strips = return_strips(lanes, rot, spacing, high)
             if any(cell_strips):
                 ts = _cell_tasks(
                     room, base, cells, clipped, shoulders, cell_strips, frame, params, robot

@@ -23,20 +23,23 @@ MIN_LANES = 3
 
 
 def return_strips(
-    lanes: list[np.ndarray], rot: np.ndarray, step: int, high: bool
+    lanes: list[np.ndarray], rot: np.ndarray, spacing: float, high: bool
 ) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
     """Per cell its lanes with the strips' width cut off their ends on one side (the last
     column's side when ``high``, else the first's), and per cell the strips as (n, 2) (row,
     col) polylines through the lanes' old end points.
 
-    A strip runs half a column inside the old ends, over consecutive lanes (at most ``step``
-    rows apart) at least ``2·step`` long whose ends lie at most ``step`` columns apart, as
-    long as the straight segments between those ends stay on robot-centre cells of ``rot``;
-    runs of fewer than ``MIN_LANES`` lanes are left alone.
+    A strip runs half a column inside the old ends, over consecutive lanes (at most
+    ``spacing`` rows apart) at least ``2·spacing`` long whose ends lie at most ``spacing``
+    columns apart, as long as the straight segments between those ends stay on robot-centre
+    cells of ``rot``; runs of fewer than ``MIN_LANES`` lanes are left alone. The lanes are
+    shortened by ``spacing`` rounded down to whole columns (lane ends are cell centres), so
+    strip and lanes overlap by at least the lanes' own overlap.
     """
     out_lanes = []
     out_strips = []
     end = 2 if high else 1
+    step = math.floor(spacing + 1e-9)
     # half a column in: a lane end at a cell centre sweeps ``step − 1`` columns across, a line
     # between two columns exactly ``step``, meeting the shortened lanes' ends
     inward = -0.5 if high else 0.5
@@ -47,11 +50,11 @@ def return_strips(
         pts: list[tuple[float, float]] = []
         for i in range(len(ln) + 1):
             p = None
-            if i < len(ln) and ln[i, 2] - ln[i, 1] >= 2 * step:
+            if i < len(ln) and ln[i, 2] - ln[i, 1] >= 2 * spacing:
                 p = (float(ln[i, 0]), float(ln[i, end] + inward))
             link = None
-            if p is not None and run and ln[i, 0] - ln[run[-1], 0] <= step + 1e-9:
-                link = _link(rot, pts[-1], p, step)
+            if p is not None and run and ln[i, 0] - ln[run[-1], 0] <= spacing + 1e-9:
+                link = _link(rot, pts[-1], p, spacing)
             if run and link is None:
                 strips.append(_cut(ln, run, pts, end, step))
                 run, pts = [], []
@@ -63,11 +66,11 @@ def return_strips(
     return out_lanes, out_strips
 
 
-def _link(rot, a, b, step) -> list[tuple[float, float]] | None:
+def _link(rot, a, b, spacing: float) -> list[tuple[float, float]] | None:
     """The strip's way from lane end ``a`` to the next lane's end ``b``: straight, or where
     the wall's staircase is in the way, along the first lane and then across; None if the
-    ends are more than ``step`` apart along the lanes or neither way is clear."""
-    if abs(a[1] - b[1]) > step:
+    ends are more than ``spacing`` apart along the lanes or neither way is clear."""
+    if abs(a[1] - b[1]) > spacing:
         return None
     if _clear(rot, a, b):
         return [b]

@@ -1,12 +1,13 @@
 """Sweep paths inside one boustrophedon cell, in the cell's rotated (row, col) coordinates.
 
-Lanes run along rows, on the lines between two cell rows (half-integer row coordinates), so a
-swath of width ``w`` spans exactly ``w / resolution`` rows of cell centres and lanes
-``spacing`` apart tile the cell without double counting. Where the lanes lie is decided by
-:mod:`planners.coverage.lattice` (one lattice per room); :func:`lane_rows` is the simple
-per-cell placement (first and last lanes half a row inside the outermost rows) used by the
-spiral's core. Consecutive lanes are joined along the cell's side (its outermost cells row by
-row), so the swath also reaches into the corners a straight lane misses.
+Lanes run along rows at a row coordinate ``y`` (any real number: a robot centre may take it
+where both rows next to it, ``floor(y)`` and ``ceil(y)``, are robot-centre cells). Where the
+lanes lie is decided by :mod:`planners.coverage.lattice` (continuous lanes exactly the lane
+spacing apart, one lattice per room); :func:`lane_rows` is the simple per-cell placement
+(half-integer rows, the spacing rounded down to whole rows; first and last lanes half a row
+inside the outermost rows) used by the spiral's core. Consecutive lanes are joined along the
+cell's side (its outermost cells row by row), so the swath also reaches into the corners a
+straight lane misses.
 """
 
 from __future__ import annotations

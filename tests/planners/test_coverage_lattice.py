@@ -37,8 +37,8 @@ def _sweep_counts(shape, lanes):
 def test_cells_around_a_table_share_one_lattice_and_rarely_sweep_the_same_strip():
     mask, labels, cells, clean = _ring_room()
     assert len(cells) == 4
-    lanes, shoulders = room_lanes(cells, mask, clean, labels, 6, 3.0)
-    lanes = lanes + shoulders
+    placed = room_lanes(cells, mask, clean, labels, 6, 3.0)
+    lanes = placed.lanes() + list(placed.shoulders)
     for ln in lanes:  # lane centres stay on robot-centre cells
         for y, lo, hi in ln:
             for r in {int(np.floor(y)), int(np.ceil(y))}:
@@ -63,7 +63,8 @@ def test_shoulder_lanes_sweep_the_strip_a_stepped_wall_leaves():
     labels, cells = decompose(mask, max_step=max(mask.shape))
     assert len(cells) == 1
     clean = dilate(mask, 3.0, 1.0)
-    lanes, shoulders = room_lanes(cells, mask, clean, labels, 6, 3.0)
+    placed = room_lanes(cells, mask, clean, labels, 6, 3.0)
+    lanes, shoulders = placed.lanes(), list(placed.shoulders)
     assert len(shoulders[0]) >= 1
     without = (_sweep_counts(mask.shape, lanes)[clean] >= 1).mean()
     with_shoulders = (_sweep_counts(mask.shape, lanes + shoulders)[clean] >= 1).mean()
