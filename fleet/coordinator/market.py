@@ -306,16 +306,15 @@ class Market:
             for rec in self.job.tasks.values()
             if rec.state in (OPEN, ASSIGNED) and planner.near_bodies(rec.task.path)
         ]
-        taken: list[str] = []
+        taken: list[str] = []  # what was taken back (saved: open, replaced or done) and opened
         for tid in near:
             rec = self.job.tasks[tid]
             if rec.state != ASSIGNED or rec.owner is None:
                 continue
-            owner = rec.owner
-            for later in self.job.queue(owner):
-                if later.position >= rec.position:
-                    self.journal.event("withdrawn", owner, later.task.id, f"near {body}'s body")
-            taken += self.job.take_back(tid)
+            gone = [r.task.id for r in self.job.queue(rec.owner) if r.position >= rec.position]
+            for later in gone:
+                self.journal.event("withdrawn", rec.owner, later, f"near {body}'s body")
+            taken += gone + self.job.take_back(tid)
         self.dispatcher.cut(taken)
         opened = [t for t in dict.fromkeys([*near, *taken]) if self.job.tasks[t].state == OPEN]
         for tid in opened:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
+from fleet.coordinator.store import JobStore
 from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import (
     Award,
@@ -402,6 +404,36 @@ def test_a_robot_lost_between_the_rounds_of_a_long_auction_wins_nothing_after(
     assert len(rounds) >= 3 and winners[:2] == ["robot-1", "robot-1"]
     assert set(winners[2:]) == {"robot-0"}
     assert all(r.owner == "robot-0" for r in c.job.tasks.values() if r.owner is not None)
+
+
+def test_every_task_a_body_takes_back_is_saved_in_its_new_state(
+    planner: TaskPlanner, tmp_path: Path
+) -> None:
+    """robot-0 has swept part of t00 when robot-1 dies on its lane: t00 is replaced by its
+    remainder, planned round the body. The store holds t00 as replaced, not as still assigned
+    (a resumed coordinator, and report.json, read the job from it)."""
+    c = Coordinator(planner, ["robot-0", "robot-1", "robot-2"])
+    store = JobStore(tmp_path / "job.sqlite")
+    c.journal.store = store
+    job = c.job
+    job.tasks.clear()
+    job.add_tasks((_lane("t00", 0.85), _lane("t01", 1.6)))
+    job.award("t00", "robot-0", False)
+    pieces = job.tasks["t00"].task.pieces
+    assert job.progress("robot-0", "t00", np.array([1] + [0] * (pieces - 1), dtype=np.uint8))
+    c.journal.save_tasks("t00", "t01")
+    job.robots["robot-1"].xy = (2.0, 0.85)
+    try:
+        c.market.lose("robot-1", "its liveliness token is gone")
+        assert job.tasks["t00"].state == REPLACED and job.tasks["t00.1"].parent == "t00"
+        saved = Job(CoverageParams(), ROBOT, 0.0)
+        store.load_job(saved)
+        assert {t: r.state for t, r in saved.tasks.items()} == {
+            t: r.state for t, r in job.tasks.items()
+        }
+    finally:
+        planner.set_bodies(np.zeros((0, 2)))
+        store.close()
 
 
 def test_a_stuck_robots_work_is_sold_to_an_idle_one(planner: TaskPlanner) -> None:
