@@ -259,6 +259,7 @@ class Market:
     def lose(self, rid: str, why: str) -> None:
         """``rid`` is lost: its unswept remainder and unstarted tasks go on sale at once, as
         regions; it drives no plan."""
+        queued = [r.task.id for r in self.job.queue(rid)]  # each saved in its new state
         reopened, made = self.job.lose(rid)
         self.version += 1
         self.journal.event("lost", rid, "", why)
@@ -266,8 +267,7 @@ class Market:
         self.region_sale += reopened
         for tid in reopened:
             self.journal.event("reopened", rid, tid, "remainder" if tid in made else "unstarted")
-        changed = [r.task.id for r in self.job.tasks.values() if r.owner is None]
-        self.journal.save_tasks(*changed)
+        self.journal.save_tasks(*queued, *reopened)
         self.dispatcher.forget(rid)
         self.progress.pop(rid, None)
         xy = self.job.robots[rid].xy
@@ -380,12 +380,12 @@ class Market:
     def stuck(self, rid: str, why: str) -> None:
         """``rid`` is alive but gets nowhere: its work goes back to the market (what it was
         driving as tried by it), and it waits for other work, planned from where it stands."""
+        queued = [r.task.id for r in self.job.queue(rid)]  # each saved in its new state
         reopened = self.job.release(rid)
         self.journal.event("stuck", rid, "", f"{why}; its work goes back to the market")
         for tid in reopened:
             self.journal.event("reopened", rid, tid, "from a stuck robot")
-        parents = [p for t in reopened if (p := self.job.tasks[t].parent) is not None]
-        self.journal.save_tasks(*reopened, *parents)
+        self.journal.save_tasks(*queued, *reopened)
         self.dispatcher.forget(rid)
         self.progress.pop(rid, None)
         self.version += 1

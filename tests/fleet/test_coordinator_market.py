@@ -436,15 +436,17 @@ def test_every_task_a_body_takes_back_is_saved_in_its_new_state(
         store.close()
 
 
-def test_a_stuck_robots_work_is_sold_to_an_idle_one(planner: TaskPlanner) -> None:
+def test_a_stuck_robots_work_is_sold_to_an_idle_one(planner: TaskPlanner, tmp_path: Path) -> None:
     """robot-0 is alive and reports its plan, but reaches no waypoint of it for stall_s while
-    it escapes and gives them up one by one: its work goes back on sale, and although it bids
-    lowest, idle robot-1 wins what robot-0 was driving."""
+    it escapes and gives them up one by one: its work goes back on sale (saved in its new
+    states), and although it bids lowest, idle robot-1 wins what robot-0 was driving."""
     c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.journal.store = store = JobStore(tmp_path / "job.sqlite")
     c.market.stall_s = 30.0
     job = c.job
     job.award("t00", "robot-0", False)
     job.award("t01", "robot-0", False)
+    c.journal.save_tasks(*job.tasks)
     job.progress("robot-0", "t00", np.array([1, 0, 0, 0], dtype=np.uint8))
     c.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", job.tasks["t00"].task.path, 0)
 
@@ -464,11 +466,17 @@ def test_a_stuck_robots_work_is_sold_to_an_idle_one(planner: TaskPlanner) -> Non
     assert job.queue("robot-0") == [] and "robot-0" not in c.dispatcher.plans
     rest = next(t for t, r in job.tasks.items() if r.parent == "t00")
     assert job.tasks[rest].tried == {"robot-0"} and job.tasks["t01"].state == OPEN
+    saved = Job(CoverageParams(), ROBOT, 0.0)
+    store.load_job(saved)
+    assert {t: r.state for t, r in saved.tasks.items()} == {
+        t: r.state for t, r in job.tasks.items()
+    }
 
     c.bidding = {"robot-0": 1.0, "robot-1": 30.0}
     c.market.auction(c.auctioneer)
     assert job.tasks[rest].owner == "robot-1"
     assert job.tasks["t01"].owner in ("robot-0", "robot-1")
+    store.close()
 
 
 def test_holding_for_a_peer_is_not_being_stuck(planner: TaskPlanner) -> None:
