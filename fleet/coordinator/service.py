@@ -16,8 +16,8 @@ and runs the main loop; each part has one job:
 - :class:`fleet.coordinator.dispatcher.Dispatcher`: plans and transits.
 
 A robot is lost when its liveliness token goes (a dead process) or its wall-clock heartbeat is
-silent for ``coordinator.heartbeat_timeout_s`` (a hung one); one heard from again rejoins. The
-coordinator never reads truth.
+silent for ``coordinator.heartbeat_timeout_s`` (a hung one; checked in the main loop and before
+each auction round); one heard from again rejoins. The coordinator never reads truth.
 
 Its clock is the simulator's (``sim/clock``), as :class:`fleet.plausible.SimClock` believes it;
 no robot's message moves it. Each receiver checks what it hears against what it knows
