@@ -41,7 +41,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from fleet.bench.recovery import _after, _quantiles, to_reassign
+from fleet.bench.recovery import events_after, quantiles, to_reassign
 from fleet.bus import Bus
 from fleet.params import FleetConfig, load_fleet_config
 from fleet.plausible import SimClock as BelievedClock
@@ -245,7 +245,7 @@ def make_fault(fleet: RunningFleet, fault: Fault, rogue: Callable[[], Rogue]) ->
     made: dict[str, Any] = {**asdict(fault), "seq": _last_seq(fleet), "sent": time.time()}
     if fault.kind == "kill-agent":
         fleet.signal(fault.target, signal.SIGKILL)
-        fleet.wait(lambda: _after(fleet.events(), made["seq"], "lost", fault.target), 10.0)
+        fleet.wait(lambda: events_after(fleet.events(), made["seq"], "lost", fault.target), 10.0)
         made["respawn"] = fleet.verb("respawn", fault.target).returncode
     elif fault.kind == "stop-agent":
         fleet.signal(fault.target, signal.SIGSTOP)
@@ -268,29 +268,29 @@ def fault_outcome(events: list[dict[str, Any]], made: dict[str, Any]) -> dict[st
     out["fired"] = made.get("fired", True)
     seq, target = made.get("seq", 0), made["target"]
     if made["kind"] == "kill-coordinator":
-        resumed = _after(events, seq, "resumed")
+        resumed = events_after(events, seq, "resumed")
         out["resumed_s"] = round(resumed[0]["wall"] - made["sent"], 3) if resumed else None
         return out
     if made["kind"] == "rogue" or not out["fired"]:
         return out
     lost = [
         e
-        for e in _after(events, seq, "lost", target)
+        for e in events_after(events, seq, "lost", target)
         if e["wall"] - made["sent"] <= NOTICED_WITHIN_S
     ]
     out["detection_s"] = round(lost[0]["wall"] - made["sent"], 3) if lost else None
     out["reassignment_s"] = None
-    out["rejoined"] = bool(_after(events, seq, "rejoined", target))
+    out["rejoined"] = bool(events_after(events, seq, "rejoined", target))
     if lost:
         # the work it held when lost: reopened before it was lost again
         until = lost[1]["seq"] if len(lost) > 1 else float("inf")
         reopened = {
             e["task"]
-            for e in _after(events, lost[0]["seq"], "reopened", target)
+            for e in events_after(events, lost[0]["seq"], "reopened", target)
             if e["seq"] < until
         }
-        due = to_reassign(_after(events, lost[0]["seq"], "rerouted"), reopened)
-        done = [e for e in _after(events, lost[0]["seq"], "reassigned") if e["task"] in due]
+        due = to_reassign(events_after(events, lost[0]["seq"], "rerouted"), reopened)
+        done = [e for e in events_after(events, lost[0]["seq"], "reassigned") if e["task"] in due]
         if done:
             out["reassignment_s"] = round(max(e["wall"] for e in done) - lost[0]["wall"], 3)
         out["all_reassigned"] = {e["task"] for e in done} >= due
@@ -435,11 +435,11 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         ]
         per_kind[kind] = {
             "made": len(mine),
-            "detection_s": _quantiles([f["detection_s"] for f in mine if f.get("detection_s")]),
-            "reassignment_s": _quantiles(
+            "detection_s": quantiles([f["detection_s"] for f in mine if f.get("detection_s")]),
+            "reassignment_s": quantiles(
                 [f["reassignment_s"] for f in mine if f.get("reassignment_s") is not None]
             ),
-            "resumed_s": _quantiles([f["resumed_s"] for f in mine if f.get("resumed_s")]),
+            "resumed_s": quantiles([f["resumed_s"] for f in mine if f.get("resumed_s")]),
             "makespan_ratio_mean": round(float(np.mean(ratios)), 3) if ratios else None,
         }
     coverages = [r["coverage"] for r in rows if r["coverage"] is not None]

@@ -46,7 +46,8 @@ def to_reassign(events: list[dict], reopened: set[str]) -> set[str]:
     return due
 
 
-def _after(events: list[dict], seq: int, kind: str, robot: str | None = None) -> list[dict]:
+def events_after(events: list[dict], seq: int, kind: str, robot: str | None = None) -> list[dict]:
+    """The ``kind`` events after sequence number ``seq`` (of ``robot``, when given)."""
     return [
         e
         for e in events
@@ -60,18 +61,19 @@ def _trial(fleet: RunningFleet, victim: str, hang: bool) -> dict[str, Any] | Non
     sent = fleet.signal(victim, signal.SIGSTOP if hang else signal.SIGKILL)
 
     def lost() -> list[dict]:
-        return _after(fleet.events(), before, "lost", victim)
+        return events_after(fleet.events(), before, "lost", victim)
 
     if not fleet.wait(lost, DETECT_TIMEOUT_S):
         return None
     event = lost()[0]
-    reopened = {e["task"] for e in _after(fleet.events(), event["seq"], "reopened", victim)}
+    reopened = {e["task"] for e in events_after(fleet.events(), event["seq"], "reopened", victim)}
 
     def due() -> set[str]:
-        return to_reassign(_after(fleet.events(), event["seq"], "rerouted"), reopened)
+        return to_reassign(events_after(fleet.events(), event["seq"], "rerouted"), reopened)
 
     def reassigned() -> list[dict]:
-        return [e for e in _after(fleet.events(), event["seq"], "reassigned") if e["task"] in due()]
+        sold = events_after(fleet.events(), event["seq"], "reassigned")
+        return [e for e in sold if e["task"] in due()]
 
     fleet.wait(lambda: {e["task"] for e in reassigned()} >= due(), DETECT_TIMEOUT_S)
     done = reassigned()
@@ -80,7 +82,7 @@ def _trial(fleet: RunningFleet, victim: str, hang: bool) -> dict[str, Any] | Non
     else:
         fleet.verb("respawn", victim)
     rejoined = fleet.wait(
-        lambda: _after(fleet.events(), event["seq"], "rejoined", victim), REJOIN_TIMEOUT_S
+        lambda: events_after(fleet.events(), event["seq"], "rejoined", victim), REJOIN_TIMEOUT_S
     )
     return {
         "signal": "STOP" if hang else "KILL",
@@ -121,7 +123,7 @@ def latency_trials(
     return trials
 
 
-def _quantiles(values: list[float]) -> dict[str, float | None]:
+def quantiles(values: list[float]) -> dict[str, float | None]:
     if not values:
         return {"n": 0, "median": None, "p95": None, "max": None}
     a = np.asarray(values)
@@ -137,8 +139,8 @@ def summarize(trials: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for sig in ("KILL", "STOP"):
         mine = [t for t in trials if t["signal"] == sig]
-        out[f"detection_{sig.lower()}_s"] = _quantiles([t["detection_s"] for t in mine])
-    out["reassignment_s"] = _quantiles(
+        out[f"detection_{sig.lower()}_s"] = quantiles([t["detection_s"] for t in mine])
+    out["reassignment_s"] = quantiles(
         [t["reassignment_s"] for t in trials if t["reassignment_s"] is not None]
     )
     out["rejoined"] = sum(t["rejoined"] for t in trials)
@@ -162,7 +164,7 @@ def _scenario(
             failure = {"victim": victim, "sim_s": round(clock.t, 2)}
             fleet.signal(victim, signal.SIGKILL)
             if name == "kill-respawn":
-                fleet.wait(lambda: _after(fleet.events(), before, "lost", victim), 10.0)
+                fleet.wait(lambda: events_after(fleet.events(), before, "lost", victim), 10.0)
                 fleet.verb("respawn", victim)
             elif name == "coordinator-restart":
                 time.sleep(2.0)
@@ -187,7 +189,7 @@ def _scenario(
     if name == "kill-respawn":
         rejoin = next((e for e in events if e["kind"] == "rejoined"), None)
         result["respawned_robot_tasks_done"] = (
-            len(_after(events, rejoin["seq"], "done", "robot-1")) if rejoin else 0
+            len(events_after(events, rejoin["seq"], "done", "robot-1")) if rejoin else 0
         )
     return result
 
@@ -201,7 +203,7 @@ def auction_ms_per_lot(root: Path) -> dict[str, float | None]:
                 lots, _, rest = e["detail"].partition(" lots in ")
                 with contextlib.suppress(ValueError):
                     per_lot.append(float(rest.split()[0]) / int(lots))
-    return _quantiles(per_lot)
+    return quantiles(per_lot)
 
 
 def run_bench(

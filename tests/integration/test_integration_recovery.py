@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from fleet_runs import FleetRun
 
-from fleet.bench.recovery import to_reassign
+from fleet.bench.recovery import events_after, to_reassign
 from fleet.bus import Bus
 from fleet.protocol import Award, Bid, Keys
 
@@ -36,10 +36,6 @@ def _check_floor(run: FleetRun, report: dict) -> None:
     assert report["overlaps"] == [], run.explained()
     settled = ("done", "replaced", "unreachable")
     assert all(t["state"] in settled for t in report["tasks"]), run.explained()
-
-
-def _after(events: list[dict], seq: int, kind: str, robot: str) -> list[dict]:
-    return [e for e in events if e["seq"] > seq and e["kind"] == kind and e["robot"] == robot]
 
 
 @pytest.fixture
@@ -79,16 +75,16 @@ def _hang(fleet: FleetRun, robot: str) -> dict:
     stopped_at = time.monotonic()
     fleet.verb("kill", robot, "--signal", "STOP")
     fleet.wait_for(
-        lambda: _after(fleet.events(), before, "lost", robot),
+        lambda: events_after(fleet.events(), before, "lost", robot),
         timeout=5,
         what=f"{robot} lost while it hangs",
     )
-    lost = _after(fleet.events(), before, "lost", robot)[0]
+    lost = events_after(fleet.events(), before, "lost", robot)[0]
     assert "heartbeat" in lost["detail"]
     time.sleep(max(0.0, 5.0 - (time.monotonic() - stopped_at)))
     fleet.verb("kill", robot, "--signal", "CONT")
     fleet.wait_for(
-        lambda: _after(fleet.events(), lost["seq"], "rejoined", robot),
+        lambda: events_after(fleet.events(), lost["seq"], "rejoined", robot),
         timeout=30,
         what=f"{robot} rejoined",
     )
@@ -100,21 +96,23 @@ def _kill_and_respawn(fleet: FleetRun, robot: str) -> dict:
     before = max(e["seq"] for e in fleet.events())
     fleet.verb("kill", robot, "--signal", "KILL")
     fleet.wait_for(
-        lambda: _after(fleet.events(), before, "lost", robot), timeout=10, what=f"{robot} lost"
+        lambda: events_after(fleet.events(), before, "lost", robot),
+        timeout=10,
+        what=f"{robot} lost",
     )
-    lost = _after(fleet.events(), before, "lost", robot)[0]
-    reopened = {e["task"] for e in _after(fleet.events(), lost["seq"], "reopened", robot)}
+    lost = events_after(fleet.events(), before, "lost", robot)[0]
+    reopened = {e["task"] for e in events_after(fleet.events(), lost["seq"], "reopened", robot)}
     fleet.wait_for(
         lambda: (
             {e["task"] for e in fleet.events("reassigned")}
-            >= to_reassign(_after(fleet.events(), lost["seq"], "rerouted", robot), reopened)
+            >= to_reassign(events_after(fleet.events(), lost["seq"], "rerouted", robot), reopened)
         ),
         timeout=10,
         what=f"{robot}'s tasks reassigned",
     )
     fleet.verb("respawn", robot)
     fleet.wait_for(
-        lambda: _after(fleet.events(), lost["seq"], "rejoined", robot),
+        lambda: events_after(fleet.events(), lost["seq"], "rejoined", robot),
         timeout=60,
         what=f"{robot} rejoined",
     )
@@ -132,16 +130,15 @@ def test_the_floor_is_cleaned_through_a_kill_a_coordinator_restart_and_a_hang(fl
     events = fleet.events()
     assert len(fleet.events("planned")) == 1, "the restarted coordinator planned the job again"
     # the hung robot's work went to others at once
-    back = _after(events, hung["seq"], "rejoined", "robot-2")[0]["seq"]
-    reopened = {
-        e["task"] for e in _after(events, hung["seq"], "reopened", "robot-2") if e["seq"] < back
-    }
+    back = events_after(events, hung["seq"], "rejoined", "robot-2")[0]["seq"]
+    given = events_after(events, hung["seq"], "reopened", "robot-2")
+    reopened = {e["task"] for e in given if e["seq"] < back}
     reassigned = {e["task"] for e in fleet.events("reassigned")}
-    due = to_reassign(_after(events, hung["seq"], "rerouted", "robot-2"), reopened)
+    due = to_reassign(events_after(events, hung["seq"], "rerouted", "robot-2"), reopened)
     assert due <= reassigned, fleet.explained()
     # the respawned robot found itself in its saved map, won work and finished some of it
     assert "found itself" in (fleet.dir / "robot-1.log").read_text(), fleet.explained()
-    assert _after(events, killed["seq"], "done", "robot-1"), fleet.explained()
+    assert events_after(events, killed["seq"], "done", "robot-1"), fleet.explained()
     # garbage on the market's keys was counted and dropped, and nothing crashed
     assert report["rejected_bids"].get("late", 0) >= 1, fleet.explained()
     assert report["rejected_bids"].get("malformed", 0) >= 1, fleet.explained()
