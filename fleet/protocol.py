@@ -801,6 +801,8 @@ def _check_shapes(msg: Message) -> None:
 
 
 def _check_plan(msg: Plan) -> None:
+    """A plan's indices within its path, its chain's starts one per task, and its parallel
+    ``wait_*`` fields (the order of passage) one entry per wait each."""
     last = max(len(msg.waypoints) - 1, 0)
     if not 0 <= msg.sweep_from <= last:
         raise DecodeError(f"plan.sweep_from: {msg.sweep_from} is not a waypoint index")
@@ -811,6 +813,13 @@ def _check_plan(msg: Plan) -> None:
         starts[0] != msg.sweep_from or np.any(np.diff(starts) < 0) or starts[-1] > last
     ):
         raise DecodeError("plan.chain_starts: must begin at sweep_from and rise within the path")
+    n = len(msg.wait_at)
+    for name in ("wait_for", "wait_plan", "wait_passed"):
+        if len(getattr(msg, name)) != n:
+            raise DecodeError(
+                f"plan.{name}: {len(getattr(msg, name))} entries for {n} in wait_at"
+                " (the order of passage is one row per wait)"
+            )
 
 
 MAX_MAP_TILE = 1024

@@ -120,6 +120,8 @@ def messages(draw: st.DrawFn, cls: type[Message]) -> Message:
     elif cls is Plan:
         fixed["sweep_from"] = 0
         fixed["chain"] = []
+        fixed["wait_for"] = draw(st.lists(TEXT, max_size=5))
+        lengths = dict.fromkeys(("wait_at", "wait_plan", "wait_passed"), len(fixed["wait_for"]))
         lengths["chain_starts"] = 0
     elif cls is CoverageImage:
         fixed["rows"] = draw(st.integers(0, 6))
@@ -444,6 +446,15 @@ def test_cross_field_shapes_are_checked() -> None:
     image["cols"], image["rows"] = -3, -2
     with pytest.raises(DecodeError):
         decode(_pack(image), CoverageImage)
+
+
+@pytest.mark.parametrize("name", ["wait_for", "wait_plan", "wait_passed", "wait_at"])
+def test_plan_wait_fields_of_other_lengths_are_refused_by_name(name: str) -> None:
+    raw = _valid_map(_example(Plan))
+    raw[name] = ["r0"] if name == "wait_for" else np.ones(1, "<i4").tobytes()
+    shown = "wait_for" if name == "wait_at" else name
+    with pytest.raises(DecodeError, match=f"plan.{shown}: "):
+        decode(_pack(raw), Plan)
 
 
 def test_map_patches_round_trip_their_cells_and_reject_bad_geometry() -> None:
