@@ -227,11 +227,33 @@ class StampWatch:
     its own :class:`SimClock`, fed every clock message (``hear_clock``), and messages stamped
     farther past it than any robot's can be, dropped through ``drop`` (``ahead``). Such a
     message would otherwise stand as a robot's newest status or pose, or the newest coverage,
-    and hide every real one after it."""
+    and hide every real one after it. It also knows the robots in the job (``join``: their
+    liveliness tokens heard, as the coordinator and the agents know them) and drops what a robot
+    not among them sends (``stranger``), which would otherwise stand as a robot of the fleet.
+    Thread-safe.
+    """
 
     def __init__(self, step_s: float, drop: Drop, clock_key: str) -> None:
         self.drop = drop
         self.clock = SimClock(step_s, lambda n, why: drop(clock_key, "sim", why, n))
+        self._members: set[str] = set()
+        self._lock = threading.Lock()
+
+    def join(self, rid: str) -> None:
+        """Robot ``rid`` is in the job: its liveliness token was heard (it stays in the job
+        once its token goes)."""
+        with self._lock:
+            self._members.add(rid)
+
+    def stranger(self, key: str, sender: str) -> bool:
+        """Whether to drop the message on ``key`` from robot ``sender``: it is not in the job
+        (see :meth:`join`); then it is counted."""
+        with self._lock:
+            known = sender in self._members
+        if known:
+            return False
+        self.drop(key, sender, "not in the job: no liveliness token of it heard")
+        return True
 
     def hear_clock(self, _key: str, msg: Clock) -> None:
         self.clock.hear(msg.stamp)

@@ -185,8 +185,9 @@ class FleetWatcher:
         watch: StampWatch | None = None,
     ) -> None:
         """``watch``: the sim clock the view judges stamps by (messages stamped past it are
-        dropped and counted); None takes every stamp as it comes (tests, the dashboard bench).
-        """
+        dropped and counted) and the robots in the job, fed by :meth:`on_alive` (statuses,
+        intents and heartbeats of other robots are dropped and counted); None takes every
+        message as it comes (tests, the dashboard bench)."""
         self.keys = Keys(fleet)
         self.watch = watch
         self.silent_after_s = silent_after_s
@@ -222,6 +223,9 @@ class FleetWatcher:
     def _ahead(self, key: str, sender: str, stamp: float) -> bool:
         return self.watch is not None and self.watch.ahead(key, sender, stamp)
 
+    def _stranger(self, key: str, rid: str) -> bool:
+        return self.watch is not None and self.watch.stranger(key, rid)
+
     def on_clock(self, _key: str, m: Clock) -> None:
         # the view samples the clock at each redraw; its watch hears every clock message and
         # has counted a forged one already
@@ -250,7 +254,7 @@ class FleetWatcher:
 
     def on_status(self, key: str, m: RobotStatus) -> None:
         rid = self.keys.robot_of(key)
-        if self._ahead(key, rid, m.stamp):
+        if self._stranger(key, rid) or self._ahead(key, rid, m.stamp):
             return
         with self.lock:
             robot = self._robot(rid)
@@ -288,12 +292,18 @@ class FleetWatcher:
             robot.speed = math.hypot(m.x - x0, m.y - y0) / (m.stamp - t0) if m.stamp > t0 else 0.0
 
     def on_intent(self, key: str, m: Intent) -> None:
+        rid = self.keys.robot_of(key)
+        if self._stranger(key, rid):
+            return
         with self.lock:
-            self._robot(self.keys.robot_of(key)).intent = m.points[:, 1:3].copy()
+            self._robot(rid).intent = m.points[:, 1:3].copy()
 
     def on_heartbeat(self, key: str, _m: Heartbeat) -> None:
+        rid = self.keys.robot_of(key)
+        if self._stranger(key, rid):
+            return
         with self.lock:
-            self._robot(self.keys.robot_of(key)).heartbeat_wall = time.time()
+            self._robot(rid).heartbeat_wall = time.time()
 
     def on_plan(self, _key: str, m: Plan) -> None:
         with self.lock:
@@ -318,7 +328,9 @@ class FleetWatcher:
             self._event(time.time(), "contact", _line(m.stamp, "contact", m.robot, rest))
 
     def on_alive(self, rid: str, alive: bool) -> None:
-        """An agent's liveliness token appeared (``alive``) or went."""
+        """An agent's liveliness token appeared (``alive``) or went: it is in the job."""
+        if self.watch is not None:
+            self.watch.join(rid)
         with self.lock:
             robot = self._robot(rid)
             robot.alive = alive

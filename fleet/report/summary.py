@@ -278,7 +278,8 @@ class RunRecorder:
 
     def __init__(self, bus: Bus, clock_step_s: float) -> None:
         """``clock_step_s``: how far past the sim clock (``fleet.plausible.Bounds``) a message
-        may be stamped before it is dropped (``watch``, shared with the live view)."""
+        may be stamped before it is dropped (``watch``, shared with the live view); statuses of
+        robots whose liveliness token it never heard are dropped too."""
         self.lock = threading.Lock()
         self.watch = StampWatch(clock_step_s, bus.drop_implausible, bus.keys.clock())
         self.tracks: dict[str, list[tuple[float, float, float]]] = {}
@@ -293,6 +294,7 @@ class RunRecorder:
         bus.subscribe(bus.keys.collisions(), Collision, self._on_collision)
         bus.subscribe(bus.keys.all_robots("status"), RobotStatus, self._on_status)
         bus.subscribe(bus.keys.plan("*"), Plan, self._on_plan)
+        bus.watch_alive("agent", self.watch.join, self.watch.join)
 
     def _on_truth(self, key: str, m: TruthPose) -> None:
         if self.watch.ahead(key, "sim", m.stamp):
@@ -316,9 +318,12 @@ class RunRecorder:
             self.collisions.append(m)
 
     def _on_status(self, key: str, m: RobotStatus) -> None:
-        if len(m.time_s) != len(TIME_KINDS) or self.watch.ahead(key, self._robot_of(key), m.stamp):
+        rid = self._robot_of(key)
+        if len(m.time_s) != len(TIME_KINDS):
             return
-        row = (m.stamp, self._robot_of(key), m.plan_id, m.waypoint, *m.time_s.tolist())
+        if self.watch.stranger(key, rid) or self.watch.ahead(key, rid, m.stamp):
+            return
+        row = (m.stamp, rid, m.plan_id, m.waypoint, *m.time_s.tolist())
         with self.lock:
             self.status.append(row)
 

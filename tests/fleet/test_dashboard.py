@@ -24,6 +24,8 @@ from fleet.protocol import (
     Collision,
     FleetEvent,
     FleetState,
+    Heartbeat,
+    Intent,
     Keys,
     Message,
     Plan,
@@ -361,6 +363,7 @@ def test_the_view_drops_what_is_stamped_past_the_sim_clock() -> None:
     for t in (9.9, 10.0, 10.1):
         watch.hear_clock(KEYS.clock(), Clock(t, 1.0))
     w = FleetWatcher(watch=watch)
+    w.on_alive("robot-1", True)
     key = KEYS.robot("robot-1", "status")
     for t in (1e9, 10.2):
         w.on_status(key, _recorded(RobotStatus(t, "driving", f"t{t:.0f}", 0.4, 3, 10, 4.2)))
@@ -370,3 +373,26 @@ def test_the_view_drops_what_is_stamped_past_the_sim_clock() -> None:
     assert status is not None and status.stamp == 10.2
     assert w.clock == 10.1
     assert dropped == [(key, "robot-1")]
+
+
+def test_the_view_drops_what_robots_not_in_the_job_send() -> None:
+    """A status, intent or heartbeat from a robot whose liveliness token the view never heard
+    would show it as a robot of the fleet (and put it in report.json): with its watch the view
+    drops each, counted with the sender named, and takes those of robots in the job, also
+    once a robot's token went."""
+    dropped: list[tuple[str, str]] = []
+    watch = StampWatch(0.5, lambda key, who, why, n=1: dropped.append((key, who)), KEYS.clock())
+    w = FleetWatcher(watch=watch)
+    w.on_alive("robot-0", True)
+    w.on_alive("robot-0", False)
+    points = np.array([[1.0, 0.5, 0.5], [2.0, 0.6, 0.5]])
+    for rid in ("ghost", "robot-0"):
+        w.on_status(KEYS.robot(rid, "status"), RobotStatus(1.0, "driving", "t00", 0.5, 1, 2, 0.0))
+        w.on_intent(KEYS.robot(rid, "intent"), Intent(1.0, points, 1, 1))
+        w.on_heartbeat(KEYS.robot(rid, "heartbeat"), Heartbeat(1.0, 1, True))
+    assert list(w.robots) == ["robot-0"]
+    robot = w.robots["robot-0"]
+    assert robot.status is not None and robot.intent is not None
+    assert dropped == [
+        (KEYS.robot("ghost", topic), "ghost") for topic in ("status", "intent", "heartbeat")
+    ]

@@ -206,6 +206,9 @@ class _Bus:
     def subscribe(self, key: str, _type: type, handler: Callable) -> None:
         self.handlers[key] = handler
 
+    def watch_alive(self, _role: str, on_join: Callable, _on_leave: Callable) -> None:
+        self.handlers["alive"] = on_join
+
     def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
         self.dropped.append((key, sender, why))
 
@@ -215,6 +218,7 @@ def test_the_recorder_writes_the_statuses_and_plans_the_breakdown_reads(tmp_path
     recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
     keys = bus.keys
     seconds = np.arange(len(TIME_KINDS), dtype=float)
+    bus.handlers["alive"]("robot-1")
     for t in (1.5, 1.0):
         status = RobotStatus(t, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=t * seconds)
         bus.handlers[keys.all_robots("status")](keys.robot("robot-1", "status"), status)
@@ -241,6 +245,7 @@ def test_the_recorder_drops_what_is_stamped_past_the_sim_clock() -> None:
     seconds = np.arange(len(TIME_KINDS), dtype=float)
     for t in (9.9, 10.0, 10.1):  # a receiver started late believes the clock once confirmed
         bus.handlers[keys.clock()](keys.clock(), Clock(t, 1.0))
+    bus.handlers["alive"]("robot-1")
     on_status = bus.handlers[keys.all_robots("status")]
     for t in (1e9, 10.2):
         status = RobotStatus(t, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=seconds)
@@ -256,3 +261,20 @@ def test_the_recorder_drops_what_is_stamped_past_the_sim_clock() -> None:
         (keys.robot("robot-1", "status"), "robot-1"),
         (keys.coverage(), "sim"),
     ]
+
+
+def test_the_recorder_drops_the_statuses_of_a_robot_not_in_the_job() -> None:
+    """A status from a robot whose liveliness token was never heard is no robot of the run's:
+    the recorder drops it, counted with its sender named, and keeps those of robots in the job.
+    """
+    bus = _Bus()
+    recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
+    keys = bus.keys
+    seconds = np.arange(len(TIME_KINDS), dtype=float)
+    bus.handlers["alive"]("robot-0")
+    on_status = bus.handlers[keys.all_robots("status")]
+    for rid in ("ghost", "robot-0"):
+        status = RobotStatus(1.0, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=seconds)
+        on_status(keys.robot(rid, "status"), status)
+    assert [row[1] for row in recorder.status] == ["robot-0"]
+    assert [(k, who) for k, who, _ in bus.dropped] == [(keys.robot("ghost", "status"), "ghost")]
