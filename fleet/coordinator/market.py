@@ -99,7 +99,7 @@ class Market:
         self.stop = stop
         self.need_auction = False
         self.lost_at: dict[str, float] = {}
-        # tasks to sell as regions in the next auction: a lost robot's run of the tour
+        # tasks to sell as regions in the next auction, each once: a lost robot's run of the tour
         self.region_sale: list[str] = []
         # the idle-robot rebalance runs once per change of who works: a robot that wins its
         # withdrawn tasks back must not be asked again and again
@@ -264,7 +264,9 @@ class Market:
         self.version += 1
         self.journal.event("lost", rid, "", why)
         self.lost_at.update(dict.fromkeys(reopened, time.monotonic()))
-        self.region_sale += reopened
+        # a task may wait there still: sold meanwhile by an auction that was running when an
+        # earlier loss put it there, and reopened now by this one
+        self.region_sale += [t for t in reopened if t not in self.region_sale]
         for tid in reopened:
             self.journal.event("reopened", rid, tid, "remainder" if tid in made else "unstarted")
         self.journal.save_tasks(*queued, *reopened)

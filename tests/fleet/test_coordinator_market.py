@@ -381,6 +381,37 @@ def test_a_lot_replaced_round_a_body_while_its_round_runs_is_not_sold(
         planner.set_bodies(np.zeros((0, 2)))
 
 
+def test_work_lost_twice_is_on_the_next_region_sale_once(planner: TaskPlanner) -> None:
+    """robot-0 is lost while an auction runs: its work waits for the next region sale, but the
+    running auction sells it task by task to robot-1. robot-1 is lost too: the same tasks are
+    reopened again. The next sale holds each once (a chaos run's coordinator died on a region
+    holding t01 twice: ValueError, t01 is assigned, not open)."""
+    c = Coordinator(planner, ["robot-0", "robot-1", "robot-2"])
+    job = c.job
+    for tid in ("t00", "t01", "t02"):
+        job.award(tid, "robot-0", False)
+    c.awards.send()
+    job.robots["robot-0"].xy = None  # no body to plan round
+    c.bidding = {"robot-0": 1.0, "robot-1": 10.0, "robot-2": 20.0}
+
+    def lose_robot_0(_call: TaskCall) -> None:
+        if job.robots["robot-0"].liveness != LOST:
+            c.market.lose("robot-0", "its liveliness token is gone")
+
+    c.on_call = lose_robot_0
+    c.market.auction(c.auctioneer)
+    assert all(job.tasks[f"t0{i}"].owner == "robot-1" for i in range(6))
+
+    assert job.finish("robot-1", "t03")  # not all open: no first allocation
+    job.robots["robot-1"].xy = None
+    c.market.lose("robot-1", "no heartbeat for 1.0 s")
+    c.sales.clear()
+    c.market.auction(c.auctioneer)
+    sold = [t for s in c.sales for t in s.lot.tasks]
+    assert sorted(sold) == ["t00", "t01", "t02", "t04", "t05"]
+    assert all(job.tasks[t].owner == "robot-2" for t in sold)
+
+
 def test_a_robot_lost_between_the_rounds_of_a_long_auction_wins_nothing_after(
     planner: TaskPlanner,
 ) -> None:
