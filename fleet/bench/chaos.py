@@ -61,6 +61,7 @@ from fleet.protocol import (
     RobotStatus,
     Twist,
 )
+from fleet.rundir import RunDirError
 from fleet.supervisor.runner import RunningFleet, SimClock
 
 KINDS = ("kill-agent", "stop-agent", "kill-coordinator", "rogue")
@@ -241,8 +242,21 @@ def _last_seq(fleet: RunningFleet) -> int:
 
 
 def make_fault(fleet: RunningFleet, fault: Fault, rogue: Callable[[], Rogue]) -> dict[str, Any]:
-    """Make ``fault`` now; what happened, for :func:`fault_outcome`."""
+    """Make ``fault`` now; what happened, for :func:`fault_outcome`. A target gone before the
+    fault is made to its end (the fleet stopped under it: a process it cannot do without
+    died) is noted as ``error``; the run's outcome says why it ended."""
     made: dict[str, Any] = {**asdict(fault), "seq": _last_seq(fleet), "sent": time.time()}
+    try:
+        _make(fleet, fault, rogue, made)
+    except RunDirError as e:
+        made["error"] = str(e)
+    return made
+
+
+def _make(
+    fleet: RunningFleet, fault: Fault, rogue: Callable[[], Rogue], made: dict[str, Any]
+) -> None:
+    """Make ``fault``, noting in ``made`` what its respawn returned, or the rogue."""
     if fault.kind == "kill-agent":
         fleet.signal(fault.target, signal.SIGKILL)
         fleet.wait(lambda: events_after(fleet.events(), made["seq"], "lost", fault.target), 10.0)
@@ -257,7 +271,6 @@ def make_fault(fleet: RunningFleet, fault: Fault, rogue: Callable[[], Rogue]) ->
         made["respawn"] = fleet.verb("respawn", fault.target).returncode
     else:
         made["rogue"] = rogue()
-    return made
 
 
 def fault_outcome(events: list[dict[str, Any]], made: dict[str, Any]) -> dict[str, Any]:
@@ -266,6 +279,8 @@ def fault_outcome(events: list[dict[str, Any]], made: dict[str, Any]) -> dict[st
     ``rejoined``; for the coordinator, its ``resumed``."""
     out = {k: made[k] for k in ("at_s", "kind", "target")}
     out["fired"] = made.get("fired", True)
+    if "error" in made:
+        out["error"] = made["error"]
     seq, target = made.get("seq", 0), made["target"]
     if made["kind"] == "kill-coordinator":
         resumed = events_after(events, seq, "resumed")

@@ -3,9 +3,12 @@ events, report and output are read into its row and the rows summed up."""
 
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 
+from fleet.bench import chaos
 from fleet.bench.chaos import (
     FIRST,
     KINDS,
@@ -18,12 +21,14 @@ from fleet.bench.chaos import (
     fault_outcome,
     fuzz_payloads,
     implausible_messages,
+    make_fault,
     run_outcome,
     schedule,
     tasks_lost,
 )
 from fleet.params import load_fleet_config
 from fleet.protocol import DecodeError, Keys, Message, decode, key_class
+from fleet.rundir import RunDirError
 
 CFG = load_fleet_config()
 
@@ -112,6 +117,37 @@ def test_a_faults_detection_reassignment_and_the_coordinators_resumption() -> No
     assert late["detection_s"] is None
     half = fault_outcome(EVENTS[:5], made)
     assert half["reassignment_s"] == pytest.approx(0.3) and not half["all_reassigned"]
+
+
+class _StoppedFleet:
+    """A run whose fleet stops while its target is SIGSTOPped (its coordinator died): the
+    SIGCONT finds the target gone."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, int]] = []
+
+    def events(self) -> list[dict]:
+        return []
+
+    def signal(self, name: str, sig: int) -> float:
+        if sig == signal.SIGCONT:
+            raise RunDirError(f"{name} (pid 4) is gone")
+        self.sent.append((name, sig))
+        return 0.0
+
+
+def test_a_target_gone_before_its_fault_ends_is_noted_and_the_bench_goes_on(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The bench died when a SIGCONT found its target gone (the fleet stopped under it),
+    before the run it was in was written; now the fault notes it and the run is recorded."""
+    monkeypatch.setattr(chaos, "STOP_S", 0.0)
+    fleet = _StoppedFleet()
+    fault = Fault(20.0, "stop-agent", "robot-1")
+    made = make_fault(fleet, fault, lambda: None)  # type: ignore[arg-type]
+    assert fleet.sent == [("robot-1", signal.SIGSTOP)]
+    assert made["error"] == "robot-1 (pid 4) is gone"
+    assert fault_outcome([], {**made, "sent": 0.0})["error"] == made["error"]
 
 
 def test_tasks_lost_are_those_neither_done_nor_left_out() -> None:
