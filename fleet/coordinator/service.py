@@ -25,8 +25,10 @@ no robot's message moves it. Each receiver checks what it hears against what it 
 acknowledgement from a robot not in the job (no liveliness token heard), a pose or status
 stamped (with the scan it answers) more than a clock step ahead of the clock, and a pose the
 robot cannot have driven to since its last. Heartbeats and acknowledgements carry the agent's
-clock, which moves nothing here; they are not judged by it. Its counts of malformed and
-implausible messages go out in ``coord/state`` and to the store's meta (``dropped``).
+clock, which moves nothing here; they are not judged by it. Poses and statuses that come
+before its clock has synced (a started or resumed coordinator, within a few clock messages) are
+dropped uncounted. Its counts of malformed and implausible messages go out in ``coord/state``
+and to the store's meta (``dropped``).
 """
 
 from __future__ import annotations
@@ -191,10 +193,15 @@ class Coordinator:
 
     def _implausible(self, key: str, rid: str, stamp: float | None = None) -> bool:
         """Drop (count and log) a message from ``rid`` that is not in the job, or with a sensor
-        ``stamp`` farther ahead of the clock than a robot's can be; whether it was dropped.
+        ``stamp`` farther ahead of the clock than a robot's can be; whether it was dropped. A
+        stamped one that comes before the clock has synced (since this coordinator started)
+        is dropped uncounted: there is no time to judge it by yet, and one stamped far ahead,
+        believed, would stand as the robot's newest pose and hide every real one after it.
         Call with the lock held."""
         if rid not in self.job.robots:
             why = "not in the job: no liveliness token of it heard"
+        elif stamp is not None and not self.sim_clock.synced:
+            return True
         elif stamp is not None and self.sim_clock.ahead(stamp, strict=True):
             why = f"stamped {stamp:.3f} s, past the sim clock at {self.sim_clock.now:.3f} s"
         else:
