@@ -74,6 +74,8 @@ from fleet.protocol import (
 log = logging.getLogger("coordinator")
 
 LOOP_S = 0.05
+# the phases of a finished job: its end is final (a robot back later reopens nothing)
+FINISHED = ("done", "incomplete")
 STATE_PERIOD_S = 0.5
 PERSIST_ROBOTS_S = 1.0
 
@@ -238,7 +240,9 @@ class Coordinator:
             if r.liveness == LOST:
                 r.liveness = REJOINED
                 self.journal.event("rejoined", rid, "", "heard from again; bids afresh")
-                self.market.rejoined(rid)
+                if self.phase not in FINISHED:
+                    # a finished job stays so: what it left out is named in its end
+                    self.market.rejoined(rid)
             elif r.ready and not was_ready and self.phase != "gathering":
                 self.market.rebalance()
 
@@ -355,7 +359,7 @@ class Coordinator:
         self.awards.send()
         self.dispatcher.dispatch()
         self.dispatcher.resend_unheard(time.monotonic())
-        if self.job.finished and self.phase not in ("done", "incomplete"):
+        if self.job.finished and self.phase not in FINISHED:
             left = self.job.left_out()
             self.phase = "incomplete" if left else "done"
             log.info(self.given_up.finished_message())

@@ -15,7 +15,7 @@ from waits import wait_until
 
 from fleet.bus import Bus
 from fleet.config import resolve_world
-from fleet.coordinator.job import LOST, OPEN, REPLACED
+from fleet.coordinator.job import BLOCKED, DONE, LOST, OPEN, REJOINED, REPLACED
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
@@ -133,6 +133,25 @@ def test_a_coordinator_believes_no_stamp_before_its_clock_has_synced(
     coord._on_pose(pose, PoseEstimate(0.05, 0.52, 0.5, 0.0))
     assert robot.xy == (0.52, 0.5)
     assert sum(cbus.implausible.values()) == 0
+
+
+def test_a_robot_back_after_the_job_ended_incomplete_reopens_nothing(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner
+) -> None:
+    """A job ended incomplete with t01 blocked behind robot-0's body; robot-0, respawned, is
+    heard from after. It reopened t01 and won it again while the job stayed "incomplete", and
+    the report taken then held t01 as assigned, a task lost (chaos bench, seed 0, run 16)."""
+    cbus, _, _ = buses
+    coord = _coordinator(cbus, planner)
+    job = coord.job
+    job.tasks["t00"].state, job.tasks["t00"].owner = DONE, None
+    job.tasks["t01"].state, job.tasks["t01"].owner = BLOCKED, None
+    job.tasks["t01"].blocked_by = "robot-0"
+    job.robots["robot-0"].liveness = LOST
+    coord.phase = "incomplete"
+    coord._on_heartbeat(cbus.keys.robot("robot-0", "heartbeat"), Heartbeat(0.0, 1, True))
+    assert job.robots["robot-0"].liveness == REJOINED
+    assert job.tasks["t01"].state == BLOCKED and not coord.market.need_auction
 
 
 def test_a_pose_jump_no_robot_can_drive_is_dropped(
