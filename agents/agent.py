@@ -72,6 +72,8 @@ ODOM_WAIT_S = 0.02
 MAX_LATENCY_S = 0.5
 # task calls of one auction round arrive together: bid on them in one go
 BID_GATHER_S = 0.003
+# how long the end of the control loop waits for the heartbeat and bid loops to end (wall s)
+LOOPS_END_S = 2.0
 # a respawned robot's SLAM estimate of where it stood is itself this far off at most
 RESPAWN_MARGIN_XY = 0.05
 RESPAWN_MARGIN_THETA = 0.1
@@ -387,15 +389,27 @@ class Agent:
         return out.cmd_vel
 
     def run(self) -> None:
-        for loop in (self.heartbeat_loop, self.bid_loop):
-            threading.Thread(target=loop, name=loop.__name__, daemon=True).start()
-        self.fetch_plan()
-        while not self.stop.is_set():
-            try:
-                scan = self.scans.get(timeout=0.1)
-            except queue.Empty:
-                continue
-            self.handle(scan)
+        """The control loop until ``stop``, with the heartbeat and bid loops beside it; it
+        returns once they have ended too, so that the caller may close the bus (a heartbeat
+        sent as the session closed raised: a traceback in the agent's log at a run's end)."""
+        loops = [
+            threading.Thread(target=loop, name=loop.__name__, daemon=True)
+            for loop in (self.heartbeat_loop, self.bid_loop)
+        ]
+        for thread in loops:
+            thread.start()
+        try:
+            self.fetch_plan()
+            while not self.stop.is_set():
+                try:
+                    scan = self.scans.get(timeout=0.1)
+                except queue.Empty:
+                    continue
+                self.handle(scan)
+        finally:
+            self.stop.set()
+            for thread in loops:
+                thread.join(LOOPS_END_S)
 
     def handle(self, scan: LaserScan) -> None:
         """One scan: the control step, then the map. A step that raises costs this scan, which

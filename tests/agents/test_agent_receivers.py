@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
@@ -290,3 +291,38 @@ def test_a_scan_whose_step_raises_is_answered_with_a_stop_and_counted(tmp_path: 
     assert len(stops) == 1 and isinstance(stops[0], Twist)
     assert (stops[0].stamp, stops[0].v, stops[0].w) == (10.1, 0.0, 0.0)
     assert math.isclose(sum(bus.implausible.values()), 1)
+
+
+class ClosingBus(StandInBus):
+    """A stand-in bus whose heartbeats take a while to send, closed by the test as the agent's
+    process closes its bus once ``Agent.run`` returns: what is sent after raises."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.closed = False
+        self.sending_heartbeat = threading.Event()
+
+    def publish(self, key: str, msg: Message, control: bool = False) -> None:
+        if key.endswith("heartbeat"):
+            self.sending_heartbeat.set()
+            time.sleep(0.3)
+        if self.closed:
+            raise RuntimeError("session closed")
+        super().publish(key, msg, control)
+
+
+def test_the_agent_returns_from_run_only_once_its_heartbeats_have_ended(tmp_path: Path) -> None:
+    """A heartbeat on its way when the agent stopped was sent after its process had closed the
+    bus: a traceback in the agent's log at the end of a chaos run."""
+    bus = ClosingBus()
+    cfg = replace(CFG, agent=replace(CFG.agent, pose_source="odometry"))
+    agent = Agent(bus, "robot-1", cfg, tmp_path)  # type: ignore[arg-type]
+    agent.spawn((1.0, 2.0, 0.0))
+    runner = threading.Thread(target=agent.run, daemon=True)
+    runner.start()
+    assert bus.sending_heartbeat.wait(5.0)
+    agent.stop.set()
+    runner.join(5.0)
+    bus.closed = True
+    time.sleep(0.5)
+    assert "heartbeat" not in bus.handler_errors
