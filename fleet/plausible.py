@@ -260,7 +260,12 @@ class StampWatch:
 
     def ahead(self, key: str, sender: str, stamp: float) -> bool:
         """Whether to drop the message on ``key`` from ``sender`` stamped ``stamp``: it is
-        stamped past the clock (see :meth:`SimClock.ahead`, strict); then it is counted."""
+        stamped past the clock (see :meth:`SimClock.ahead`, strict); then it is counted. Before
+        the clock has synced every stamped message is dropped, uncounted: there is no time to
+        judge it by yet (a view started while a rogue sends would hold its status stamped
+        1e9 s as a robot's newest, and hide every real one after it)."""
+        if not self.clock.synced:
+            return True
         if not self.clock.ahead(stamp, strict=True):
             return False
         why = f"stamped {stamp:.3f} s, past the sim clock at {self.clock.now:.3f} s"

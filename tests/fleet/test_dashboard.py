@@ -382,6 +382,7 @@ def test_the_view_drops_what_robots_not_in_the_job_send() -> None:
     once a robot's token went."""
     dropped: list[tuple[str, str]] = []
     watch = StampWatch(0.5, lambda key, who, why, n=1: dropped.append((key, who)), KEYS.clock())
+    watch.hear_clock(KEYS.clock(), Clock(0.5, 1.0))
     w = FleetWatcher(watch=watch)
     w.on_alive("robot-0", True)
     w.on_alive("robot-0", False)
@@ -396,3 +397,21 @@ def test_the_view_drops_what_robots_not_in_the_job_send() -> None:
     assert dropped == [
         (KEYS.robot("ghost", topic), "ghost") for topic in ("status", "intent", "heartbeat")
     ]
+
+
+def test_a_view_started_late_believes_no_stamp_before_its_clock_has_synced() -> None:
+    """A view started while a rogue sends knows no sim time until its clock has synced: a
+    status stamped 1e9 s taken then would stand as the robot's newest and hide every real one
+    after it. Until the clock syncs, stamped messages are dropped, uncounted."""
+    dropped: list[tuple[str, str]] = []
+    watch = StampWatch(0.5, lambda key, who, why, n=1: dropped.append((key, who)), KEYS.clock())
+    w = FleetWatcher(watch=watch)
+    w.on_alive("robot-1", True)
+    key = KEYS.robot("robot-1", "status")
+    w.on_status(key, _recorded(RobotStatus(1e9, "driving", "t00", 0.4, 3, 10, 4.2)))
+    for t in (10.0, 10.05, 10.1):  # the clock of a fleet that has run for 10 s, confirmed
+        watch.hear_clock(KEYS.clock(), Clock(t, 1.0))
+    w.on_status(key, _recorded(RobotStatus(10.2, "driving", "t00", 0.4, 3, 10, 4.2)))
+    status = w.robots["robot-1"].status
+    assert status is not None and status.stamp == 10.2
+    assert dropped == []

@@ -218,6 +218,8 @@ def test_the_recorder_writes_the_statuses_and_plans_the_breakdown_reads(tmp_path
     recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
     keys = bus.keys
     seconds = np.arange(len(TIME_KINDS), dtype=float)
+    for t in (0.4, 0.8, 1.2):
+        bus.handlers[keys.clock()](keys.clock(), Clock(t, 1.0))
     bus.handlers["alive"]("robot-1")
     for t in (1.5, 1.0):
         status = RobotStatus(t, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=t * seconds)
@@ -271,6 +273,7 @@ def test_the_recorder_drops_the_statuses_of_a_robot_not_in_the_job() -> None:
     recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
     keys = bus.keys
     seconds = np.arange(len(TIME_KINDS), dtype=float)
+    bus.handlers[keys.clock()](keys.clock(), Clock(0.5, 1.0))
     bus.handlers["alive"]("robot-0")
     on_status = bus.handlers[keys.all_robots("status")]
     for rid in ("ghost", "robot-0"):
