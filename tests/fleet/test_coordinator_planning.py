@@ -110,3 +110,19 @@ def test_a_body_in_the_only_way_cuts_the_far_room_off(corridor):
     assert corridor.blocked_m2(way.dropped[0]) > 0.15  # the corridor's floor, 0.3 m wide
     corridor.set_bodies(np.zeros((0, 2)))
     assert corridor.drive(west_xy, [(east, False)])[0].shape[1] == 2
+
+
+# the coordinator's one-robot tour on the built-in worlds: its repetition (its own figure, on
+# its own floor; BENCHMARKS.md, "Cleaning efficiency": home 28.7 %, small 26.0 %, corridor
+# 21.4 %, corridor_wide 24.5 %) plus half a point
+TOUR_REPETITION = {"home": 0.292, "small": 0.265, "corridor": 0.219, "corridor_wide": 0.25}
+
+
+@pytest.mark.parametrize("name", sorted(TOUR_REPETITION))
+def test_the_tour_resweeps_no_more_than_measured(name):
+    cfg = load_fleet_config()
+    planner = TaskPlanner(load_world(resolve_world(name), cfg.robot.radius), cfg)
+    planner.tasks()
+    tour = planner.meta["tour"]
+    assert tour["coverage"] >= 0.995
+    assert tour["repetition"] <= TOUR_REPETITION[name], tour
