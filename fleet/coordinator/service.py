@@ -17,7 +17,8 @@ and runs the main loop; each part has one job:
 
 A robot is lost when its liveliness token goes (a dead process) or its wall-clock heartbeat is
 silent for ``coordinator.heartbeat_timeout_s`` (a hung one; checked in the main loop and before
-each auction round); one heard from again rejoins. The coordinator never reads truth.
+each auction round); one heard from again rejoins. The coordinator knows only what the robots
+report, never the simulator's poses.
 
 Its clock is the simulator's (``sim/clock``), as :class:`fleet.plausible.SimClock` believes it;
 no robot's message moves it. Each receiver checks what it hears against what it knows
