@@ -52,6 +52,20 @@ def test_an_opening_narrower_than_the_robot_is_no_frontier():
     assert find_frontiers(grid(occ, unk), ROBOT_AT, ROBOT.radius, RANGE) == ()
 
 
+def test_a_long_frontier_beyond_a_gap_narrower_than_the_robot_is_unreachable():
+    occ, unk = room_in_the_unknown()
+    # a passage 0.3 m wide out through the right wall, 2 m long; its far side never seen, so
+    # its whole length is a frontier, but no robot centre gets through the gap in the wall
+    door(occ, slice(40, 46), 79)
+    unk[39:46, 80:120] = False
+    occ[39, 79:120] = True
+    g = grid(occ, unk)
+    assert find_frontiers(g, ROBOT_AT, ROBOT.radius, RANGE) == ()
+    # a robot that fits through the gap finds it
+    (f,) = find_frontiers(g, ROBOT_AT, 0.1, RANGE)
+    assert len(f.cells) > 40
+
+
 def test_a_frontier_behind_a_wall_is_unreachable():
     occ, unk = room_in_the_unknown()
     # a second room right of the first, seen (through a window, say) but with no way in from

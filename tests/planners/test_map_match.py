@@ -58,6 +58,10 @@ def test_a_map_with_an_unknown_start_is_placed_within_a_cell_and_a_degree():
     assert match.confident, match.reason
     assert_close(match.transform, B_TO_A)
     assert match.overlap_m2 > 10.0 and match.ambiguity < PARAMS.max_ambiguity
+    # the walls agree well, but not as well as a stricter threshold asks
+    strict = MatchParams(min_score=min(match.score + 0.01, 1.0))
+    refused = place_map(grid(b), grid(a), strict)
+    assert not refused.confident and refused.reason.startswith("score"), refused.reason
 
 
 def test_a_prior_off_by_30_cm_and_5_degrees_is_corrected():
@@ -109,6 +113,9 @@ def test_a_map_of_another_place_is_refused():
     stranger = piece(segment_floor(other), right(-1.0), B_TO_A, (-0.1, -0.1, 8.1, 6.1))
     match = place_map(grid(stranger), grid(a), PARAMS)
     assert not match.confident and match.reason != "matched"
+    # nor is it placed near a start pose given for it
+    near = refine_transform(grid(stranger), grid(a), B_TO_A, PARAMS)
+    assert not near.confident and near.reason != "matched"
 
 
 def test_a_map_of_a_symmetric_room_is_refused_as_ambiguous():
