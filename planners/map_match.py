@@ -347,6 +347,40 @@ def _side(grid: GridMap, params: MatchParams) -> _Side:
     return _Side(grid, field, _points(grid, params.max_points))
 
 
+def _search_space(
+    prior: Transform2D | None, centroid: np.ndarray, params: MatchParams
+) -> tuple[np.ndarray, tuple[float, float, float] | None]:
+    """The coarse rotations, and the window (centre x, y and half-width) where the centroid may
+    land: every rotation and anywhere without a prior, else the window around the prior."""
+    step = math.radians(params.coarse_step_deg)
+    if prior is None:
+        return np.arange(-math.pi, math.pi, step), None
+    n = math.ceil(params.window_theta_deg / params.coarse_step_deg)
+    u = prior.apply(centroid)
+    return prior.theta + step * np.arange(-n, n + 1), (float(u[0]), float(u[1]), params.window_xy)
+
+
+def _verdict(
+    score: float,
+    overlap: float,
+    ambiguity: float,
+    runner_up: Transform2D | None,
+    params: MatchParams,
+) -> str:
+    """ "matched", or the first acceptance test the match fails."""
+    if score < params.min_score:
+        return f"score {score:.2f} is below {params.min_score:.2f}"
+    if overlap < params.min_overlap_m2:
+        return f"overlap {overlap:.1f} m² is below {params.min_overlap_m2:.1f} m²"
+    if runner_up is not None and ambiguity > params.max_ambiguity:
+        return (
+            f"ambiguous: a runner-up at ({runner_up.x:.2f}, {runner_up.y:.2f}, "
+            f"{math.degrees(runner_up.theta):.0f}°) scores {ambiguity:.2f} of the best "
+            f"(limit {params.max_ambiguity:.2f})"
+        )
+    return "matched"
+
+
 def _match(
     moving: GridMap,
     reference: GridMap,
@@ -355,39 +389,29 @@ def _match(
 ) -> MapMatch:
     params.validate()
     fallback = prior or Transform2D.identity()
-    points = _points(moving, params.max_points)
-    if len(points) == 0 or not reference.occupied.any():
-        return MapMatch(fallback, 0.0, 0.0, 0.0, False, "a map has no occupied cells", None)
-    centroid = points.mean(axis=0)
-    centred = points - centroid
-    fine_field = _side(reference, params).field
-    ref_side = _Side(reference, fine_field, _points(reference, params.max_points))
     moving_side = _side(moving, params)
+    if len(moving_side.points) == 0 or not reference.occupied.any():
+        return MapMatch(fallback, 0.0, 0.0, 0.0, False, "a map has no occupied cells", None)
+    ref_side = _side(reference, params)
+    centroid = moving_side.points.mean(axis=0)
+    centred = moving_side.points - centroid
     coarse = _coarse(reference, params.coarse_factor)
     coarse_field = _Field(
         match_field(coarse, max(params.sigma, coarse.resolution), params.free_penalty),
         coarse.resolution,
         coarse.origin,
     )
-    step = math.radians(params.coarse_step_deg)
-    if prior is None:
-        thetas = np.arange(-math.pi, math.pi, step)
-        window = None
-    else:
-        n = math.ceil(params.window_theta_deg / params.coarse_step_deg)
-        thetas = prior.theta + step * np.arange(-n, n + 1)
-        u = prior.apply(centroid)
-        window = (float(u[0]), float(u[1]), params.window_xy)
+    thetas, window = _search_space(prior, centroid, params)
     coarse_cands = _coarse_candidates(centred, coarse_field, thetas, window, params)
     if not coarse_cands:
         return MapMatch(fallback, 0.0, 0.0, 0.0, False, "no placement puts a wall on a wall", None)
     fine = [
-        _fine(centred, fine_field, c, coarse.resolution, params)
+        _fine(centred, ref_side.field, c, coarse.resolution, params)
         for c in _pick_distinct(coarse_cands, params)
     ]
     fine.sort(key=lambda cand: -cand.total)
     best = fine[0]
-    transform = _to_transform(_polish(centred, fine_field, best, params), centroid)
+    transform = _to_transform(_polish(centred, ref_side.field, best, params), centroid)
     score = _agreement(moving_side, ref_side, transform)
     overlap = _overlap_m2(moving, reference, transform)
     runner_up, ambiguity = None, 0.0
@@ -400,21 +424,8 @@ def _match(
             rival_score = _agreement(moving_side, ref_side, other)
             ambiguity = max(rival_score, 0.0) / score if score > 0 else 1.0
             break
-    if best.total <= 0 or score < params.min_score:
-        reason = f"score {score:.2f} is below {params.min_score:.2f}"
-    elif overlap < params.min_overlap_m2:
-        reason = f"overlap {overlap:.1f} m² is below {params.min_overlap_m2:.1f} m²"
-    elif ambiguity > params.max_ambiguity:
-        assert runner_up is not None
-        reason = (
-            f"ambiguous: a runner-up at ({runner_up.x:.2f}, {runner_up.y:.2f}, "
-            f"{math.degrees(runner_up.theta):.0f}°) scores {ambiguity:.2f} of the best "
-            f"(limit {params.max_ambiguity:.2f})"
-        )
-    else:
-        reason = "matched"
-    confident = reason == "matched"
-    return MapMatch(transform, score, ambiguity, overlap, confident, reason, runner_up)
+    reason = _verdict(score, overlap, ambiguity, runner_up, params)
+    return MapMatch(transform, score, ambiguity, overlap, reason == "matched", reason, runner_up)
 
 
 def refine_transform(

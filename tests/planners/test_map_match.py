@@ -13,7 +13,9 @@ from map_pieces import (
     flat_segments,
     free_iou,
     grid_floor,
+    lidar_map,
     piece,
+    route,
     segment_floor,
     truth_on,
 )
@@ -74,6 +76,23 @@ def test_a_prior_off_by_30_cm_and_5_degrees_is_corrected():
     narrow = MatchParams(window_xy=0.1, window_theta_deg=2.0)
     off = refine_transform(grid(b), grid(a), prior, narrow).transform
     assert abs(off.x - B_TO_A.x) > RES or abs(off.theta - B_TO_A.theta) > math.radians(1.0)
+
+
+def test_maps_a_lidar_made_in_two_frames_are_placed_and_refined():
+    segments = flat_segments()
+    a = lidar_map(
+        segments, route([(1, 3), (3, 3), (3, 1.5), (3, 3), (5, 3), (5.5, 2)]), IDENTITY, 0
+    )
+    b = lidar_map(
+        segments, route([(9, 2), (8.7, 4), (7.5, 3.5), (5.5, 3.2), (5.5, 4.5)]), B_TO_A, 1
+    )
+    placed = place_map(grid(b), grid(a), PARAMS)
+    assert placed.confident, placed.reason
+    assert_close(placed.transform, B_TO_A)
+    prior = Transform2D(B_TO_A.x + 0.3, B_TO_A.y, B_TO_A.theta - math.radians(5.0))
+    refined = refine_transform(grid(b), grid(a), prior, PARAMS)
+    assert refined.confident, refined.reason
+    assert_close(refined.transform, B_TO_A)
 
 
 def test_three_robots_drifted_start_poses_are_refined_around_the_anchor():
