@@ -17,18 +17,19 @@ the "scan", with a wall on known floor far less likely than one on the unknown.
    cross-correlated with the coarse field by FFT, which scores every translation at once. Local
    maxima of each rotation's score image are the candidates.
 2. The best candidates that are distinct from each other (more than ``distinct_xy`` or
-   ``distinct_theta_deg`` apart) are searched again at full resolution in a window of one coarse
-   cell and one coarse rotation step (``fine_step_deg``), all poses of a rotation scored in one
-   vectorized gather.
+   ``distinct_theta_deg`` apart) are searched again at full resolution, rotations
+   ``fine_step_deg`` apart, in a window of one coarse cell and one coarse rotation step; all
+   poses of a rotation are scored in one vectorized gather.
 3. The best is refined continuously on the bilinearly interpolated field (Nelder–Mead; the
    Gauss–Newton step of Hess et al. 2016 on a smooth field plays the same part).
 
 Confidence follows the acceptance test of Birk and Carpin, "Merging occupancy grid maps from
 multiple robots" (Proc. IEEE 2006): a placement is taken only when the maps overlap by at least
-``min_overlap_m2`` of commonly observed floor, the walls that land on observed reference cells
-agree on average by at least ``min_score``, and no distinct runner-up scores more than
-``max_ambiguity`` of the best (a symmetric or repetitive place, as Olson's covariance
-estimate would show as a second mode).
+``min_overlap_m2`` of commonly observed floor, both maps' walls that land on cells the other
+map observed agree on average by at least ``min_score`` (each map's walls on the other's field,
+so walls of either crossing the other's floor count), and no distinct runner-up that overlaps as
+much scores more than ``max_ambiguity`` of the best (a symmetric or repetitive place, as
+Olson's covariance estimate would show as a second mode).
 """
 
 from __future__ import annotations
@@ -127,7 +128,8 @@ class _Field:
 
 @dataclass(frozen=True)
 class _Candidate:
-    """A pose in centred form: the moving map's centroid lands at (ux, uy), rotated by theta."""
+    """A pose in centred form: the moving map's centroid lands at (ux, uy), rotated by theta;
+    ``total`` is its summed G."""
 
     ux: float
     uy: float
