@@ -9,6 +9,8 @@ malformed payload. No single message moves a clock or a position by more than on
   within ``step_s`` of the others, say that time has moved on that far (a receiver that started
   late, was stopped for a while or lost clock messages catches up within a few messages; a lone
   stamp far ahead never moves it, nor does it keep the real clock's jump from being believed).
+  Other messages' stamps may lead it by a step, or by what a loaded receiver's late callbacks
+  make of the clock's rate (:meth:`SimClock.ahead`).
 - :class:`PoseTrack` follows one robot's reported positions the same way: a position the robot
   can have driven to since the last one believed (``speed`` × the time between their stamps +
   ``margin_m``) is believed; a jump is believed once ``CONFIRMATIONS`` positions, each within
@@ -24,6 +26,8 @@ from __future__ import annotations
 
 import math
 import threading
+import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -34,6 +38,14 @@ from fleet.protocol import Clock
 CONFIRMATIONS = 3
 # chains of messages not believed yet that a receiver keeps; the oldest beyond goes
 MAX_CHAINS = 4
+
+# a receiver's callbacks may run this long (wall s) behind the messages it was sent, on a
+# loaded machine: a stamp may lead its clock by the sim time this much wall time holds
+LAG_WALL_S = 0.5
+# the sim clock's rate is judged over its moves in this much wall time (s) ...
+RATE_WINDOW_S = 2.0
+# ... once they span at least this much
+MIN_RATE_SPAN_S = 0.2
 
 # dropped(n, why): n messages were dropped as implausible, for this reason
 Dropped = Callable[[int, str], None]
@@ -115,14 +127,29 @@ class _Jumps:
 
 class SimClock:
     """The newest sim time a receiver believes the simulator's clock messages (see the module
-    docstring); ``synced`` once it has believed one since it started. Thread-safe."""
+    docstring); ``synced`` once it has believed one since it started. Thread-safe.
 
-    def __init__(self, step_s: float, dropped: Dropped, now: float = 0.0) -> None:
+    It also knows how fast sim time has been going (:meth:`rate`, sim seconds per wall second
+    over the last ``RATE_WINDOW_S`` of clock messages it believed, taken at the wall time
+    ``wall`` returns). A starved receiver runs its callbacks late and not in the order the
+    messages were sent: a robot's status can be handled before the clock messages sent before
+    it, by as much sim time as passes in ``LAG_WALL_S`` of wall time, several steps when the
+    simulator runs faster than real time (``--speed 0``). :meth:`ahead` allows that lead."""
+
+    def __init__(
+        self,
+        step_s: float,
+        dropped: Dropped,
+        now: float = 0.0,
+        wall: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.step_s = step_s
         self.now = now
         self.synced = False
         self._jumps = _Jumps(dropped)
         self._lock = threading.Lock()
+        self._wall = wall
+        self._moves: deque[tuple[float, float]] = deque()
 
     def start(self, now: float) -> None:
         """Believe ``now``, told by the simulator itself (its answer to a query, not a message
@@ -139,6 +166,8 @@ class SimClock:
                 self.synced = True
                 moved = stamp > self.now
                 self.now = max(self.now, stamp)
+                if moved:
+                    self._moved()
                 return moved
             why = f"sim time {stamp:.3f} s, {stamp - self.now:.3f} s past the clock"
             confirmed = self._jumps.hear(
@@ -147,18 +176,41 @@ class SimClock:
             if confirmed is None:
                 return False
             self.now, self.synced = confirmed.stamp, True
+            self._moves.clear()
             return True
+
+    def _moved(self) -> None:
+        """Note the clock's move to ``now`` (the lock held) for :meth:`rate`."""
+        wall = self._wall()
+        self._moves.append((wall, self.now))
+        while self._moves and self._moves[0][0] < wall - RATE_WINDOW_S:
+            self._moves.popleft()
+
+    def rate(self) -> float:
+        """Sim seconds per wall second over the clock's moves in the last ``RATE_WINDOW_S``
+        before its newest one (0 until they span ``MIN_RATE_SPAN_S``). A confirmed jump is not
+        a rate: the window starts again after it."""
+        with self._lock:
+            return self._rate()
+
+    def _rate(self) -> float:
+        if len(self._moves) < 2:
+            return 0.0
+        (w0, t0), (w1, t1) = self._moves[0], self._moves[-1]
+        return (t1 - t0) / (w1 - w0) if w1 - w0 >= MIN_RATE_SPAN_S else 0.0
 
     def ahead(self, stamp: float, strict: bool = False) -> bool:
         """Whether ``stamp`` is farther ahead of the clock than any robot's can be: more than a
-        step past it, and past a jump it may be about to confirm (a receiver catching up after a
-        stop) unless ``strict``: then a jump not confirmed yet does not count (a forged clock
-        message would let a message forged with the same stamp through). Never before the clock
-        has synced: until then it knows no time to judge by."""
+        step past it (or than ``LAG_WALL_S`` of wall time holds at the clock's :meth:`rate`,
+        whichever is more), and past a jump it may be about to confirm (a receiver catching up
+        after a stop) unless ``strict``: then a jump not confirmed yet does not count (a forged
+        clock message would let a message forged with the same stamp through). Never before the
+        clock has synced: until then it knows no time to judge by."""
         with self._lock:
             pending = None if strict else self._jumps.newest()
             limit = self.now if pending is None else max(self.now, pending)
-            return self.synced and stamp > limit + self.step_s
+            lead = max(self.step_s, self._rate() * LAG_WALL_S)
+            return self.synced and stamp > limit + lead
 
 
 class PoseTrack:

@@ -5,7 +5,15 @@ confirmed is counted once a believable message supersedes it."""
 from __future__ import annotations
 
 from fleet.params import AgentParams, SimParams, load_fleet_config
-from fleet.plausible import CONFIRMATIONS, Bounds, PoseTrack, SimClock, clock_step_s
+from fleet.plausible import (
+    CONFIRMATIONS,
+    LAG_WALL_S,
+    RATE_WINDOW_S,
+    Bounds,
+    PoseTrack,
+    SimClock,
+    clock_step_s,
+)
 
 STEP = 0.5
 
@@ -42,6 +50,65 @@ def test_a_lone_clock_stamp_far_ahead_never_moves_the_clock_and_is_counted() -> 
     for t in (1e9, 2e9, 0.15, 1e9 + 1):
         clock.hear(t)
     assert clock.now == 0.15 and drops.total == 3
+
+
+class Wall:
+    """A wall clock the test moves."""
+
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _run(clock: SimClock, wall: Wall, rate: float, wall_s: float, hz: float = 20.0) -> None:
+    """Clock messages at ``hz`` (sim) for ``wall_s`` wall seconds of a sim going ``rate`` × real
+    time."""
+    for _ in range(int(wall_s * hz * rate)):
+        wall.t += 1.0 / (hz * rate)
+        clock.hear(clock.now + 1.0 / hz)
+
+
+def test_a_stamp_may_lead_the_clock_by_what_a_late_callback_makes_of_its_rate() -> None:
+    """At 8 × real time a status handled before the clock messages sent ahead of it leads the
+    clock by up to 8 × LAG_WALL_S of sim time: not implausible. At real time only a step is
+    allowed; a stamp far ahead is implausible at any rate."""
+    drops = Drops()
+    wall = Wall()
+    fast = SimClock(STEP, drops, wall=wall)
+    fast.hear(0.0)
+    _run(fast, wall, rate=8.0, wall_s=RATE_WINDOW_S)
+    assert abs(fast.rate() - 8.0) < 0.1
+    lead = 8.0 * LAG_WALL_S
+    assert lead > 2 * STEP
+    assert not fast.ahead(fast.now + lead - 0.1, strict=True)
+    assert fast.ahead(fast.now + lead + 0.1, strict=True) and fast.ahead(1e9)
+    slow = SimClock(STEP, drops, wall=wall)
+    slow.hear(0.0)
+    _run(slow, wall, rate=1.0, wall_s=RATE_WINDOW_S)
+    assert abs(slow.rate() - 1.0) < 0.05
+    assert not slow.ahead(slow.now + STEP - 0.01) and slow.ahead(slow.now + STEP + 0.1)
+    assert drops.calls == []
+
+
+def test_the_rate_is_the_recent_one_and_a_jump_is_not_a_rate() -> None:
+    """The rate follows the last RATE_WINDOW_S of wall time (a sim that slows down allows less
+    lead soon after), a receiver that has heard nothing for a while keeps the rate it last knew
+    (it is the one running late), and a confirmed jump starts the window again."""
+    wall = Wall()
+    clock = SimClock(STEP, Drops(), wall=wall)
+    clock.hear(0.0)
+    _run(clock, wall, rate=8.0, wall_s=RATE_WINDOW_S)
+    _run(clock, wall, rate=1.0, wall_s=2 * RATE_WINDOW_S)
+    assert abs(clock.rate() - 1.0) < 0.05
+    _run(clock, wall, rate=8.0, wall_s=RATE_WINDOW_S)
+    wall.t += 30.0
+    assert abs(clock.rate() - 8.0) < 0.1
+    for k in range(CONFIRMATIONS):
+        wall.t += 0.01
+        clock.hear(clock.now + 500.0 + 0.05 * (k + 1))
+    assert clock.rate() == 0.0
 
 
 def test_a_late_or_resumed_clock_catches_up_once_messages_confirm_the_jump() -> None:
