@@ -531,7 +531,9 @@ class SpawnReply(Message):
 
 @dataclass(frozen=True, eq=False)
 class CoverageImage(Message):
-    """The ground-truth visit-count grid (uint16, row 0 = lowest y) and the cleanable mask."""
+    """The ground-truth visit-count grid of the main brushes (uint16, row 0 = lowest y), the
+    cleanable mask, and the cells the robots' side brushes have touched (empty when the robots
+    have none)."""
 
     TYPE: ClassVar[str] = "coverage_image"
     stamp: float
@@ -542,6 +544,19 @@ class CoverageImage(Message):
     cols: int
     visits: Annotated[np.ndarray, Arr("<u2")]
     cleanable: Annotated[np.ndarray, Arr("|u1")]
+    side: Annotated[np.ndarray, Arr("|u1")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.uint8)
+    )
+
+    def side_mask(self) -> np.ndarray:
+        """(rows, cols) the cells a side brush has touched."""
+        if not len(self.side):
+            return np.zeros((self.rows, self.cols), dtype=bool)
+        return self.side.reshape(self.rows, self.cols) > 0
+
+    def swept(self) -> np.ndarray:
+        """(rows, cols) the cells either brush has swept."""
+        return (self.visits.reshape(self.rows, self.cols) > 0) | self.side_mask()
 
 
 @dataclass(frozen=True, eq=False)
@@ -790,6 +805,8 @@ def _check_shapes(msg: Message) -> None:
         cells = msg.rows * msg.cols
         if msg.rows < 0 or msg.cols < 0 or len(msg.visits) != cells or len(msg.cleanable) != cells:
             raise DecodeError(f"coverage_image: arrays do not hold rows × cols = {cells} cells")
+        if len(msg.side) not in (0, cells):
+            raise DecodeError(f"coverage_image.side: {len(msg.side)} cells, not 0 or {cells}")
     elif isinstance(msg, MapPatches):
         _check_map_patches(msg)
     elif isinstance(msg, Award):

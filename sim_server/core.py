@@ -122,7 +122,9 @@ class SimCore:
         if starts_xy is None:
             starts_xy = np.array([p[:2] for p in world.start_poses(1, cfg.robot.radius)])
         cleanable = cleanable_mask(grid, starts_xy, cfg.robot.radius, cfg.robot.cleaning_width)
-        self.cleaning = CleaningGrid(grid, cleanable, cfg.robot.cleaning_width)
+        self.cleaning = CleaningGrid(
+            grid, cleanable, cfg.robot.cleaning_width, cfg.robot.side_brush
+        )
         self.robots: dict[str, RobotState] = {}
         self.departed: dict[str, RobotState] = {}
         self._pending_collisions: list[Collision] = []
@@ -171,7 +173,7 @@ class SimCore:
         self._path = np.append(self._path, state.path_length_m)
         self._sampled_xy = np.vstack([self._sampled_xy, placed[:, :2]])
         self._odom.add(pose)
-        self.cleaning.update([rid], placed[:, :2])
+        self.cleaning.update([rid], placed)
         return pose
 
     def remove_robot(self, rid: str) -> None:
@@ -179,7 +181,7 @@ class SimCore:
         if state is None:
             return
         i = self._row[rid]
-        self.cleaning.update([rid], self._poses[i : i + 1, :2])
+        self.cleaning.update([rid], self._poses[i : i + 1])
         self.cleaning.forget(rid)
         state.path_length_m = float(self._path[i])
         self.physics.remove_robot(rid)
@@ -243,7 +245,7 @@ class SimCore:
             self.robots[ids[i]].trajectory.append(float(xy[i, 0]), float(xy[i, 1]))
             self._sampled_xy[i] = xy[i]
         if self.steps % self.clean_every == 0:
-            self.cleaning.update(ids, xy)
+            self.cleaning.update(ids, poses)
         if self.steps % self.odom_every == 0:
             odom = self._odom.update(poses).tolist()
             vel = self._vel.tolist()
@@ -312,7 +314,7 @@ class SimCore:
     def summary(self, wall_s: float) -> CoverageSummary:
         """Metrics so far; sweeps the cleaning grid up to the current poses first."""
         if self._ids:
-            self.cleaning.update(self._ids, self._poses[:, :2])
+            self.cleaning.update(self._ids, self._poses)
         robots = self.all_robots()
         ids = sorted(robots)
         return CoverageSummary(

@@ -197,6 +197,7 @@ class SimServer:
                 g.shape[1],
                 c.visits.reshape(-1).copy(),
                 c.cleanable.reshape(-1).astype(np.uint8),
+                c.side.reshape(-1).astype(np.uint8),
             )
 
     def _held_back(self, now: float) -> bool:

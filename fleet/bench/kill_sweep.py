@@ -55,7 +55,7 @@ def outside_body(run_dir: Path, victim: str, radius: float) -> float | None:
         run.visits, run.resolution, run.origin, tuple(track[-1, 1:]), radius + TRACK_STEP_M
     )
     floor = run.cleanable & ~under
-    return round(float(((run.visits > 0) & floor).sum() / max(floor.sum(), 1)), 4)
+    return round(float((run.swept & floor).sum() / max(floor.sum(), 1)), 4)
 
 
 def _one(

@@ -165,7 +165,7 @@ def base_layer(snap: FleetSnapshot, frame: MapFrame) -> np.ndarray:
         c = snap.cleaned
         flat, ok = _grid_blocks(frame, (c.rows, c.cols), c.resolution, (c.origin_x, c.origin_y))
         cleanable = c.cleanable.reshape(c.rows, c.cols).astype(bool) & ok
-        visited = cleanable & (c.visits.reshape(c.rows, c.cols) > 0)
+        visited = cleanable & c.swept()
         total = np.bincount(flat[cleanable], minlength=n)
         done = np.bincount(flat[visited], minlength=n)
         chars[(total > 0) & (chars == " ")] = DIRTY

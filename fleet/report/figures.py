@@ -34,6 +34,8 @@ MIN_MAP_HEIGHT_IN = 4.0
 # cleaned cells by passes: 1, 2, 3, 4 or more
 PASS_COLOURS = ("#c7e9c0", "#74c476", "#31a354", "#006d2c")
 MISSED_COLOUR = "#e34a33"
+# floor only a side brush touched (the main brush never passed over it)
+SIDE_COLOUR = "#9ecae1"
 BLOCKED_COLOUR = "#4d4d4d"
 # the paths of work no robot could reach (report.json's left_out), dashed over the floor
 LEFT_OUT_COLOUR = "#000000"
@@ -88,12 +90,17 @@ def scale_bar_length(width_m: float) -> float:
     return fits[-1] if fits else SCALE_BAR_LENGTHS_M[0]
 
 
-def floor_rgb(visits: np.ndarray, cleanable: np.ndarray) -> np.ndarray:
-    """The floor as RGB (row 0 at the bottom): passes in greens, missed cleanable cells red,
-    the rest (walls, furniture, floor out of reach) grey."""
+def floor_rgb(
+    visits: np.ndarray, cleanable: np.ndarray, side: np.ndarray | None = None
+) -> np.ndarray:
+    """The floor as RGB (row 0 at the bottom): main brush passes in greens, cleanable cells
+    only a side brush touched (``side``) light blue, missed cleanable cells red, the rest
+    (walls, furniture, floor out of reach) grey."""
     rgb = np.empty((*visits.shape, 3))
     rgb[:] = matplotlib.colors.to_rgb(BLOCKED_COLOUR)
     rgb[cleanable] = matplotlib.colors.to_rgb(MISSED_COLOUR)
+    if side is not None:
+        rgb[cleanable & side] = matplotlib.colors.to_rgb(SIDE_COLOUR)
     passes = np.clip(visits, 0, len(PASS_COLOURS))
     for n, colour in enumerate(PASS_COLOURS, start=1):
         rgb[passes == n] = matplotlib.colors.to_rgb(colour)
@@ -113,7 +120,7 @@ def map_figure(data: RunData) -> tuple[Figure, float]:
     map_frac = MAP_WIDTH_IN / (MAP_WIDTH_IN + SIDE_WIDTH_IN)
     ax = fig.add_axes((left, 0.02, map_frac - left, 1 - 0.8 / (map_h + 0.8) - 0.02))
     ax.imshow(
-        floor_rgb(data.visits, data.cleanable),
+        floor_rgb(data.visits, data.cleanable, data.side),
         origin="lower",
         extent=(x0, x0 + width_m, y0, y0 + height_m),
         interpolation="nearest",
@@ -183,7 +190,10 @@ def map_figure(data: RunData) -> tuple[Figure, float]:
         va="top",
         fontsize=9,
     )
-    missed_m2 = float((data.cleanable & (data.visits == 0)).sum()) * res * res
+    missed_m2 = float((data.cleanable & ~data.swept).sum()) * res * res
+    side_m2 = float((data.cleanable & data.swept & (data.visits == 0)).sum()) * res * res
+    if side_m2 > 0:
+        handles.append(Patch(color=SIDE_COLOUR, label=f"side brush only ({side_m2:.2f} m²)"))
     handles += [
         Patch(color=PASS_COLOURS[0], label="cleaned once"),
         Patch(color=PASS_COLOURS[1], label="cleaned twice"),

@@ -6,8 +6,10 @@ its sim and wall time, and per task its owners over time, rebuilt from the event
 ``fleet up`` also writes, beside ``report.json``, what the pictures (``fleet.report.figures``)
 need, so ``fleet report RUN_DIR`` can draw them again from the run dir alone:
 
-* ``coverage.npz``: the simulator's final cleaning grid (visits and cleanable cells, row 0 at
-  ``origin_y``), its resolution and origin in metres, and the brush width;
+* ``coverage.npz``: the simulator's final cleaning grid (the main brushes' visits, the cells
+  side brushes touched (``side``, all false without them; absent before side brushes) and the
+  cleanable cells, row 0 at ``origin_y``), its resolution and origin in metres, and the brush
+  width;
 * ``tracks.csv``: ``sim_s,robot,x,y``, each robot's true position every ``TRACK_STEP_M``
   (1.25 cm; 5 cm before report format 2);
 * ``coverage.csv``: ``sim_s,coverage,repetition``, the fleet's cleaning over time;
@@ -117,7 +119,7 @@ def missed_breakdown(image: CoverageImage, grid: GridMap) -> dict[str, float] | 
     if not same:
         return None
     parts = missed_by_clearance(
-        image.visits.reshape(shape),
+        image.swept(),
         image.cleanable.reshape(shape).astype(bool),
         clearance(grid),
         MISSED_BANDS_M,
@@ -369,6 +371,7 @@ def write_grid(path: Path, image: CoverageImage, cleaning_width_m: float) -> Non
         np.savez_compressed(
             f,
             visits=image.visits.reshape(shape),
+            side=image.side_mask(),
             cleanable=image.cleanable.reshape(shape).astype(bool),
             resolution=image.resolution,
             origin=np.array([image.origin_x, image.origin_y]),
@@ -396,9 +399,15 @@ class RunData:
     resolution: float
     origin: tuple[float, float]
     cleaning_width_m: float
+    side: np.ndarray | None = None
     tracks: dict[str, np.ndarray] = field(default_factory=dict)
     coverage: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     collisions: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def swept(self) -> np.ndarray:
+        """The cells either brush swept: the main brushes' visits and the side brushes'."""
+        return (self.visits > 0) if self.side is None else (self.visits > 0) | self.side
 
     @property
     def robots(self) -> list[str]:
@@ -465,6 +474,7 @@ def _read_grid(path: Path) -> dict[str, Any]:
     try:
         with np.load(path) as npz:
             visits = np.asarray(npz["visits"])
+            side = np.asarray(npz["side"]).astype(bool) if "side" in npz else None
             cleanable = np.asarray(npz["cleanable"]).astype(bool)
             resolution = float(npz["resolution"])
             origin = np.asarray(npz["origin"], dtype=float)
@@ -479,10 +489,15 @@ def _read_grid(path: Path) -> dict[str, Any]:
         raise ReportError(
             f"{path}: visits {visits.shape} and cleanable {cleanable.shape} must be one 2-D shape"
         )
+    if side is None:
+        side = np.zeros(visits.shape, dtype=bool)
+    if side.shape != visits.shape:
+        raise ReportError(f"{path}: side {side.shape} and visits {visits.shape} must be one shape")
     if not resolution > 0 or origin.shape != (2,) or not width > 0:
         raise ReportError(f"{path}: resolution and cleaning_width_m must be > 0, origin x, y")
     return {
         "visits": visits.astype(np.int64),
+        "side": side,
         "cleanable": cleanable,
         "resolution": resolution,
         "origin": (float(origin[0]), float(origin[1])),

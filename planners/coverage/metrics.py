@@ -244,7 +244,8 @@ def _row(covered, visits, clean, n_clean, area, length, turns, t) -> PathMetrics
 def missed_by_clearance(
     visits: np.ndarray, cleanable_cells: np.ndarray, clearance_m: np.ndarray, edges: Sequence[float]
 ) -> list[float]:
-    """Where the missed floor lies: the cleanable cells never visited (``visits`` == 0), as
+    """Where the missed floor lies: the cleanable cells never visited (``visits`` == 0; a
+    boolean mask of the swept cells will do), as
     fractions of all cleanable cells, in bands of their clearance from the nearest obstacle
     (``clearance_m``, see :func:`planners.grid.clearance`) cut at ``edges`` (m, ascending).
     len(edges) + 1 fractions, summing to 1 − coverage: a band along walls and furniture that a

@@ -126,7 +126,9 @@ def messages(draw: st.DrawFn, cls: type[Message]) -> Message:
     elif cls is CoverageImage:
         fixed["rows"] = draw(st.integers(0, 6))
         fixed["cols"] = draw(st.integers(0, 6))
-        lengths = dict.fromkeys(("visits", "cleanable"), fixed["rows"] * fixed["cols"])
+        cells = fixed["rows"] * fixed["cols"]
+        lengths = dict.fromkeys(("visits", "cleanable"), cells)
+        lengths["side"] = draw(st.sampled_from((0, cells)))
     kwargs = {}
     for name, tp, meta in _fields(cls):
         if name in fixed:
@@ -307,7 +309,7 @@ def _example(cls: type[Message]) -> Message:
     kwargs: dict[str, Any] = {}
     for name, tp, meta in _fields(cls):
         if isinstance(meta, Arr):
-            n = {"covariance": 9, "visits": 6, "cleanable": 6}.get(name, 2)
+            n = {"covariance": 9, "visits": 6, "cleanable": 6, "side": 6}.get(name, 2)
             kwargs[name] = np.ones((n, *meta.tail), dtype=meta.dtype)
         elif tp == list[str]:
             kwargs[name] = ["r0", "r1"]
@@ -445,6 +447,10 @@ def test_cross_field_shapes_are_checked() -> None:
         decode(_pack(image), CoverageImage)
     image["cols"], image["rows"] = -3, -2
     with pytest.raises(DecodeError):
+        decode(_pack(image), CoverageImage)
+    image["cols"], image["rows"] = 3, 2
+    image["side"] = np.ones(5, np.uint8).tobytes()
+    with pytest.raises(DecodeError, match=r"coverage_image\.side"):
         decode(_pack(image), CoverageImage)
 
 

@@ -9,6 +9,7 @@ import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import matplotlib.colors
 import numpy as np
 import pytest
 from PIL import Image
@@ -19,6 +20,8 @@ from fleet.colours import robot_colour
 from fleet.report.figures import (
     BLOCKED_COLOUR,
     SCALE_BAR_COLOUR,
+    SIDE_COLOUR,
+    floor_rgb,
     map_figure,
     render_report,
     swept_over_time,
@@ -144,3 +147,26 @@ def test_fleet_report_on_a_missing_or_damaged_run_dir_names_the_file(
     assert result.exit_code == 2
     assert "error:" in result.output and named in result.output
     assert "Traceback" not in result.output
+
+
+def test_floor_only_a_side_brush_touched_is_drawn_and_counted_apart(run_dir: Path) -> None:
+    """A stored run from before side brushes reads with none; given the cells a side brush
+    touched, the picture paints the cleanable ones the main brush missed in the side brush's
+    colour, the legend counts them, and missed floor no longer includes them."""
+    data = load_run(run_dir)
+    assert data.side is not None and not data.side.any()
+    missed = data.cleanable & (data.visits == 0)
+    assert missed.sum() > 10
+    with np.load(run_dir / GRID_FILE) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    np.savez_compressed(run_dir / GRID_FILE, **arrays, side=missed)
+    data = load_run(run_dir)
+    assert np.array_equal(data.side, missed)
+    assert not (data.cleanable & ~data.swept).any()
+    rgb = floor_rgb(data.visits, data.cleanable, data.side)
+    assert np.allclose(rgb[missed], matplotlib.colors.to_rgb(SIDE_COLOUR))
+    fig, _ = map_figure(data)
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    res2 = data.resolution**2
+    assert f"side brush only ({missed.sum() * res2:.2f} m²)" in labels
+    assert "missed (0.00 m²)" in labels
