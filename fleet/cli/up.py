@@ -114,6 +114,7 @@ def up(
         job_report,
         load_run,
         missed_breakdown,
+        side_brush_only,
         time_use_of,
         write_json,
     )
@@ -231,6 +232,7 @@ def up(
                 "seed": seed,
                 "deconfliction": deconfliction or cfg.coordinator.deconfliction,
                 "missed": missed_breakdown(image, w.grid(image.resolution)),
+                "side_brush_only": side_brush_only(image),
                 "dropped": {n: {"malformed": m, "implausible": i} for n, (m, i) in dropped.items()},
                 **job,
             },

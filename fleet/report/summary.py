@@ -127,6 +127,14 @@ def missed_breakdown(image: CoverageImage, grid: GridMap) -> dict[str, float] | 
     return {name: round(part, 5) for name, part in zip(MISSED_BANDS, parts, strict=True)}
 
 
+def side_brush_only(image: CoverageImage) -> float:
+    """report.json's ``side_brush_only``: the share of the cleanable floor that only a side
+    brush swept (the main brushes never passed over it); 0 without side brushes."""
+    cleanable = image.cleanable.reshape(image.rows, image.cols).astype(bool)
+    only = cleanable & image.side_mask() & (image.visits.reshape(cleanable.shape) == 0)
+    return round(float(only.sum()) / max(int(cleanable.sum()), 1), 5)
+
+
 def build_report(
     summary: CoverageSummary,
     makespan_s: float | None,

@@ -12,6 +12,8 @@ import yaml
 
 from fleet.config import ConfigError
 from fleet.params import load_fleet_config
+from fleet.protocol import CoverageImage
+from fleet.report.summary import side_brush_only
 from planners.grid import GridMap
 from planners.robot import SideBrush
 from sim_server.cleaning import CleaningGrid
@@ -174,3 +176,16 @@ def test_the_default_config_has_the_side_brush_off() -> None:
     brush = load_fleet_config().robot.side_brush
     assert not brush.enabled
     assert brush.reach > load_fleet_config().robot.radius
+
+
+def test_the_report_counts_the_floor_only_the_side_brush_swept() -> None:
+    """Of 6 cleanable cells, the main brush swept 2, the side brush 3 of which 1 the main brush
+    also swept: 2 of 6 were the side brush's alone; without a side mask, none."""
+    visits = np.array([1, 2, 0, 0, 0, 0], dtype=np.uint16)
+    cleanable = np.ones(6, dtype=np.uint8)
+    side = np.array([0, 1, 1, 1, 0, 0], dtype=np.uint8)
+    image = CoverageImage(0.0, 0.05, 0.0, 0.0, 2, 3, visits, cleanable, side)
+    assert side_brush_only(image) == pytest.approx(2 / 6, abs=1e-5)
+    assert image.swept().sum() == 4
+    plain = CoverageImage(0.0, 0.05, 0.0, 0.0, 2, 3, visits, cleanable)
+    assert side_brush_only(plain) == 0.0 and plain.swept().sum() == 2
