@@ -112,9 +112,15 @@ class TaskPlanner:
     """Tasks of the known floor plan, and plans that drive them."""
 
     def __init__(self, world: World, cfg: FleetConfig) -> None:
-        self.spec = fleet_tour_spec(cfg)
-        self.grid = self.spec.grid(world)
+        self._configure(cfg)
+        grid = self.spec.grid(world)
         self.dock = tuple(float(v) for v in world.start_poses(1, cfg.robot.radius)[0][:2])
+        centres = clearance(grid) >= self.centre_clearance
+        self.use_floor(grid, reachable(centres, grid.world_to_cell(np.array([self.dock]))))
+
+    def _configure(self, cfg: FleetConfig) -> None:
+        """What does not depend on the floor: the tour's spec, the robot, the clearances."""
+        self.spec = fleet_tour_spec(cfg)
         self.target_s = cfg.coordinator.task_target_s
         self.robot = cfg.robot
         self.wall_clearance = self.spec.wall_clearance
@@ -123,18 +129,23 @@ class TaskPlanner:
         self.params = self.spec.params
         # what the run's report reads from the job's store: the tour's figures and elements
         self.meta: dict[str, Any] = {}
-        centres = clearance(self.grid) >= self.centre_clearance
-        start = self.grid.world_to_cell(np.array([self.dock]))
-        self.reachable = reachable(centres, start)
-        self.transit = Transit(self.grid, self.reachable)
         # a lost robot's body: its radius, and the error of the pose it last reported
         self.body_radius = cfg.robot.radius + cfg.coordinator.body_margin
         self.max_detour = cfg.coordinator.max_detour_m
         self.bodies = np.zeros((0, 2))
+
+    def use_floor(self, grid: GridMap, centres: np.ndarray) -> None:
+        """Plan on ``grid`` from now on, robot centres on the cells ``centres`` (those a robot
+        reaches), around the bodies of lost robots known so far."""
+        self.grid = grid
+        self.reachable = centres
+        self.transit = Transit(grid, centres)
         # floor the brush reaches from some robot centre, without bodies and with them
-        self.brushable = self._brushable(self.reachable)
+        self.brushable = self._brushable(centres)
         self.brushable_now = self.brushable
-        self._counted = np.zeros(self.grid.shape, dtype=bool)
+        self._counted = np.zeros(grid.shape, dtype=bool)
+        if len(self.bodies):
+            self.set_bodies(self.bodies)
 
     def tasks(self) -> tuple[Task, ...]:
         """The tour from the dock cut into tasks; fills :attr:`meta` (``tour``: its figures,
