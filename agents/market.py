@@ -130,6 +130,7 @@ class MarketClient:
                 c.time_s,
                 commitment,
                 self._travel,
+                c.gain_s,
             )
             out.append(
                 Bid(c.stamp, c.round, c.task, self.robot, b.marginal_s, b.total_s, b.reverse)

@@ -345,7 +345,9 @@ class Plan(Message):
 @dataclass(frozen=True, eq=False)
 class TaskCall(Message):
     """An auction call for one task (``coord/task/<task>``) in auction round ``round``: its
-    two ends, its estimated cleaning time and area. Agents answer with a :class:`Bid`."""
+    two ends, its estimated cleaning time and area, and what it is worth beyond its work in
+    seconds a bid takes off (``gain_s``: an exploring fleet's frontier, its expected
+    information; 0 for cleaning). Agents answer with a :class:`Bid`."""
 
     TYPE: ClassVar[str] = "task_call"
     stamp: float
@@ -357,6 +359,7 @@ class TaskCall(Message):
     exit_y: float
     time_s: float
     area_m2: float
+    gain_s: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)

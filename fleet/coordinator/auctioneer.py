@@ -85,9 +85,12 @@ class Auctioneer:
     def on_bid(self, key: str, msg: Bid) -> None:
         """A bid heard on ``key``: kept for the open round, or counted and ignored."""
         rid = self.keys.robot_of(key)
-        ok_numbers = all(math.isfinite(v) and v >= 0 for v in (msg.marginal_s, msg.total_s))
         with self._cond:
             rnd = self._open
+            # a bid takes off at most what its lot is worth beyond its work
+            lot = rnd.lots.get(msg.task) if rnd is not None and msg.round == rnd.number else None
+            least = -lot.gain_s if lot is not None else 0.0
+            ok_numbers = all(math.isfinite(v) and v >= least for v in (msg.marginal_s, msg.total_s))
             if msg.robot != rid or not ok_numbers or key != self.keys.bid(msg.task, msg.robot):
                 why = "malformed"
             elif rnd is None or msg.round != rnd.number or msg.task not in rnd.lots:
@@ -114,7 +117,14 @@ class Auctioneer:
             self._open = rnd
         for lot in rnd.lots.values():
             call = TaskCall(
-                clock, rnd.number, lot.id, *lot.entry, *lot.exit, lot.time_s, lot.area_m2
+                clock,
+                rnd.number,
+                lot.id,
+                *lot.entry,
+                *lot.exit,
+                lot.time_s,
+                lot.area_m2,
+                lot.gain_s,
             )
             self.publish(self.keys.task(lot.id), call, True)
         deadline = time.monotonic() + self.params.bid_timeout_s

@@ -86,14 +86,17 @@ def make_bid(
     time_s: float,
     commitment: Commitment,
     travel: Travel,
+    gain_s: float = 0.0,
 ) -> Bid:
     """The marginal cost of appending the task to ``commitment`` (Koenig et al. 2006 SSI bids):
     ``travel(from_xy, targets (2, 2))`` gives the seconds to the task's entry and exit; the bid
-    takes the cheaper end (``reverse`` when that is the exit; the entry on a tie)."""
+    takes the cheaper end (``reverse`` when that is the exit; the entry on a tie). ``gain_s``
+    is what the task is worth beyond its work (a frontier's expected information, in seconds of
+    travel: Burgard et al. 2005's utility against cost, U − β·V, as a cost) and is taken off."""
     ends = np.array([entry, exit_], dtype=float).reshape(2, 2)
     secs = np.asarray(travel(np.array(commitment.end, dtype=float), ends), dtype=float)
     reverse = bool(secs[1] < secs[0])
-    marginal = float(secs[int(reverse)]) + float(time_s)
+    marginal = float(secs[int(reverse)]) + float(time_s) - float(gain_s)
     return Bid(task_id, robot, marginal, commitment.total_s + marginal, reverse)
 
 

@@ -21,7 +21,9 @@ from planners.auction.tasks import Task
 @dataclass(frozen=True, eq=False)
 class Lot:
     """One call's item: ``tasks`` in driving order from ``entry`` to ``exit``. A lot bought
-    backwards (entered at its exit) is driven last task first, each task backwards."""
+    backwards (entered at its exit) is driven last task first, each task backwards.
+    ``gain_s``: what it is worth beyond its work, in seconds a bid takes off (a frontier's
+    expected information; 0 for cleaning)."""
 
     id: str
     tasks: tuple[str, ...]
@@ -29,6 +31,7 @@ class Lot:
     exit: np.ndarray
     time_s: float
     area_m2: float
+    gain_s: float = 0.0
 
 
 def task_lot(task: Task) -> Lot:
