@@ -34,8 +34,9 @@ from planners.robot import RobotSpec
 
 OPEN, ASSIGNED, DONE, REPLACED = "open", "assigned", "done", "replaced"
 BLOCKED, UNREACHABLE = "blocked", "unreachable"
-# states of work that is over: done, or left out for good unless the world changes
-SETTLED = (DONE, REPLACED, BLOCKED, UNREACHABLE)
+GONE = "gone"
+# states of work that is over: done, gone, or left out for good unless the world changes
+SETTLED = (DONE, REPLACED, BLOCKED, UNREACHABLE, GONE)
 LEFT_OUT = (BLOCKED, UNREACHABLE)
 ALIVE, LOST, REJOINED = "alive", "lost", "rejoined"
 
@@ -326,6 +327,16 @@ class Job:
                 rec.state, rec.blocked_by = OPEN, None
                 out.append(rec.task.id)
         return out
+
+    def drop(self, task_id: str) -> str | None:
+        """``task_id``, open or assigned, is no longer wanted (its frontier vanished): it is
+        ``gone``; the robot that held it, if any (its queue closes up behind it)."""
+        rec = self.tasks.get(task_id)
+        if rec is None or rec.state not in (OPEN, ASSIGNED):
+            return None
+        owner = rec.owner if rec.state == ASSIGNED else None
+        rec.state, rec.owner = GONE, None
+        return owner
 
     def next_id(self, task_id: str) -> str:
         """A fresh id for a task made from ``task_id``: "t07" → "t07.1", "t07.1" → "t07.2"."""
