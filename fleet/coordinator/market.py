@@ -115,31 +115,19 @@ class Market:
 
     def auction(self, auctioneer: Auctioneer, each_round: Hook = lambda: None) -> None:
         """Sequential single-item auctions over the bus until nothing is open or no robot bids,
-        ``each_round`` (the heartbeat watch, else held up by a long auction) called first in each.
-
-        Runs of the tour are sold as regions, one per robot in the market
-        (``planners.auction.regions``): all tasks in the first allocation, and the work a lost
-        robot leaves; everything else task by task."""
+        ``each_round`` (the heartbeat watch, else held up by a long auction) called first in
+        each."""
         t0 = time.monotonic()
         committed: list[float] = []
         with self.lock:
-            first = all(r.state == "open" for r in self.job.tasks.values())
-            if first:
-                self.region_sale = list(self.job.tasks)
-            for_sale = sorted(
-                (t for t in self.region_sale if self.job.tasks[t].state == "open"), key=_tour_key
-            )
-            self.region_sale = []
-            bidders = self.job.market()
-            runs = [self.job.tasks[t].task for t in for_sale]
-        regions = auction.regions(runs, len(bidders)) if bidders else ()
+            first, regions = self._regions()
         while not self.stop.is_set():
             with self.lock:
                 each_round()
                 self.need_auction = False
                 self._settle()
                 lots = self._lots(regions)
-                round_bidders = frozenset(self.job.market())
+                round_bidders = frozenset(self._bidders())
             if not lots or not round_bidders:
                 break
             rnd = auctioneer.call(self.journal.clock, lots, round_bidders)
@@ -155,7 +143,7 @@ class Market:
         if first and committed:
             with self.lock:
                 if not self.job.open_tasks():
-                    self._estimate(max(committed))
+                    estimate(self.journal, max(committed))
         if committed:
             ms = 1e3 * (time.monotonic() - t0)
             log.info("auction: %d lots sold in %.0f ms", len(committed), ms)
@@ -193,6 +181,25 @@ class Market:
         self.journal.set_meta(round_seq=sale.round)
         self.awards.send()
 
+    def _regions(self) -> tuple[bool, tuple[auction.Lot, ...]]:
+        """Whether this is the first allocation, and the runs of the tour sold as regions, one
+        per robot in the market (``planners.auction.regions``): all tasks in the first
+        allocation, and the work a lost robot leaves; everything else goes task by task."""
+        first = all(r.state == "open" for r in self.job.tasks.values())
+        if first:
+            self.region_sale = list(self.job.tasks)
+        for_sale = sorted(
+            (t for t in self.region_sale if self.job.tasks[t].state == "open"), key=_tour_key
+        )
+        self.region_sale = []
+        bidders = self.job.market()
+        runs = [self.job.tasks[t].task for t in for_sale]
+        return first, auction.regions(runs, len(bidders)) if bidders else ()
+
+    def _bidders(self) -> list[str]:
+        """The robots called to bid: those in the market."""
+        return self.job.market()
+
     def _untried(self, lot: auction.Lot, robot: str) -> bool:
         """Whether ``robot`` may win ``lot``: it has tried none of its tasks."""
         return not any(robot in self.job.tasks[t].tried for t in lot.tasks)
@@ -218,13 +225,6 @@ class Market:
         if unsold:
             return unsold
         return {tid: auction.task_lot(self.job.tasks[tid].task) for tid in open_ids}
-
-    def _estimate(self, makespan_s: float) -> None:
-        """The job's makespan as the first allocation prices it: the longest of the winners'
-        committed times (travel from where each stood, and the cleaning time of what it won)."""
-        log.info("the first allocation's makespan estimate: %.1f s", makespan_s)
-        self.journal.event("estimated", "", "", f"makespan {makespan_s:.1f} s")
-        self.journal.set_meta(estimate_s=round(makespan_s, 2))
 
     # ---- the job's changes ----------------------------------------------------------------
 
@@ -402,13 +402,13 @@ class Market:
         self.stuck(rid, f"no way to {task_id}")
 
     def serve_idle(self) -> bool:
-        """When a robot in the market has no work while others hold queued tasks, rebalance
-        (once per change of who works); whether an auction is due for the idle robots."""
+        """Rebalance (once per change of who works) when a robot in the market has no work while
+        others hold queued tasks; whether an auction is due (open work untried by an idle robot)."""
         idle = [rid for rid in self.job.market() if self.job.current(rid) is None]
         queued = any(len(self.job.queue(rid)) > 1 for rid in self.job.robots)
         if idle and queued and self.version != self.balanced_version:
             self.rebalance()
-        return bool(idle and self.job.open_tasks())
+        return any(rid not in rec.tried for rid in idle for rec in self.job.open_tasks())
 
     def rebalance(self) -> None:
         """Withdraw the unstarted tasks for a new auction. A robot keeps the task it drives; its
@@ -425,6 +425,14 @@ class Market:
         self.awards.send()
         self.need_auction = True
         self.wake.set()
+
+
+def estimate(journal: Journal, makespan_s: float) -> None:
+    """The job's makespan as the first allocation prices it: the longest of the winners'
+    committed times (travel from where each stood, and the cleaning time of what it won)."""
+    log.info("the first allocation's makespan estimate: %.1f s", makespan_s)
+    journal.event("estimated", "", "", f"makespan {makespan_s:.1f} s")
+    journal.set_meta(estimate_s=round(makespan_s, 2))
 
 
 def changed(job: Job, lots: Mapping[str, auction.Lot]) -> bool:

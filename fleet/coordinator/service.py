@@ -84,6 +84,8 @@ PERSIST_ROBOTS_S = 1.0
 class Coordinator:
     """The coordinator's parts, wired to the bus, and its main loop."""
 
+    market_class: type[Market] = Market
+
     def __init__(
         self,
         bus: Bus,
@@ -116,7 +118,7 @@ class Coordinator:
         self.dispatcher = Dispatcher(
             self.journal, planner, transits, params, self.keys, bus.publish
         )
-        self.market = Market(
+        self.market = self.market_class(
             self.journal, self.awards, self.dispatcher, self.lock, self.wake, self.stop
         )
         self.market.stall_s = params.stall_s
@@ -155,8 +157,12 @@ class Coordinator:
         bus.subscribe(self.keys.all_bids(), Bid, self.auctioneer.on_bid)
         bus.subscribe(self.keys.ack("*"), AwardAck, self._on_ack)
         bus.serve(self.keys.plan("*"), Request, self._on_plan_query)
-        floor = pack_grid(planner.grid)
-        bus.serve(self.keys.floor_map(), Request, lambda _req: floor)
+        self._serve_floor()
+
+    def _serve_floor(self) -> None:
+        """Serve the floor plan the tasks are cut from on ``coord/map``: robots price on it."""
+        floor = pack_grid(self.planner.grid)
+        self.bus.serve(self.keys.floor_map(), Request, lambda _req: floor)
 
     # ---- restart ------------------------------------------------------------------------
 
@@ -340,6 +346,7 @@ class Coordinator:
                 else:
                     self._check_heartbeats()
                     self.market.check_stalls()
+                    self._tick()
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
             if self.phase != "gathering" and auction_due:
@@ -355,12 +362,15 @@ class Coordinator:
                     last_state = now
                     self._publish_state()
 
+    def _tick(self) -> None:
+        """What the job does each loop besides the market's own (with the lock held)."""
+
     def _send_due(self) -> None:
         """Send the awards and plans due, and move the phase on."""
         self.awards.send()
         self.dispatcher.dispatch()
         self.dispatcher.resend_unheard(time.monotonic())
-        if self.job.finished and self.phase not in FINISHED:
+        if self._finished() and self.phase not in FINISHED:
             left = self.job.left_out()
             self.phase = "incomplete" if left else "done"
             log.info(self.given_up.finished_message())
@@ -374,6 +384,9 @@ class Coordinator:
             self.journal.set_meta(phase=self.phase)
         elif self.phase == "auction" and not self.job.open_tasks():
             self.phase = "cleaning"
+
+    def _finished(self) -> bool:
+        return self.job.finished
 
     def _persist(self, store: JobStore) -> None:
         """What changes too often to save at each change: the robots, the counters."""
@@ -414,21 +427,27 @@ class Coordinator:
             self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
-        counts = self.job.counts()
-        robots = sorted(self.job.robots)
-        state = FleetState(
-            self.journal.clock,
-            self.phase,
-            robots,
-            sorted(r for r in robots if self.job.current(r) is None),
-            sorted(r for r in robots if self.job.robots[r].liveness == LOST),
-            counts["open"],
-            counts[ASSIGNED],
-            counts["done"],
-            counts[BLOCKED] + counts[UNREACHABLE],
-            *self._dropped(),
-        )
+        state = fleet_state(self.job, self.journal.clock, self.phase, self._dropped())
         self.bus.publish(self.keys.coord_state(), state, control=True)
+
+
+def fleet_state(job: Job, clock: float, phase: str, dropped: tuple[int, int]) -> FleetState:
+    """What ``coord/state`` tells: the phase, the robots (idle, lost), the task counts and the
+    messages dropped (malformed, implausible)."""
+    counts = job.counts()
+    robots = sorted(job.robots)
+    return FleetState(
+        clock,
+        phase,
+        robots,
+        sorted(r for r in robots if job.current(r) is None),
+        sorted(r for r in robots if job.robots[r].liveness == LOST),
+        counts["open"],
+        counts[ASSIGNED],
+        counts["done"],
+        counts[BLOCKED] + counts[UNREACHABLE],
+        *dropped,
+    )
 
 
 def _left_out(rec: TaskRecord) -> str:
