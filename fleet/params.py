@@ -165,10 +165,19 @@ class CoordinatorParams:
     max_detour_m: float = 1.0
     stall_s: float = 30.0
     stall_progress_m: float = 0.1
+    explore_every_s: float = 2.0
+    explore_gain_s_per_m2: float = 2.0
+    explore_min_gain_m2: float = 0.1
+    explore_match_m: float = 0.5
+    explore_step_m: float = 0.05
 
     def validate(self) -> None:
+        require_non_negative(self, "explore_gain_s_per_m2", "explore_min_gain_m2")
         require_positive(
             self,
+            "explore_every_s",
+            "explore_match_m",
+            "explore_step_m",
             "task_target_s",
             "heartbeat_timeout_s",
             "bid_timeout_s",

@@ -206,11 +206,23 @@ def coordinator(
         ),
     ] = None,
     deconfliction: DeconflictionOpt = None,
+    explore: Annotated[
+        Path | None,
+        typer.Option(
+            "--explore",
+            help="Explore instead of cleaning, and write the merged map (map.yaml, map.pgm) "
+            "into this directory: the floor plan is not read; the robots' own maps are merged, "
+            "and their frontiers auctioned until none is left.",
+        ),
+    ] = None,
 ) -> None:
     """Run the coordinator: cuts the floor into tasks, auctions them to the live robots,
-    re-auctions the work of a robot that is lost, and sends each robot its plans."""
+    re-auctions the work of a robot that is lost, and sends each robot its plans. With
+    --explore it auctions the frontiers of the robots' merged maps instead."""
     import sqlite3
 
+    from fleet.coordinator.explore_service import ExploringCoordinator
+    from fleet.coordinator.exploring import Explorer, MapPlanner
     from fleet.coordinator.planning import TaskPlanner
     from fleet.coordinator.service import Coordinator
     from fleet.coordinator.store import JobStore, StoreError
@@ -222,9 +234,14 @@ def coordinator(
     _setup_logging("coordinator")
     cfg, w = _load(config, world)
     mode = deconfliction or cfg.coordinator.deconfliction
+    if explore is not None and mode != "local":
+        _fail("--explore plans local transits only; leave out --deconfliction")
+    transits = None
     try:
-        planner = TaskPlanner(w, cfg)
-        transits = None if mode == "local" else TransitPlanner(w, cfg, mode, planner.transit.clear)
+        if explore is None:
+            planner = TaskPlanner(w, cfg)
+            if mode != "local":
+                transits = TransitPlanner(w, cfg, mode, planner.transit.clear)
     except ValueError as e:
         _fail(str(e))
     try:
@@ -236,7 +253,12 @@ def coordinator(
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
-    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=Bounds.of(cfg))
+    bounds = Bounds.of(cfg)
+    if explore is None:
+        c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=bounds)
+    else:
+        explorer = Explorer(cfg, MapPlanner(cfg), explore)
+        c = ExploringCoordinator(bus, explorer, robots, cfg.coordinator, store, bounds=bounds)
     _stop_on_signals(c.stop)
     try:
         c.run(cfg.coordinator.expected_robots_grace_s)

@@ -1,0 +1,141 @@
+"""The coordinator of an exploring fleet: the cleaning coordinator's market, loop and store,
+with the robots' merged maps in place of the floor plan (:mod:`fleet.coordinator.exploring`).
+
+What changes: no floor plan is served on ``coord/map`` (a robot prices travel on its own SLAM
+map, unknown cells counted as free); the robots' map patches are heard; every
+``coordinator.explore_every_s`` sim seconds the maps are merged and the frontier tasks
+updated, the update told as an ``explored`` event (known area, frontiers, each robot's goal);
+the market calls only the robots without work, so each holds one frontier at a time
+(Burgard et al. 2005 assign one target per robot), and sells the open frontier tasks, each
+worth its discounted information gain; the job is finished when the explorer finds no new
+frontier with no task open or assigned.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+from fleet.bus import Bus
+from fleet.coordinator.exploring import Change, Explorer
+from fleet.coordinator.market import Market
+from fleet.coordinator.service import Coordinator
+from fleet.coordinator.store import JobStore
+from fleet.params import CoordinatorParams
+from fleet.plausible import Bounds
+from fleet.protocol import MapPatches, Request
+from planners import auction
+
+log = logging.getLogger("coordinator")
+
+# wall seconds a robot's whole map is waited for when its patches had a gap
+WHOLE_MAP_TIMEOUT_S = 2.0
+
+
+class ExploringMarket(Market):
+    """The market selling frontier tasks, one to each robot without work."""
+
+    explorer: Explorer
+
+    def _regions(self) -> tuple[bool, tuple[auction.Lot, ...]]:
+        return False, ()
+
+    def _bidders(self) -> list[str]:
+        """The robots in the market without work: each drives to one frontier at a time."""
+        return [rid for rid in self.job.market() if self.job.current(rid) is None]
+
+    def _lots(self, regions: tuple[auction.Lot, ...]) -> dict[str, auction.Lot]:
+        return self.explorer.lots(self.job)
+
+
+class ExploringCoordinator(Coordinator):
+    """The coordinator's loop and market on the robots' merged maps."""
+
+    market_class = ExploringMarket
+
+    def __init__(
+        self,
+        bus: Bus,
+        explorer: Explorer,
+        expected: int,
+        params: CoordinatorParams,
+        store: JobStore | None = None,
+        *,
+        bounds: Bounds,
+    ) -> None:
+        self.explorer = explorer
+        self.explored_at = -float("inf")
+        self._fetching: threading.Thread | None = None
+        super().__init__(bus, explorer.planner, expected, params, store, None, bounds=bounds)
+        self.market.explorer = explorer  # type: ignore[attr-defined]
+        bus.subscribe(self.keys.all_robots("map"), MapPatches, self._on_map)
+
+    def _serve_floor(self) -> None:
+        """No floor plan: the robots price travel on their own maps."""
+
+    def _plan_tasks(self) -> None:
+        with self.lock:
+            self.journal.set_meta(expected_robots=self.expected, exploring=True)
+
+    def _on_map(self, key: str, msg: MapPatches) -> None:
+        rid = self.keys.robot_of(key)
+        with self.lock:
+            if self._implausible(key, rid, msg.stamp):
+                return
+            self.explorer.maps.hear(rid, msg)
+
+    def _fetch_whole_maps(self) -> None:
+        """Ask each robot whose patches had a gap for its whole map (on a thread of its own:
+        the main loop holds the lock)."""
+        with self.lock:
+            missing = sorted(self.explorer.maps.missing)
+        for rid in missing:
+            key = self.keys.robot(rid, "map")
+            try:
+                msg = self.bus.request(key, Request("coordinator"), MapPatches, WHOLE_MAP_TIMEOUT_S)
+            except (TimeoutError, RuntimeError) as e:
+                log.info("%s: no whole map yet (%s)", rid, e)
+                continue
+            with self.lock:
+                self.explorer.maps.hear(rid, msg)
+
+    def _tick(self) -> None:
+        """Every ``explore_every_s`` sim seconds: merge the maps, update the frontier tasks."""
+        if self.explorer.maps.missing and not (self._fetching and self._fetching.is_alive()):
+            self._fetching = threading.Thread(target=self._fetch_whole_maps, daemon=True)
+            self._fetching.start()
+        if self.journal.clock - self.explored_at < self.params.explore_every_s:
+            return
+        self.explored_at = self.journal.clock
+        change = self.explorer.update(self.job)
+        if change is not None:
+            self._take(change)
+
+    def _take(self, change: Change) -> None:
+        """Save and tell what an update changed; withdraw the tasks gone from their robots."""
+        self.journal.save_tasks(*(t.id for t in change.added))
+        for tid, owner in change.gone:
+            self.journal.event("withdrawn", owner or "", tid, "its frontier vanished")
+            self.journal.save_tasks(tid)
+        gone = [tid for tid, _ in change.gone]
+        self.dispatcher.cut(gone)
+        self.awards.send()
+        if change.added or gone:
+            self.market.version += 1
+            self.market.need_auction = True
+            self.wake.set()
+        goals = ", ".join(
+            f"{rid} → {rec.task.id} ({rec.task.entry[0]:.1f}, {rec.task.entry[1]:.1f})"
+            for rid in sorted(self.job.robots)
+            if (rec := self.job.current(rid)) is not None
+        )
+        self.journal.event(
+            "explored",
+            "",
+            "",
+            f"known {change.known_m2:.1f} m², {change.frontiers} frontiers, "
+            f"{len(change.added)} new, {len(gone)} gone; goals: {goals or 'none'}",
+        )
+
+    def _finished(self) -> bool:
+        return self.explorer.finished(self.job)

@@ -1,0 +1,257 @@
+"""Exploring an unknown home: the robots' maps merged, their frontiers sold as tasks.
+
+The coordinator of an exploring fleet has no floor plan: it knows only what the robots report.
+Each robot's SLAM map comes as changed tiles (``robot/<id>/map``, :class:`RobotMaps` keeps a
+copy of each; a gap in ``seq`` has the whole map fetched by query). Every
+``coordinator.explore_every_s`` sim seconds :meth:`Explorer.update`:
+
+1. merges the maps into one grid in the common frame (``planners.map_merge.merge_maps``, Birk
+   and Carpin 2006). A robot's SLAM starts at its known start pose, so its map frame is the
+   common frame (the prior is the identity); each map is then matched against the merge of
+   those before it (``planners.map_match.refine_transforms``, Olson 2009) and moved only where
+   the match is confident, which takes out the drift between the robots' maps;
+2. extracts the merged map's frontiers a robot can reach (``planners.frontiers.find_frontiers``,
+   Yamauchi 1997) with their expected information gain (Burgard et al. 2005);
+3. makes each new frontier a task (``planners.frontier_tasks``: drive to its goal), and takes
+   off the market every task whose frontier vanished (state ``gone``; a robot driving to it
+   stops and bids again).
+
+Plans are A* on the merged map (:class:`MapPlanner`: robot centres on known floor clear of
+walls by the robot's radius and ``coordinator.wall_clearance``). The market sells a frontier's
+task to one idle robot at a time; its call is worth the discounted information gain
+(``planners.frontier_tasks.call_values``), and each robot's bid takes that off its travel, which
+it prices on its own map. Exploring is over when no task is open or assigned and an update finds
+no new frontier. The merged map is written as a ROS map_server pair (``map.yaml``, ``map.pgm``)
+after every update.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from fleet.coordinator.job import ASSIGNED, GONE, OPEN, REPLACED, Job
+from fleet.coordinator.planning import TaskPlanner
+from fleet.floor_map import apply_patches
+from fleet.params import FleetConfig
+from fleet.protocol import MapPatches
+from planners.auction import Lot, Task, task_lot
+from planners.frontier_tasks import call_values, goal_task, new_frontiers, still_there
+from planners.frontiers import Frontier, centre_reachable, find_frontiers
+from planners.grid import GridMap
+from planners.map_match import MatchParams, refine_transforms
+from planners.map_merge import LogOddsMap, Transform2D, merge_maps
+
+log = logging.getLogger("coordinator")
+
+MAP_YAML = "map.yaml"
+MAP_PGM = "map.pgm"
+# ROS map_saver's trinary pixels and thresholds
+PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN = 254, 0, 205
+FREE_THRESH, OCCUPIED_THRESH = 0.196, 0.65
+
+
+class RobotMaps:
+    """Each robot's SLAM map as its patches told it (int8 OccupancyGrid values)."""
+
+    def __init__(self) -> None:
+        self.cells: dict[str, np.ndarray] = {}
+        self.geometry: dict[str, tuple[float, tuple[float, float]]] = {}
+        self.seq: dict[str, int] = {}
+        # robots whose whole map must be fetched: a gap in their patches' seq
+        self.missing: set[str] = set()
+        self.changed = False
+
+    def hear(self, rid: str, msg: MapPatches) -> None:
+        """Write ``msg``'s tiles into ``rid``'s copy; a gap in ``seq`` (or patches before any
+        whole map) marks the robot's whole map as missing."""
+        if not msg.full and msg.seq != self.seq.get(rid, -2) + 1:
+            self.missing.add(rid)
+        try:
+            cells = apply_patches(self.cells.get(rid), msg)
+        except ValueError:
+            return
+        self.cells[rid] = cells
+        self.geometry[rid] = (msg.resolution, (msg.origin_x, msg.origin_y))
+        self.seq[rid] = msg.seq
+        if msg.full:
+            self.missing.discard(rid)
+        self.changed = True
+
+    def log_odds(self, limits: tuple[float, float]) -> dict[str, LogOddsMap]:
+        """Each robot's map as log-odds, by robot id."""
+        return {
+            rid: LogOddsMap.from_ros(cells, *self.geometry[rid], limits)
+            for rid, cells in sorted(self.cells.items())
+        }
+
+
+class MapPlanner(TaskPlanner):
+    """Plans on the fleet's merged map as it grows (no floor plan, no tour: no tasks of its
+    own)."""
+
+    def __init__(self, cfg: FleetConfig) -> None:
+        self._configure(cfg)
+        self.use_floor(
+            GridMap(np.zeros((1, 1), bool), np.ones((1, 1), bool), cfg.slam.resolution, (0, 0)),
+            np.zeros((1, 1), dtype=bool),
+        )
+
+    def tasks(self) -> tuple[Task, ...]:
+        return ()
+
+
+@dataclass(frozen=True)
+class Change:
+    """What an update did: the tasks it made, and those it took off as gone (with the robot
+    that held each, or None)."""
+
+    added: tuple[Task, ...]
+    gone: tuple[tuple[str, str | None], ...]
+    frontiers: int
+    known_m2: float
+
+
+class Explorer:
+    """The merged map, its frontiers, and the frontier tasks of the job."""
+
+    def __init__(self, cfg: FleetConfig, planner: MapPlanner, out_dir: Path | None) -> None:
+        slam = cfg.slam
+        self.params = cfg.coordinator
+        self.planner = planner
+        self.out_dir = out_dir
+        self.limits = (_logit(slam.p_min), _logit(slam.p_max))
+        self.thresholds = (slam.occupied_threshold, slam.free_threshold)
+        self.match = MatchParams(
+            sigma=slam.match_sigma,
+            occupied_threshold=slam.occupied_threshold,
+            free_threshold=slam.free_threshold,
+        )
+        self.sensor_range = cfg.lidar.range_max
+        self.clearance = planner.centre_clearance
+        self.maps = RobotMaps()
+        self.grid: GridMap | None = None
+        self.transforms: dict[str, Transform2D] = {}
+        self.seq = 0
+        # the last update found no new frontier while no task was open or assigned
+        self.exhausted = False
+
+    def update(self, job: Job) -> Change | None:
+        """Merge the maps, extract the frontiers, add the new ones to ``job`` and drop the
+        tasks whose frontier vanished; None before any robot has sent its map."""
+        maps = self.maps.log_odds(self.limits)
+        if not maps:
+            return None
+        self.maps.changed = False
+        grid, robots = self._merge(maps, job)
+        frontiers = [
+            f
+            for f in find_frontiers(grid, robots, self.clearance, self.sensor_range)
+            if f.information_gain >= self.params.explore_min_gain_m2
+        ]
+        self.planner.use_floor(grid, centre_reachable(grid, robots, self.clearance))
+        gone = self._drop_vanished(job, frontiers, grid)
+        taken = np.array(
+            [rec.task.entry for rec in job.tasks.values() if rec.state not in (GONE, REPLACED)]
+        ).reshape(-1, 2)
+        added = []
+        for f in new_frontiers(frontiers, taken, self.params.explore_match_m):
+            self.seq += 1
+            task = goal_task(f"f{self.seq:03d}", f, self.params.explore_step_m)
+            job.add_tasks((task,))
+            added.append(task)
+        busy = any(rec.state in (OPEN, ASSIGNED) for rec in job.tasks.values())
+        # over only once every robot's map is in and shows floor: a map of a robot that has
+        # not scanned yet shows no frontier
+        everyone = set(job.market()) <= set(maps) and bool(grid.free.any())
+        self.exhausted = everyone and not busy
+        known = float((grid.free | grid.occupied).sum()) * grid.resolution**2
+        if self.out_dir is not None:
+            write_ros_map(self.out_dir, grid)
+        return Change(tuple(added), tuple(gone), len(frontiers), known)
+
+    def _merge(self, maps: Mapping[str, LogOddsMap], job: Job) -> tuple[GridMap, np.ndarray]:
+        """The merged grid, and the robots' positions in its frame."""
+        ids = list(maps)
+        priors = [self.transforms.get(rid, Transform2D.identity()) for rid in ids]
+        matches = refine_transforms(list(maps.values()), priors, self.limits, self.match)
+        self.transforms = {rid: m.transform for rid, m in zip(ids, matches, strict=True)}
+        merged = merge_maps(list(maps.values()), [m.transform for m in matches], self.limits)
+        self.grid = grid = merged.to_gridmap(*self.thresholds)
+        robots = [
+            self.transforms.get(rid, Transform2D.identity()).apply(np.array(r.xy))
+            for rid, r in sorted(job.robots.items())
+            if r.xy is not None
+        ]
+        return grid, np.array(robots, dtype=float).reshape(-1, 2)
+
+    def _drop_vanished(
+        self, job: Job, frontiers: list[Frontier], grid: GridMap
+    ) -> list[tuple[str, str | None]]:
+        alive = [rec for rec in job.tasks.values() if rec.state in (OPEN, ASSIGNED)]
+        if not alive:
+            return []
+        goals = np.array([rec.task.entry for rec in alive])
+        there = still_there(goals, frontiers, grid, self.params.explore_match_m)
+        return [
+            (rec.task.id, job.drop(rec.task.id))
+            for rec, ok in zip(alive, there, strict=True)
+            if not ok
+        ]
+
+    def finished(self, job: Job) -> bool:
+        """No task open or assigned, and the last update, with every robot's map in and floor
+        on the merged map, found no new frontier."""
+        return self.exhausted and not any(
+            rec.state in (OPEN, ASSIGNED) for rec in job.tasks.values()
+        )
+
+    def lots(self, job: Job) -> dict[str, Lot]:
+        """The open tasks for sale, each worth its discounted information gain
+        (``planners.frontier_tasks.call_values``) given the goals robots are headed to."""
+        open_recs = job.open_tasks()
+        if not open_recs:
+            return {}
+        goals = np.array([rec.task.entry for rec in open_recs])
+        headed = np.array(
+            [rec.task.entry for rec in job.tasks.values() if rec.state == ASSIGNED]
+        ).reshape(-1, 2)
+        gains = np.array([rec.task.area_m2 for rec in open_recs])
+        values = call_values(
+            gains, goals, headed, self.sensor_range, self.params.explore_gain_s_per_m2
+        )
+        out = {}
+        for rec, value in zip(open_recs, values, strict=True):
+            lot = task_lot(rec.task)
+            out[lot.id] = Lot(lot.id, lot.tasks, lot.entry, lot.exit, 0.0, lot.area_m2, value)
+        return out
+
+
+def write_ros_map(out_dir: Path, grid: GridMap) -> None:
+    """``grid`` as a ROS map_server pair in ``out_dir`` (trinary PGM as map_saver writes it:
+    free 254, occupied 0, unknown 205; image row 0 is the highest y), written through
+    temporary files so a reader never sees half a map."""
+    pixels = np.full(grid.shape, PGM_UNKNOWN, dtype=np.uint8)
+    pixels[grid.free] = PGM_FREE
+    pixels[grid.occupied] = PGM_OCCUPIED
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tmp = out_dir / (MAP_PGM + ".tmp")
+    Image.fromarray(np.flipud(pixels)).save(tmp, format="PPM")
+    tmp.replace(out_dir / MAP_PGM)
+    yaml = (
+        f"image: {MAP_PGM}\nresolution: {grid.resolution}\n"
+        f"origin: [{grid.origin[0]}, {grid.origin[1]}, 0.0]\nnegate: 0\n"
+        f"occupied_thresh: {OCCUPIED_THRESH}\nfree_thresh: {FREE_THRESH}\nmode: trinary\n"
+    )
+    tmp = out_dir / (MAP_YAML + ".tmp")
+    tmp.write_text(yaml)
+    tmp.replace(out_dir / MAP_YAML)
+
+
+def _logit(p: float) -> float:
+    return float(np.log(p / (1.0 - p)))
