@@ -111,6 +111,7 @@ class Agent:
             cfg.slam.free_threshold,
         )
         self._calls: list[TaskCall] = []
+        self._told_no_floor = False
         self._calls_ready = threading.Condition()
 
     def spawn(
@@ -325,9 +326,9 @@ class Agent:
         try:
             msg = self.bus.request(self.keys.floor_map(), Request(self.rid), MapPatches, 1.0)
         except (TimeoutError, RuntimeError, ValueError) as e:
-            log.warning(
-                "%s: no floor plan from the coordinator (%s); pricing on its own map", self.rid, e
-            )
+            if not self._told_no_floor:  # an exploring fleet's coordinator has none
+                log.warning("%s: no floor plan (%s); pricing on its own map", self.rid, e)
+            self._told_no_floor = True
             return
         floor = unpack_grid(msg)
         with self.lock:
