@@ -119,7 +119,7 @@ def up(
         write_json,
     )
     from fleet.rundir import RunTable, cmdline, write_dropped, write_table
-    from fleet.supervisor.launcher import Launcher, WorkWatch, free_port, wait_for_port
+    from fleet.supervisor.launcher import Launcher, free_port
 
     if not 1 <= robots <= MAX_ROBOTS:
         _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
@@ -157,46 +157,16 @@ def up(
 
     launcher = Launcher(run_dir, on_change=save_table)
     stop = threading.Event()
-    interrupted = []
-
-    def on_signal(signum: int, _frame: object) -> None:
-        interrupted.append(signal.Signals(signum).name)
-        if signum == signal.SIGHUP:
-            # the terminal is gone (a closed window or SSH session): what would be printed has
-            # nowhere to go, and writing to it would fail before the report is written
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, sys.stdout.fileno())
-            os.dup2(devnull, sys.stderr.fileno())
-        stop.set()
-
     # a closed terminal stops the fleet as Ctrl-C does: report written, no process left
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, on_signal)
+    _stop_on_signals(stop)
     out = typer.echo
     status = "interrupted"
     report_failed = False
     bus = None
     t0 = time.monotonic()
     try:
-        router = WorkWatch(launcher.start("router", ["router", "--listen", endpoint]))
-        waited = 0.0
-        while not wait_for_port("127.0.0.1", port, ROUTER_WAIT_S):
-            waited += ROUTER_WAIT_S
-            if not router.working() or waited >= ROUTER_GIVE_UP_S:
-                _fail(f"the Zenoh router did not start; see {run_dir / 'router.log'}")
-        sim_args = ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed)]
-        sim = WorkWatch(launcher.start("sim", [*sim_args, *common]))
-        state = ["--state", str(run_dir / "coordinator.sqlite")]
-        if deconfliction:
-            state += ["--deconfliction", deconfliction]
-        launcher.start(
-            "coordinator",
-            ["coordinator", "--robots", str(robots), "--world", world_path, *common, *state],
-        )
-        for i, (x, y, th) in enumerate(starts):
-            rid = f"robot-{i}"
-            state = ["--state-dir", str(run_dir / rid)]
-            launcher.start(rid, ["agent", "--id", rid, "--start", f"{x},{y},{th}", *common, *state])
+        coordinator = ["--deconfliction", deconfliction] if deconfliction else []
+        sim = _start_fleet(launcher, port, common, world_path, speed, seed, starts, coordinator)
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
@@ -279,6 +249,214 @@ def up(
         raise typer.Exit(INCOMPLETE_EXIT)
     if status not in ("done", "stopped", "timeout"):
         raise typer.Exit(1 if status != "interrupted" else 130)
+
+
+def explore(
+    robots: Annotated[int, typer.Option("--robots", "-n", help="Number of robot agents.")] = 2,
+    world: WorldOpt = "home",
+    speed: Annotated[
+        float,
+        typer.Option("--speed", help="Real-time factor; 0 runs as fast as the agents keep up."),
+    ] = 4.0,
+    headless: Annotated[
+        bool, typer.Option("--headless", help="Plain log lines instead of the live table.")
+    ] = False,
+    timeout: Annotated[
+        float | None,
+        typer.Option(
+            "--timeout",
+            help="Stop after this many wall-clock seconds (exit status 3); the map so far is "
+            "written all the same.",
+        ),
+    ] = None,
+    run_dir: Annotated[
+        Path | None,
+        typer.Option("--run-dir", help="Where logs and the map go (default: runs/<date-time>)."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
+    config: ConfigOpt = None,
+) -> None:
+    """Explore an unknown home: the robots start with no map, the coordinator merges the maps
+    they build (SLAM) and auctions the frontiers between known floor and the unknown (Burgard
+    et al. 2005) until no frontier a robot can reach is left.
+
+    The world file is the simulator's only: the coordinator knows what the robots report. In the
+    run dir: the merged map as a ROS map_server pair (map.yaml + map.pgm, written after every
+    update, so a run stopped early leaves the map so far) and map.png; explore.json (sim time
+    to finish, path length per robot, frontiers assigned, and the merged map's free-space IoU
+    against the true floor, scored from the world file after the run); the processes' logs.
+    The terminal shows each update as an `explored` event: known area, frontiers, each robot's
+    goal. Exit status: 0 explored, 3 stopped by --timeout, 4 done with frontiers no robot could
+    reach.
+
+    Examples: `fleet explore --robots 2 --world small --headless`;
+    `fleet explore --robots 3 --run-dir runs/home-map --timeout 900`; then
+    `fleet up --world runs/home-map/map.yaml` shows the map in the live view.
+    """
+    from fleet.bus import Bus
+    from fleet.config import resolve_world
+    from fleet.coordinator.exploring import MAP_PGM, MAP_YAML
+    from fleet.dashboard.model import BusFeed, FleetWatcher
+    from fleet.plausible import Bounds
+    from fleet.protocol import DEFAULT_FLEET, OpsRequest
+    from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG
+    from fleet.report.summary import RunRecorder, write_json
+    from fleet.rundir import RunTable, cmdline, write_table
+    from fleet.supervisor.launcher import Launcher, free_port
+
+    if not 1 <= robots <= MAX_ROBOTS:
+        _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
+    if speed < 0 or not math.isfinite(speed):
+        _fail(f"--speed must be a finite number >= 0, got {speed}")
+    if timeout is not None and timeout <= 0:
+        _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    cfg, w = _load(config, world)
+    try:
+        starts = w.start_poses(robots, cfg.robot.radius)
+    except ValueError as e:
+        _fail(str(e))
+    world_path = str(resolve_world(world))
+    run_dir = run_dir or Path("runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
+    if (run_dir / "coordinator.sqlite").exists() or (run_dir / MAP_YAML).exists():
+        _fail(f"--run-dir {run_dir} holds an earlier run; choose a new directory")
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        _fail(f"--run-dir {run_dir}: {e.strerror}")
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    common = ["--connect", endpoint] + (["--config", str(config)] if config else [])
+    up_cmdline = cmdline(os.getpid()) or []
+
+    def save_table(records: dict[str, ProcessRecord]) -> None:
+        table = RunTable(DEFAULT_FLEET, endpoint, os.getpid(), world_path, records, up_cmdline)
+        write_table(run_dir, table)
+
+    launcher = Launcher(run_dir, on_change=save_table)
+    stop = threading.Event()
+    _stop_on_signals(stop)
+    status, bus, t0 = "interrupted", None, time.monotonic()
+    try:
+        _start_fleet(
+            launcher, port, common, world_path, speed, seed, starts, ["--explore", str(run_dir)]
+        )
+        bus = Bus("dashboard", "up", [endpoint])
+        calls = MainThreadCalls()
+        bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
+        recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s)
+        watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s, recorder.watch)
+        feed = BusFeed(bus, watcher, fetch=False)
+        typer.echo(f"fleet: {robots} robots exploring {w.name} at {speed}× — {run_dir}/", err=True)
+        status = _watch(watcher, feed, launcher, calls, stop, True, timeout, headless, t0)
+        feed.pump()
+        feed.close()
+        with watcher.lock:
+            sim_s = watcher.finished_at if watcher.finished_at is not None else watcher.clock
+            tracks = {rid: list(tr) for rid, tr in recorder.tracks.items()}
+    finally:
+        if bus is not None:
+            bus.close()
+        launcher.stop_all()
+    if not (run_dir / MAP_YAML).exists():
+        _fail(f"no map was written (no robot reported its map); logs in {run_dir}/")
+    report = _explore_report(run_dir, w, starts[0], status, sim_s, time.monotonic() - t0, tracks)
+    write_json(run_dir / EXPLORE_REPORT, report)
+    from fleet.report.exploration import write_map_png
+
+    write_map_png(run_dir / MAP_PGM, run_dir / MAP_PNG)
+    lengths = ", ".join(f"{rid} {m:.1f} m" for rid, m in report["path_length_m"].items())
+    typer.echo(
+        f"{status}: explored in {report['sim_s']} s sim ({report['wall_s']} s wall), "
+        f"free-space IoU {report['free_iou']:.3f}, {report['frontiers']['assigned']} frontiers "
+        f"assigned, driven {lengths} — {run_dir / MAP_YAML}, {run_dir / MAP_PNG}, "
+        f"{run_dir / EXPLORE_REPORT}",
+        err=True,
+    )
+    exits = {"done": 0, "incomplete": INCOMPLETE_EXIT, "timeout": TIMED_OUT_EXIT}
+    if status not in exits:
+        raise typer.Exit(1 if status != "interrupted" else 130)
+    raise typer.Exit(exits[status])
+
+
+def _explore_report(
+    run_dir: Path,
+    world: Any,
+    start: tuple[float, float, float],
+    status: str,
+    sim_s: float,
+    wall_s: float,
+    tracks: dict[str, list[tuple[float, float, float]]],
+) -> dict[str, Any]:
+    """explore.json: how the exploration ended and what it took, and the merged map scored
+    against the world's true floor (the truth read here only, after the run)."""
+    from fleet.coordinator.exploring import MAP_YAML
+    from fleet.report.exploration import free_iou, frontier_counts, path_lengths, true_floor
+    from fleet.world import load_ros_map
+
+    mapped = load_ros_map(run_dir / MAP_YAML)
+    truth, floor = true_floor(world, mapped.resolution, (start[0], start[1]))
+    return {
+        "status": status,
+        "world": world.name,
+        "sim_s": round(sim_s, 1),
+        "wall_s": round(wall_s, 1),
+        "path_length_m": path_lengths(tracks),
+        "frontiers": frontier_counts(run_dir / "coordinator.sqlite"),
+        "known_m2": round(float((mapped.free | mapped.occupied).sum()) * mapped.resolution**2, 2),
+        "true_floor_m2": round(float(floor.sum()) * truth.resolution**2, 2),
+        "free_iou": round(free_iou(mapped, truth, floor), 4),
+        "map": MAP_YAML,
+    }
+
+
+def _stop_on_signals(stop: threading.Event) -> None:
+    """Set ``stop`` on SIGINT, SIGTERM or SIGHUP. On SIGHUP the terminal is gone (a closed
+    window or SSH session): what would be printed has nowhere to go, and writing to it would
+    fail before the report is written, so stdout and stderr go to /dev/null."""
+
+    def on_signal(signum: int, _frame: object) -> None:
+        if signum == signal.SIGHUP:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.dup2(devnull, sys.stderr.fileno())
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, on_signal)
+
+
+def _start_fleet(
+    launcher: Launcher,
+    port: int,
+    common: list[str],
+    world_path: str,
+    speed: float,
+    seed: int,
+    starts: list[tuple[float, float, float]],
+    coordinator: list[str],
+) -> WorkWatch:
+    """Start the router (and wait for its port), the simulator, the coordinator (its state in
+    the run dir, with the extra arguments ``coordinator``) and one agent per start pose; the
+    simulator's watch."""
+    from fleet.supervisor.launcher import WorkWatch, wait_for_port
+
+    run_dir = launcher.run_dir
+    router = WorkWatch(launcher.start("router", ["router", "--listen", f"tcp/127.0.0.1:{port}"]))
+    waited = 0.0
+    while not wait_for_port("127.0.0.1", port, ROUTER_WAIT_S):
+        waited += ROUTER_WAIT_S
+        if not router.working() or waited >= ROUTER_GIVE_UP_S:
+            _fail(f"the Zenoh router did not start; see {run_dir / 'router.log'}")
+    sim_args = ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed)]
+    sim = WorkWatch(launcher.start("sim", [*sim_args, *common]))
+    state = ["--state", str(run_dir / "coordinator.sqlite"), *coordinator]
+    robots = ["--robots", str(len(starts))]
+    launcher.start("coordinator", ["coordinator", *robots, "--world", world_path, *common, *state])
+    for i, (x, y, th) in enumerate(starts):
+        rid = f"robot-{i}"
+        state = ["--state-dir", str(run_dir / rid)]
+        launcher.start(rid, ["agent", "--id", rid, "--start", f"{x},{y},{th}", *common, *state])
+    return sim
 
 
 def _ask_sim(bus: Bus, key: str, cls: type[M], sim: WorkWatch) -> M:
@@ -537,4 +715,5 @@ def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
     app.command("up")(up)
+    app.command("explore")(explore)
     bench_app.command("sim")(bench_sim)

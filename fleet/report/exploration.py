@@ -1,0 +1,81 @@
+"""An exploration run judged: the fleet's merged map against the true floor, and what it took.
+
+Scoring only: the truth (the world file's floor) is read here, after the run, never by the
+exploring processes. The true floor is the world's free cells 4-connected to a robot's start (closed
+spaces no robot can enter are not floor); the merged map's free space is compared with it cell
+by cell on the truth's grid (each true cell looks up the merged cell holding its centre;
+outside the merged map is not free): free-space IoU = |mapped ∩ true| / |mapped ∪ true|.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from fleet.world import World
+from planners.grid import GridMap, reachable
+
+EXPLORE_REPORT = "explore.json"
+MAP_PNG = "map.png"
+# map.png shows each map cell as this many pixels a side
+PNG_SCALE = 4
+
+
+def true_floor(
+    world: World, resolution: float, start: tuple[float, float]
+) -> tuple[GridMap, np.ndarray]:
+    """The world's grid at ``resolution`` and its floor: free cells 4-connected to ``start``
+    (a robot's start)."""
+    grid = world.grid(resolution)
+    return grid, reachable(grid.free, grid.world_to_cell(np.array([start], dtype=float)))
+
+
+def mapped_free_on(mapped: GridMap, truth: GridMap) -> np.ndarray:
+    """``mapped``'s free cells on ``truth``'s grid: each truth cell takes the mapped cell
+    holding its centre (outside ``mapped``: not free)."""
+    rows, cols = np.indices(truth.shape)
+    centres = truth.cell_to_world(np.stack([rows.ravel(), cols.ravel()], axis=-1))
+    rc = mapped.world_to_cell(centres)
+    inside = mapped.in_bounds(rc)
+    free = np.zeros(len(rc), dtype=bool)
+    free[inside] = mapped.free[rc[inside, 0], rc[inside, 1]]
+    return free.reshape(truth.shape)
+
+
+def free_iou(mapped: GridMap, truth: GridMap, floor: np.ndarray) -> float:
+    """Free-space IoU of ``mapped`` against ``floor`` (a mask on ``truth``'s grid)."""
+    free = mapped_free_on(mapped, truth)
+    union = int((free | floor).sum())
+    return float((free & floor).sum()) / union if union else 0.0
+
+
+def path_lengths(tracks: dict[str, list[tuple[float, float, float]]]) -> dict[str, float]:
+    """Metres each robot drove along its track of (sim s, x, y)."""
+    out = {}
+    for rid, track in sorted(tracks.items()):
+        xy = np.array([(x, y) for _, x, y in track], dtype=float).reshape(-1, 2)
+        out[rid] = round(float(np.hypot(*np.diff(xy, axis=0).T).sum()), 2) if len(xy) else 0.0
+    return out
+
+
+def write_map_png(pgm: Path, png: Path) -> None:
+    """The map_server image ``pgm`` as a PNG, each cell ``PNG_SCALE`` pixels a side."""
+    with Image.open(pgm) as im:
+        im.resize((im.width * PNG_SCALE, im.height * PNG_SCALE), Image.Resampling.NEAREST).save(png)
+
+
+def frontier_counts(state: Path) -> dict[str, int]:
+    """From the coordinator's SQLite ``state`` (read-only): ``assigned``, the frontier tasks
+    awarded to a robot (each once), and the frontier tasks by their final state."""
+    db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
+    try:
+        (assigned,) = db.execute(
+            "SELECT COUNT(DISTINCT task) FROM events WHERE kind = 'awarded'"
+        ).fetchone()
+        states = db.execute("SELECT state, COUNT(*) FROM tasks GROUP BY state").fetchall()
+    finally:
+        db.close()
+    return {"assigned": int(assigned), **{str(s): int(n) for s, n in states}}
