@@ -61,7 +61,8 @@ def read_events(state: Path) -> list[dict[str, Any]]:
 
 
 class RunningFleet:
-    """``fleet up --headless --until-done --speed S`` (0 by default) started at construction."""
+    """``fleet up --headless --until-done --speed S`` (0 by default) started at construction;
+    with ``command`` ``("explore",)``, ``fleet explore --headless ...``."""
 
     def __init__(
         self,
@@ -73,6 +74,7 @@ class RunningFleet:
         cwd: Path | None = None,
         speed: float = 0.0,
         options: Sequence[str] = (),
+        command: Sequence[str] = ("up", "--until-done"),
     ) -> None:
         """``options``: more options of ``fleet up`` (e.g. ``--deconfliction cbs``)."""
         self.dir = run_dir
@@ -80,13 +82,12 @@ class RunningFleet:
             sys.executable,
             "-m",
             "fleet.cli",
-            "up",
+            *command,
             "--robots",
             str(robots),
             "--world",
             world,
             "--headless",
-            "--until-done",
             "--timeout",
             str(timeout_s),
             "--speed",

@@ -1,0 +1,72 @@
+"""`fleet explore` end to end: two robots map the small world they were never shown, over real
+processes and a real Zenoh router on a free loopback port."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fleet.supervisor.runner import RunningFleet
+from fleet.world import load_ros_map, load_world
+from planners.grid import GridMap
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
+
+WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "small.yaml"
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    run_dir = tmp_path_factory.mktemp("explore")
+    fleet = RunningFleet(run_dir, str(WORLD), 2, timeout_s=150.0, command=("explore",))
+    fleet.finish(240.0)
+    return {
+        "rc": fleet.proc.returncode,
+        "output": fleet.output,
+        "dir": run_dir,
+        "left": fleet.left,
+        "events": fleet.events(),
+    }
+
+
+def _explained(run: dict) -> str:
+    warnings = [
+        line
+        for log in sorted(run["dir"].glob("*.log"))
+        for line in log.read_text(errors="replace").splitlines()
+        if " WARNING " in line or " ERROR " in line
+    ]
+    events = [
+        f"{e['sim']:.1f} {e['kind']} {e['robot']} {e['task']} {e['detail']}" for e in run["events"]
+    ]
+    return "\n".join([run["output"], *events, *warnings])
+
+
+def test_the_small_world_is_explored_to_the_end(run: dict) -> None:
+    assert run["rc"] == 0, _explained(run)
+    assert run["left"] == [], f"orphans: {run['left']}"
+    report = json.loads((run["dir"] / "explore.json").read_text())
+    assert report["status"] == "done", _explained(run)
+    assert report["frontiers"]["assigned"] >= 1
+    assert set(report["path_length_m"]) == {"robot-0", "robot-1"}
+    assert any(m > 0.5 for m in report["path_length_m"].values()), report
+    kinds = {e["kind"] for e in run["events"]}
+    assert {"explored", "awarded", "finished"} <= kinds, kinds
+
+
+def test_the_stored_map_loads_and_matches_the_true_floor(run: dict) -> None:
+    mapped = load_ros_map(run["dir"] / "map.yaml")
+    assert isinstance(mapped, GridMap) and mapped.free.any()
+    report = json.loads((run["dir"] / "explore.json").read_text())
+    assert report["free_iou"] >= 0.9, _explained(run)
+    assert (run["dir"] / "map.png").stat().st_size > 0
+    # every free cell of the stored map lies inside the room's walls
+    world = load_world(WORLD)
+    xmin, ymin, xmax, ymax = world.bounds
+    rc = np.argwhere(mapped.free)
+    xy = mapped.cell_to_world(rc)
+    assert (xy[:, 0] > xmin).all() and (xy[:, 0] < xmax).all(), _explained(run)
+    assert (xy[:, 1] > ymin).all() and (xy[:, 1] < ymax).all(), _explained(run)
