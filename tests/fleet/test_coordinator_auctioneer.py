@@ -155,6 +155,18 @@ def test_each_kind_of_bad_bid_is_counted_and_ignored() -> None:
     assert len(sale.bids) == 1
 
 
+def test_a_bid_may_take_off_what_its_lot_is_worth_and_no_more() -> None:
+    # a frontier worth 10 s: a robot next to it bids -9 s; -11 s is more than it is worth
+    worth = auction.Lot("f01", ("f01",), np.zeros(2), np.ones(2), 0.0, 5.0, 10.0)
+    prices = {("f01", "robot-0"): (-9.0, -9.0), ("f01", "robot-1"): (-11.0, -11.0)}
+    m = Bidders(prices, timeout_s=0.2)
+    rnd = m.auctioneer.call(0.0, {"f01": worth}, frozenset({"robot-0", "robot-1"}))
+    sale = m.auctioneer.award(rnd, {"robot-0", "robot-1"})
+    assert sale is not None and sale.best.robot == "robot-0"
+    assert m.auctioneer.rejected() == {"malformed": 1}
+    assert m.calls[0][1].gain_s == 10.0
+
+
 def test_a_round_waits_for_a_silent_bidder_only_until_the_bid_timeout() -> None:
     # every bidder bid: the round closes at once, far short of a minute's timeout (the bound
     # is loose on purpose: a busy machine must not fail it)

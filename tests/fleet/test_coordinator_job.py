@@ -13,6 +13,7 @@ from fleet.coordinator.job import (
     ASSIGNED,
     BLOCKED,
     DONE,
+    GONE,
     LOST,
     OPEN,
     REPLACED,
@@ -51,6 +52,20 @@ def test_awards_build_each_robots_queue_in_order(job: Job):
     assert job.counts() == {OPEN: 1, ASSIGNED: 3, DONE: 0, BLOCKED: 0, UNREACHABLE: 0}
     with pytest.raises(ValueError, match="not open"):
         job.award("t00", "robot-1", False)
+
+
+def test_a_dropped_task_is_gone_from_its_owner_and_the_market(job: Job):
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-0", False)
+    assert job.drop("t00") == "robot-0"
+    assert job.drop("t02") is None  # open: no owner
+    assert job.drop("t02") is None and job.tasks["t02"].state == GONE  # already gone
+    assert [r.task.id for r in job.queue("robot-0")] == ["t01"]
+    assert job.tasks["t00"].owner is None and job.tasks["t00"].state == GONE
+    assert [r.task.id for r in job.open_tasks()] == ["t03"]
+    job.finish("robot-0", "t01")
+    job.drop("t03")
+    assert job.finished and not job.left_out()
 
 
 def test_swept_pieces_of_a_reversed_task_map_back_to_its_own_order(job: Job):

@@ -82,6 +82,16 @@ def test_a_bid_is_priced_from_the_end_of_the_queue():
     assert bid.total_s == pytest.approx(20.0 + 8.0)
 
 
+def test_what_a_task_is_worth_beyond_its_work_is_taken_off_its_bid():
+    # Burgard et al. 2005: a far goal worth more can beat a near one worth less
+    at = Commitment((0.0, 0.0))
+    near = make_bid("a", "f1", np.array([2.0, 0.0]), np.array([2.0, 0.1]), 0.0, at, straight(), 1.0)
+    far = make_bid("a", "f2", np.array([5.0, 0.0]), np.array([5.0, 0.1]), 0.0, at, straight(), 6.0)
+    assert near.marginal_s == pytest.approx(2.0 - 1.0)
+    assert far.marginal_s == pytest.approx(5.0 - 6.0) and far.total_s == far.marginal_s
+    assert winner([near, far]).task == "f2"
+
+
 BIDS = [
     Bid("t1", "a", marginal_s=5.0, total_s=50.0, reverse=False),
     Bid("t2", "b", marginal_s=9.0, total_s=20.0, reverse=True),

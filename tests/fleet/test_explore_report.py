@@ -1,0 +1,52 @@
+"""Scoring an explored map against the true floor, and the robots' path lengths."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fleet.report.exploration import free_iou, mapped_free_on, path_lengths, true_floor
+from fleet.world import load_world
+from planners.grid import GridMap
+
+SMALL = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "small.yaml"
+
+
+def test_the_true_floor_is_the_free_space_a_robot_start_reaches(tmp_path: Path):
+    truth, floor = true_floor(load_world(SMALL), 0.05, (0.6, 0.85))
+    # 4 m × 3 m inside 10 cm walls, less the 0.8 m × 0.6 m table and the dock
+    assert 9.5 < floor.sum() * 0.05**2 < 11.3
+    assert not (floor & truth.occupied).any()
+    # a closet walled in on every side is no floor
+    closet = tmp_path / "closet.yaml"
+    walls = "  - [3.0, 2.0, 3.8, 2.0]\n  - [3.8, 2.0, 3.8, 2.8]\n"
+    walls += "  - [3.8, 2.8, 3.0, 2.8]\n  - [3.0, 2.8, 3.0, 2.0]\n"
+    closet.write_text(SMALL.read_text().replace("walls:\n", "walls:\n" + walls))
+    truth, walled = true_floor(load_world(closet), 0.05, (0.6, 0.85))
+    inside = truth.world_to_cell(np.array([[3.4, 2.4]]))[0]
+    assert truth.free[inside[0], inside[1]] and not walled[inside[0], inside[1]]
+
+
+def test_the_floor_mapped_exactly_scores_one_and_half_of_it_about_a_half():
+    truth, floor = true_floor(load_world(SMALL), 0.05, (0.6, 0.85))
+    # the map on a grid of its own, offset by a quarter cell: each true cell finds its own
+    shifted = GridMap(
+        truth.occupied, ~floor & ~truth.occupied, 0.05, (truth.origin[0] - 0.0125, truth.origin[1])
+    )
+    assert np.array_equal(mapped_free_on(shifted, truth), floor)
+    assert free_iou(shifted, truth, floor) == pytest.approx(1.0)
+    half = floor.copy()
+    half[:, half.shape[1] // 2 :] = False
+    mapped = GridMap(truth.occupied, ~half & ~truth.occupied, 0.05, truth.origin)
+    assert free_iou(mapped, truth, floor) == pytest.approx(half.sum() / floor.sum())
+    everything = GridMap(truth.occupied & False, truth.occupied & False, 0.05, truth.origin)
+    assert free_iou(everything, truth, floor) == pytest.approx(floor.sum() / floor.size)
+    nothing = GridMap(np.zeros((2, 2), bool), np.ones((2, 2), bool), 0.05, (50.0, 50.0))
+    assert free_iou(nothing, truth, floor) == 0.0
+
+
+def test_path_lengths_sum_each_robots_track():
+    tracks = {"robot-1": [(0.0, 0.0, 0.0), (1.0, 3.0, 4.0), (2.0, 3.0, 5.0)], "robot-0": []}
+    assert path_lengths(tracks) == {"robot-0": 0.0, "robot-1": 6.0}
