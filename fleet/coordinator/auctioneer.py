@@ -87,9 +87,10 @@ class Auctioneer:
         rid = self.keys.robot_of(key)
         with self._cond:
             rnd = self._open
-            # a bid takes off at most what its lot is worth beyond its work
+            # a bid takes off at most what its lot is worth beyond its work (one for no lot of
+            # the open round is late, whatever its numbers)
             lot = rnd.lots.get(msg.task) if rnd is not None and msg.round == rnd.number else None
-            least = -lot.gain_s if lot is not None else 0.0
+            least = -lot.gain_s if lot is not None else -math.inf
             ok_numbers = all(math.isfinite(v) and v >= least for v in (msg.marginal_s, msg.total_s))
             if msg.robot != rid or not ok_numbers or key != self.keys.bid(msg.task, msg.robot):
                 why = "malformed"

@@ -5,7 +5,7 @@ What changes: no floor plan is served on ``coord/map`` (a robot prices travel on
 map, unknown cells counted as free); the robots' map patches are heard; every
 ``coordinator.explore_every_s`` sim seconds the maps are merged and the frontier tasks
 updated, the update told as an ``explored`` event (known area, frontiers, each robot's goal);
-the market calls only the robots without work, so each holds one frontier at a time
+the market sells only to robots without work, so each holds one frontier at a time
 (Burgard et al. 2005 assign one target per robot), and sells the open frontier tasks, each
 worth its discounted information gain; the job is finished when the explorer finds no new
 frontier with no task open or assigned.
@@ -40,9 +40,10 @@ class ExploringMarket(Market):
     def _regions(self) -> tuple[bool, tuple[auction.Lot, ...]]:
         return False, ()
 
-    def _bidders(self) -> list[str]:
-        """The robots in the market without work: each drives to one frontier at a time."""
-        return [rid for rid in self.job.market() if self.job.current(rid) is None]
+    def _untried(self, lot: auction.Lot, robot: str) -> bool:
+        """Only a robot without work may win: each drives to one frontier at a time (a robot
+        with work bids all the same; its bid shows what it would pay)."""
+        return super()._untried(lot, robot) and self.job.current(robot) is None
 
     def _lots(self, regions: tuple[auction.Lot, ...]) -> dict[str, auction.Lot]:
         return self.explorer.lots(self.job)

@@ -165,6 +165,9 @@ def test_a_bid_may_take_off_what_its_lot_is_worth_and_no_more() -> None:
     assert sale is not None and sale.best.robot == "robot-0"
     assert m.auctioneer.rejected() == {"malformed": 1}
     assert m.calls[0][1].gain_s == 10.0
+    # a bid of another round is late, whatever it takes off
+    m.auctioneer.on_bid(KEYS.bid("f01", "robot-0"), _bid("f01", "robot-0", 0, -50.0, -50.0))
+    assert m.auctioneer.rejected() == {"malformed": 1, "late": 1}
 
 
 def test_a_round_waits_for_a_silent_bidder_only_until_the_bid_timeout() -> None:

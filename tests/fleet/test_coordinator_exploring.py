@@ -145,7 +145,7 @@ def test_a_call_is_worth_less_near_a_goal_another_robot_is_headed_to(tmp_path: P
     assert 0 < explorer.lots(job)[tid].gain_s < alone
 
 
-def test_the_exploring_market_calls_only_robots_without_work():
+def test_the_exploring_market_sells_only_to_robots_without_work():
     job = _job("robot-0", "robot-1", "robot-2")
     journal = Journal(job, None, Keys("test"), lambda *_: None, 0.0)
     lock, wake, stop = threading.RLock(), threading.Event(), threading.Event()
@@ -155,8 +155,11 @@ def test_the_exploring_market_calls_only_robots_without_work():
     explorer.update(job)
     market.explorer = explorer
     (tid,) = job.tasks
-    assert market._bidders() == ["robot-0", "robot-1", "robot-2"]
+    lot = market._lots(())[tid]
+    assert all(market._untried(lot, rid) for rid in ("robot-0", "robot-1", "robot-2"))
     job.award(tid, "robot-1", False)
-    assert market._bidders() == ["robot-0", "robot-2"]
+    assert not market._untried(lot, "robot-1") and market._untried(lot, "robot-2")
+    job.tasks[tid].tried = frozenset({"robot-2"})
+    assert not market._untried(lot, "robot-2")
     assert job.tasks[tid].state == ASSIGNED and market._lots(()) == {}
     assert market._regions() == (False, ())
