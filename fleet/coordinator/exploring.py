@@ -14,7 +14,7 @@ copy of each; a gap in ``seq`` has the whole map fetched by query). Every
    Yamauchi 1997) with their expected information gain (Burgard et al. 2005);
 3. makes each new frontier a task (``planners.frontier_tasks``: drive to its goal), and takes
    off the market every task whose frontier vanished (state ``gone``; a robot driving to it
-   stops and bids again).
+   stops and bids again), one no robot could reach included.
 
 Plans are A* on the merged map (:class:`MapPlanner`: robot centres on known floor clear of
 walls by the robot's radius and ``coordinator.wall_clearance``). The market sells a frontier's
@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from fleet.coordinator.job import ASSIGNED, GONE, OPEN, REPLACED, Job
+from fleet.coordinator.job import ASSIGNED, GONE, OPEN, REPLACED, UNREACHABLE, Job
 from fleet.coordinator.planning import TaskPlanner
 from fleet.floor_map import apply_patches
 from fleet.params import FleetConfig
@@ -193,7 +193,8 @@ class Explorer:
     def _drop_vanished(
         self, job: Job, frontiers: list[Frontier], grid: GridMap
     ) -> list[tuple[str, str | None]]:
-        alive = [rec for rec in job.tasks.values() if rec.state in (OPEN, ASSIGNED)]
+        # an unreachable frontier the robots mapped another way is no work left out
+        alive = [rec for rec in job.tasks.values() if rec.state in (OPEN, ASSIGNED, UNREACHABLE)]
         if not alive:
             return []
         goals = np.array([rec.task.entry for rec in alive])

@@ -329,10 +329,11 @@ class Job:
         return out
 
     def drop(self, task_id: str) -> str | None:
-        """``task_id``, open or assigned, is no longer wanted (its frontier vanished): it is
-        ``gone``; the robot that held it, if any (its queue closes up behind it)."""
+        """``task_id``, open, assigned or unreachable, is no longer wanted (its frontier
+        vanished: the robots mapped it another way): it is ``gone``; the robot that held it, if
+        any (its queue closes up behind it)."""
         rec = self.tasks.get(task_id)
-        if rec is None or rec.state not in (OPEN, ASSIGNED):
+        if rec is None or rec.state not in (OPEN, ASSIGNED, UNREACHABLE):
             return None
         owner = rec.owner if rec.state == ASSIGNED else None
         rec.state, rec.owner = GONE, None

@@ -12,7 +12,7 @@ import pytest
 
 from fleet.coordinator.explore_service import ExploringMarket
 from fleet.coordinator.exploring import Explorer, MapPlanner, RobotMaps, write_ros_map
-from fleet.coordinator.job import ASSIGNED, GONE, OPEN, Job
+from fleet.coordinator.job import ASSIGNED, GONE, OPEN, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
 from fleet.floor_map import apply_patches
 from fleet.params import load_fleet_config
@@ -116,6 +116,13 @@ def test_frontiers_become_tasks_vanish_with_their_frontier_and_the_end_follows(t
     change = explorer.update(job)
     assert change.gone == ((task.id, "robot-0"),) and job.tasks[task.id].state == GONE
     assert change.frontiers == 0 and explorer.finished(job)
+    # a frontier no robot could reach goes too once it vanishes
+    explorer.maps.hear("robot-0", patches(room(door=True), 3))
+    (again,) = explorer.update(job).added
+    job.tasks[again.id].state = UNREACHABLE
+    assert not explorer.update(job).gone  # still there: left out
+    explorer.maps.hear("robot-0", patches(room(door=False), 4))
+    assert explorer.update(job).gone == ((again.id, None),) and not job.left_out()
 
 
 def test_the_end_waits_for_every_robots_map():
