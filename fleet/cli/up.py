@@ -290,8 +290,7 @@ def explore(
     reach.
 
     Examples: `fleet explore --robots 2 --world small --headless`;
-    `fleet explore --robots 3 --run-dir runs/home-map --timeout 900`; then
-    `fleet up --world runs/home-map/map.yaml` shows the map in the live view.
+    `fleet explore --robots 3 --run-dir runs/home-map --timeout 900`.
     """
     from fleet.bus import Bus
     from fleet.config import resolve_world
