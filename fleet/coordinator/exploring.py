@@ -7,9 +7,9 @@ copy of each; a gap in ``seq`` has the whole map fetched by query). Every
 
 1. merges the maps into one grid in the common frame (``planners.map_merge.merge_maps``, Birk
    and Carpin 2006). A robot's SLAM starts at its known start pose, so its map frame is the
-   common frame (the prior is the identity); each map is then matched against the merge of
-   those before it (``planners.map_match.refine_transforms``, Olson 2009) and moved only where
-   the match is confident, which takes out the drift between the robots' maps;
+   common frame (the prior is the identity, at every update); each map is then matched against
+   the merge of those before it (``planners.map_match.refine_transforms``, Olson 2009) and
+   moved only where the match is confident, which takes out the drift between the robots' maps;
 2. extracts the merged map's frontiers a robot can reach (``planners.frontiers.find_frontiers``,
    Yamauchi 1997) with their expected information gain (Burgard et al. 2005);
 3. makes each new frontier a task (``planners.frontier_tasks``: drive to its goal), and takes
@@ -178,7 +178,9 @@ class Explorer:
     def _merge(self, maps: Mapping[str, LogOddsMap], job: Job) -> tuple[GridMap, np.ndarray]:
         """The merged grid, and the robots' positions in its frame."""
         ids = list(maps)
-        priors = [self.transforms.get(rid, Transform2D.identity()) for rid in ids]
+        # the known start poses, every time: a wrong match then costs one update, never the
+        # prior of every later one
+        priors = [Transform2D.identity()] * len(ids)
         matches = refine_transforms(list(maps.values()), priors, self.limits, self.match)
         self.transforms = {rid: m.transform for rid, m in zip(ids, matches, strict=True)}
         merged = merge_maps(list(maps.values()), [m.transform for m in matches], self.limits)
