@@ -53,6 +53,7 @@ class ExploringCoordinator(Coordinator):
     """The coordinator's loop and market on the robots' merged maps."""
 
     market_class = ExploringMarket
+    working = "exploring"
 
     def __init__(
         self,

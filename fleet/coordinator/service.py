@@ -1,9 +1,9 @@
 """The coordinator process: owns the job — who cleans what — and runs the market.
 
 Phases: ``gathering`` (waiting for the expected robots to be ready), ``auction`` (the first
-allocation), ``cleaning``, ``done`` (every task done) or ``incomplete`` (every task done but
-some no robot could reach, named in the ``finished`` event). This shell wires the parts to the bus
-and runs the main loop; each part has one job:
+allocation), ``cleaning`` (``exploring`` for an exploring fleet), ``done`` (every task done)
+or ``incomplete`` (every task done but some no robot could reach, named in the ``finished``
+event). This shell wires the parts to the bus and runs the main loop; each part has one job:
 
 - :class:`fleet.coordinator.job.Job`: the job's state and rules (tasks, owners, swept pieces,
   robots), kept on disk by :class:`fleet.coordinator.store.JobStore` through
@@ -85,6 +85,7 @@ class Coordinator:
     """The coordinator's parts, wired to the bus, and its main loop."""
 
     market_class: type[Market] = Market
+    working = "cleaning"  # the phase once the first allocation is sold
 
     def __init__(
         self,
@@ -383,7 +384,7 @@ class Coordinator:
             self.journal.event("finished", "", "", detail)
             self.journal.set_meta(phase=self.phase)
         elif self.phase == "auction" and not self.job.open_tasks():
-            self.phase = "cleaning"
+            self.phase = self.working
 
     def _finished(self) -> bool:
         return self.job.finished
