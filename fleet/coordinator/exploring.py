@@ -65,7 +65,6 @@ class RobotMaps:
         self.seq: dict[str, int] = {}
         # robots whose whole map must be fetched: a gap in their patches' seq
         self.missing: set[str] = set()
-        self.changed = False
 
     def hear(self, rid: str, msg: MapPatches) -> None:
         """Write ``msg``'s tiles into ``rid``'s copy; a gap in ``seq`` (or patches before any
@@ -81,7 +80,6 @@ class RobotMaps:
         self.seq[rid] = msg.seq
         if msg.full:
             self.missing.discard(rid)
-        self.changed = True
 
     def log_odds(self, limits: tuple[float, float]) -> dict[str, LogOddsMap]:
         """Each robot's map as log-odds, by robot id."""
@@ -135,7 +133,6 @@ class Explorer:
         self.sensor_range = cfg.lidar.range_max
         self.clearance = planner.centre_clearance
         self.maps = RobotMaps()
-        self.grid: GridMap | None = None
         self.transforms: dict[str, Transform2D] = {}
         self.seq = 0
         # the last update found no new frontier while no task was open or assigned
@@ -147,7 +144,6 @@ class Explorer:
         maps = self.maps.log_odds(self.limits)
         if not maps:
             return None
-        self.maps.changed = False
         grid, robots = self._merge(maps, job)
         frontiers = [
             f
@@ -184,7 +180,7 @@ class Explorer:
         matches = refine_transforms(list(maps.values()), priors, self.limits, self.match)
         self.transforms = {rid: m.transform for rid, m in zip(ids, matches, strict=True)}
         merged = merge_maps(list(maps.values()), [m.transform for m in matches], self.limits)
-        self.grid = grid = merged.to_gridmap(*self.thresholds)
+        grid = merged.to_gridmap(*self.thresholds)
         robots = [
             self.transforms.get(rid, Transform2D.identity()).apply(np.array(r.xy))
             for rid, r in sorted(job.robots.items())
