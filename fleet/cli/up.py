@@ -56,6 +56,7 @@ if TYPE_CHECKING:
     from fleet.protocol import Message, OpsReply, OpsRequest
     from fleet.rundir import ProcessRecord
     from fleet.supervisor.launcher import Launcher, WorkWatch
+    from fleet.world import World
 
 M = TypeVar("M", bound="Message")
 
@@ -287,7 +288,8 @@ def explore(
     against the true floor, scored from the world file after the run); the processes' logs.
     The terminal shows each update as an `explored` event: known area, frontiers, each robot's
     goal. Exit status: 0 explored, 3 stopped by --timeout, 4 done with frontiers no robot could
-    reach.
+    reach, 130 stopped by Ctrl-C or `fleet down` (the map so far is written), 1 a process
+    failed.
 
     Examples: `fleet explore --robots 2 --world small --headless`;
     `fleet explore --robots 3 --run-dir runs/home-map --timeout 900`.
@@ -365,21 +367,20 @@ def explore(
     write_map_png(run_dir / MAP_PGM, run_dir / MAP_PNG)
     lengths = ", ".join(f"{rid} {m:.1f} m" for rid, m in report["path_length_m"].items())
     typer.echo(
-        f"{status}: explored in {report['sim_s']} s sim ({report['wall_s']} s wall), "
+        f"{status} after {report['sim_s']} s sim ({report['wall_s']} s wall): "
         f"free-space IoU {report['free_iou']:.3f}, {report['frontiers']['assigned']} frontiers "
         f"assigned, driven {lengths} — {run_dir / MAP_YAML}, {run_dir / MAP_PNG}, "
         f"{run_dir / EXPLORE_REPORT}",
         err=True,
     )
     exits = {"done": 0, "incomplete": INCOMPLETE_EXIT, "timeout": TIMED_OUT_EXIT}
-    if status not in exits:
-        raise typer.Exit(1 if status != "interrupted" else 130)
-    raise typer.Exit(exits[status])
+    exits |= dict.fromkeys(("stopped", "interrupted"), 130)
+    raise typer.Exit(exits.get(status, 1))
 
 
 def _explore_report(
     run_dir: Path,
-    world: Any,
+    world: World,
     start: tuple[float, float, float],
     status: str,
     sim_s: float,
