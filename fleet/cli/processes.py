@@ -232,7 +232,8 @@ def coordinator(
     if robots < 1:
         _fail("--robots must be >= 1")
     _setup_logging("coordinator")
-    cfg, w = _load(config, world)
+    # exploring, the world file is not even opened: the robots' maps are all it knows
+    cfg, w = _load(config, world if explore is None else None)
     mode = deconfliction or cfg.coordinator.deconfliction
     if explore is not None and mode != "local":
         _fail("--explore plans local transits only; leave out --deconfliction")
@@ -247,7 +248,8 @@ def coordinator(
     try:
         store = None
         if state is not None:
-            store = JobStore(state, fleet=fleet, world=w.name, robots=robots)
+            name = w.name if w is not None else Path(world).stem
+            store = JobStore(state, fleet=fleet, world=name, robots=robots)
     except StoreError as e:
         _fail(str(e))
     except (sqlite3.Error, OSError) as e:
