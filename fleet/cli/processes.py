@@ -206,6 +206,12 @@ def coordinator(
         ),
     ] = None,
     deconfliction: DeconflictionOpt = None,
+    loop: Annotated[
+        bool,
+        typer.Option(
+            "--loop", help="When the job finishes, plan the floor again and start the next job."
+        ),
+    ] = False,
 ) -> None:
     """Run the coordinator: cuts the floor into tasks, auctions them to the live robots,
     re-auctions the work of a robot that is lost, and sends each robot its plans."""
@@ -236,7 +242,9 @@ def coordinator(
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
-    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=Bounds.of(cfg))
+    c = Coordinator(
+        bus, planner, robots, cfg.coordinator, store, transits, bounds=Bounds.of(cfg), loop=loop
+    )
     _stop_on_signals(c.stop)
     try:
         c.run(cfg.coordinator.expected_robots_grace_s)

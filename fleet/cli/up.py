@@ -88,6 +88,14 @@ def up(
     seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
     config: ConfigOpt = None,
     deconfliction: DeconflictionOpt = None,
+    loop: Annotated[
+        bool,
+        typer.Option(
+            "--loop",
+            help="Start the job again each time it finishes (the floor planned afresh), until "
+            "Ctrl-C or --timeout: a long run. Not with --until-done.",
+        ),
+    ] = False,
 ) -> None:
     """Run the whole fleet: a Zenoh router, the simulator, the coordinator and N agents, each
     its own process, with a live view; writes report.json, the report pictures (report.png,
@@ -126,6 +134,8 @@ def up(
         _fail(f"--speed must be a finite number >= 0, got {speed}")
     if timeout is not None and timeout <= 0:
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    if loop and until_done:
+        _fail("--loop starts the job again when it is done: it cannot stop --until-done")
     cfg, w = _load(config, world)
     _check_deconfliction(deconfliction)
     try:
@@ -188,6 +198,8 @@ def up(
         state = ["--state", str(run_dir / "coordinator.sqlite")]
         if deconfliction:
             state += ["--deconfliction", deconfliction]
+        if loop:
+            state.append("--loop")
         launcher.start(
             "coordinator",
             ["coordinator", "--robots", str(robots), "--world", world_path, *common, *state],

@@ -283,6 +283,22 @@ class Market:
         self.need_auction = True
         self.wake.set()
 
+    def start_over(self, tasks: tuple[auction.Task, ...]) -> None:
+        """The job finished; ``tasks`` are the next one, all on sale in the next auction (as
+        the first allocation), planned around the bodies that still lie on the floor."""
+        self.job.start_over(tasks)
+        self.journal.clear_job()
+        self.dispatcher.start_over()
+        self.progress.clear()
+        self.lost_at.clear()
+        self.region_sale = []
+        self.version += 1
+        self.journal.save_tasks(*self.job.tasks)
+        for body in list(self.bodies):
+            self._plan_around_bodies(body)
+        self.need_auction = True
+        self.wake.set()
+
     def rejoined(self, rid: str) -> None:
         """``rid`` is heard from again: its body is a robot again, so the work it blocked opens
         again, and so does the work no robot could reach (one more robot may)."""

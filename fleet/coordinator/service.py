@@ -2,8 +2,9 @@
 
 Phases: ``gathering`` (waiting for the expected robots to be ready), ``auction`` (the first
 allocation), ``cleaning``, ``done`` (every task done) or ``incomplete`` (every task done but
-some no robot could reach, named in the ``finished`` event). This shell wires the parts to the bus
-and runs the main loop; each part has one job:
+some no robot could reach, named in the ``finished`` event). With ``--loop`` a finished job is
+followed by the next: the floor planned again, every task open, ``auction`` again. This shell
+wires the parts to the bus and runs the main loop; each part has one job:
 
 - :class:`fleet.coordinator.job.Job`: the job's state and rules (tasks, owners, swept pieces,
   robots), kept on disk by :class:`fleet.coordinator.store.JobStore` through
@@ -94,8 +95,12 @@ class Coordinator:
         transits: TransitPlanner | None = None,
         *,
         bounds: Bounds,
+        loop: bool = False,
     ) -> None:
+        """``loop``: each time the job finishes, plan the floor again and sell it afresh (a
+        long run of the same job, as ``fleet bench soak`` makes)."""
         self.bus = bus
+        self.loop = loop
         self.keys = bus.keys
         self.planner = planner
         self.expected = expected
@@ -109,6 +114,8 @@ class Coordinator:
         self.given_up = GivenUpWaypoints()
         resumed = self._load(store)
         meta = resumed or {}
+        # which job of a loop this is (1 without --loop)
+        self.job_number = int(meta.get("job", 1))
         self.journal = Journal(
             self.job, store, self.keys, bus.publish, float(meta.get("clock", 0.0))
         )
@@ -342,7 +349,9 @@ class Coordinator:
                     self.market.check_stalls()
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
-            if self.phase != "gathering" and auction_due:
+            if self.loop and self.phase in FINISHED:
+                self._next_job()
+            elif self.phase != "gathering" and auction_due:
                 self.market.auction(self.auctioneer, self._check_heartbeats)
             with self.lock:
                 if self.phase != "gathering":
@@ -412,6 +421,17 @@ class Coordinator:
             self.journal.save_tasks(*self.job.tasks)
             self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
             self.journal.event("planned", "", "", f"{len(tasks)} tasks")
+
+    def _next_job(self) -> None:
+        """The job finished and the coordinator loops: the same floor's tasks again, all open,
+        for the robots in the market; its number goes to the store's meta (``job``)."""
+        tasks = self.planner.tasks()
+        with self.lock:
+            self.job_number += 1
+            self.market.start_over(tasks)
+            self.phase = "auction"
+            self.journal.event("planned", "", "", f"{len(tasks)} tasks: job {self.job_number}")
+            self.journal.set_meta(phase=self.phase, job=self.job_number)
 
     def _publish_state(self) -> None:
         counts = self.job.counts()
