@@ -61,7 +61,9 @@ def read_events(state: Path) -> list[dict[str, Any]]:
 
 
 class RunningFleet:
-    """``fleet up --headless --until-done --speed S`` (0 by default) started at construction."""
+    """``fleet up --headless --until-done --speed S`` (0 by default) started at construction;
+    with ``loop``, ``fleet up --headless --loop`` (the job again each time it finishes), which
+    runs until it is stopped."""
 
     def __init__(
         self,
@@ -69,12 +71,14 @@ class RunningFleet:
         world: str,
         robots: int = 3,
         seed: int = 0,
-        timeout_s: float = 900.0,
+        timeout_s: float | None = 900.0,
         cwd: Path | None = None,
         speed: float = 0.0,
         options: Sequence[str] = (),
+        loop: bool = False,
     ) -> None:
-        """``options``: more options of ``fleet up`` (e.g. ``--deconfliction cbs``)."""
+        """``timeout_s``: fleet up's ``--timeout`` (None: none); ``options``: more options of
+        ``fleet up`` (e.g. ``--deconfliction cbs``)."""
         self.dir = run_dir
         cmd = [
             sys.executable,
@@ -86,9 +90,8 @@ class RunningFleet:
             "--world",
             world,
             "--headless",
-            "--until-done",
-            "--timeout",
-            str(timeout_s),
+            "--loop" if loop else "--until-done",
+            *(() if timeout_s is None else ("--timeout", str(timeout_s))),
             "--speed",
             str(speed),
             "--seed",
