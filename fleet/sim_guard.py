@@ -5,14 +5,16 @@ a given time) cannot be bounded in wall seconds alone: on a starved machine the 
 in lockstep with its agents, so the sim clock moves slowly, and a wall bound fires while the
 run is well. A hung fleet is told apart by its clock, which stops.
 
-:class:`SimGuard` gives up on such a wait only when
+:class:`SimGuard` gives up on such a wait only once it has lasted ``wall_s`` wall seconds
+(never sooner than a wall bound would) *and*
 
-- the wait has lasted ``wall_s`` wall seconds *and* the sim clock has not moved for the last
-  ``stall_s`` wall seconds (the fleet is hung, or its clock cannot be heard), or
-- the sim clock has moved ``sim_s`` past where it stood when the wait began (the awaited thing
+- the sim clock has not moved for the last ``stall_s`` wall seconds (the fleet is hung, or its
+  clock cannot be heard), or
+- the sim clock has moved ``sim_s`` past where it stood when the wait began (what is awaited
   should have happened by then, however slowly the sim ran).
 
-So a slow sim is waited for as long as it moves, and a stopped one for ``wall_s`` at least.
+So past its wall bound a slow sim is waited for as long as it moves, up to a budget in sim
+seconds, and a stopped one is not.
 Wall time is the monotonic clock; both clocks are passed in, so the rule is tested without
 processes.
 """
@@ -35,10 +37,10 @@ class SimGuard:
         sim_s: float = math.inf,
         wall_now: Callable[[], float] = time.monotonic,
     ) -> None:
-        """``sim_now``: the sim time as the waiter hears it; ``wall_s``: the least wall time
-        the wait lasts before a stalled clock ends it; ``stall_s``: the wall time without a
-        move of the sim clock that counts as stalled; ``sim_s``: the sim time the awaited
-        thing may take (none by default)."""
+        """``sim_now``: the sim time as the waiter hears it; ``wall_s``: the wall time the
+        wait lasts at least; ``stall_s``: the wall time without a move of the sim clock that
+        counts as stalled; ``sim_s``: the sim time the awaited thing may take (no bound by
+        default: past ``wall_s``, only a stalled clock ends the wait)."""
         if wall_s < 0 or stall_s <= 0 or sim_s <= 0:
             raise ValueError(f"wall_s >= 0, stall_s > 0, sim_s > 0, not {wall_s, stall_s, sim_s}")
         self.sim_now = sim_now
@@ -54,9 +56,9 @@ class SimGuard:
         now, sim = self.wall_now(), self.sim_now()
         if sim > self.sim_last:
             self.sim_last, self.moved_at = sim, now
-        if sim - self.sim_start >= self.sim_s:
-            return True
-        return now - self.started >= self.wall_s and now - self.moved_at >= self.stall_s
+        if now - self.started < self.wall_s:
+            return False
+        return now - self.moved_at >= self.stall_s or sim - self.sim_start >= self.sim_s
 
     def why(self) -> str:
         """What the guard saw, for the message of a wait that gave up."""
