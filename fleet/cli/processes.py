@@ -242,12 +242,10 @@ def coordinator(
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
-    c = Coordinator(
-        bus, planner, robots, cfg.coordinator, store, transits, bounds=Bounds.of(cfg), loop=loop
-    )
+    c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=Bounds.of(cfg))
     _stop_on_signals(c.stop)
     try:
-        c.run(cfg.coordinator.expected_robots_grace_s)
+        c.run(cfg.coordinator.expected_robots_grace_s, loop)
     finally:
         c.close()
         bus.close()

@@ -278,24 +278,8 @@ class Market:
             self.journal.event(
                 "body", rid, "", f"its body stands at ({xy[0]:.2f}, {xy[1]:.2f}); planned around"
             )
-            self._plan_around_bodies(rid)
+            self.plan_around_bodies(rid)
         self.awards.send()
-        self.need_auction = True
-        self.wake.set()
-
-    def start_over(self, tasks: tuple[auction.Task, ...]) -> None:
-        """The job finished; ``tasks`` are the next one, all on sale in the next auction (as
-        the first allocation), planned around the bodies that still lie on the floor."""
-        self.job.start_over(tasks)
-        self.journal.clear_job()
-        self.dispatcher.start_over()
-        self.progress.clear()
-        self.lost_at.clear()
-        self.region_sale = []
-        self.version += 1
-        self.journal.save_tasks(*self.job.tasks)
-        for body in list(self.bodies):
-            self._plan_around_bodies(body)
         self.need_auction = True
         self.wake.set()
 
@@ -314,7 +298,7 @@ class Market:
     def _body_centres(self) -> np.ndarray:
         return np.array(list(self.bodies.values()), dtype=float).reshape(-1, 2)
 
-    def _plan_around_bodies(self, body: str) -> None:
+    def plan_around_bodies(self, body: str) -> None:
         """Take back every task whose path comes near a body (its owner's queue from there
         on), and replace it by what a robot can drive round the bodies and what they block."""
         planner = self.dispatcher.planner

@@ -54,6 +54,7 @@ from fleet.coordinator.job import (
     TaskRecord,
 )
 from fleet.coordinator.journal import Journal
+from fleet.coordinator.looping import next_job
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
@@ -95,12 +96,8 @@ class Coordinator:
         transits: TransitPlanner | None = None,
         *,
         bounds: Bounds,
-        loop: bool = False,
     ) -> None:
-        """``loop``: each time the job finishes, plan the floor again and sell it afresh (a
-        long run of the same job, as ``fleet bench soak`` makes)."""
         self.bus = bus
-        self.loop = loop
         self.keys = bus.keys
         self.planner = planner
         self.expected = expected
@@ -114,8 +111,6 @@ class Coordinator:
         self.given_up = GivenUpWaypoints()
         resumed = self._load(store)
         meta = resumed or {}
-        # which job of a loop this is (1 without --loop)
-        self.job_number = int(meta.get("job", 1))
         self.journal = Journal(
             self.job, store, self.keys, bus.publish, float(meta.get("clock", 0.0))
         )
@@ -328,8 +323,8 @@ class Coordinator:
             if store is not None:
                 store.close()
 
-    def run(self, grace_s: float) -> None:
-        """Plan the tasks (unless resumed) while the robots start, then run the job."""
+    def run(self, grace_s: float, loop: bool = False) -> None:
+        """Plan the tasks (unless resumed), then run the job; with ``loop``, job after job."""
         if not self.job.tasks:
             self._plan_tasks()
         gather_start = time.monotonic()
@@ -349,8 +344,8 @@ class Coordinator:
                     self.market.check_stalls()
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
-            if self.loop and self.phase in FINISHED:
-                self._next_job()
+            if loop and self.phase in FINISHED:
+                self.phase = next_job(self.market, self.planner, self.lock)
             elif self.phase != "gathering" and auction_due:
                 self.market.auction(self.auctioneer, self._check_heartbeats)
             with self.lock:
@@ -421,17 +416,6 @@ class Coordinator:
             self.journal.save_tasks(*self.job.tasks)
             self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
             self.journal.event("planned", "", "", f"{len(tasks)} tasks")
-
-    def _next_job(self) -> None:
-        """The job finished and the coordinator loops: the same floor's tasks again, all open,
-        for the robots in the market; its number goes to the store's meta (``job``)."""
-        tasks = self.planner.tasks()
-        with self.lock:
-            self.job_number += 1
-            self.market.start_over(tasks)
-            self.phase = "auction"
-            self.journal.event("planned", "", "", f"{len(tasks)} tasks: job {self.job_number}")
-            self.journal.set_meta(phase=self.phase, job=self.job_number)
 
     def _publish_state(self) -> None:
         counts = self.job.counts()
