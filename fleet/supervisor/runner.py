@@ -17,6 +17,7 @@ import signal
 import sqlite3
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -117,7 +118,10 @@ class RunningFleet:
             str(run_dir),
             *options,
         ]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=cwd)
+        # to a file, not a pipe: nobody reads fleet up's output while it runs, and a pipe's
+        # buffer (64 KiB) fills in a long run and blocks fleet up on its next progress line
+        self._out = tempfile.TemporaryFile()  # noqa: SIM115 - closed in cleanup
+        self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=subprocess.STDOUT, cwd=cwd)
         self.speed = speed
         self.children: set[int] = set()
         self.output = ""
@@ -218,9 +222,10 @@ class RunningFleet:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        if self.proc.stdout is not None and not self.proc.stdout.closed:
-            self.output = self.proc.stdout.read().decode(errors="replace")
-            self.proc.stdout.close()
+        if not self._out.closed:
+            self._out.seek(0)
+            self.output = self._out.read().decode(errors="replace")
+            self._out.close()
         time.sleep(1.0)
         left = [p for p in self.children if Path(f"/proc/{p}").exists()]
         for p in left:
