@@ -13,19 +13,20 @@ WORLDS = Path(__file__).resolve().parents[1] / "configs" / "worlds"
 
 
 class FleetRun(RunningFleet):
-    """``fleet up`` on ``configs/worlds/<world>.yaml`` with three robots."""
+    """``fleet up`` on ``configs/worlds/<world>.yaml`` with three robots, with no wall
+    ``--timeout``: :meth:`finish` waits ``timeout_s`` wall seconds, and on while the sim clock
+    moves (:meth:`RunningFleet.guard`), so a run slowed down by a busy machine is not cut."""
 
     def __init__(
         self,
         run_dir: Path,
         robots: int = 3,
         world: str = "small",
-        timeout_s: float = 200.0,
+        timeout_s: float = 300.0,
         speed: float = 0.0,
     ) -> None:
-        super().__init__(
-            run_dir, str(WORLDS / f"{world}.yaml"), robots, timeout_s=timeout_s, speed=speed
-        )
+        super().__init__(run_dir, str(WORLDS / f"{world}.yaml"), robots, speed=speed)
+        self.timeout_s = timeout_s
 
     def wait_for(self, pred, timeout: float = 120.0, what: str = "") -> None:
         if not self.wait(pred, timeout, poll=0.2):
@@ -37,8 +38,8 @@ class FleetRun(RunningFleet):
         assert done.returncode == 0, f"fleet {' '.join(args)}: {done.stdout}{done.stderr}"
         return done
 
-    def finish(self, timeout: float = 300.0) -> dict:
-        report = super().finish(timeout)
+    def finish(self, timeout: float | None = None) -> dict:
+        report = super().finish(self.timeout_s if timeout is None else timeout)
         assert report is not None, self.explained()
         return report
 

@@ -62,7 +62,7 @@ from fleet.protocol import (
     Twist,
 )
 from fleet.rundir import RunDirError
-from fleet.supervisor.runner import RunningFleet, SimClock
+from fleet.supervisor.runner import RunningFleet
 
 KINDS = ("kill-agent", "stop-agent", "kill-coordinator", "rogue")
 # faults fall between these fractions of the no-fault run's makespan (sim time)
@@ -393,7 +393,7 @@ def one_run(
 ) -> dict[str, Any]:
     """One fleet run with ``faults`` made at their moments."""
     fleet = RunningFleet(run_dir, world, robots, seed)
-    clock = SimClock(fleet)
+    clock = fleet.clock()
     rogues: list[Rogue] = []
     made: list[dict[str, Any]] = []
 
@@ -420,7 +420,6 @@ def one_run(
         for r in rogues:
             r.close()
         fleet.cleanup()
-        clock.close()
     for m in made:
         r = m.pop("rogue", None)
         if r is not None:

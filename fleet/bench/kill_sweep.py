@@ -23,7 +23,7 @@ import numpy as np
 
 from fleet.params import load_fleet_config
 from fleet.report.summary import ReportError, load_run
-from fleet.supervisor.runner import RunningFleet, SimClock
+from fleet.supervisor.runner import RunningFleet
 
 TRACK_STEP_M = 0.05
 
@@ -69,7 +69,7 @@ def _one(
 ) -> tuple[Path, dict[str, Any], float]:
     name = f"kill-{at_s:06.1f}" + ("-respawn" if respawn_after_s is not None else "")
     fleet = RunningFleet(root / name, world, robots, seed)
-    clock = SimClock(fleet)
+    clock = fleet.clock()
     killed_at = float("nan")
     try:
         fleet.wait(lambda: clock.t >= at_s, 900.0, poll=0.01)
@@ -81,7 +81,6 @@ def _one(
         report = fleet.finish() or {}
     finally:
         fleet.cleanup()
-        clock.close()
     return root / name, report, killed_at
 
 

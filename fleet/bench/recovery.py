@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from fleet.supervisor.runner import RunningFleet, SimClock, read_events
+from fleet.supervisor.runner import RunningFleet, read_events
 
 SETTLE_S = 1.0
 DETECT_TIMEOUT_S = 10.0
@@ -153,11 +153,10 @@ def _scenario(
 ) -> dict[str, Any]:
     """One whole run; with ``at_s`` the scenario's failure is made at that sim time."""
     fleet = RunningFleet(root / name, world, robots, seed)
-    clock = None
     failure: dict[str, Any] = {}
     try:
         if at_s is not None:
-            clock = SimClock(fleet)
+            clock = fleet.clock()
             fleet.wait(lambda: clock.t >= at_s, 900.0, poll=0.02)
             victim = "coordinator" if name == "coordinator-restart" else "robot-1"
             before = max((e["seq"] for e in fleet.events()), default=0)
@@ -172,8 +171,6 @@ def _scenario(
         report = fleet.finish() or {}
     finally:
         fleet.cleanup()
-        if clock is not None:
-            clock.close()
     events = fleet.events()
     result = {
         "scenario": name,

@@ -215,6 +215,12 @@ def coordinator(
             "and their frontiers auctioned until none is left.",
         ),
     ] = None,
+    loop: Annotated[
+        bool,
+        typer.Option(
+            "--loop", help="When the job finishes, plan the floor again and start the next job."
+        ),
+    ] = False,
 ) -> None:
     """Run the coordinator: cuts the floor into tasks, auctions them to the live robots,
     re-auctions the work of a robot that is lost, and sends each robot its plans. With
@@ -254,6 +260,8 @@ def coordinator(
         _fail(str(e))
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
+    if explore is not None and loop:
+        _fail("--loop and --explore do not go together: exploring ends when no frontier is left")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
     bounds = Bounds.of(cfg)
     if explore is None:
@@ -263,7 +271,7 @@ def coordinator(
         c = ExploringCoordinator(bus, explorer, robots, cfg.coordinator, store, bounds=bounds)
     _stop_on_signals(c.stop)
     try:
-        c.run(cfg.coordinator.expected_robots_grace_s)
+        c.run(cfg.coordinator.expected_robots_grace_s, loop)
     finally:
         c.close()
         bus.close()

@@ -89,6 +89,14 @@ def up(
     seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
     config: ConfigOpt = None,
     deconfliction: DeconflictionOpt = None,
+    loop: Annotated[
+        bool,
+        typer.Option(
+            "--loop",
+            help="Start the job again each time it finishes (the floor planned afresh), until "
+            "Ctrl-C or --timeout: a long run. Not with --until-done.",
+        ),
+    ] = False,
 ) -> None:
     """Run the whole fleet: a Zenoh router, the simulator, the coordinator and N agents, each
     its own process, with a live view; writes report.json, the report pictures (report.png,
@@ -128,6 +136,8 @@ def up(
         _fail(f"--speed must be a finite number >= 0, got {speed}")
     if timeout is not None and timeout <= 0:
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    if loop and until_done:
+        _fail("--loop starts the job again when it is done: it cannot stop --until-done")
     cfg, w = _load(config, world)
     _check_deconfliction(deconfliction)
     try:
@@ -167,6 +177,8 @@ def up(
     t0 = time.monotonic()
     try:
         coordinator = ["--deconfliction", deconfliction] if deconfliction else []
+        if loop:
+            coordinator.append("--loop")
         sim = _start_fleet(launcher, port, common, world_path, speed, seed, starts, coordinator)
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()

@@ -77,6 +77,12 @@ class Dispatcher:
         self.plans = plans
         self.plan_seq = plan_seq
 
+    def start_over(self) -> None:
+        """A new job: no plan drives any of its tasks yet (plan ids number on)."""
+        self.plans.clear()
+        self.schedules.clear()
+        self.progress_of.clear()
+
     def heard(self, rid: str, plan_id: int, waypoint: int) -> None:
         """``rid`` reports it drives plan ``plan_id``, heading for ``waypoint``."""
         self.progress_of[rid] = (plan_id, waypoint)

@@ -142,6 +142,12 @@ class Job:
         for t in tasks:
             self.tasks[t.id] = TaskRecord(t)
 
+    def start_over(self, tasks: tuple[Task, ...]) -> None:
+        """A new job on the same floor: ``tasks`` replace every task of the one before, all
+        open; the robots, their liveness and their award numbers stay."""
+        self.tasks = {}
+        self.add_tasks(tasks)
+
     def award(self, task_id: str, rid: str, reverse: bool) -> TaskRecord:
         rec = self.tasks[task_id]
         if rec.state != OPEN:

@@ -62,6 +62,11 @@ class Journal:
         if self.store is not None:
             self.store.save_tasks([self.job.tasks[i] for i in ids])
 
+    def clear_job(self) -> None:
+        """The job finished and a new one starts: its tasks and plans leave the store."""
+        if self.store is not None:
+            self.store.clear_job()
+
     def save_robots(self, robots: list[RobotRecord]) -> None:
         if self.store is not None:
             self.store.save_robots(robots)

@@ -278,7 +278,7 @@ class Market:
             self.journal.event(
                 "body", rid, "", f"its body stands at ({xy[0]:.2f}, {xy[1]:.2f}); planned around"
             )
-            self._plan_around_bodies(rid)
+            self.plan_around_bodies(rid)
         self.awards.send()
         self.need_auction = True
         self.wake.set()
@@ -298,7 +298,7 @@ class Market:
     def _body_centres(self) -> np.ndarray:
         return np.array(list(self.bodies.values()), dtype=float).reshape(-1, 2)
 
-    def _plan_around_bodies(self, body: str) -> None:
+    def plan_around_bodies(self, body: str) -> None:
         """Take back every task whose path comes near a body (its owner's queue from there
         on), and replace it by what a robot can drive round the bodies and what they block."""
         planner = self.dispatcher.planner

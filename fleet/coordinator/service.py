@@ -3,7 +3,9 @@
 Phases: ``gathering`` (waiting for the expected robots to be ready), ``auction`` (the first
 allocation), ``cleaning`` (``exploring`` for an exploring fleet), ``done`` (every task done)
 or ``incomplete`` (every task done but some no robot could reach, named in the ``finished``
-event). This shell wires the parts to the bus and runs the main loop; each part has one job:
+event). With ``--loop`` a finished job is followed by the next: the floor planned again, every
+task open, ``auction`` again. This shell wires the parts to the bus and runs the main loop; each
+part has one job:
 
 - :class:`fleet.coordinator.job.Job`: the job's state and rules (tasks, owners, swept pieces,
   robots), kept on disk by :class:`fleet.coordinator.store.JobStore` through
@@ -53,6 +55,7 @@ from fleet.coordinator.job import (
     TaskRecord,
 )
 from fleet.coordinator.journal import Journal
+from fleet.coordinator.looping import next_job
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
@@ -328,8 +331,8 @@ class Coordinator:
             if store is not None:
                 store.close()
 
-    def run(self, grace_s: float) -> None:
-        """Plan the tasks (unless resumed) while the robots start, then run the job."""
+    def run(self, grace_s: float, loop: bool = False) -> None:
+        """Plan the tasks (unless resumed), then run the job; with ``loop``, job after job."""
         if not self.job.tasks:
             self._plan_tasks()
         gather_start = time.monotonic()
@@ -350,7 +353,9 @@ class Coordinator:
                     self._tick()
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
-            if self.phase != "gathering" and auction_due:
+            if loop and self.phase in FINISHED:
+                self.phase = next_job(self.market, self.planner, self.lock)
+            elif self.phase != "gathering" and auction_due:
                 self.market.auction(self.auctioneer, self._check_heartbeats)
             with self.lock:
                 if self.phase != "gathering":

@@ -169,6 +169,12 @@ class JobStore:
                 [(k, json.dumps(v)) for k, v in values.items()],
             )
 
+    def clear_job(self) -> None:
+        """Forget the tasks and plans of a finished job (its events and bids stay)."""
+        with self.db:
+            self.db.execute("DELETE FROM tasks")
+            self.db.execute("DELETE FROM plans")
+
     def save_tasks(self, records: list[TaskRecord]) -> None:
         now = time.time()
         rows = [

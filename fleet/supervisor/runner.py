@@ -1,5 +1,13 @@
 """A `fleet up` run in the background, for benchmarks and integration tests: its process table,
-the coordinator's events as they are written, and cleanup of every process it started."""
+the coordinator's events as they are written, its sim clock, and cleanup of every process it
+started.
+
+Its waits (:meth:`RunningFleet.wait`, :meth:`RunningFleet.finish`) guard against a hung run by
+its sim clock (:class:`fleet.sim_guard.SimGuard`): past its wall bound, a wait goes on while
+the sim clock moves, up to the sim time the run would make in that bound on an idle machine
+(``IDLE_RTF``, or ``--speed``), and gives up once the clock has stalled for ``STALL_S``. A run
+slowed down by a busy machine is waited for; a hung one is not, and no wait ends sooner than
+its wall bound."""
 
 from __future__ import annotations
 
@@ -9,6 +17,7 @@ import signal
 import sqlite3
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -20,8 +29,16 @@ from fleet.plausible import SimClock as BelievedClock
 from fleet.plausible import clock_step_s
 from fleet.protocol import Clock
 from fleet.rundir import RunDirError, process_state, read_table
+from fleet.sim_guard import SimGuard
 
 EVENT_COLUMNS = ("seq", "wall", "sim", "kind", "robot", "task", "detail")
+# a wait past its wall bound gives up once the sim clock has not moved for this long (wall s)
+STALL_S = 30.0
+# sim seconds per wall second of a fleet at --speed 0 on an idle 2-core machine (5.7-6.3 with
+# 3 robots on home, BENCHMARKS.md): a wait's sim budget is its wall bound times this
+IDLE_RTF = 6.0
+# fleet up writes its process table at its start; it is waited for this long (wall s)
+TABLE_WAIT_S = 30.0
 
 
 def descendants(pid: int) -> list[int]:
@@ -62,7 +79,8 @@ def read_events(state: Path) -> list[dict[str, Any]]:
 
 class RunningFleet:
     """``fleet up --headless --until-done --speed S`` (0 by default) started at construction;
-    with ``command`` ``("explore",)``, ``fleet explore --headless ...``."""
+    with ``loop``, ``fleet up --headless --loop`` (the job again each time it finishes), which
+    runs until it is stopped; with ``command`` ``("explore",)``, ``fleet explore --headless``."""
 
     def __init__(
         self,
@@ -70,13 +88,16 @@ class RunningFleet:
         world: str,
         robots: int = 3,
         seed: int = 0,
-        timeout_s: float = 900.0,
+        timeout_s: float | None = None,
         cwd: Path | None = None,
         speed: float = 0.0,
         options: Sequence[str] = (),
-        command: Sequence[str] = ("up", "--until-done"),
+        loop: bool = False,
+        command: Sequence[str] = ("up",),
     ) -> None:
-        """``options``: more options of ``fleet up`` (e.g. ``--deconfliction cbs``)."""
+        """``timeout_s``: fleet up's ``--timeout``, a wall budget (None: none; :meth:`finish`
+        guards against a hung run by its sim clock); ``options``: more options of ``fleet up``
+        (e.g. ``--deconfliction cbs``)."""
         self.dir = run_dir
         cmd = [
             sys.executable,
@@ -88,8 +109,8 @@ class RunningFleet:
             "--world",
             world,
             "--headless",
-            "--timeout",
-            str(timeout_s),
+            *(("--loop" if loop else "--until-done",) if command[0] == "up" else ()),
+            *(() if timeout_s is None else ("--timeout", str(timeout_s))),
             "--speed",
             str(speed),
             "--seed",
@@ -98,10 +119,15 @@ class RunningFleet:
             str(run_dir),
             *options,
         ]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=cwd)
+        # to a file, not a pipe: nobody reads fleet up's output while it runs, and a pipe's
+        # buffer (64 KiB) fills in a long run and blocks fleet up on its next progress line
+        self._out = tempfile.TemporaryFile()  # noqa: SIM115 - closed in cleanup
+        self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=subprocess.STDOUT, cwd=cwd)
+        self.speed = speed
         self.children: set[int] = set()
         self.output = ""
         self.left: list[int] = []
+        self._clock: SimClock | None = None
 
     def events(self, kind: str | None = None, robot: str | None = None) -> list[dict[str, Any]]:
         return [
@@ -110,10 +136,41 @@ class RunningFleet:
             if (kind is None or e["kind"] == kind) and (robot is None or e["robot"] == robot)
         ]
 
-    def wait(self, pred: Callable[[], Any], timeout: float, poll: float = 0.05) -> bool:
-        """Poll ``pred()`` until it is truthy (True) or ``timeout`` passes or the run ends."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
+    def clock(self) -> SimClock:
+        """The run's sim clock, heard from once the process table is written (the one clock
+        of this run: closed by :meth:`cleanup`)."""
+        if self._clock is None:
+            self._clock = SimClock(self)
+        return self._clock
+
+    def sim_t(self) -> float:
+        """The run's sim time as heard so far; 0 before its clock can be heard (no process
+        table, or no router to hear it through yet)."""
+        if self._clock is None and not (self.dir / "processes.json").exists():
+            return 0.0
+        try:
+            return self.clock().t
+        except Exception:  # zenoh raises ZError while the run's router is not up yet
+            return 0.0
+
+    def guard(self, wall_s: float, sim_s: float | None = None) -> SimGuard:
+        """A guard for a wait of ``wall_s`` wall seconds on this run: past them, it goes on
+        while the sim clock moves, up to ``sim_s`` sim seconds (by default what the run would
+        make in ``wall_s`` at its speed, or at ``IDLE_RTF`` with --speed 0)."""
+        budget = sim_s if sim_s is not None else wall_s * (self.speed or IDLE_RTF)
+        return SimGuard(self.sim_t, wall_s, min(wall_s, STALL_S) or STALL_S, budget)
+
+    def wait(
+        self,
+        pred: Callable[[], Any],
+        timeout: float,
+        poll: float = 0.05,
+        sim_s: float | None = None,
+    ) -> bool:
+        """Poll ``pred()`` until it is truthy (True) or the run ends, or :meth:`guard`
+        ``(timeout, sim_s)`` gives up."""
+        guard = self.guard(timeout, sim_s)
+        while not guard.expired():
             self.children.update(descendants(self.proc.pid))
             if pred():
                 return True
@@ -145,9 +202,10 @@ class RunningFleet:
         )
 
     def finish(self, timeout: float = 900.0) -> dict[str, Any] | None:
-        """Wait for ``fleet up`` to end, clean up, and return its report (None if none)."""
-        deadline = time.monotonic() + timeout
-        while self.proc.poll() is None and time.monotonic() < deadline:
+        """Wait for ``fleet up`` to end (:meth:`guard` ``(timeout)`` bounds the wait), clean
+        up, and return its report (None if none)."""
+        guard = self.guard(timeout)
+        while self.proc.poll() is None and not guard.expired():
             self.children.update(descendants(self.proc.pid))
             time.sleep(0.5)
         self.cleanup()
@@ -156,6 +214,8 @@ class RunningFleet:
 
     def cleanup(self) -> list[int]:
         """Stop ``fleet up`` if it still runs, and kill (and return) any process it left."""
+        if self._clock is not None:
+            self._clock.close()
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
             try:
@@ -163,9 +223,10 @@ class RunningFleet:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        if self.proc.stdout is not None and not self.proc.stdout.closed:
-            self.output = self.proc.stdout.read().decode(errors="replace")
-            self.proc.stdout.close()
+        if not self._out.closed:
+            self._out.seek(0)
+            self.output = self._out.read().decode(errors="replace")
+            self._out.close()
         time.sleep(1.0)
         left = [p for p in self.children if Path(f"/proc/{p}").exists()]
         for p in left:
@@ -180,12 +241,17 @@ class SimClock:
     failures early."""
 
     def __init__(self, fleet: RunningFleet) -> None:
-        fleet.wait(lambda: (fleet.dir / "processes.json").exists(), 30.0)
+        """Heard from once ``fleet``'s process table is written (``TABLE_WAIT_S`` at most: it
+        is written as fleet up starts, before any sim clock runs)."""
+        deadline = time.monotonic() + TABLE_WAIT_S
+        while not (fleet.dir / "processes.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
         table = fleet.table()
         cfg = load_fleet_config()
         self._clock = BelievedClock(clock_step_s(cfg.sim, cfg.agent), lambda _n, _why: None)
         self.bus = Bus("dashboard", f"bench-{id(self)}", [table["endpoint"]], table["fleet"])
         self.bus.subscribe(self.bus.keys.clock(), Clock, self._on_clock)
+        self.closed = False
 
     @property
     def t(self) -> float:
@@ -195,4 +261,7 @@ class SimClock:
         self._clock.hear(msg.stamp)
 
     def close(self) -> None:
-        self.bus.close()
+        """Stop hearing the clock (again: nothing)."""
+        if not self.closed:
+            self.closed = True
+            self.bus.close()

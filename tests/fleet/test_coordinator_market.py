@@ -8,6 +8,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import PLAN_RESEND_S, Dispatcher
 from fleet.coordinator.job import ASSIGNED, DONE, LOST, OPEN, REPLACED, Job
 from fleet.coordinator.journal import Journal
+from fleet.coordinator.looping import next_job
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
@@ -542,3 +544,37 @@ def test_a_slow_robot_that_gets_nearer_its_waypoint_is_not_stuck(planner: TaskPl
         c.market.observe("robot-0", RobotStatus(at, "driving", "t00", 0.1, 1, 2, 0.0, 0, 0, 7))
         c.market.check_stalls()
     assert [r for r, _, _ in c.events("stuck")] == ["robot-0"]
+
+
+def test_a_new_job_sells_the_whole_floor_again_as_a_first_allocation(
+    planner: TaskPlanner, tmp_path: Path
+) -> None:
+    """``--loop``: the job finished, the next starts: every task open again (none of the old
+    job's state, remainders or plans left), the robots and their award numbers kept, so the
+    agents take the new awards, and the whole floor sold as regions again."""
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    store = JobStore(tmp_path / "state.sqlite", fleet="test", world="small", robots=2)
+    c.journal.store = store
+    c.bidding = {"robot-0": 1.0, "robot-1": 2.0}
+    c.market.auction(c.auctioneer)
+    c.dispatcher.dispatch()
+    for rid in ("robot-0", "robot-1"):
+        for rec in c.job.queue(rid):
+            c.job.finish(rid, rec.task.id)
+    c.job.tasks["t05"].state = REPLACED  # its remainder t05.1 was done by another
+    c.job.tasks["t05.1"] = c.job.tasks["t05"].__class__(_task(5), DONE)
+    assert c.job.finished and c.dispatcher.plans
+    seqs = {rid: r.award_seq for rid, r in c.job.robots.items()}
+    sold_before = len(c.sales)
+    floor = SimpleNamespace(tasks=lambda: tuple(_task(i) for i in range(6)))
+    assert next_job(c.market, floor, c.market.lock) == "auction"  # type: ignore[arg-type]
+    assert sorted(c.job.tasks) == [f"t{i:02d}" for i in range(6)]
+    assert all(rec.state == OPEN for rec in c.job.tasks.values())
+    assert not c.dispatcher.plans and c.market.need_auction
+    assert sorted(r[0] for r in store.db.execute("SELECT id FROM tasks")) == sorted(c.job.tasks)
+    assert store.plans() == {}
+    c.market.auction(c.auctioneer)
+    assert not c.job.open_tasks() and len(c.sales) - sold_before == 2  # one region per robot
+    winners = {s.best.robot for s in c.sales[sold_before:]}
+    assert all(c.job.robots[rid].award_seq > seqs[rid] for rid in winners)
+    store.close()

@@ -20,7 +20,6 @@ from fleet_runs import FleetRun
 from fleet.bench.kill_sweep import outside_body
 from fleet.cli.up import INCOMPLETE_EXIT
 from fleet.params import load_fleet_config
-from fleet.supervisor.runner import SimClock
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 KILL_AT_S = 10.8
@@ -30,13 +29,12 @@ def test_a_robot_killed_in_the_way_is_planned_round_and_the_floor_still_cleaned(
     tmp_path: Path,
 ) -> None:
     run = FleetRun(tmp_path / "run", timeout_s=300.0)
-    clock = SimClock(run)
+    clock = run.clock()
     try:
         run.wait_for(lambda: clock.t >= KILL_AT_S, timeout=120, what="sim time 10.8 s")
         run.signal("robot-1", signal.SIGKILL)
         report = run.finish()
     finally:
-        clock.close()
         run.cleanup()
     assert run.left == [], f"processes left behind: {run.left}"
     events = run.events()

@@ -38,9 +38,7 @@ def _crossings(tracks: Path) -> int:
 def test_the_corridor_world_is_cleaned_with_planned_transits_and_no_robot_contact(
     tmp_path: Path,
 ) -> None:
-    fleet = RunningFleet(
-        tmp_path, str(WORLD), 3, timeout_s=240.0, options=("--deconfliction", "prioritized")
-    )
+    fleet = RunningFleet(tmp_path, str(WORLD), 3, options=("--deconfliction", "prioritized"))
     report = fleet.finish(330.0)
     assert report is not None, fleet.output[-3000:]
     assert report["status"] == "done", fleet.output[-3000:]
@@ -66,7 +64,6 @@ def test_a_corridor_with_a_lane_is_crossed_both_ways_with_every_round_planned(
         tmp_path,
         str(WORLDS / "corridor_wide.yaml"),
         4,
-        timeout_s=300.0,
         options=("--deconfliction", "prioritized"),
     )
     report = fleet.finish(390.0)

@@ -15,9 +15,10 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "small.yaml"
 
 
-def _fleet_up(run_dir: Path, robots: int, timeout_s: float = 150.0) -> dict:
-    """Run ``fleet up`` headless until done on the small world; collect every process it
-    started while it ran, and kill (and report) any left after it exits."""
+def _fleet_up(run_dir: Path, robots: int, timeout_s: float | None = None) -> dict:
+    """Run ``fleet up`` headless until done on the small world (``timeout_s``: its wall
+    ``--timeout``); collect every process it started while it ran, and kill (and report) any
+    left after it exits."""
     fleet = RunningFleet(run_dir, str(WORLD), robots, timeout_s=timeout_s)
     fleet.finish(300.0)
     return {
@@ -108,7 +109,7 @@ def test_until_done_that_times_out_exits_3_with_a_report_and_no_orphans(tmp_path
 
 def test_a_closed_terminal_stops_the_fleet_with_a_report_and_no_orphans(tmp_path: Path) -> None:
     """SIGHUP (the terminal or SSH session closed) stops fleet up as Ctrl-C does."""
-    fleet = RunningFleet(tmp_path, str(WORLD), 1, timeout_s=150.0)
+    fleet = RunningFleet(tmp_path, str(WORLD), 1)
     try:
         assert fleet.wait(lambda: fleet.events("awarded"), timeout=120), fleet.output
         fleet.proc.send_signal(signal.SIGHUP)
