@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from fleet.params import AgentParams, FleetConfig, SimParams
-from fleet.protocol import Clock
+from fleet.protocol import Clock, key_class
 
 # a jump is believed once this many messages agree with it: one is never enough
 CONFIRMATIONS = 3
@@ -274,6 +274,60 @@ class PoseTrack:
 Drop = Callable[..., None]
 
 
+# a robot's token is awaited this long (wall s) after its first message before what it sent is
+# counted as implausible: on a loaded machine a token can come a second or more after them
+STRANGER_GRACE_S = 5.0
+
+
+class Strangers:
+    """Messages from robots not in the job. Each is dropped at once, but a robot's first
+    messages can reach a loaded receiver before its liveliness token does (they come on other
+    keys, handled by other threads): they are counted as implausible through ``drop`` only
+    when no token of their sender has come ``grace_s`` (wall seconds, at the time ``wall``
+    returns) after the first of them (:meth:`flush`). Thread-safe."""
+
+    def __init__(self, grace_s: float, drop: Drop, wall: Callable[[], float] = time.monotonic):
+        self.grace_s = grace_s
+        self.drop = drop
+        self._wall = wall
+        self._held: dict[tuple[str, str], _Held] = {}
+        self._lock = threading.Lock()
+
+    def heard(self, key: str, sender: str, why: str) -> None:
+        """A message on ``key`` from ``sender``, not in the job, was dropped for ``why``."""
+        with self._lock:
+            held = self._held.setdefault((sender, key_class(key)), _Held(self._wall(), key, why))
+            held.count += 1
+        self.flush()
+
+    def joined(self, sender: str) -> None:
+        """``sender``'s token came: what it sent before was early, not implausible."""
+        with self._lock:
+            for k in [k for k in self._held if k[0] == sender]:
+                del self._held[k]
+
+    def flush(self) -> None:
+        """Count the messages of senders whose token has not come within the grace."""
+        now = self._wall()
+        with self._lock:
+            due = [(k, v) for k, v in self._held.items() if now - v.first >= self.grace_s]
+            for k, _ in due:
+                del self._held[k]
+        for (sender, _), held in due:
+            self.drop(held.key, sender, held.why, held.count)
+
+
+@dataclass
+class _Held:
+    """Messages of one sender on one key class held back by :class:`Strangers`: when the
+    first came (wall s), one of their keys, why they were dropped, and how many."""
+
+    first: float
+    key: str
+    why: str
+    count: int = 0
+
+
 class StampWatch:
     """The judge of a receiver that only watches the fleet (the live view, the run's recorder):
     its own :class:`SimClock`, fed every clock message (``hear_clock``), and messages stamped
@@ -288,6 +342,7 @@ class StampWatch:
     def __init__(self, step_s: float, drop: Drop, clock_key: str) -> None:
         self.drop = drop
         self.clock = SimClock(step_s, lambda n, why: drop(clock_key, "sim", why, n))
+        self.strangers = Strangers(STRANGER_GRACE_S, drop)
         self._members: set[str] = set()
         self._lock = threading.Lock()
 
@@ -296,15 +351,17 @@ class StampWatch:
         once its token goes)."""
         with self._lock:
             self._members.add(rid)
+        self.strangers.joined(rid)
 
     def stranger(self, key: str, sender: str) -> bool:
         """Whether to drop the message on ``key`` from robot ``sender``: it is not in the job
-        (see :meth:`join`); then it is counted."""
+        (see :meth:`join`); then it is counted unless the sender's token comes soon after
+        (:class:`Strangers`)."""
         with self._lock:
             known = sender in self._members
         if known:
             return False
-        self.drop(key, sender, "not in the job: no liveliness token of it heard")
+        self.strangers.heard(key, sender, "not in the job: no liveliness token of it heard")
         return True
 
     def hear_clock(self, _key: str, msg: Clock) -> None:

@@ -62,7 +62,7 @@ from fleet.coordinator.store import JobStore
 from fleet.coordinator.transits import TransitPlanner
 from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
-from fleet.plausible import Bounds, PoseTrack, SimClock
+from fleet.plausible import STRANGER_GRACE_S, Bounds, PoseTrack, SimClock, Strangers
 from fleet.protocol import (
     AwardAck,
     Bid,
@@ -144,6 +144,7 @@ class Coordinator:
             lambda n, why: bus.drop_implausible(clock_key, "sim", why, n),
             self.journal.clock,
         )
+        self.strangers = Strangers(STRANGER_GRACE_S, bus.drop_implausible)
         self.tracks: dict[str, PoseTrack] = {}
         # the messages the coordinators before this one dropped on the bus in this job
         before = meta.get("dropped")
@@ -205,17 +206,19 @@ class Coordinator:
             self.journal.heard(self.sim_clock.now)
 
     def _implausible(self, key: str, rid: str, stamp: float | None = None) -> bool:
-        """Drop (count and log) a message from ``rid`` that is not in the job, or with a sensor
-        ``stamp`` farther ahead of the clock than a robot's can be; whether it was dropped. A
+        """Drop (count and log) a message from ``rid`` that is not in the job (counted unless its
+        token comes soon after: :class:`fleet.plausible.Strangers`), or with a sensor ``stamp``
+        farther ahead of the clock than a robot's can be; whether it was dropped. A
         stamped one that comes before the clock has synced (since this coordinator started)
         is dropped uncounted: there is no time to judge it by yet, and one stamped far ahead,
         believed, would stand as the robot's newest pose and hide every real one after it.
         Call with the lock held."""
         if rid not in self.job.robots:
-            why = "not in the job: no liveliness token of it heard"
-        elif stamp is not None and not self.sim_clock.synced:
+            self.strangers.heard(key, rid, "not in the job: no liveliness token of it heard")
             return True
-        elif stamp is not None and self.sim_clock.ahead(stamp, strict=True):
+        if stamp is not None and not self.sim_clock.synced:
+            return True
+        if stamp is not None and self.sim_clock.ahead(stamp, strict=True):
             why = f"stamped {stamp:.3f} s, past the sim clock at {self.sim_clock.now:.3f} s"
         else:
             return False
@@ -258,6 +261,7 @@ class Coordinator:
                 self.market.rebalance()
 
     def _on_join(self, rid: str) -> None:
+        self.strangers.joined(rid)
         with self.lock:
             known = rid in self.job.robots
             r = self.job.robot(rid)
@@ -341,6 +345,7 @@ class Coordinator:
             self.wake.wait(LOOP_S)
             self.wake.clear()
             auction_due = False
+            self.strangers.flush()
             with self.lock:
                 if self.phase == "gathering":
                     if self._gathered(time.monotonic() - gather_start, grace_s):

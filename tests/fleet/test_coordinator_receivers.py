@@ -185,7 +185,28 @@ def test_messages_from_a_robot_not_in_the_job_are_dropped(
     # robot-0 acknowledging for another robot
     coord._on_ack(k.ack("robot-0"), AwardAck(0.0, 1, "robot-9"))
     assert sorted(coord.job.robots) == ["robot-0"]
+    # robot-9's four wait for its token, robot-0's acknowledgement for another is counted
+    assert sum(cbus.implausible.values()) == 1
+    coord.strangers.grace_s = 0.0
+    coord.strangers.flush()
     assert sum(cbus.implausible.values()) == 5
+
+
+def test_messages_just_before_a_robots_token_are_dropped_but_not_counted(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner
+) -> None:
+    """On a loaded machine a robot's first status can beat its liveliness token: it is dropped
+    (the robot is not in the job yet), but the token coming within the grace shows it was
+    early, not implausible."""
+    cbus, _, _ = buses
+    coord = _coordinator(cbus, planner)
+    k = cbus.keys
+    coord._on_status(k.robot("robot-7", "status"), RobotStatus(0.0, "idle", "", 0.0, -1, 0, 0))
+    coord._on_join("robot-7")
+    coord.strangers.grace_s = 0.0
+    coord.strangers.flush()
+    assert "robot-7" in coord.job.robots
+    assert sum(cbus.implausible.values()) == 0
 
 
 def test_a_robot_whose_token_goes_is_lost_and_its_work_goes_back_on_sale(
@@ -252,6 +273,8 @@ def test_the_counts_survive_a_restart(
     coord = _coordinator(cbus, planner, store)
     coord.journal.save_tasks("t00", "t01")
     coord._on_pose(cbus.keys.robot("robot-9", "pose"), PoseEstimate(0.0, 1.0, 1.0, 0.0))
+    coord.strangers.grace_s = 0.0
+    coord.strangers.flush()
     coord._persist(store)
     assert store.meta()["dropped"] == {"malformed": 0, "implausible": 1}
     store.close()

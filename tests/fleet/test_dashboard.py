@@ -394,6 +394,10 @@ def test_the_view_drops_what_robots_not_in_the_job_send() -> None:
     assert list(w.robots) == ["robot-0"]
     robot = w.robots["robot-0"]
     assert robot.status is not None and robot.intent is not None
+    # counted once the ghost's token has not come within the grace
+    assert dropped == []
+    watch.strangers.grace_s = 0.0
+    watch.strangers.flush()
     assert dropped == [
         (KEYS.robot("ghost", topic), "ghost") for topic in ("status", "intent", "heartbeat")
     ]

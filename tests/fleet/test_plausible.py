@@ -12,6 +12,7 @@ from fleet.plausible import (
     Bounds,
     PoseTrack,
     SimClock,
+    Strangers,
     clock_step_s,
 )
 
@@ -173,3 +174,32 @@ def test_a_real_jump_a_relocalization_is_believed_once_confirmed_and_not_counted
     heard = [track.hear(0.1 * i, (3.0 + 0.01 * i, 0.0)) for i in range(1, CONFIRMATIONS + 1)]
     assert heard == [False] * (CONFIRMATIONS - 1) + [True]
     assert track.last is not None and track.last[1][0] > 3.0 and drops.calls == []
+
+
+def test_strangers_are_counted_only_when_no_token_comes_within_the_grace() -> None:
+    """Messages from robots not in the job are held back per sender and key class: counted,
+    with their number, once the grace has passed without the sender's token; forgotten when
+    the token comes in time."""
+    counted: list[tuple[str, str, int]] = []
+    wall = Wall()
+
+    def drop(key: str, sender: str, _why: str, n: int = 1) -> None:
+        counted.append((key, sender, n))
+
+    strangers = Strangers(5.0, drop, wall)
+    for _ in range(3):
+        strangers.heard("fleet/x/robot/robot-9/status", "robot-9", "not in the job")
+    strangers.heard("fleet/x/robot/robot-9/pose", "robot-9", "not in the job")
+    strangers.heard("fleet/x/robot/robot-2/status", "robot-2", "not in the job")
+    wall.t += 4.9
+    strangers.flush()
+    assert counted == []
+    strangers.joined("robot-2")
+    wall.t += 0.2
+    strangers.flush()
+    assert sorted(counted) == [
+        ("fleet/x/robot/robot-9/pose", "robot-9", 1),
+        ("fleet/x/robot/robot-9/status", "robot-9", 3),
+    ]
+    strangers.flush()
+    assert len(counted) == 2
