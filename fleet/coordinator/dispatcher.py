@@ -265,7 +265,9 @@ class Dispatcher:
             self.on_unreachable(rid, chain[0].task.id, str(e))
             return
         self.plan_seq = max(self.plan_seq + 1, ids.get(rid, 0))
-        waits = transit.waits if transit is not None else ()
+        # a robot standing in the round (no work, stuck or lost) is planned round, not waited
+        # for: it drives no plan of the round whose progress could release the wait
+        waits = tuple(w for w in transit.waits if w[1] in ids) if transit is not None else ()
         plan = Plan(
             self.journal.clock,
             self.plan_seq,

@@ -10,6 +10,7 @@ from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
+from fleet.coordinator.transits import PlannedTransit
 from fleet.params import load_fleet_config
 from fleet.plan_chain import chain_of
 from fleet.protocol import Keys, Message, Plan
@@ -77,3 +78,27 @@ def test_a_robot_gets_one_plan_for_the_run_of_its_queue_once_it_has_the_award(
 
     d.forget("robot-0")
     assert d.current("robot-0") is None
+
+
+def test_a_wait_on_a_robot_standing_in_the_round_is_left_out_not_a_crash(
+    planner: TaskPlanner,
+) -> None:
+    """A planned transit may order a robot after one that stands in the round (no work, stuck:
+    planned round as an obstacle). That robot drives no plan of the round, so the wait is left
+    out; the coordinator once crashed looking up its new plan id (KeyError)."""
+    cfg = load_fleet_config()
+    job = Job(planner.params, planner.robot, planner.wall_clearance)
+    job.add_tasks((_task("t00", (1.0, 0.85), (1.5, 0.85)),))
+    job.award("t00", "robot-0", False)
+    robot = job.robot("robot-0")
+    robot.ready, robot.xy, robot.award_seq, robot.acked_seq = True, planner.dock, 1, 1
+    sent: list[tuple[str, Message]] = []
+    journal = Journal(job, None, KEYS, lambda key, msg, _control: sent.append((key, msg)))
+    d = Dispatcher(journal, planner, None, cfg.coordinator, KEYS, journal.publish)
+    chain = d._unplanned()["robot-0"]
+    points = np.array([planner.dock, (1.0, 0.85)], dtype=float)
+    transit = PlannedTransit(points, ((1, "robot-5", 2), (1, "robot-1", 0)), np.zeros(2))
+    d._send_plan("robot-0", chain, transit, {"robot-0": 7, "robot-1": 8})
+    plan = sent[-1][1]
+    assert isinstance(plan, Plan) and plan.plan_id == 7
+    assert list(plan.wait_for) == ["robot-1"] and plan.wait_plan.tolist() == [8]
