@@ -85,6 +85,23 @@ def bench_deconfliction(
             "--run-root", help="Where the fleets' run dirs go (default: runs/bench-deconf-<time>)."
         ),
     ] = None,
+    family: bool = typer.Option(
+        False,
+        "--family",
+        help="Run only whole fleets on the generated family of stress worlds (two or three "
+        "rooms, corridors 0.45-0.9 m wide and 1-4 m long, a doorway, an L), every member under "
+        "every mode of --modes, and judge each mode against issue 30's targets (PASS/FAIL). "
+        "No planning rounds are timed then.",
+    ),
+    family_seeds: str = typer.Option(
+        "0-2", "--family-seeds", help="Seeds of the family's fleets (0-2, or 0,1,2)."
+    ),
+    family_members: str = typer.Option(
+        "all",
+        "--family-members",
+        help="Comma-separated members of the family to run (all by default): "
+        "c0.45x2.5, c0.6x1, c0.6x4, c0.75x2.5, c0.9x2.5, door0.8, L0.6, 3rooms0.6.",
+    ),
 ) -> None:
     """Time planning all transits of a round (planners/deconfliction.py) on a transit graph,
     and with --fleet-seeds run `fleet up --deconfliction MODE` side by side on stress worlds.
@@ -102,7 +119,25 @@ def bench_deconfliction(
     waiting (robot-seconds held before shared cells plus given way to peers), makespan, and
     waypoints given up; each run's dir keeps its report. Example: `fleet bench deconfliction
     --fleet-seeds 0-9 --json`.
+
+    The generated family (`--family`, fleet/bench/world_family.py): eight worlds named by their
+    passage: c<width>x<length> (two rooms of 3.4 × 3 m joined by a straight corridor, width
+    face to face), door0.8 (a gap in the wall between two rooms), L0.6 (an L-shaped corridor)
+    and 3rooms0.6 (three rooms in a row). A table in each room, two robots starting in the
+    first room and two in the last, so the passages are crossed both ways. The worlds are
+    written to <run-root>/worlds/. Each fleet runs `fleet up --until-done --headless --speed 0
+    --deconfliction MODE`, one at a time, each in <run-root>/<member>-<mode>-seed<N>/; a line
+    per run as it ends. Per run: finished, coverage, robot–robot and robot–wall contacts,
+    makespan, the coordinator's "unreachable" events and waypoints given up. Per mode, the
+    targets: no "unreachable" event (every member's goals are reachable on the grid), every run
+    done with coverage ≥ 0.95, no robot–robot contact, and the median of its makespan over
+    local's on the same member and seed ≤ 1; PASS when all hold. Example: `fleet bench
+    deconfliction --family --family-seeds 0 --modes local,prioritized --run-root
+    runs/family`.
     """
+    if family:
+        _family(family_members, family_seeds, modes, run_root, as_json)
+        return
     import numpy as np
 
     from fleet.config import resolve_world
@@ -185,15 +220,9 @@ def bench_deconfliction(
         Console().print(fleets)
 
 
-def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[str, dict]:
-    """Whole fleets on the stress worlds under each mode (see the command's help)."""
-    from datetime import datetime
-
-    import numpy as np
-
-    from fleet.bench.fleet import Scenario, run_bench
-    from fleet.cli.common import _fail, parse_seeds
-    from fleet.config import resolve_world
+def _modes(modes: str) -> list[str]:
+    """The modes of ``--modes``; exits naming an unknown one."""
+    from fleet.cli.common import _fail
     from fleet.params import DECONFLICTION_MODES
 
     chosen = [m.strip() for m in modes.split(",") if m.strip()]
@@ -203,6 +232,40 @@ def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[
             f"--modes: {', '.join(bad) or 'none given'}; choose from "
             f"{', '.join(DECONFLICTION_MODES)}"
         )
+    return chosen
+
+
+def _run_fleets(scenarios: list, seeds: str, root: Path) -> dict:
+    """``fleet bench fleet``'s runner on ``scenarios`` (one fleet at a time, progress on
+    stderr); its result, also kept in ``root / bench.json``."""
+    from fleet.bench.fleet import run_bench
+    from fleet.cli.common import parse_seeds
+
+    return run_bench(
+        root,
+        scenarios,
+        parse_seeds(seeds),
+        0.0,
+        FLEET_TIMEOUT_S,
+        lambda line: print(line, file=sys.stderr, flush=True),
+    )
+
+
+def _default_root(run_root: Path | None) -> Path:
+    from datetime import datetime
+
+    return run_root or Path("runs") / datetime.now().strftime("bench-deconf-%Y%m%d-%H%M%S")
+
+
+def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[str, dict]:
+    """Whole fleets on the stress worlds under each mode (see the command's help)."""
+    import numpy as np
+
+    from fleet.bench.fleet import Scenario
+    from fleet.cli.common import _fail
+    from fleet.config import resolve_world
+
+    chosen = _modes(modes)
     stress = dict(STRESS_WORLDS)
     names = [w.strip() for w in worlds.split(",") if w.strip()]
     unknown = [w for w in names if w not in stress]
@@ -218,15 +281,7 @@ def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[
         if world in names
         for mode in chosen
     ]
-    root = run_root or Path("runs") / datetime.now().strftime("bench-deconf-%Y%m%d-%H%M%S")
-    result = run_bench(
-        root,
-        scenarios,
-        parse_seeds(seeds),
-        0.0,
-        FLEET_TIMEOUT_S,
-        lambda line: print(line, file=sys.stderr, flush=True),
-    )
+    result = _run_fleets(scenarios, seeds, _default_root(run_root))
     out = {}
     for sc in scenarios:
         runs = [r for r in result["runs"] if r["world"] == sc.name and r["status"] != "no report"]
@@ -241,3 +296,88 @@ def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[
             "given_up": summary["skipped_total"],
         }
     return out
+
+
+def _family(names: str, seeds: str, modes: str, run_root: Path | None, as_json: bool) -> None:
+    """Whole fleets on the generated family under each mode, and each mode's verdict (see the
+    command's help)."""
+    from fleet.bench.family_verdict import family_run, family_summary
+    from fleet.bench.fleet import Scenario
+    from fleet.bench.world_family import layout, members, write_world
+    from fleet.cli.common import _fail
+
+    chosen = _modes(modes)
+    try:
+        family = members(names)
+    except ValueError as e:
+        _fail(f"--family-members: {e}")
+    root = _default_root(run_root)
+    scenarios = [
+        Scenario(
+            f"{m.name}/{mode}",
+            str(write_world(m, root / "worlds")),
+            len(layout(m).starts),
+            ("--deconfliction", mode),
+        )
+        for m in family
+        for mode in chosen
+    ]
+    result = _run_fleets(scenarios, seeds, root)
+    runs = [family_run(r) for r in result["runs"]]
+    out = {"root": str(root), "runs": runs, "modes": family_summary(runs)}
+    (root / "family.json").write_text(json.dumps(out, indent=2) + "\n")
+    if as_json:
+        typer.echo(json.dumps(out))
+        return
+    _print_family(out)
+
+
+def _print_family(out: dict) -> None:
+    """The family's runs (a row per member, mode and seed) and the modes' verdicts."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from fleet.bench.family_verdict import CHECKS
+
+    runs = Table(title="Deconfliction: the generated family, whole fleets")
+    columns = ("member", "mode", "seed", "status", "coverage", "robot contacts")
+    for col in (*columns, "wall contacts", "makespan s", "unreachable", "given up"):
+        runs.add_column(col, justify="right")
+    for r in out["runs"]:
+        unreachable = r["unreachable"]
+        runs.add_row(
+            *(str(r[k]) for k in ("member", "mode", "seed", "status", "coverage")),
+            str(r["robot_contacts"]),
+            str(r["wall_contacts"]),
+            str(r["makespan_s"]),
+            "–" if unreachable is None else str(len(unreachable)),
+            str(r["given_up"]),
+        )
+    Console().print(runs)
+    verdicts = Table(title="Per mode, against issue 30's targets")
+    verdicts.add_column("mode")
+    for col in ("finished", "unreachable", "coverage min", "robot contacts", "wall contacts"):
+        verdicts.add_column(col, justify="right")
+    for col in ("makespan median s", "× local (median)", "given up", *CHECKS, "verdict"):
+        verdicts.add_column(col, justify="right")
+    for mode, s in out["modes"].items():
+        marks = {True: "pass", False: "FAIL", None: "–"}
+        verdicts.add_row(
+            mode,
+            f"{s['finished']}/{s['runs']}",
+            *(
+                str(s[k])
+                for k in (
+                    "unreachable",
+                    "coverage_min",
+                    "robot_contacts",
+                    "wall_contacts",
+                    "makespan_s_median",
+                    "makespan_over_local_median",
+                    "given_up",
+                )
+            ),
+            *(marks[s["checks"][c]] for c in CHECKS),
+            s["verdict"],
+        )
+    Console().print(verdicts)
