@@ -17,6 +17,8 @@ FLEET_TIMEOUT_S = 900.0
 # warehouse-like grid: planners.mapf.generate's shelf map, each of its cells this many metres
 WAREHOUSE_CELL_M = 0.5
 WAREHOUSE_CELLS = 40
+# the family's table of runs needs this many columns of text
+RUNS_TABLE_COLUMNS = 110
 
 
 def register(app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app) -> None:
@@ -235,16 +237,15 @@ def _modes(modes: str) -> list[str]:
     return chosen
 
 
-def _run_fleets(scenarios: list, seeds: str, root: Path) -> dict:
+def _run_fleets(scenarios: list, seeds: list[int], root: Path) -> dict:
     """``fleet bench fleet``'s runner on ``scenarios`` (one fleet at a time, progress on
     stderr); its result, also kept in ``root / bench.json``."""
     from fleet.bench.fleet import run_bench
-    from fleet.cli.common import parse_seeds
 
     return run_bench(
         root,
         scenarios,
-        parse_seeds(seeds),
+        seeds,
         0.0,
         FLEET_TIMEOUT_S,
         lambda line: print(line, file=sys.stderr, flush=True),
@@ -262,10 +263,10 @@ def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[
     import numpy as np
 
     from fleet.bench.fleet import Scenario
-    from fleet.cli.common import _fail
+    from fleet.cli.common import _fail, parse_seeds
     from fleet.config import resolve_world
 
-    chosen = _modes(modes)
+    chosen, seed_list = _modes(modes), parse_seeds(seeds)
     stress = dict(STRESS_WORLDS)
     names = [w.strip() for w in worlds.split(",") if w.strip()]
     unknown = [w for w in names if w not in stress]
@@ -281,7 +282,7 @@ def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[
         if world in names
         for mode in chosen
     ]
-    result = _run_fleets(scenarios, seeds, _default_root(run_root))
+    result = _run_fleets(scenarios, seed_list, _default_root(run_root))
     out = {}
     for sc in scenarios:
         runs = [r for r in result["runs"] if r["world"] == sc.name and r["status"] != "no report"]
@@ -304,9 +305,9 @@ def _family(names: str, seeds: str, modes: str, run_root: Path | None, as_json: 
     from fleet.bench.family_verdict import family_run, family_summary
     from fleet.bench.fleet import Scenario
     from fleet.bench.world_family import layout, members, write_world
-    from fleet.cli.common import _fail
+    from fleet.cli.common import _fail, parse_seeds
 
-    chosen = _modes(modes)
+    chosen, seed_list = _modes(modes), parse_seeds(seeds)
     try:
         family = members(names)
     except ValueError as e:
@@ -322,7 +323,7 @@ def _family(names: str, seeds: str, modes: str, run_root: Path | None, as_json: 
         for m in family
         for mode in chosen
     ]
-    result = _run_fleets(scenarios, seeds, root)
+    result = _run_fleets(scenarios, seed_list, root)
     runs = [family_run(r) for r in result["runs"]]
     out = {"root": str(root), "runs": runs, "modes": family_summary(runs)}
     (root / "family.json").write_text(json.dumps(out, indent=2) + "\n")
@@ -333,51 +334,51 @@ def _family(names: str, seeds: str, modes: str, run_root: Path | None, as_json: 
 
 
 def _print_family(out: dict) -> None:
-    """The family's runs (a row per member, mode and seed) and the modes' verdicts."""
+    """The family's runs (a row per member, mode and seed) and, a column per mode, the modes'
+    figures, checks and verdicts."""
     from rich.console import Console
     from rich.table import Table
 
     from fleet.bench.family_verdict import CHECKS
 
+    def pct(v: float | None) -> str:
+        return "–" if v is None else f"{100 * v:.1f} %"
+
     runs = Table(title="Deconfliction: the generated family, whole fleets")
-    columns = ("member", "mode", "seed", "status", "coverage", "robot contacts")
-    for col in (*columns, "wall contacts", "makespan s", "unreachable", "given up"):
+    for col in ("member", "mode", "seed", "status", "coverage", "contacts robot / wall"):
+        runs.add_column(col, justify="right")
+    for col in ("makespan s", "unreachable", "given up"):
         runs.add_column(col, justify="right")
     for r in out["runs"]:
         unreachable = r["unreachable"]
         runs.add_row(
-            *(str(r[k]) for k in ("member", "mode", "seed", "status", "coverage")),
-            str(r["robot_contacts"]),
-            str(r["wall_contacts"]),
+            *(str(r[k]) for k in ("member", "mode", "seed", "status")),
+            pct(r["coverage"]),
+            f"{r['robot_contacts']} / {r['wall_contacts']}",
             str(r["makespan_s"]),
             "–" if unreachable is None else str(len(unreachable)),
             str(r["given_up"]),
         )
-    Console().print(runs)
+    # a row holds nine figures: wider than a pipe's 80 columns, so the table is never cut
+    Console(width=max(RUNS_TABLE_COLUMNS, Console().width)).print(runs)
+    modes = out["modes"]
     verdicts = Table(title="Per mode, against issue 30's targets")
-    verdicts.add_column("mode")
-    for col in ("finished", "unreachable", "coverage min", "robot contacts", "wall contacts"):
-        verdicts.add_column(col, justify="right")
-    for col in ("makespan median s", "× local (median)", "given up", *CHECKS, "verdict"):
-        verdicts.add_column(col, justify="right")
-    for mode, s in out["modes"].items():
-        marks = {True: "pass", False: "FAIL", None: "–"}
-        verdicts.add_row(
-            mode,
-            f"{s['finished']}/{s['runs']}",
-            *(
-                str(s[k])
-                for k in (
-                    "unreachable",
-                    "coverage_min",
-                    "robot_contacts",
-                    "wall_contacts",
-                    "makespan_s_median",
-                    "makespan_over_local_median",
-                    "given_up",
-                )
-            ),
-            *(marks[s["checks"][c]] for c in CHECKS),
-            s["verdict"],
-        )
+    verdicts.add_column("")
+    for mode in modes:
+        verdicts.add_column(mode, justify="right")
+    rows = {
+        "finished": lambda s: f"{s['finished']}/{s['runs']}",
+        "unreachable events": lambda s: str(s["unreachable"]),
+        "coverage, least": lambda s: pct(s["coverage_min"]),
+        "contacts robot / wall": lambda s: f"{s['robot_contacts']} / {s['wall_contacts']}",
+        "makespan median s": lambda s: str(s["makespan_s_median"]),
+        "makespan / local's, median": lambda s: str(s["makespan_over_local_median"] or "–"),
+        "waypoints given up": lambda s: str(s["given_up"]),
+    }
+    for label, cell in rows.items():
+        verdicts.add_row(label, *(cell(s) for s in modes.values()))
+    marks = {True: "pass", False: "FAIL", None: "–"}
+    for check in CHECKS:
+        verdicts.add_row(check, *(marks[s["checks"][check]] for s in modes.values()))
+    verdicts.add_row("verdict", *(s["verdict"] for s in modes.values()))
     Console().print(verdicts)

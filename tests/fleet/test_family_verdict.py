@@ -3,11 +3,17 @@ run figures: each of issue 30's targets fails the verdict alone."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from fleet.bench.family_verdict import family_run, family_summary, mode_summary
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _figures(
@@ -85,3 +91,26 @@ def test_a_run_without_a_report_fails_the_finishing_target() -> None:
     assert summary["finished"] == 1 and summary["runs"] == 2
     assert summary["checks"]["all done, coverage ≥ 0.95"] is False
     assert summary["checks"]["makespan ≤ local"] is True  # the one pair both finished
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--family-members", "c9x9"], "--family-members"),
+        (["--modes", "fast"], "--modes"),
+        (["--family-seeds", "0-x"], "--seeds"),
+    ],
+)
+def test_the_family_bench_refuses_bad_arguments_before_any_run(
+    args: list[str], message: str, tmp_path: Path
+) -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "fleet.cli", "bench", "deconfliction", "--family", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert out.returncode != 0 and message in out.stderr, out.stderr
+    assert not list(tmp_path.iterdir())
