@@ -4,8 +4,9 @@ Each run is ``fleet up --headless --until-done --speed S`` in its own run dir (t
 one a user gets). Per run: coverage, repetition, makespan, the makespan the coordinator's first
 allocation priced (``plan_estimate_s``) and their ratio, wall time, real-time factor (sim
 seconds per wall second), contacts, waypoints given up, and where the robots' time went (sim
-seconds summed over robots per kind of control step, ``fleet.protocol.TIME_KINDS``), and where
-the missed floor lies (report.json's ``missed``: by clearance from walls and furniture). Per
+seconds summed over robots per kind of control step, ``fleet.protocol.TIME_KINDS``), the
+coordinator's ``unreachable`` events (a transit or task it could not route), and where the
+missed floor lies (report.json's ``missed``: by clearance from walls and furniture). Per
 world: the medians, and the worst run's contacts and given-up waypoints.
 """
 
@@ -59,6 +60,11 @@ def run_figures(report: dict[str, Any] | None, world: str, seed: int) -> dict[st
         "real_time_factor": round(report["sim_time_s"] / wall, 2) if wall > 0 else None,
         "contacts": report["collisions"],
         "skipped_waypoints": sum(s for s in skipped if s is not None),
+        "unreachable": [
+            f"{e['robot']} {e['task']}: {e['detail']}"
+            for e in report.get("events") or []
+            if e["kind"] == "unreachable"
+        ],
         "time_s": time_use,
         "missed": report.get("missed"),
     }

@@ -41,6 +41,19 @@ def test_one_runs_figures_come_from_its_report() -> None:
     assert run_figures(None, "home", 4) == {"world": "home", "seed": 4, "status": "no report"}
 
 
+def test_a_runs_unreachable_events_are_kept_with_robot_task_and_why() -> None:
+    report = _report(150.0, 0, [0])
+    event = {"sim": 12.0, "robot": "robot-1", "task": "t4", "detail": "its goal cannot be reached"}
+    report["events"] = [
+        {**event, "kind": "awarded", "detail": ""},
+        {**event, "kind": "unreachable"},
+    ]
+    assert run_figures(report, "c0.45x2.5/prioritized", 0)["unreachable"] == [
+        "robot-1 t4: its goal cannot be reached"
+    ]
+    assert run_figures(_report(150.0, 0, [0]), "home", 0)["unreachable"] == []
+
+
 def test_a_worlds_medians_skip_runs_without_a_report_and_contacts_are_summed() -> None:
     runs = [
         run_figures(_report(150.0, 1, [0, 0]), "home", 0),
