@@ -316,14 +316,6 @@ class Coordinator:
             if r.liveness != LOST and now - r.heartbeat_wall > self.params.heartbeat_timeout_s:
                 self.market.lose(rid, f"no heartbeat for {now - r.heartbeat_wall:.1f} s")
 
-    def _gathered(self, waited: float, grace_s: float) -> bool:
-        n = len(self.job.market())
-        if n >= self.expected or (n > 0 and waited > grace_s):
-            if n < self.expected:
-                log.warning("only %d of %d robots are ready; starting with them", n, self.expected)
-            return True
-        return False
-
     # ---- main loop ----------------------------------------------------------------------
 
     def close(self) -> None:
@@ -348,7 +340,8 @@ class Coordinator:
             self.strangers.flush()
             with self.lock:
                 if self.phase == "gathering":
-                    if self._gathered(time.monotonic() - gather_start, grace_s):
+                    waited = time.monotonic() - gather_start
+                    if gathered(len(self.job.market()), self.expected, waited, grace_s):
                         self.phase = "auction"
                         self.market.need_auction = True
                         self.journal.set_meta(phase=self.phase)
@@ -466,3 +459,13 @@ def _left_out(rec: TaskRecord) -> str:
     x, y = rec.task.path.mean(axis=0)
     why = f"behind {rec.blocked_by}'s body" if rec.blocked_by else "tried by every robot"
     return f"{rec.task.id} ({rec.task.area_m2:.2f} m² at ({x:.1f}, {y:.1f}), {why})"
+
+
+def gathered(ready: int, expected: int, waited: float, grace_s: float) -> bool:
+    """Whether the job may start: all ``expected`` robots are ready, or some are and the
+    robots' start has been waited for longer than ``grace_s``."""
+    if ready >= expected or (ready > 0 and waited > grace_s):
+        if ready < expected:
+            log.warning("only %d of %d robots are ready; starting with them", ready, expected)
+        return True
+    return False
