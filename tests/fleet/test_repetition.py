@@ -280,4 +280,8 @@ def test_the_recorder_drops_the_statuses_of_a_robot_not_in_the_job() -> None:
         status = RobotStatus(1.0, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=seconds)
         on_status(keys.robot(rid, "status"), status)
     assert [row[1] for row in recorder.status] == ["robot-0"]
+    # counted once the ghost's token has not come within the grace
+    assert bus.dropped == []
+    recorder.watch.strangers.grace_s = 0.0
+    recorder.watch.strangers.flush()
     assert [(k, who) for k, who, _ in bus.dropped] == [(keys.robot("ghost", "status"), "ghost")]
