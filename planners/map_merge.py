@@ -88,10 +88,12 @@ class LogOddsMap:
         lo[cells < 0] = 0.0
         return LogOddsMap(lo.astype(np.float32), float(resolution), origin)
 
+    def probabilities(self) -> np.ndarray:
+        return 1.0 / (1.0 + np.exp(-self.log_odds))
+
     def to_gridmap(self, occupied_threshold: float, free_threshold: float) -> GridMap:
-        """Occupied where p ≥ occupied_threshold, unknown where p is strictly between the two
-        (the SLAM map's own view, ``agents.slam.slam_map.SlamMap.to_gridmap``)."""
-        p = 1.0 / (1.0 + np.exp(-self.log_odds))
+        """Occupied where p ≥ occupied_threshold, unknown where p is strictly between the two."""
+        p = self.probabilities()
         occupied = p >= occupied_threshold
         return GridMap(occupied, ~occupied & (p > free_threshold), self.resolution, self.origin)
 

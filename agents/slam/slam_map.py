@@ -11,35 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planners.grid import GridMap
+from planners.map_merge import LogOddsMap
 
 
 @dataclass(frozen=True, eq=False)
-class SlamMap:
-    """Log-odds (rows, cols) in the map frame; row 0 = lowest y; cell (r, c) starts at
-    ``origin + (c, r)·resolution``. Zero log-odds means never observed."""
-
-    log_odds: np.ndarray
-    resolution: float
-    origin: tuple[float, float]
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return self.log_odds.shape  # type: ignore[return-value]
-
-    def probabilities(self) -> np.ndarray:
-        return 1.0 / (1.0 + np.exp(-self.log_odds))
-
-    def to_gridmap(self, occupied_threshold: float, free_threshold: float) -> GridMap:
-        """Occupied where p ≥ occupied_threshold, unknown where p is strictly between the two."""
-        p = self.probabilities()
-        occupied = p >= occupied_threshold
-        return GridMap(
-            occupied=occupied,
-            unknown=~occupied & (p > free_threshold),
-            resolution=self.resolution,
-            origin=self.origin,
-        )
+class SlamMap(LogOddsMap):
+    """A robot's SLAM map: log-odds (rows, cols) in its map frame, as
+    ``planners.map_merge.LogOddsMap`` (the coordinator merges these), plus its ROS values."""
 
     def to_ros(self) -> np.ndarray:
         """int8 OccupancyGrid data: −1 where never observed, else round(100·p)."""
