@@ -197,7 +197,8 @@ class SimServer:
                 g.shape[1],
                 c.visits.reshape(-1).copy(),
                 c.cleanable.reshape(-1).astype(np.uint8),
-                c.side.reshape(-1).astype(np.uint8),
+                # empty without side brushes: nothing to send
+                c.side.reshape(-1).astype(np.uint8) if c.side_brush else np.zeros(0, np.uint8),
             )
 
     def _held_back(self, now: float) -> bool:
