@@ -143,6 +143,7 @@ def bench_deconfliction(
     import numpy as np
 
     from fleet.config import resolve_world
+    from fleet.coordinator.transits import GRAPH_RESOLUTION
     from fleet.params import load_fleet_config
     from fleet.world import load_world
     from planners.deconfliction import plan_round
@@ -153,7 +154,8 @@ def bench_deconfliction(
     radius, clearance = cfg.robot.radius, cfg.coordinator.wall_clearance
     speed, resolution = cfg.agent.transit_speed, 0.05
     scenarios = {
-        "home": (lambda: load_world(resolve_world("home")).grid(resolution), 6, 0.05),
+        # home on the coordinator's own graph grid; the warehouse is drawn on 5 cm cells
+        "home": (lambda: load_world(resolve_world("home")).grid(GRAPH_RESOLUTION), 6, 0.05),
         "warehouse": (lambda: _warehouse(resolution), 50, 1.0),
     }
     results = {}

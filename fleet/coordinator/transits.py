@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fleet.coordinator.planning import PLAN_RESOLUTION
 from fleet.params import DECONFLICTION_MODES, FleetConfig
 from fleet.world import World
 from planners.deconfliction import RoundPlan, TransitRequest, plan_round
@@ -35,10 +36,11 @@ from planners.transit_graph import TransitGraph, build_transit_graph
 
 log = logging.getLogger("coordinator")
 
-# The fine grid the transit graph is built on. Its cells are whole fine cells of about the
-# robot's diameter plus clearance: 0.4 m here, where the plan's 2.5 cm grid gives 0.375 m cells
-# whose points leave the corridor world's rooms unjoined to its corridor.
-GRAPH_RESOLUTION = 0.05
+# The fine grid the transit graph is built on: the coverage plan's own, so that every place
+# the plan sends a robot centre is a possible centre of the graph too. On the simulator's 5 cm
+# grid, which rasterizes walls conservatively, a corridor 0.45 m between its faces keeps 0.40 m
+# free, less than a robot centre needs, and its rooms fell apart into two components.
+GRAPH_RESOLUTION = PLAN_RESOLUTION
 
 
 @dataclass(frozen=True, eq=False)

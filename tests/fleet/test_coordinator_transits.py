@@ -5,9 +5,12 @@ anywhere."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from fleet.bench.world_family import FAMILY, FamilyMember, layout, write_world
 from fleet.config import resolve_world
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.transits import TransitPlanner
@@ -42,3 +45,22 @@ def test_a_round_through_the_corridor(corridor: TransitPlanner) -> None:
             assert 0 < at < len(t.waypoints) and 0 <= passed < len(out[peer].waypoints)
     # robots crossing the one-lane corridor in opposite directions wait for each other
     assert out["robot-2"].waits or out["robot-0"].waits
+
+
+@pytest.mark.parametrize("member", FAMILY, ids=lambda m: m.name)
+def test_every_room_of_a_generated_world_is_reached_from_every_start(
+    member: FamilyMember, tmp_path: Path
+) -> None:
+    """The coordinator's transit graph joins what the coverage plan joins: on the family's
+    narrowest corridor (0.45 m between faces) a graph on the simulator's 5 cm grid had no cell
+    inside it, and a transit from one room to the other "could not be reached"."""
+    cfg = load_fleet_config()
+    world = load_world(write_world(member, tmp_path), cfg.robot.radius)
+    transits = TransitPlanner(world, cfg, "prioritized", TaskPlanner(world, cfg).transit.clear)
+    plan = layout(member)
+    for start in plan.starts:
+        for goal in plan.room_points:
+            moving = {"robot-0": (tuple(start[:2]), tuple(goal))}
+            result, out = transits.plan(0.0, moving, {})
+            assert result.status == "success", (member.name, start, goal, result.message)
+            assert np.allclose(out["robot-0"].waypoints[0], start[:2])
