@@ -342,7 +342,8 @@ def explore(
     run dir: the merged map as a ROS map_server pair (map.yaml + map.pgm, written after every
     update, so a run stopped early leaves the map so far) and map.png; explore.json (sim time
     to finish, path length per robot, frontiers assigned, and the merged map's free-space IoU
-    against the true floor, scored from the world file after the run); the processes' logs.
+    against the true floor and the share of true walls with a mapped wall within 5 cm, scored
+    from the world file after the run); the processes' logs.
     The terminal shows each update as an `explored` event: known area, frontiers, each robot's
     goal. Exit status: 0 explored, 3 stopped by --timeout, 4 done with frontiers no robot could
     reach, 130 stopped by Ctrl-C or `fleet down` (the map so far is written), 1 a process
