@@ -48,6 +48,9 @@ ROS_MAP_FIELDS = {
     "mode",
 }
 CIRCLE_SIDES = 24
+# a stored map in the world's frame has (nearly) no free floor outside the world's outer walls;
+# one whose origin is off has a strip of it there
+MAP_OUTSIDE_MAX = 0.02
 DOCK_SIZE = (0.35, 0.2)
 
 
@@ -167,6 +170,36 @@ def load_ros_map(path: str | Path) -> GridMap:
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     return _parse_ros_map(path, data)
+
+
+def on_stored_map(world: World, map_path: str | Path) -> World:
+    """``world`` with its floor plan replaced by the stored ROS map at ``map_path`` (the one
+    `fleet explore` writes, in the world's frame: the robots' SLAM starts at their known start
+    poses); its name, dock and start poses stay the world's. The map must be in the world's
+    frame: every listed start pose on its known floor, and at most ``MAP_OUTSIDE_MAX`` of its
+    free area outside the world's bounds; a ConfigError naming the file says which it breaks."""
+    path = Path(map_path)
+    grid = load_ros_map(path)
+    frame = f"{path}: origin: the map is not in the frame of the world {world.source}"
+    poses = [(f"starts[{i}]", pose) for i, pose in enumerate(world.starts)]
+    if not poses and world.dock is not None:
+        poses = [("dock", world.dock)]
+    for field, (x, y, _) in poses:
+        rc = grid.world_to_cell(np.array([x, y]))
+        if not (grid.in_bounds(rc) and grid.free[rc[0], rc[1]]):
+            raise ConfigError(f"{frame}: its {field} ({x}, {y}) is not on the map's known floor")
+    xy = grid.cell_to_world(np.argwhere(grid.free))
+    xmin, ymin, xmax, ymax = world.bounds
+    outside = ~((xy[:, 0] >= xmin) & (xy[:, 0] <= xmax) & (xy[:, 1] >= ymin) & (xy[:, 1] <= ymax))
+    if outside.mean() > MAP_OUTSIDE_MAX:
+        raise ConfigError(
+            f"{frame}: {100 * outside.mean():.0f} % of the map's free floor lies outside the "
+            f"world's bounds {world.bounds}"
+        )
+    rows, cols = grid.shape
+    ox, oy = grid.origin
+    bounds = (ox, oy, ox + cols * grid.resolution, oy + rows * grid.resolution)
+    return World(world.name, path, (), (), grid, world.dock, world.starts, bounds)
 
 
 def _number(value: Any, where: str) -> float:

@@ -1,5 +1,5 @@
-"""`fleet bench fleet` and `fleet bench follow`: what fleets, and one robot on its own, deliver
-on the floor, over worlds and seeds."""
+"""`fleet bench fleet`, `fleet bench follow` and `fleet bench explore`: what fleets, and one robot
+on its own, deliver on the floor, over worlds and seeds, and what an explored map is worth."""
 
 from __future__ import annotations
 
@@ -12,7 +12,13 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import DeconflictionOpt, _check_deconfliction, _fail, parse_seeds
+from fleet.cli.common import (
+    DeconflictionOpt,
+    WorldOpt,
+    _check_deconfliction,
+    _fail,
+    parse_seeds,
+)
 from fleet.cli.help_text import reflow
 
 WorldsOpt = Annotated[
@@ -221,9 +227,67 @@ def bench_repetition(
         typer.echo("\n".join(table_lines(result)))
 
 
+def bench_explore(
+    world: WorldOpt = "home",
+    seeds: SeedsOpt = "0-2",
+    robots: Annotated[int, typer.Option("--robots", "-n", help="Robots exploring together.")] = 3,
+    speed: Annotated[
+        float,
+        typer.Option("--speed", help="Sim seconds per wall second; 0 runs as fast as it can."),
+    ] = 0.0,
+    timeout: Annotated[
+        float, typer.Option("--timeout", help="Wall seconds a run may take before it is stopped.")
+    ] = 1800.0,
+    run_root: Annotated[
+        Path | None,
+        typer.Option(
+            "--run-root", help="Where each run's dir goes (default: runs/bench-explore-<time>)."
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Explore a world with N robots and with one alone, and clean on the map the N made.
+
+    Per seed, four whole runs: `fleet explore` with N robots and with one (sim time to finish
+    and path length, their ratio), the merged map scored against the true floor (free-space
+    IoU, the share of true walls with a mapped wall within 5 cm), then `fleet up --map` on
+    that map and `fleet up` on the world file, the same fleet and seed (true coverage of each,
+    the gap in points, contacts). The targets (issue 27, home, 3 robots: time ≤ 0.5 × one
+    robot's, IoU ≥ 0.95, walls ≥ 95 %, coverage within 1 point, 0 contacts) are judged on the
+    worst seed. Each run's dir keeps its report and logs; the result is also written to
+    RUN_ROOT/bench.json after every seed. Progress goes to stderr.
+
+    Examples: `fleet bench explore --json`; `fleet bench explore --world small --seeds 0 -n 2`.
+    """
+    from fleet.bench.explore import run_bench, table_lines
+    from fleet.config import ConfigError, resolve_world
+
+    if robots < 1:
+        _fail("--robots must be >= 1")
+    if speed < 0 or not math.isfinite(speed):
+        _fail(f"--speed must be a finite number >= 0, got {speed}")
+    if timeout <= 0:
+        _fail("--timeout must be > 0")
+    try:
+        path = resolve_world(world)
+    except ConfigError as e:
+        _fail(f"--world: {e}")
+    root = run_root or Path("runs") / datetime.now().strftime("bench-explore-%Y%m%d-%H%M%S")
+
+    def progress(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    result = run_bench(root, str(path), robots, parse_seeds(seeds), speed, timeout, progress)
+    if as_json:
+        print(json.dumps(result))
+    else:
+        typer.echo("\n".join(table_lines(result)))
+
+
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
     bench_app.command("fleet", help=reflow(bench_fleet.__doc__ or ""))(bench_fleet)
     bench_app.command("follow", help=reflow(bench_follow.__doc__ or ""))(bench_follow)
     bench_app.command("repetition", help=reflow(bench_repetition.__doc__ or ""))(bench_repetition)
+    bench_app.command("explore", help=reflow(bench_explore.__doc__ or ""))(bench_explore)

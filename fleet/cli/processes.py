@@ -221,12 +221,23 @@ def coordinator(
             "--loop", help="When the job finishes, plan the floor again and start the next job."
         ),
     ] = False,
+    floor_map: Annotated[
+        Path | None,
+        typer.Option(
+            "--map",
+            help="Plan on this stored ROS map (map.yaml, as `fleet explore` writes it, in the "
+            "world's frame) instead of the world's floor plan; the dock and starts stay the "
+            "world's.",
+        ),
+    ] = None,
 ) -> None:
     """Run the coordinator: cuts the floor into tasks, auctions them to the live robots,
     re-auctions the work of a robot that is lost, and sends each robot its plans. With
-    --explore it auctions the frontiers of the robots' merged maps instead."""
+    --explore it auctions the frontiers of the robots' merged maps instead; with --map it
+    plans on a stored map instead of the world's floor plan."""
     import sqlite3
 
+    from fleet.config import ConfigError
     from fleet.coordinator.explore_service import ExploringCoordinator
     from fleet.coordinator.exploring import Explorer, MapPlanner
     from fleet.coordinator.planning import TaskPlanner
@@ -234,6 +245,7 @@ def coordinator(
     from fleet.coordinator.store import JobStore, StoreError
     from fleet.coordinator.transits import TransitPlanner
     from fleet.plausible import Bounds
+    from fleet.world import on_stored_map
 
     if robots < 1:
         _fail("--robots must be >= 1")
@@ -243,6 +255,13 @@ def coordinator(
     mode = deconfliction or cfg.coordinator.deconfliction
     if explore is not None and mode != "local":
         _fail("--explore plans local transits only; leave out --deconfliction")
+    if explore is not None and floor_map is not None:
+        _fail("--explore makes a map; --map plans on one: not both")
+    if floor_map is not None:
+        try:
+            w = on_stored_map(w, floor_map)
+        except ConfigError as e:
+            _fail(str(e))
     transits = None
     try:
         if explore is None:

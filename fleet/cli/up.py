@@ -53,6 +53,7 @@ FATAL_PROCESSES = ("router", "sim")
 
 if TYPE_CHECKING:
     from fleet.bus import Bus
+    from fleet.params import FleetConfig
     from fleet.protocol import Message, OpsReply, OpsRequest
     from fleet.rundir import ProcessRecord
     from fleet.supervisor.launcher import Launcher, WorkWatch
@@ -97,6 +98,24 @@ def up(
             "Ctrl-C or --timeout: a long run. Not with --until-done.",
         ),
     ] = False,
+    floor_map: Annotated[
+        Path | None,
+        typer.Option(
+            "--map",
+            help="Plan the cleaning on this stored ROS map (map.yaml, as `fleet explore` writes "
+            "it, in the world's frame) instead of the world file; the simulator still runs the "
+            "world, whose dock and start poses the robots start from.",
+        ),
+    ] = None,
+    explore_first: Annotated[
+        bool,
+        typer.Option(
+            "--explore",
+            help="First explore the world as `fleet explore` does (into RUN_DIR/explore), then "
+            "clean on the map it wrote; report.json's `explored` says what exploring took. "
+            "--timeout bounds both together.",
+        ),
+    ] = False,
 ) -> None:
     """Run the whole fleet: a Zenoh router, the simulator, the coordinator and N agents, each
     its own process, with a live view; writes report.json, the report pictures (report.png,
@@ -107,11 +126,17 @@ def up(
     report.json's `left_out` name each piece and its area, report.png marks them, and the
     exit status is 4. With `--until-done`, a run stopped by `--timeout` exits with 3.
 
+    With `--map MAP.yaml` the coordinator plans on a stored map (the one `fleet explore`
+    wrote) instead of the world file; with `--explore` the fleet first explores the world,
+    then cleans on the map it made, starting again from the dock (the simulator is started
+    afresh for the cleaning, so the floor driven while exploring does not count as cleaned).
+
     Examples: `fleet up --robots 3` (the home, until Ctrl-C);
-    `fleet up --robots 2 --world small --headless --until-done --timeout 300`.
+    `fleet up --robots 2 --world small --headless --until-done --timeout 300`;
+    `fleet up --robots 3 --map runs/home-map/map.yaml --headless --until-done`.
     """
     from fleet.bus import Bus
-    from fleet.config import resolve_world
+    from fleet.config import ConfigError, resolve_world
     from fleet.dashboard.model import FINISHED_PHASES, BusFeed, FleetWatcher
     from fleet.plausible import Bounds
     from fleet.protocol import DEFAULT_FLEET, CoverageImage, CoverageSummary, OpsRequest
@@ -129,6 +154,7 @@ def up(
     )
     from fleet.rundir import RunTable, cmdline, write_dropped, write_table
     from fleet.supervisor.launcher import Launcher, free_port
+    from fleet.world import on_stored_map
 
     if not 1 <= robots <= MAX_ROBOTS:
         _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
@@ -138,6 +164,8 @@ def up(
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
     if loop and until_done:
         _fail("--loop starts the job again when it is done: it cannot stop --until-done")
+    if floor_map is not None and explore_first:
+        _fail("--explore makes the map the cleaning is planned on: leave out --map")
     cfg, w = _load(config, world)
     _check_deconfliction(deconfliction)
     try:
@@ -156,6 +184,18 @@ def up(
         run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         _fail(f"--run-dir {run_dir}: {e.strerror}")
+    explored = None
+    if explore_first:
+        explored, floor_map = _explore_first(
+            cfg, w, world, robots, speed, seed, run_dir, config, timeout, headless
+        )
+        if timeout is not None:
+            timeout = max(1.0, timeout - explored["wall_s"])
+    if floor_map is not None:
+        try:
+            on_stored_map(w, floor_map)
+        except ConfigError as e:
+            _fail(str(e))
 
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -179,6 +219,8 @@ def up(
         coordinator = ["--deconfliction", deconfliction] if deconfliction else []
         if loop:
             coordinator.append("--loop")
+        if floor_map is not None:
+            coordinator += ["--map", str(floor_map.resolve())]
         sim = _start_fleet(launcher, port, common, world_path, speed, seed, starts, coordinator)
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
@@ -186,7 +228,8 @@ def up(
         recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s)
         watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s, recorder.watch)
         feed = BusFeed(bus, watcher, fetch=not headless)
-        out(f"fleet: {robots} robots in {w.name} at {speed}× — logs in {run_dir}/", err=True)
+        on = "" if floor_map is None else f", planned on {floor_map}"
+        out(f"fleet: {robots} robots in {w.name}{on} at {speed}× — logs in {run_dir}/", err=True)
         status = _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, t0)
         feed.pump()
         feed.close()
@@ -217,6 +260,8 @@ def up(
                 "missed": missed_breakdown(image, w.grid(image.resolution)),
                 "side_brush_only": side_brush_only(image),
                 "dropped": {n: {"malformed": m, "implausible": i} for n, (m, i) in dropped.items()},
+                "floor_map": None if floor_map is None else str(floor_map),
+                "explored": explored,
                 **job,
             },
             skipped,
@@ -297,7 +342,8 @@ def explore(
     run dir: the merged map as a ROS map_server pair (map.yaml + map.pgm, written after every
     update, so a run stopped early leaves the map so far) and map.png; explore.json (sim time
     to finish, path length per robot, frontiers assigned, and the merged map's free-space IoU
-    against the true floor, scored from the world file after the run); the processes' logs.
+    against the true floor and the share of true walls with a mapped wall within 5 cm, scored
+    from the world file after the run); the processes' logs.
     The terminal shows each update as an `explored` event: known area, frontiers, each robot's
     goal. Exit status: 0 explored, 3 stopped by --timeout, 4 done with frontiers no robot could
     reach, 130 stopped by Ctrl-C or `fleet down` (the map so far is written), 1 a process
@@ -306,16 +352,8 @@ def explore(
     Examples: `fleet explore --robots 2 --world small --headless`;
     `fleet explore --robots 3 --run-dir runs/home-map --timeout 900`.
     """
-    from fleet.bus import Bus
-    from fleet.config import resolve_world
-    from fleet.coordinator.exploring import MAP_PGM, MAP_YAML
-    from fleet.dashboard.model import BusFeed, FleetWatcher
-    from fleet.plausible import Bounds
-    from fleet.protocol import DEFAULT_FLEET, OpsRequest
+    from fleet.coordinator.exploring import MAP_YAML
     from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG
-    from fleet.report.summary import RunRecorder, write_json
-    from fleet.rundir import RunTable, cmdline, write_table
-    from fleet.supervisor.launcher import Launcher, free_port
 
     if not 1 <= robots <= MAX_ROBOTS:
         _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
@@ -324,12 +362,82 @@ def explore(
     if timeout is not None and timeout <= 0:
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
     cfg, w = _load(config, world)
+    run_dir = run_dir or Path("runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
+    report = _exploration(cfg, w, world, robots, speed, seed, run_dir, config, timeout, headless)
+    status = report["status"]
+    lengths = ", ".join(f"{rid} {m:.1f} m" for rid, m in report["path_length_m"].items())
+    typer.echo(
+        f"{status} after {report['sim_s']} s sim ({report['wall_s']} s wall): "
+        f"free-space IoU {report['free_iou']:.3f}, {report['frontiers']['assigned']} frontiers "
+        f"assigned, driven {lengths} — {run_dir / MAP_YAML}, {run_dir / MAP_PNG}, "
+        f"{run_dir / EXPLORE_REPORT}",
+        err=True,
+    )
+    exits = {"done": 0, "incomplete": INCOMPLETE_EXIT, "timeout": TIMED_OUT_EXIT}
+    exits |= dict.fromkeys(("stopped", "interrupted"), 130)
+    raise typer.Exit(exits.get(status, 1))
+
+
+def _explore_first(
+    cfg: FleetConfig,
+    w: World,
+    world: str,
+    robots: int,
+    speed: float,
+    seed: int,
+    run_dir: Path,
+    config: Path | None,
+    timeout: float | None,
+    headless: bool,
+) -> tuple[dict[str, Any], Path]:
+    """`fleet up --explore`'s first part: the world explored into ``run_dir``/explore; what it
+    took (for report.json's ``explored``) and the map it wrote. Exits unless the exploring
+    finished (every reachable frontier mapped, or only unreachable ones left)."""
+    from fleet.coordinator.exploring import MAP_YAML
+
+    into = run_dir / "explore"
+    report = _exploration(cfg, w, world, robots, speed, seed, into, config, timeout, headless)
+    if report["status"] not in ("done", "incomplete"):
+        _fail(f"exploring ended {report['status']}: no cleaning on a map not finished; see {into}/")
+    typer.echo(
+        f"explored in {report['sim_s']} s sim (free-space IoU {report['free_iou']:.3f}); "
+        f"cleaning on {into / MAP_YAML}",
+        err=True,
+    )
+    keys = ("status", "sim_s", "wall_s", "path_length_m", "known_m2", "free_iou", "walls_within")
+    return {k: report[k] for k in keys} | {"dir": "explore"}, into / MAP_YAML
+
+
+def _exploration(
+    cfg: FleetConfig,
+    w: World,
+    world: str,
+    robots: int,
+    speed: float,
+    seed: int,
+    run_dir: Path,
+    config: Path | None,
+    timeout: float | None,
+    headless: bool,
+) -> dict[str, Any]:
+    """Explore ``w`` with ``robots`` robots into ``run_dir`` (the fleet's processes, their logs,
+    the merged map, map.png and explore.json); explore.json's content."""
+    from fleet.bus import Bus
+    from fleet.config import resolve_world
+    from fleet.coordinator.exploring import MAP_PGM, MAP_YAML
+    from fleet.dashboard.model import BusFeed, FleetWatcher
+    from fleet.plausible import Bounds
+    from fleet.protocol import DEFAULT_FLEET, OpsRequest
+    from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG, write_map_png
+    from fleet.report.summary import RunRecorder, write_json
+    from fleet.rundir import RunTable, cmdline, write_table
+    from fleet.supervisor.launcher import Launcher, free_port
+
     try:
         starts = w.start_poses(robots, cfg.robot.radius)
     except ValueError as e:
         _fail(str(e))
     world_path = str(resolve_world(world))
-    run_dir = run_dir or Path("runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
     if (run_dir / "coordinator.sqlite").exists() or (run_dir / MAP_YAML).exists():
         _fail(f"--run-dir {run_dir} holds an earlier run; choose a new directory")
     try:
@@ -374,20 +482,8 @@ def explore(
         _fail(f"no map was written (no robot reported its map); logs in {run_dir}/")
     report = _explore_report(run_dir, w, starts[0], status, sim_s, time.monotonic() - t0, tracks)
     write_json(run_dir / EXPLORE_REPORT, report)
-    from fleet.report.exploration import write_map_png
-
     write_map_png(run_dir / MAP_PGM, run_dir / MAP_PNG)
-    lengths = ", ".join(f"{rid} {m:.1f} m" for rid, m in report["path_length_m"].items())
-    typer.echo(
-        f"{status} after {report['sim_s']} s sim ({report['wall_s']} s wall): "
-        f"free-space IoU {report['free_iou']:.3f}, {report['frontiers']['assigned']} frontiers "
-        f"assigned, driven {lengths} — {run_dir / MAP_YAML}, {run_dir / MAP_PNG}, "
-        f"{run_dir / EXPLORE_REPORT}",
-        err=True,
-    )
-    exits = {"done": 0, "incomplete": INCOMPLETE_EXIT, "timeout": TIMED_OUT_EXIT}
-    exits |= dict.fromkeys(("stopped", "interrupted"), 130)
-    raise typer.Exit(exits.get(status, 1))
+    return report
 
 
 def _explore_report(
@@ -400,9 +496,16 @@ def _explore_report(
     tracks: dict[str, list[tuple[float, float, float]]],
 ) -> dict[str, Any]:
     """explore.json: how the exploration ended and what it took, and the merged map scored
-    against the world's true floor (the truth read here only, after the run)."""
+    against the world's true floor (the truth read here only, after the run): free-space IoU,
+    and ``walls_within``, the share of the true walls with a mapped wall within 5 cm."""
     from fleet.coordinator.exploring import MAP_YAML
-    from fleet.report.exploration import free_iou, frontier_counts, path_lengths, true_floor
+    from fleet.report.exploration import (
+        free_iou,
+        frontier_counts,
+        path_lengths,
+        true_floor,
+        walls_within,
+    )
     from fleet.world import load_ros_map
 
     mapped = load_ros_map(run_dir / MAP_YAML)
@@ -417,6 +520,7 @@ def _explore_report(
         "known_m2": round(float((mapped.free | mapped.occupied).sum()) * mapped.resolution**2, 2),
         "true_floor_m2": round(float(floor.sum()) * truth.resolution**2, 2),
         "free_iou": round(free_iou(mapped, truth, floor), 4),
+        "walls_within": round(walls_within(mapped, truth, floor), 4),
         "map": MAP_YAML,
     }
 

@@ -113,6 +113,8 @@ class TaskPlanner:
 
     def __init__(self, world: World, cfg: FleetConfig) -> None:
         self._configure(cfg)
+        # the file the floor plan came from: the world's, or a stored map's (`--map`)
+        self.floor = str(world.source)
         grid = self.spec.grid(world)
         self.dock = tuple(float(v) for v in world.start_poses(1, cfg.robot.radius)[0][:2])
         centres = clearance(grid) >= self.centre_clearance
@@ -149,7 +151,8 @@ class TaskPlanner:
 
     def tasks(self) -> tuple[Task, ...]:
         """The tour from the dock cut into tasks; fills :attr:`meta` (``tour``: its figures,
-        ``tour_elements``: its elements, None when they cannot be told apart)."""
+        ``tour_elements``: its elements, None when they cannot be told apart; the tour's
+        ``floor`` names the file it was planned on)."""
         result = self.spec.plan(self.grid, [self.dock], self.robot)
         m = result.metrics
         tasks = split_tour(
@@ -160,7 +163,8 @@ class TaskPlanner:
         except ValueError as e:
             log.warning("the tour's elements cannot be told apart: %s", e)
             elements = None
-        self.meta = {"tour": tour_figures(result, tasks, self.spec), "tour_elements": elements}
+        tour = tour_figures(result, tasks, self.spec) | {"floor": self.floor}
+        self.meta = {"tour": tour, "tour_elements": elements}
         # judged on the plan's own floor: centres kept radius + wall clearance from obstacles
         log.info(
             "tour: coverage %.1f %%, repetition %.1f %%, %.1f m, %.0f s for one robot, "

@@ -7,7 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fleet.report.exploration import free_iou, mapped_free_on, path_lengths, true_floor
+from fleet.report.exploration import (
+    free_iou,
+    mapped_free_on,
+    path_lengths,
+    true_floor,
+    walls_within,
+)
 from fleet.world import load_world
 from planners.grid import GridMap
 
@@ -50,3 +56,22 @@ def test_the_floor_mapped_exactly_scores_one_and_half_of_it_about_a_half():
 def test_path_lengths_sum_each_robots_track():
     tracks = {"robot-1": [(0.0, 0.0, 0.0), (1.0, 3.0, 4.0), (2.0, 3.0, 5.0)], "robot-0": []}
     assert path_lengths(tracks) == {"robot-0": 0.0, "robot-1": 6.0}
+
+
+def test_walls_within_5_cm_count_a_wall_a_cell_off_and_not_two():
+    truth, floor = true_floor(load_world(SMALL), 0.05, (0.6, 0.85))
+    assert walls_within(truth, truth, floor) == pytest.approx(1.0)
+    # the whole map one cell (5 cm) off still finds every wall; two cells (10 cm) off, the
+    # walls facing the shift are lost (the wall is two cells thick, so some remain found)
+    x0, y0 = truth.origin
+    one_off = GridMap(truth.occupied, truth.unknown, 0.05, (x0 + 0.05, y0))
+    assert walls_within(one_off, truth, floor) == pytest.approx(1.0)
+    far = GridMap(truth.occupied, truth.unknown, 0.05, (x0 + 0.3, y0))
+    assert walls_within(far, truth, floor) < 0.8
+    # half the walls mapped: about half found
+    half = truth.occupied.copy()
+    half[:, half.shape[1] // 2 :] = False
+    share = walls_within(GridMap(half, truth.unknown, 0.05, truth.origin), truth, floor)
+    assert 0.3 < share < 0.7
+    nothing = GridMap(np.zeros_like(half), truth.unknown, 0.05, truth.origin)
+    assert walls_within(nothing, truth, floor) == 0.0

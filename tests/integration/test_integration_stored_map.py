@@ -1,0 +1,40 @@
+"""`fleet up --map` end to end: the coordinator plans the small world's cleaning on a stored
+ROS map while the simulator runs the world, over real processes and a real Zenoh router."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fleet.coordinator.exploring import write_ros_map
+from fleet.report.exploration import true_floor
+from fleet.supervisor.runner import RunningFleet
+from fleet.world import load_world
+from planners.grid import GridMap
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
+
+WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "small.yaml"
+
+
+def test_the_small_world_is_cleaned_on_a_stored_map(tmp_path: Path) -> None:
+    world = load_world(WORLD)
+    truth, floor = true_floor(world, 0.05, world.starts[0][:2])
+    # as `fleet explore` stores it: the floor and its walls known, what lies beyond unknown
+    walls = truth.occupied & ~floor
+    stored = GridMap(walls, ~floor & ~walls, 0.05, truth.origin)
+    write_ros_map(tmp_path / "map", stored)
+    run_dir = tmp_path / "run"
+    fleet = RunningFleet(
+        run_dir, str(WORLD), 3, timeout_s=200.0, options=("--map", str(tmp_path / "map/map.yaml"))
+    )
+    report = fleet.finish(240.0)
+    assert fleet.proc.returncode == 0 and report is not None, fleet.output
+    assert report["status"] == "done", fleet.output
+    assert report["plan"]["floor"] == str((tmp_path / "map/map.yaml").resolve()), report["plan"]
+    assert report["floor_map"] == str(tmp_path / "map/map.yaml")
+    assert report["coverage"] >= 0.95, fleet.output
+    assert report["collisions"] == {"robot_wall": 0, "robot_robot": 0}, fleet.output
+    assert np.isfinite(report["makespan_s"])
