@@ -10,6 +10,7 @@ outside the merged map is not free): free-space IoU = |mapped ∩ true| / |mappe
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +53,7 @@ def free_iou(mapped: GridMap, truth: GridMap, floor: np.ndarray) -> float:
     return float((free & floor).sum()) / union if union else 0.0
 
 
-def path_lengths(tracks: dict[str, list[tuple[float, float, float]]]) -> dict[str, float]:
+def path_lengths(tracks: Mapping[str, Sequence[Sequence[float]] | np.ndarray]) -> dict[str, float]:
     """Metres each robot drove along its track of (sim s, x, y)."""
     out = {}
     for rid, track in sorted(tracks.items()):
