@@ -144,8 +144,9 @@ class TurnCounter:
     its turns and end headings kept, its points and memo dropped, so memory stays bounded however
     long the path grows. The count then is that of the stretches simplified apart and joined
     (a turn at a join counts as at any vertex): each join is a vertex the whole path's
-    simplification might have dropped or moved, so the count may differ from the whole path's
-    by about one per join.
+    simplification need not keep, and it changes how both stretches are split, so the count
+    may differ from the whole path's by a few turns per join (on a soak run's tracks, 5 cm
+    samples in stretches of 2000: 716 turns against 710 over 6 robots and 3 joins).
     """
 
     def __init__(
