@@ -92,8 +92,8 @@ class SlamParams:
     loop_sigma_theta: float = 0.02
     huber_scale: float = 1.0  # in standard deviations: a wrong loop closure is down-weighted
     optimize_every_nodes: int = 20  # optimize at most this often, and only after new closures
-    # A finished submap is dropped (with the graph nodes only it holds) when older kept submaps
-    # observed at least this share of its cells: the robot re-mapped known floor.
+    # A finished submap is dropped, its log-odds folded into older kept submaps, when they hold
+    # at least this share of its wall cells as walls: the robot re-mapped known floor.
     trim_overlap: float = 0.9
 
     # Relocalization of a restarted agent in its saved map (agents/slam/relocalize.py)
