@@ -92,6 +92,9 @@ class SlamParams:
     loop_sigma_theta: float = 0.02
     huber_scale: float = 1.0  # in standard deviations: a wrong loop closure is down-weighted
     optimize_every_nodes: int = 20  # optimize at most this often, and only after new closures
+    # A finished submap is dropped, its log-odds folded into older kept submaps, when they hold
+    # at least this share of its wall cells as walls: the robot re-mapped known floor.
+    trim_overlap: float = 0.9
 
     # Relocalization of a restarted agent in its saved map (agents/slam/relocalize.py)
     reloc_window_xy: float = 1.0  # search ± this around the saved pose: the body may have coasted
@@ -152,6 +155,8 @@ class SlamParams:
             raise ValueError("patch_tolerance must be within 0..100")
         if self.submap_nodes < 2:
             raise ValueError("submap_nodes must be >= 2")
+        if not 0 < self.trim_overlap <= 1:
+            raise ValueError(f"trim_overlap must be within (0, 1], got {self.trim_overlap}")
         require_positive(
             self,
             "coarse_factor",

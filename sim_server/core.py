@@ -29,6 +29,9 @@ from sim_server.odometry import OdometryModel
 # turns are counted, so wheel jitter does not count as turning.
 TRAJECTORY_SAMPLE_M = 0.05
 TURN_SIMPLIFY_TOL_M = 0.05
+# ... in finished stretches of this many samples (100 m of driving), so a robot's turn count
+# keeps a bounded memory however long the run (planners.polyline.TurnCounter).
+TURN_STRETCH_POINTS = 2000
 # Segments above which the lidar uses a spatial index instead of a brute-force cull.
 SEGMENT_INDEX_MIN = 400
 # A contact between the same pair within this long (sim s) of their previous contact belongs to
@@ -51,12 +54,15 @@ class RobotState:
     While the robot is in the world its distance driven accumulates in :class:`SimCore`'s
     arrays; ``path_length_m`` is brought up to date by :meth:`SimCore.all_robots`. Its driven
     path, sampled every ``TRAJECTORY_SAMPLE_M``, goes into ``trajectory``, which keeps the turns
-    counted so far, so a summary does not simplify the whole path again.
+    counted so far, so a summary does not simplify the whole path again, and only the open
+    stretch of ``TURN_STRETCH_POINTS`` samples of the path itself.
     """
 
     rid: str
     path_length_m: float = 0.0
-    trajectory: TurnCounter = field(default_factory=lambda: TurnCounter(TURN_SIMPLIFY_TOL_M))
+    trajectory: TurnCounter = field(
+        default_factory=lambda: TurnCounter(TURN_SIMPLIFY_TOL_M, stretch_points=TURN_STRETCH_POINTS)
+    )
     wall_collisions: int = 0
     robot_collisions: int = 0
 

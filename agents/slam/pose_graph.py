@@ -32,10 +32,10 @@ class PoseGraph:
 
     def __init__(self) -> None:
         self._poses = np.zeros((0, 3))
-        self._a: list[int] = []
-        self._b: list[int] = []
-        self._z: list[np.ndarray] = []
-        self._w: list[np.ndarray] = []
+        # one row per constraint: a, b, z (3), weights 1/σ (3); grown by doubling, so a
+        # constraint costs 64 bytes, not a list entry and two small arrays each
+        self._rows = np.zeros((64, 8))
+        self._m = 0
 
     @property
     def poses(self) -> np.ndarray:
@@ -43,7 +43,7 @@ class PoseGraph:
 
     @property
     def num_constraints(self) -> int:
-        return len(self._a)
+        return self._m
 
     def add_pose(self, pose: np.ndarray) -> int:
         self._poses = np.vstack([self._poses, np.asarray(pose, dtype=float)[None, :]])
@@ -55,10 +55,11 @@ class PoseGraph:
     def add_constraint(
         self, a: int, b: int, z: np.ndarray, sigma_xy: float, sigma_theta: float
     ) -> None:
-        self._a.append(a)
-        self._b.append(b)
-        self._z.append(np.asarray(z, dtype=float))
-        self._w.append(np.array([1.0 / sigma_xy, 1.0 / sigma_xy, 1.0 / sigma_theta]))
+        if self._m == len(self._rows):
+            self._rows = np.vstack([self._rows, np.zeros_like(self._rows)])
+        z = np.asarray(z, dtype=float)
+        self._rows[self._m] = (a, b, z[0], z[1], z[2], 1 / sigma_xy, 1 / sigma_xy, 1 / sigma_theta)
+        self._m += 1
 
     def optimize(
         self, huber_scale: float, max_iterations: int = 5, tolerance: float = 1e-4
@@ -68,12 +69,13 @@ class PoseGraph:
         previous solution: incremental use needs few iterations). Each step solves the sparse
         normal equations JᵀWJ·δ = −JᵀWr (SuperLU with a COLAMD ordering); it stops when no
         variable moves by ``tolerance`` or after ``max_iterations``."""
-        if not self._a:
+        if not self._m:
             return OptimizationReport(0, 0.0, 0.0)
-        a = np.asarray(self._a)
-        b = np.asarray(self._b)
-        z = np.asarray(self._z)
-        w = np.asarray(self._w)
+        rows = self._rows[: self._m]
+        a = rows[:, 0].astype(np.int64)
+        b = rows[:, 1].astype(np.int64)
+        z = rows[:, 2:5]
+        w = rows[:, 5:8]
         n = self._poses.shape[0]
         m = a.size
         anchor = self._poses[0].copy()

@@ -7,7 +7,9 @@ prediction. Scans that moved enough become *nodes*: they are inserted into both 
 poses of a pose graph with constraints node-in-submap (from tracking), node-to-node (odometry)
 and loop closures (``agents.slam.loop_closure``: a node matched against an older finished
 submap near its estimate). After new loop closures the graph is optimized with sparse least
-squares and the current pose follows the last node's correction.
+squares and the current pose follows the last node's correction. A finished submap that adds
+almost nothing to the older ones (``agents.slam.trimmer``) is dropped, its grid and likelihood
+field with it, so a robot cleaning the same floor for hours keeps a bounded number of submaps.
 
 The map frame is the frame of ``initial_pose``: an agent that knows its dock pose in the world
 passes it, and the SLAM map is then in world coordinates.
@@ -24,9 +26,11 @@ from agents.slam.geometry import compose, relative, scan_to_points
 from agents.slam.loop_closure import LoopCloser
 from agents.slam.matcher import CorrelativeMatcher
 from agents.slam.motion import prior_penalties
+from agents.slam.occupancy import log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
-from agents.slam.submaps import Submaps
+from agents.slam.submaps import Submap, Submaps
+from agents.slam.trimmer import cover, fold
 from fleet.slam_params import SlamParams
 
 Pose = tuple[float, float, float]
@@ -54,6 +58,7 @@ class SlamStats:
     submaps: int
     loop_closures: int
     optimizations: int
+    trimmed: int = 0
 
 
 class Slam:
@@ -105,6 +110,7 @@ class Slam:
             len(self._submaps.all),
             self._loops.closures,
             self._optimizations,
+            self._submaps.trimmed,
         )
 
     def process(
@@ -203,7 +209,7 @@ class Slam:
                 self._last_node_id, node_id, step, p.odom_sigma_xy, p.odom_sigma_theta
             )
             self._loops.accumulate_drift(step)
-        self._submaps.add_node(node_id, pose, points)
+        finished = self._submaps.add_node(node_id, pose, points)
         self._last_node_id = node_id
         self._last_node_odom = odom
         self._last_node_t = t
@@ -213,6 +219,22 @@ class Slam:
             self._loops.search(node_id, points, self._submaps, self._nodes)
         if self._loops.pending and self._nodes_since_optimization >= p.optimize_every_nodes:
             self._optimize()
+        if finished is not None:
+            self._trim(finished)
+
+    def _trim(self, finished: Submap) -> None:
+        """Drop the submap that just finished, its log-odds folded into the older ones, if
+        older kept submaps hold at least ``trim_overlap`` of its walls. Its pose and its nodes
+        stay in the pose graph with their constraints (a few dozen bytes each): dropping them
+        cost accuracy (see BENCHMARKS.md), while its grid and likelihood field are what
+        weighs."""
+        p = self.params
+        older = [k for k in self._submaps.all if k.finished and k is not finished]
+        covered = cover(finished, older, self._graph.poses, log_odds(p.occupied_threshold))
+        if covered.share < p.trim_overlap:
+            return
+        self._submaps.refresh(fold(covered))
+        self._submaps.drop(finished)
 
     def _optimize(self) -> None:
         before = self._graph.poses[self._last_node_id].copy()

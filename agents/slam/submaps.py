@@ -45,7 +45,8 @@ class _MapCache:
 
 
 class Submaps:
-    """Every submap in order (``all``) and the two being filled (``active``, oldest first).
+    """Every submap kept, in order (``all``), and the two being filled (``active``, oldest
+    first); ``trimmed`` counts the finished ones dropped (``drop``).
 
     A submap's pose is its pose in ``graph``; its grid covers ± (range_max + submap_travel)
     around it, enough for every scan inserted while it is active.
@@ -57,17 +58,20 @@ class Submaps:
         self.all: list[Submap] = []
         self.active: list[Submap] = []
         self._cache: _MapCache | None = None
+        self._started = 0
+        self.trimmed = 0
         self._half_size = range_max + params.submap_travel
         # Cell boundaries of the map lie at (k + ½)·resolution, so walls drawn on round
         # coordinates fall on cell centres. A wall on a boundary is split between two cells by
         # range noise, and matching then settles it into one cell, shifting the map half a cell.
         self._lattice_offset = 0.5 * params.resolution
 
-    def start(self, pose: np.ndarray) -> None:
+    def start(self, pose: np.ndarray) -> Submap | None:
         """Start a submap at ``pose``'s position, its grid axis-aligned with the map frame and
         snapped to the map's cell lattice: all submaps then quantize a wall into the same cells,
         so the discretization bias does not differ (and accumulate) between submaps, and the
-        map is composed from them without resampling across lattices."""
+        map is composed from them without resampling across lattices. Returns the submap this
+        finished, if any."""
         p = self.params
         shift = self._lattice_offset
         snapped = np.array(
@@ -87,21 +91,24 @@ class Submaps:
             p.p_min,
             p.p_max,
         )
-        submap = Submap(len(self.all), self._graph.add_pose(snapped), grid)
+        submap = Submap(self._started, self._graph.add_pose(snapped), grid)
+        self._started += 1
         self.all.append(submap)
         self.active.append(submap)
-        if len(self.active) > 2:
-            old = self.active.pop(0)
-            old.finished = True
-            margin = math.ceil(max(p.loop_window_xy, 3.0 * p.match_sigma) / p.resolution) + 1
-            old.grid = old.grid.cropped(margin)
-            old.field = LikelihoodField(old.grid, p.match_sigma)
-            old.field_nodes = old.nodes
+        if len(self.active) <= 2:
+            return None
+        old = self.active.pop(0)
+        old.finished = True
+        margin = math.ceil(max(p.loop_window_xy, 3.0 * p.match_sigma) / p.resolution) + 1
+        old.grid = old.grid.cropped(margin)
+        old.field = LikelihoodField(old.grid, p.match_sigma)
+        old.field_nodes = old.nodes
+        return old
 
-    def add_node(self, node_id: int, pose: np.ndarray, points: np.ndarray) -> None:
+    def add_node(self, node_id: int, pose: np.ndarray, points: np.ndarray) -> Submap | None:
         """Insert the node's scan ``points`` (sensor frame) at ``pose`` into the active submaps,
         each with its node-in-submap constraint, and start a new submap when the newest is half
-        full or the robot has left it."""
+        full or the robot has left it. Returns the submap that finished, if any."""
         p = self.params
         for s in self.active:
             local = relative(self._graph.poses[s.graph_id], pose)
@@ -114,7 +121,14 @@ class Submaps:
         newest_pose = self._graph.poses[newest.graph_id]
         far = math.hypot(*(pose[:2] - newest_pose[:2])) > 0.5 * p.submap_travel
         if newest.nodes >= max(1, p.submap_nodes // 2) or far:
-            self.start(pose)
+            return self.start(pose)
+        return None
+
+    def drop(self, s: Submap) -> None:
+        """Drop the finished submap ``s`` (never rendered into the composed map: it is dropped
+        as it finishes); its pose stays in the graph."""
+        self.all.remove(s)
+        self.trimmed += 1
 
     def field(self, submap: Submap) -> LikelihoodField:
         """The submap's likelihood field, rebuilt every ``field_refresh_nodes`` nodes while the
@@ -137,6 +151,11 @@ class Submaps:
         )
         world = transform_points(self._graph.poses[s.graph_id], corners)
         return world.min(axis=0), world.max(axis=0)
+
+    def refresh(self, changed: list[Submap]) -> None:
+        """The finished submaps ``changed`` had their grids changed: the map is composed anew."""
+        if changed:
+            self._cache = None
 
     def moved(self) -> None:
         """The graph was optimized: the finished submaps must be composed anew."""

@@ -213,7 +213,7 @@ def up(
     out = typer.echo
     status = "interrupted"
     report_failed = False
-    bus = None
+    bus = recorder = None
     t0 = time.monotonic()
     try:
         coordinator = ["--deconfliction", deconfliction] if deconfliction else []
@@ -225,7 +225,7 @@ def up(
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
-        recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s)
+        recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s, run_dir)
         watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s, recorder.watch)
         feed = BusFeed(bus, watcher, fetch=not headless)
         on = "" if floor_map is None else f", planned on {floor_map}"
@@ -268,7 +268,7 @@ def up(
             time_use,
         )
         write_json(run_dir / "report.json", report)
-        recorder.write(run_dir, image, cfg.robot.cleaning_width)
+        recorder.finish(image, cfg.robot.cleaning_width)
         render_report(load_run(run_dir))
         out(
             f"{status}: coverage {100 * report['coverage']:.1f} %, repetition "
@@ -295,6 +295,8 @@ def up(
         )
         report_failed = True
     finally:
+        if recorder is not None:
+            recorder.close()
         if bus is not None:
             bus.close()
         launcher.stop_all()
@@ -429,7 +431,7 @@ def _exploration(
     from fleet.plausible import Bounds
     from fleet.protocol import DEFAULT_FLEET, OpsRequest
     from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG, write_map_png
-    from fleet.report.summary import RunRecorder, write_json
+    from fleet.report.summary import TRACKS_FILE, RunRecorder, read_tracks, write_json
     from fleet.rundir import RunTable, cmdline, write_table
     from fleet.supervisor.launcher import Launcher, free_port
 
@@ -456,7 +458,7 @@ def _exploration(
     launcher = Launcher(run_dir, on_change=save_table)
     stop = threading.Event()
     _stop_on_signals(stop)
-    status, bus, t0 = "interrupted", None, time.monotonic()
+    status, bus, recorder, t0 = "interrupted", None, None, time.monotonic()
     try:
         _start_fleet(
             launcher, port, common, world_path, speed, seed, starts, ["--explore", str(run_dir)]
@@ -464,7 +466,7 @@ def _exploration(
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
-        recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s)
+        recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s, run_dir)
         watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s, recorder.watch)
         feed = BusFeed(bus, watcher, fetch=False)
         typer.echo(f"fleet: {robots} robots exploring {w.name} at {speed}× — {run_dir}/", err=True)
@@ -473,13 +475,15 @@ def _exploration(
         feed.close()
         with watcher.lock:
             sim_s = watcher.finished_at if watcher.finished_at is not None else watcher.clock
-            tracks = {rid: list(tr) for rid, tr in recorder.tracks.items()}
     finally:
+        if recorder is not None:
+            recorder.close()
         if bus is not None:
             bus.close()
         launcher.stop_all()
     if not (run_dir / MAP_YAML).exists():
         _fail(f"no map was written (no robot reported its map); logs in {run_dir}/")
+    tracks = read_tracks(run_dir / TRACKS_FILE)
     report = _explore_report(run_dir, w, starts[0], status, sim_s, time.monotonic() - t0, tracks)
     write_json(run_dir / EXPLORE_REPORT, report)
     write_map_png(run_dir / MAP_PGM, run_dir / MAP_PNG)
@@ -493,7 +497,7 @@ def _explore_report(
     status: str,
     sim_s: float,
     wall_s: float,
-    tracks: dict[str, list[tuple[float, float, float]]],
+    tracks: dict[str, np.ndarray],
 ) -> dict[str, Any]:
     """explore.json: how the exploration ended and what it took, and the merged map scored
     against the world's true floor (the truth read here only, after the run): free-space IoU,

@@ -13,6 +13,7 @@ within ``WALL_TOLERANCE_M`` of its centre.
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +76,7 @@ def walls_within(
     return float(np.isfinite(dist).mean())
 
 
-def path_lengths(tracks: dict[str, list[tuple[float, float, float]]]) -> dict[str, float]:
+def path_lengths(tracks: Mapping[str, Sequence[Sequence[float]] | np.ndarray]) -> dict[str, float]:
     """Metres each robot drove along its track of (sim s, x, y)."""
     out = {}
     for rid, track in sorted(tracks.items()):

@@ -6,17 +6,22 @@ its sim and wall time, and per task its owners over time, rebuilt from the event
 ``fleet up`` also writes, beside ``report.json``, what the pictures (``fleet.report.figures``)
 need, so ``fleet report RUN_DIR`` can draw them again from the run dir alone:
 
+The files but the grid are written as the run goes, a line at a time (``RunRecorder``): a run
+that dies leaves what it heard so far readable.
+
 * ``coverage.npz``: the simulator's final cleaning grid (the main brushes' visits, the cells
   side brushes touched (``side``, all false without them; absent before side brushes) and the
   cleanable cells, row 0 at ``origin_y``), its resolution and origin in metres, and the brush
   width;
 * ``tracks.csv``: ``sim_s,robot,x,y``, each robot's true position every ``TRACK_STEP_M``
-  (1.25 cm; 5 cm before report format 2);
+  (1.25 cm; 5 cm before report format 2), the robots' rows interleaved in the order heard
+  (grouped by robot before the files were written as the run went);
 * ``coverage.csv``: ``sim_s,coverage,repetition``, the fleet's cleaning over time;
 * ``collisions.csv``: ``sim_s,kind,robot,other,x,y``, every contact;
 * ``status.csv``: ``sim_s,robot,plan_id,waypoint`` and the sim seconds per kind of control
   step (``fleet.protocol.TIME_KINDS``) of every status an agent sent: the plan it drove, the
-  waypoint it headed for, and (from the growth of those sums) what it was doing when;
+  waypoint it headed for, and (from the growth of those sums) what it was doing when; rows in
+  the order heard (``fleet.report.repetition.read_status`` sorts each robot's by time);
 * ``plans.jsonl``: every plan the coordinator sent, one JSON object a line (``sim_s``,
   ``robot``, ``plan_id``, ``task``, ``sweep_from``, ``chain``, ``chain_starts``,
   ``waypoints``).
@@ -284,19 +289,35 @@ class ReportError(Exception):
 
 class RunRecorder:
     """Records, during a run, what the report pictures need and the live view does not keep:
-    true tracks with their sim times, the fleet's coverage over time, and the contacts."""
+    true tracks with their sim times, the fleet's coverage over time, the contacts, the
+    statuses and the plans. Each goes to its file in the run dir as it comes, a line at a time
+    (append-only, line-buffered), so its memory does not grow with the run and a run that dies
+    leaves every line heard so far readable; ``finish`` adds the cleaning grid."""
 
-    def __init__(self, bus: Bus, clock_step_s: float) -> None:
+    def __init__(self, bus: Bus, clock_step_s: float, run_dir: Path) -> None:
         """``clock_step_s``: how far past the sim clock (``fleet.plausible.Bounds``) a message
         may be stamped before it is dropped (``watch``, shared with the live view); statuses of
         robots whose liveliness token it never heard are dropped too."""
         self.lock = threading.Lock()
         self.watch = StampWatch(clock_step_s, bus.drop_implausible, bus.keys.clock())
-        self.tracks: dict[str, list[tuple[float, float, float]]] = {}
-        self.coverage: list[tuple[float, float, float]] = []
-        self.collisions: list[Collision] = []
-        self.status: list[tuple[Any, ...]] = []
-        self.plans: list[dict[str, Any]] = []
+        self.run_dir = run_dir
+        self._files = {
+            name: (run_dir / name).open("w", newline="", buffering=1)
+            for name in (TRACKS_FILE, COVERAGE_FILE, COLLISIONS_FILE, STATUS_FILE, PLANS_FILE)
+        }
+        self._csv = {
+            name: csv.writer(self._files[name])
+            for name in (TRACKS_FILE, COVERAGE_FILE, COLLISIONS_FILE, STATUS_FILE)
+        }
+        for name, header in (
+            (TRACKS_FILE, TRACK_COLUMNS),
+            (COVERAGE_FILE, COVERAGE_COLUMNS),
+            (COLLISIONS_FILE, COLLISION_COLUMNS),
+            (STATUS_FILE, STATUS_COLUMNS),
+        ):
+            self._csv[name].writerow(header)
+        self._last_point: dict[str, tuple[float, float]] = {}
+        self._last_coverage = -np.inf
         self._robot_of = bus.keys.robot_of
         bus.subscribe(bus.keys.clock(), Clock, self.watch.hear_clock)
         bus.subscribe(bus.keys.all_robots("truth"), TruthPose, self._on_truth)
@@ -306,26 +327,34 @@ class RunRecorder:
         bus.subscribe(bus.keys.plan("*"), Plan, self._on_plan)
         bus.watch_alive("agent", self.watch.join, self.watch.join)
 
+    def _row(self, name: str, row: tuple[Any, ...]) -> None:
+        """Append one CSV row (floats to 4 decimals); the caller holds the lock."""
+        if not self._files[name].closed:
+            self._csv[name].writerow([round(v, 4) if isinstance(v, float) else v for v in row])
+
     def _on_truth(self, key: str, m: TruthPose) -> None:
         if self.watch.ahead(key, "sim", m.stamp):
             return
+        rid = self._robot_of(key)
         with self.lock:
-            track = self.tracks.setdefault(self._robot_of(key), [])
-            if not track or abs(track[-1][1] - m.x) + abs(track[-1][2] - m.y) >= TRACK_STEP_M:
-                track.append((m.stamp, m.x, m.y))
+            last = self._last_point.get(rid)
+            if last is None or abs(last[0] - m.x) + abs(last[1] - m.y) >= TRACK_STEP_M:
+                self._last_point[rid] = (m.x, m.y)
+                self._row(TRACKS_FILE, (m.stamp, rid, m.x, m.y))
 
     def _on_coverage(self, key: str, m: CoverageSummary) -> None:
         if self.watch.ahead(key, "sim", m.stamp):
             return
         with self.lock:
-            if not self.coverage or m.stamp > self.coverage[-1][0]:
-                self.coverage.append((m.stamp, m.coverage, m.repetition))
+            if m.stamp > self._last_coverage:
+                self._last_coverage = m.stamp
+                self._row(COVERAGE_FILE, (m.stamp, m.coverage, m.repetition))
 
     def _on_collision(self, key: str, m: Collision) -> None:
         if self.watch.ahead(key, "sim", m.stamp):
             return
         with self.lock:
-            self.collisions.append(m)
+            self._row(COLLISIONS_FILE, (m.stamp, m.kind, m.robot, m.other, m.x, m.y))
 
     def _on_status(self, key: str, m: RobotStatus) -> None:
         rid = self._robot_of(key)
@@ -333,9 +362,8 @@ class RunRecorder:
             return
         if self.watch.stranger(key, rid) or self.watch.ahead(key, rid, m.stamp):
             return
-        row = (m.stamp, rid, m.plan_id, m.waypoint, *m.time_s.tolist())
         with self.lock:
-            self.status.append(row)
+            self._row(STATUS_FILE, (m.stamp, rid, m.plan_id, m.waypoint, *m.time_s.tolist()))
 
     def _on_plan(self, key: str, m: Plan) -> None:
         if self.watch.ahead(key, "coordinator", m.stamp):
@@ -352,24 +380,19 @@ class RunRecorder:
             "waypoints": m.waypoints.tolist(),
         }
         with self.lock:
-            self.plans.append(record)
+            if not self._files[PLANS_FILE].closed:
+                self._files[PLANS_FILE].write(json.dumps(record) + "\n")
 
-    def write(self, run_dir: Path, image: CoverageImage, cleaning_width_m: float) -> None:
-        """Write the grid, tracks, coverage and collision files into ``run_dir``."""
+    def finish(self, image: CoverageImage, cleaning_width_m: float) -> None:
+        """Close the recorded files and write the cleaning grid beside them."""
+        self.close()
+        write_grid(self.run_dir / GRID_FILE, image, cleaning_width_m)
+
+    def close(self) -> None:
+        """Stop recording: what came so far is on disk; later messages are not recorded."""
         with self.lock:
-            tracks = [(t, rid, x, y) for rid, tr in sorted(self.tracks.items()) for t, x, y in tr]
-            coverage = list(self.coverage)
-            collisions = [(c.stamp, c.kind, c.robot, c.other, c.x, c.y) for c in self.collisions]
-            status = sorted(self.status, key=lambda r: (r[1], r[0]))
-            plans = list(self.plans)
-        write_grid(run_dir / GRID_FILE, image, cleaning_width_m)
-        _write_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS, tracks)
-        _write_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS, coverage)
-        _write_csv(run_dir / COLLISIONS_FILE, COLLISION_COLUMNS, collisions)
-        _write_csv(run_dir / STATUS_FILE, STATUS_COLUMNS, status)
-        tmp = run_dir / (PLANS_FILE + ".tmp")
-        tmp.write_text("".join(json.dumps(p) + "\n" for p in plans))
-        os.replace(tmp, run_dir / PLANS_FILE)
+            for f in self._files.values():
+                f.close()
 
 
 def write_grid(path: Path, image: CoverageImage, cleaning_width_m: float) -> None:
@@ -385,15 +408,6 @@ def write_grid(path: Path, image: CoverageImage, cleaning_width_m: float) -> Non
             origin=np.array([image.origin_x, image.origin_y]),
             cleaning_width_m=cleaning_width_m,
         )
-
-
-def _write_csv(path: Path, header: tuple[str, ...], rows: list[tuple[Any, ...]]) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with tmp.open("w", newline="") as f:
-        out = csv.writer(f)
-        out.writerow(header)
-        out.writerows([round(v, 4) if isinstance(v, float) else v for v in row] for row in rows)
-    os.replace(tmp, path)
 
 
 @dataclass
@@ -433,10 +447,6 @@ def load_run(run_dir: Path) -> RunData:
         raise ReportError(f"no such run dir: {run_dir}")
     report = _read_report(run_dir / REPORT_FILE)
     grid = _read_grid(run_dir / GRID_FILE)
-    tracks: dict[str, list[tuple[float, float, float]]] = {}
-    for line, row in read_csv(run_dir / TRACKS_FILE, TRACK_COLUMNS):
-        t, x, y = (_number(row, k, run_dir / TRACKS_FILE, line) for k in ("sim_s", "x", "y"))
-        tracks.setdefault(row["robot"], []).append((t, x, y))
     coverage = [
         tuple(_number(row, k, run_dir / COVERAGE_FILE, line) for k in COVERAGE_COLUMNS)
         for line, row in read_csv(run_dir / COVERAGE_FILE, COVERAGE_COLUMNS)
@@ -453,11 +463,20 @@ def load_run(run_dir: Path) -> RunData:
     return RunData(
         run_dir=run_dir,
         report=report,
-        tracks={rid: np.array(tr, dtype=float) for rid, tr in tracks.items()},
+        tracks=read_tracks(run_dir / TRACKS_FILE),
         coverage=np.array(coverage, dtype=float).reshape(-1, 3),
         collisions=collisions,
         **grid,
     )
+
+
+def read_tracks(path: Path) -> dict[str, np.ndarray]:
+    """Each robot's track from ``tracks.csv``: rows (sim s, x, y) in the order recorded."""
+    tracks: dict[str, list[tuple[float, float, float]]] = {}
+    for line, row in read_csv(path, TRACK_COLUMNS):
+        t, x, y = (_number(row, k, path, line) for k in ("sim_s", "x", "y"))
+        tracks.setdefault(row["robot"], []).append((t, x, y))
+    return {rid: np.array(tr, dtype=float).reshape(-1, 3) for rid, tr in tracks.items()}
 
 
 def _read_report(path: Path) -> dict[str, Any]:

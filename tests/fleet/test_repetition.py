@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import json
 import sqlite3
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -17,15 +16,9 @@ from typer.testing import CliRunner
 from fleet.cli import app
 from fleet.protocol import (
     TIME_KINDS,
-    Clock,
-    CoverageImage,
-    CoverageSummary,
-    Keys,
-    Plan,
-    RobotStatus,
 )
-from fleet.report.repetition import CAUSES, breakdown, read_plans, read_status
-from fleet.report.summary import STATUS_COLUMNS, ReportError, RunRecorder
+from fleet.report.repetition import CAUSES, breakdown
+from fleet.report.summary import STATUS_COLUMNS, ReportError
 from planners.grid import GridMap
 from planners.polyline import densify
 from planners.tour_elements import tour_elements
@@ -193,95 +186,3 @@ def test_the_command_prints_a_table_per_world(tmp_path: Path) -> None:
     res = CliRunner().invoke(app, ["bench", "repetition", str(tmp_path / "runs")])
     assert res.exit_code == 0, res.output
     assert "| hops > 1 m |" in res.output and "the tour alone" in res.output
-
-
-class _Bus:
-    """What RunRecorder needs of a bus: its keys, and subscriptions it can be fed through."""
-
-    def __init__(self) -> None:
-        self.keys = Keys("test")
-        self.handlers: dict[str, Callable] = {}
-        self.dropped: list[tuple[str, str, str]] = []
-
-    def subscribe(self, key: str, _type: type, handler: Callable) -> None:
-        self.handlers[key] = handler
-
-    def watch_alive(self, _role: str, on_join: Callable, _on_leave: Callable) -> None:
-        self.handlers["alive"] = on_join
-
-    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
-        self.dropped.append((key, sender, why))
-
-
-def test_the_recorder_writes_the_statuses_and_plans_the_breakdown_reads(tmp_path: Path) -> None:
-    bus = _Bus()
-    recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
-    keys = bus.keys
-    seconds = np.arange(len(TIME_KINDS), dtype=float)
-    for t in (0.4, 0.8, 1.2):
-        bus.handlers[keys.clock()](keys.clock(), Clock(t, 1.0))
-    bus.handlers["alive"]("robot-1")
-    for t in (1.5, 1.0):
-        status = RobotStatus(t, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=t * seconds)
-        bus.handlers[keys.all_robots("status")](keys.robot("robot-1", "status"), status)
-    plan = Plan(1.0, 7, "t00", TOUR, 0, ["t00"], np.array([0], dtype=np.int32))
-    bus.handlers[keys.plan("*")](keys.plan("robot-1"), plan)
-    image = CoverageImage(
-        2.0, RES, 0.0, 0.0, 20, 40, np.zeros(800, np.uint16), np.ones(800, np.uint8)
-    )
-    recorder.write(tmp_path, image, WIDTH)
-    status = read_status(tmp_path / "status.csv", {})
-    assert list(status) == ["robot-1"] and status["robot-1"][:, 0].tolist() == [1.0, 1.5]
-    assert status["robot-1"][1, 1:3].tolist() == [7, 3]
-    assert np.allclose(status["robot-1"][1, 3:], 1.5 * seconds)
-    plans = read_plans(tmp_path / "plans.jsonl", {})
-    assert np.array_equal(plans["robot-1", 7]["waypoints"], TOUR)
-
-
-def test_the_recorder_drops_what_is_stamped_past_the_sim_clock() -> None:
-    """A status or a coverage summary stamped far ahead would stand as the newest and hide the
-    real ones after it; the recorder drops it, counted, once it knows the sim clock."""
-    bus = _Bus()
-    recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
-    keys = bus.keys
-    seconds = np.arange(len(TIME_KINDS), dtype=float)
-    for t in (9.9, 10.0, 10.1):  # a receiver started late believes the clock once confirmed
-        bus.handlers[keys.clock()](keys.clock(), Clock(t, 1.0))
-    bus.handlers["alive"]("robot-1")
-    on_status = bus.handlers[keys.all_robots("status")]
-    for t in (1e9, 10.2):
-        status = RobotStatus(t, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=seconds)
-        on_status(keys.robot("robot-1", "status"), status)
-    on_coverage = bus.handlers[keys.coverage()]
-    for t in (1e9, 10.3):
-        none = np.zeros(0)
-        summary = CoverageSummary(t, 1.0, 0.5, 0.1, 10.0, [], none, none, none, none)
-        on_coverage(keys.coverage(), summary)
-    assert [row[0] for row in recorder.status] == [10.2]
-    assert [row[0] for row in recorder.coverage] == [10.3]
-    assert [(k, who) for k, who, _ in bus.dropped] == [
-        (keys.robot("robot-1", "status"), "robot-1"),
-        (keys.coverage(), "sim"),
-    ]
-
-
-def test_the_recorder_drops_the_statuses_of_a_robot_not_in_the_job() -> None:
-    """A status from a robot whose liveliness token was never heard is no robot of the run's:
-    the recorder drops it, counted with its sender named, and keeps those of robots in the job.
-    """
-    bus = _Bus()
-    recorder = RunRecorder(bus, 0.5)  # type: ignore[arg-type]
-    keys = bus.keys
-    seconds = np.arange(len(TIME_KINDS), dtype=float)
-    bus.handlers[keys.clock()](keys.clock(), Clock(0.5, 1.0))
-    bus.handlers["alive"]("robot-0")
-    on_status = bus.handlers[keys.all_robots("status")]
-    for rid in ("ghost", "robot-0"):
-        status = RobotStatus(1.0, "driving", "t00", 0.5, 3, 6, 1.0, plan_id=7, time_s=seconds)
-        on_status(keys.robot(rid, "status"), status)
-    assert [row[1] for row in recorder.status] == ["robot-0"]
-    # counted once the ghost's token has not come within the grace
-    assert bus.dropped == []
-    recorder.watch.strangers.grace_s = 0.0
-    recorder.watch.strangers.flush()
-    assert [(k, who) for k, who, _ in bus.dropped] == [(keys.robot("ghost", "status"), "ghost")]

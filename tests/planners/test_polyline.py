@@ -91,3 +91,31 @@ def test_turn_counter_of_short_paths() -> None:
     counter.append(2.0, 2.0)
     assert counter.turns() == 1
     np.testing.assert_array_equal(counter.points(), [[1, 1], [1, 1], [2, 1], [2, 2]])
+
+
+def _stretch_reference(points: np.ndarray, stretch: int) -> int:
+    """Turns of the path simplified in stretches of ``stretch`` points sharing their ends."""
+    step = stretch - 1
+    parts = [
+        simplify(points[k : k + stretch], 0.05)[(1 if k else 0) :]
+        for k in range(0, len(points) - 1, step)
+    ]
+    return count_turns(np.vstack(parts))
+
+
+def test_turns_in_stretches_equal_the_stretches_simplified_apart_and_memory_stays_bounded():
+    rng = np.random.default_rng(5)
+    heading = np.cumsum(rng.normal(0, 0.25, 6000))
+    wander = np.cumsum(0.05 * np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)
+    counter = TurnCounter(0.05, stretch_points=500)
+    largest_memo = largest_buffer = 0
+    for k, (x, y) in enumerate(wander.tolist(), start=1):
+        counter.append(x, y)
+        if k % 50 == 0 or k == len(wander):
+            assert counter.turns() == _stretch_reference(wander[:k], 500)
+            largest_memo = max(largest_memo, len(counter._memo))
+            largest_buffer = max(largest_buffer, len(counter._pts))
+    assert len(counter) == len(wander) and len(counter.points()) <= 500
+    assert largest_buffer <= 512 and largest_memo <= 2 * 500
+    whole = count_turns(simplify(wander, 0.05))
+    assert abs(counter.turns() - whole) <= len(wander) // 499 + 1
