@@ -25,7 +25,10 @@ class CoverageParams:
     smaller than ``min_room_area`` joins its largest neighbour. A boustrophedon cell is cut into
     lane groups of at most ``max_task_area`` (0: every lane is a task of its own, cut into
     pieces of at most ``max_lane_length``), so the tour can leave a cell part-swept to visit a
-    neighbour and come back, and k robots can balance the work finely. Time estimates use the
+    neighbour and come back, and k robots can balance the work finely; with ``skip_order`` a
+    group of three lanes or more may also be driven in Fields2Cover's skip order (out along
+    every other lane, back along the rest), which ends beside the lane it began on (measured:
+    not better than single lanes, BENCHMARKS.md, Cleaning efficiency). Time estimates use the
     robot's top speed ``max_vel_x`` plus ``turn_cost_s`` per turn (a heading change over
     ``turn_angle_deg``); the market's tasks (``planners.auction.split_tour``) are timed by the
     robot's kinematics instead: a stop and a turn in place at each such turn (``max_vel_theta``,
@@ -43,6 +46,7 @@ class CoverageParams:
     door_width: float = 1.0
     min_room_area: float = 2.0
     max_task_area: float = 0.0
+    skip_order: bool = False
     max_lane_length: float = 1.25
     simplify_tolerance: float = 0.03
 
