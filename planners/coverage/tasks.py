@@ -77,7 +77,8 @@ def cell_tasks(
     tasks = []
     for g in groups:
         if len(g) == 1:
-            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot))
+            cuts = _neighbour_ends(lanes, g[0], params, res) if params.neighbour_cuts else ()
+            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot, cuts))
             continue
         sel = lanes[g]
         orders = [np.arange(len(sel))]
@@ -93,6 +94,18 @@ def cell_tasks(
     return tasks
 
 
+def _neighbour_ends(
+    lanes: np.ndarray, k: int, params: CoverageParams, res: float
+) -> tuple[float, ...]:
+    """The columns inside lane ``k`` where another lane of its cell ends, at least
+    ``params.max_lane_length / 4`` from its own ends: where the cell's width changes, so the
+    tour may turn there (sweep one side of a shoulder as a block of its own)."""
+    _, lo, hi = lanes[k]
+    margin = params.max_lane_length / 4 / res
+    ends = np.unique(lanes[:, 1:3])
+    return tuple(float(c) for c in ends if lo + margin < c < hi - margin)
+
+
 def _lane_pieces(
     room: int,
     cell_id: int,
@@ -100,22 +113,28 @@ def _lane_pieces(
     frame: RotatedFrame,
     params: CoverageParams,
     robot: RobotSpec,
+    cuts: tuple[float, ...] = (),
 ) -> list[SweepTask]:
-    """One lane as tasks of at most ``params.max_lane_length``: equal pieces meeting at a cell
-    centre, so driving them one after the other sweeps exactly what the whole lane does (each
-    segment's brush rectangle is half-open), while the tour may also turn in the middle."""
+    """One lane as tasks of at most ``params.max_lane_length``: cut at ``cuts`` (columns), each
+    part in equal pieces, pieces meeting at a cell centre, so driving them one after the other
+    sweeps exactly what the whole lane does (each segment's brush rectangle is half-open),
+    while the tour may also turn in the middle."""
     res = frame.resolution
     y, lo, hi = (float(v) for v in lane)
-    n = max(1, math.ceil((hi - lo) * res / params.max_lane_length - 1e-9))
-    cuts = np.unique(np.rint(np.linspace(lo, hi, n + 1)))
+    bounds = [lo, *sorted(cuts), hi]
+    parts = []
+    for a, b in itertools.pairwise(bounds):
+        n = max(1, math.ceil((b - a) * res / params.max_lane_length - 1e-9))
+        parts.append(np.rint(np.linspace(a, b, n + 1)))
+    cuts_all = np.unique(np.concatenate(parts))
     spacing = params.lane_spacing(robot)
     tasks = []
-    for a, b in itertools.pairwise(cuts):
+    for a, b in itertools.pairwise(cuts_all):
         path = frame.to_world(np.array([[y, a], [y, b]]))
         length = (b - a) * res
         t = length / robot.max_vel_x
         tasks.append(SweepTask(room, cell_id, (path,), length * spacing, t))
-    if len(cuts) == 1:
+    if len(cuts_all) == 1:
         path = frame.to_world(np.array([[y, lo], [y, hi]]))
         tasks.append(SweepTask(room, cell_id, (path,), res * spacing, 0.0))
     return tasks
