@@ -62,7 +62,8 @@ def cell_tasks(
     """The boustrophedon tasks of one cell over ``lanes`` ((n, 3) row coordinate, first and
     last column, sorted by row), lanes grouped so each group is ≤ ``max_area``; a group's
     variants are its plain order and, with ``params.skip_order``, its skip order, each with
-    the first lane driven either way."""
+    the first lane driven either way. A lane alone is cut into pieces (``_lane_pieces``),
+    with ``params.neighbour_cuts`` also where another lane of the cell ends."""
     res = frame.resolution
     lengths = (lanes[:, 2] - lanes[:, 1] + 1) * res
     lane_area = lengths * params.lane_spacing(robot)
