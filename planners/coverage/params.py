@@ -25,7 +25,13 @@ class CoverageParams:
     smaller than ``min_room_area`` joins its largest neighbour. A boustrophedon cell is cut into
     lane groups of at most ``max_task_area`` (0: every lane is a task of its own, cut into
     pieces of at most ``max_lane_length``), so the tour can leave a cell part-swept to visit a
-    neighbour and come back, and k robots can balance the work finely. Time estimates use the
+    neighbour and come back, and k robots can balance the work finely; with ``skip_order`` a
+    group of three lanes or more may also be driven in Fields2Cover's skip order (out along
+    every other lane, back along the rest), which ends beside the lane it began on (measured:
+    not better than single lanes, BENCHMARKS.md, Cleaning efficiency). With ``neighbour_cuts``
+    a single lane is also cut where another lane of its cell ends (at least a quarter of
+    ``max_lane_length`` inside it), so the tour may sweep either side of a shoulder as a block
+    of its own and turn there. Time estimates use the
     robot's top speed ``max_vel_x`` plus ``turn_cost_s`` per turn (a heading change over
     ``turn_angle_deg``); the market's tasks (``planners.auction.split_tour``) are timed by the
     robot's kinematics instead: a stop and a turn in place at each such turn (``max_vel_theta``,
@@ -43,6 +49,8 @@ class CoverageParams:
     door_width: float = 1.0
     min_room_area: float = 2.0
     max_task_area: float = 0.0
+    skip_order: bool = False
+    neighbour_cuts: bool = False
     max_lane_length: float = 1.25
     simplify_tolerance: float = 0.03
 

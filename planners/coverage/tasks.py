@@ -3,7 +3,11 @@
 A task is a run of consecutive lanes of one boustrophedon cell (or one cell's spiral), with its
 ways to drive it: ``variants`` are paths, each of which may also be driven backwards (the tour
 chooses). A lane run has two (its first lane driven either way, the turns on opposite sides);
-reversed, they give the runs starting from the last lane.
+reversed, they give the runs starting from the last lane. With
+``CoverageParams.skip_order`` a run of three lanes or more also has the two of its "skip" order
+(``sweeps.skip_order``, Fields2Cover's snake), which end beside the lane they began on: the
+tour can leave the run on the side it came in by, where a plain boustrophedon would leave it on
+the far side and hop back across swept floor.
 """
 
 from __future__ import annotations
@@ -18,7 +22,13 @@ from planners.coverage.bcd import MonotoneCell
 from planners.coverage.frame import RotatedFrame
 from planners.coverage.metrics import path_time
 from planners.coverage.params import CoverageParams
-from planners.coverage.sweeps import boustrophedon, eroded_sides, lane_rows, lanes_of
+from planners.coverage.sweeps import (
+    boustrophedon,
+    eroded_sides,
+    lane_rows,
+    lanes_of,
+    skip_order,
+)
 from planners.polyline import path_length, simplify
 from planners.robot import RobotSpec
 
@@ -50,7 +60,10 @@ def cell_tasks(
     max_area: float,
 ) -> list[SweepTask]:
     """The boustrophedon tasks of one cell over ``lanes`` ((n, 3) row coordinate, first and
-    last column, sorted by row), lanes grouped so each group is ≤ ``max_area``."""
+    last column, sorted by row), lanes grouped so each group is ≤ ``max_area``; a group's
+    variants are its plain order and, with ``params.skip_order``, its skip order, each with
+    the first lane driven either way. A lane alone is cut into pieces (``_lane_pieces``),
+    with ``params.neighbour_cuts`` also where another lane of the cell ends."""
     res = frame.resolution
     lengths = (lanes[:, 2] - lanes[:, 1] + 1) * res
     lane_area = lengths * params.lane_spacing(robot)
@@ -65,14 +78,33 @@ def cell_tasks(
     tasks = []
     for g in groups:
         if len(g) == 1:
-            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot))
+            cuts = _neighbour_ends(lanes, g[0], params, res) if params.neighbour_cuts else ()
+            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot, cuts))
             continue
         sel = lanes[g]
-        sides = (True, False) if len(sel) > 1 else (True,)
-        variants = tuple(_to_world(frame, boustrophedon(cell, sel, left), params) for left in sides)
+        orders = [np.arange(len(sel))]
+        if params.skip_order and len(sel) > 2:
+            orders.append(skip_order(len(sel)))
+        variants = tuple(
+            _to_world(frame, boustrophedon(cell, sel[order], left), params)
+            for order in orders
+            for left in (True, False)
+        )
         _, _, t = path_time(variants[0], robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
         tasks.append(SweepTask(room, cell_id, variants, float(lane_area[g].sum()), t))
     return tasks
+
+
+def _neighbour_ends(
+    lanes: np.ndarray, k: int, params: CoverageParams, res: float
+) -> tuple[float, ...]:
+    """The columns inside lane ``k`` where another lane of its cell ends, at least
+    ``params.max_lane_length / 4`` from its own ends: where the cell's width changes, so the
+    tour may turn there (sweep one side of a shoulder as a block of its own)."""
+    _, lo, hi = lanes[k]
+    margin = params.max_lane_length / 4 / res
+    ends = np.unique(lanes[:, 1:3])
+    return tuple(float(c) for c in ends if lo + margin < c < hi - margin)
 
 
 def _lane_pieces(
@@ -82,22 +114,28 @@ def _lane_pieces(
     frame: RotatedFrame,
     params: CoverageParams,
     robot: RobotSpec,
+    cuts: tuple[float, ...] = (),
 ) -> list[SweepTask]:
-    """One lane as tasks of at most ``params.max_lane_length``: equal pieces meeting at a cell
-    centre, so driving them one after the other sweeps exactly what the whole lane does (each
-    segment's brush rectangle is half-open), while the tour may also turn in the middle."""
+    """One lane as tasks of at most ``params.max_lane_length``: cut at ``cuts`` (columns), each
+    part in equal pieces, pieces meeting at a cell centre, so driving them one after the other
+    sweeps exactly what the whole lane does (each segment's brush rectangle is half-open),
+    while the tour may also turn in the middle."""
     res = frame.resolution
     y, lo, hi = (float(v) for v in lane)
-    n = max(1, math.ceil((hi - lo) * res / params.max_lane_length - 1e-9))
-    cuts = np.unique(np.rint(np.linspace(lo, hi, n + 1)))
+    bounds = [lo, *sorted(cuts), hi]
+    parts = []
+    for a, b in itertools.pairwise(bounds):
+        n = max(1, math.ceil((b - a) * res / params.max_lane_length - 1e-9))
+        parts.append(np.rint(np.linspace(a, b, n + 1)))
+    cuts_all = np.unique(np.concatenate(parts))
     spacing = params.lane_spacing(robot)
     tasks = []
-    for a, b in itertools.pairwise(cuts):
+    for a, b in itertools.pairwise(cuts_all):
         path = frame.to_world(np.array([[y, a], [y, b]]))
         length = (b - a) * res
         t = length / robot.max_vel_x
         tasks.append(SweepTask(room, cell_id, (path,), length * spacing, t))
-    if len(cuts) == 1:
+    if len(cuts_all) == 1:
         path = frame.to_world(np.array([[y, lo], [y, hi]]))
         tasks.append(SweepTask(room, cell_id, (path,), res * spacing, 0.0))
     return tasks
