@@ -48,6 +48,7 @@ from fleet.params import FleetConfig
 from fleet.protocol import (
     Award,
     AwardAck,
+    BatteryState,
     Clock,
     Heartbeat,
     Intent,
@@ -94,6 +95,8 @@ class Agent:
         self.pose_source: PoseSource | None = None
         self.odom_stamp = -1.0
         self.velocity = (0.0, 0.0)
+        # the battery sensor's last reading, if any (robot.battery on)
+        self.battery: BatteryState | None = None
         self.latency_s = 0.0
         self.drive = Drive()
         # the latest intent of each other robot
@@ -130,7 +133,7 @@ class Agent:
             saved = load_state(self.state_dir)
             start = saved.pose
         self._subscribe()
-        reply = self._request_spawn(SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
+        reply = request_spawn(self.bus, SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
         if reply.stamp >= 0:
             self.rx.start(reply.stamp)
         with self.lock:
@@ -162,6 +165,7 @@ class Agent:
         # peers are in the job by their liveliness tokens, heard before their intents
         self.bus.watch_alive("agent", self.rx.joined, self.rx.left)
         self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
+        self.bus.subscribe(k.robot(self.rid, "battery"), BatteryState, self._on_battery)
         self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
         self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
@@ -169,20 +173,6 @@ class Agent:
         self.bus.subscribe(k.task("*"), TaskCall, self._on_call)
         self.bus.subscribe(k.award(self.rid), Award, self._on_award)
         self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
-
-    def _request_spawn(self, req: SpawnRequest, timeout: float) -> SpawnReply:
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                reply = self.bus.request(self.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
-                break
-            except (TimeoutError, RuntimeError) as e:
-                if time.monotonic() > deadline:
-                    raise TimeoutError(f"no simulator answered the spawn request: {e}") from None
-                time.sleep(0.2)
-        if not reply.ok:
-            raise ValueError(f"spawn refused: {reply.error}")
-        return reply
 
     def _pose_source(
         self, saved: SavedState | None, spawned: tuple[float, float, float]
@@ -220,6 +210,10 @@ class Agent:
             self.pose_source.on_odometry(msg)
             self.odom_stamp = msg.stamp
             self.velocity = (msg.v, msg.w)
+
+    def _on_battery(self, key: str, msg: BatteryState) -> None:
+        if self.rx.battery(key, msg):
+            self.battery = msg  # one reference, replaced whole
 
     def _on_scan(self, key: str, msg: LaserScan) -> None:
         if not self.rx.scan(key, msg):
@@ -371,6 +365,7 @@ class Agent:
                 dict(self.peers),
                 self.latency_s,
                 *self.bus.dropped(),
+                self.battery,
             )
             self.control_state, out = control(
                 heard, self.control_state, self.params, self.pose_source
@@ -429,6 +424,23 @@ class Agent:
             self.maps.save_pose(scan.stamp, self.pose_source)
         except Exception:
             self.bus.handler_failed("robot/*/map")
+
+
+def request_spawn(bus: Bus, req: SpawnRequest, timeout: float) -> SpawnReply:
+    """The simulator's answer to ``req``, asked again until it answers or ``timeout`` (wall s)
+    passes; ValueError when it refuses."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            reply = bus.request(bus.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
+            break
+        except (TimeoutError, RuntimeError) as e:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no simulator answered the spawn request: {e}") from None
+            time.sleep(0.2)
+    if not reply.ok:
+        raise ValueError(f"spawn refused: {reply.error}")
+    return reply
 
 
 def respawn_window(cfg: FleetConfig) -> tuple[float, float]:

@@ -38,7 +38,16 @@ from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
 from fleet.params import FleetConfig
 from fleet.plan_chain import chain_of, chain_starts, current_task
-from fleet.protocol import TIME_KINDS, Intent, LaserScan, Plan, PoseEstimate, RobotStatus, Twist
+from fleet.protocol import (
+    TIME_KINDS,
+    BatteryState,
+    Intent,
+    LaserScan,
+    Plan,
+    PoseEstimate,
+    RobotStatus,
+    Twist,
+)
 
 MEDIAN_BEAMS = 5
 
@@ -95,7 +104,7 @@ class Heard:
     """What a control step is given: the scan, the stamp and velocity (v, ω) of the latest
     odometry, the plan being driven, each peer's latest intent, the latency of a command (sim
     s from its scan until it is sent) and how many messages the bus has dropped as malformed and
-    as implausible."""
+    as implausible, and the battery sensor's last reading (None without one)."""
 
     scan: LaserScan
     odom_stamp: float
@@ -105,6 +114,7 @@ class Heard:
     latency_s: float
     decode_errors: int
     implausible: int = 0
+    battery: BatteryState | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -363,4 +373,6 @@ def _status(heard: Heard, state: ControlState, follow: FollowState | None) -> Ro
         swept_pieces(follow, drive.sweep_from),
         np.array(state.time_s),
         heard.implausible,
+        -1.0 if heard.battery is None else heard.battery.percentage,
+        heard.battery is not None and heard.battery.charging,
     )

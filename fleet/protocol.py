@@ -24,7 +24,7 @@ from typing import Annotated, Any, ClassVar, TypeVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
@@ -216,6 +216,18 @@ class Odometry(Message):
 
 
 @dataclass(frozen=True, eq=False)
+class BatteryState(Message):
+    """sensor_msgs/BatteryState, reduced: ``percentage`` the charge as a fraction of a full
+    one (0..1, as ROS gives it), ``charging`` whether a dock is charging it (sim → its
+    agent, with robot.battery on)."""
+
+    TYPE: ClassVar[str] = "battery"
+    stamp: float
+    percentage: float
+    charging: bool = False
+
+
+@dataclass(frozen=True, eq=False)
 class Twist(Message):
     """cmd_vel. ``stamp`` is the sim time of the newest sensor data the command answers."""
 
@@ -270,7 +282,8 @@ class RobotStatus(Message):
     by its own pose estimate, so the coordinator knows the exact remainder of the task.
     ``time_s`` is the sim time its control steps have spent on each of ``TIME_KINDS`` since it
     started. ``decode_errors`` and ``implausible`` count the messages its agent dropped as
-    malformed and as implausible."""
+    malformed and as implausible. ``charge`` is its battery's last reading (a fraction of a
+    full charge; -1 without a battery sensor heard) and ``charging`` whether a dock charges it."""
 
     TYPE: ClassVar[str] = "status"
     stamp: float
@@ -290,6 +303,8 @@ class RobotStatus(Message):
         default_factory=lambda: np.zeros(0, dtype=np.float64)
     )
     implausible: int = 0
+    charge: float = -1.0
+    charging: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -478,7 +493,10 @@ class Collision(Message):
 @dataclass(frozen=True, eq=False)
 class CoverageSummary(Message):
     """Ground-truth cleaning progress and per-robot counters (sim → dashboard and report), and
-    how many messages the simulator has dropped as malformed and as implausible."""
+    how many messages the simulator has dropped as malformed and as implausible. With
+    robot.battery on, per robot too: its ``charge`` now and ``min_charge`` (fractions), the
+    ``charges`` it began on a dock, its ``charging_s`` (sim s) and whether it stands ``docked``
+    (1) now; empty arrays with batteries off."""
 
     TYPE: ClassVar[str] = "coverage"
     stamp: float
@@ -493,6 +511,15 @@ class CoverageSummary(Message):
     robot_collisions: Annotated[np.ndarray, Arr("<i4")]
     decode_errors: int = 0
     implausible: int = 0
+    charge: Annotated[np.ndarray, Arr("<f8")] = field(default_factory=lambda: np.zeros(0))
+    min_charge: Annotated[np.ndarray, Arr("<f8")] = field(default_factory=lambda: np.zeros(0))
+    charges: Annotated[np.ndarray, Arr("<i4")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int32)
+    )
+    charging_s: Annotated[np.ndarray, Arr("<f8")] = field(default_factory=lambda: np.zeros(0))
+    docked: Annotated[np.ndarray, Arr("|u1")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.uint8)
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -639,6 +666,7 @@ MESSAGES: dict[str, type[Message]] = {
         Clock,
         LaserScan,
         Odometry,
+        BatteryState,
         Twist,
         PoseEstimate,
         TruthPose,
