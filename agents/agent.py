@@ -36,6 +36,8 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 from agents.control import ControlParams, ControlState, Drive, Heard, control
 from agents.map_keeper import MapKeeper
 from agents.market import MarketClient
@@ -45,11 +47,13 @@ from agents.slam.persistence import SavedState, load_state
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
+from fleet.plan_chain import is_dock_trip
 from fleet.protocol import (
     Award,
     AwardAck,
     BatteryState,
     Clock,
+    Docks,
     Heartbeat,
     Intent,
     LaserScan,
@@ -112,6 +116,7 @@ class Agent:
             cfg.robot.radius,
             cfg.slam.occupied_threshold,
             cfg.slam.free_threshold,
+            cfg.robot.battery,
         )
         self._calls: list[TaskCall] = []
         self._told_no_floor = False
@@ -236,7 +241,7 @@ class Agent:
             if msg.plan_id == self.drive.plan_id:
                 self._cut_plan(msg)
                 return
-            if not self.market.holds(msg.task):
+            if not self.market.holds(msg.task) and not is_dock_trip(msg.task):
                 return
             self.drive = Drive.of(msg, self.market.queue)
         log.info(
@@ -261,7 +266,8 @@ class Agent:
             taken = self.market.on_award(msg)
             follow = self.drive.follow
             driving = follow is not None and not follow.done
-            dropped = taken and driving and not any(self.market.holds(t) for t in self.drive.chain)
+            held = is_dock_trip(self.drive.task) or any(map(self.market.holds, self.drive.chain))
+            dropped = taken and driving and not held
             if dropped:
                 self.drive = dataclasses.replace(self.drive, follow=None, task="")
             seq = self.market.seq
@@ -312,7 +318,7 @@ class Agent:
             commitment = self.market.commitment(
                 self.pose_source.pose(), drive.follow, list(drive.chain), drive.chain_time_s
             )
-            bids = self.market.bids(calls, commitment)
+            bids = self.market.bids(calls, commitment, self.battery)
         for b in bids:
             self.bus.publish(self.keys.bid(b.task, self.rid), b, control=True)
 
@@ -325,8 +331,10 @@ class Agent:
             self._told_no_floor = True
             return
         floor = unpack_grid(msg)
+        docks = fetch_docks(self.bus, self.rid)
         with self.lock:
             self.market.use_floor(floor)
+            self.market.docks = docks
 
     def heartbeat_loop(self) -> None:
         """A heartbeat every 1 / ``agent.heartbeat_hz`` wall seconds, whatever sim time does."""
@@ -441,6 +449,16 @@ def request_spawn(bus: Bus, req: SpawnRequest, timeout: float) -> SpawnReply:
     if not reply.ok:
         raise ValueError(f"spawn refused: {reply.error}")
     return reply
+
+
+def fetch_docks(bus: Bus, rid: str) -> np.ndarray:
+    """Where a robot stands on each dock (K, 2), as the coordinator serves them; none when it
+    serves none (an exploring coordinator)."""
+    try:
+        msg = bus.request(bus.keys.docks(), Request(rid), Docks, 1.0)
+    except (TimeoutError, RuntimeError, ValueError):
+        return np.zeros((0, 2))
+    return np.asarray(msg.poses, dtype=float).reshape(-1, 3)[:, :2]
 
 
 def respawn_window(cfg: FleetConfig) -> tuple[float, float]:

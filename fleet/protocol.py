@@ -114,6 +114,9 @@ class Keys:
     def floor_map(self) -> str:
         return f"{self.root}/coord/map"
 
+    def docks(self) -> str:
+        return f"{self.root}/coord/docks"
+
     def ops(self, verb: str) -> str:
         return f"{self.root}/ops/{verb}"
 
@@ -381,7 +384,9 @@ class TaskCall(Message):
 class Bid(Message):
     """A robot's price for a called task (``coord/bid/<task>/<robot>``): the marginal seconds
     of adding it to what the robot has won, its whole committed time with it, and which end it
-    would enter by (``reverse``: the task's exit)."""
+    would enter by (``reverse``: the task's exit). ``declined``: the robot cannot do it and then
+    get to a dock on its charge; it answers the call, so the round need not wait for it, but
+    never wins."""
 
     TYPE: ClassVar[str] = "bid"
     stamp: float
@@ -391,6 +396,18 @@ class Bid(Message):
     marginal_s: float
     total_s: float
     reverse: bool
+    declined: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class Docks(Message):
+    """The world's docks, served by the coordinator on ``coord/docks``: rows of (x, y,
+    theta), the pose of a robot standing on each (facing away from it); none, a world without
+    docks."""
+
+    TYPE: ClassVar[str] = "docks"
+    stamp: float
+    poses: Annotated[np.ndarray, Arr("<f8", (3,))]
 
 
 @dataclass(frozen=True, eq=False)
@@ -684,6 +701,7 @@ MESSAGES: dict[str, type[Message]] = {
         Heartbeat,
         TaskCall,
         Bid,
+        Docks,
         Award,
         AwardAck,
         FleetEvent,

@@ -77,10 +77,16 @@ class RobotRecord:
     award_seq: int = 0
     acked_seq: int = 0
     xy: tuple[float, float] | None = None
+    # its battery as its status reports it: charge (fraction; -1 without a battery heard) and
+    # whether a dock charges it; ``docking`` names the dock trip that keeps it out of the
+    # market ("" while it works)
+    charge: float = -1.0
+    charging: bool = False
+    docking: str = ""
 
     @property
     def in_market(self) -> bool:
-        return self.liveness != LOST and self.ready and self.xy is not None
+        return self.liveness != LOST and self.ready and self.xy is not None and not self.docking
 
 
 class Job:
