@@ -11,6 +11,7 @@ import pytest
 
 from fleet.config import ConfigError, configs_dir
 from fleet.params import FleetConfig, load_fleet_config
+from fleet.report.summary import battery_of
 from fleet.world import World, load_world
 from sim_server.core import SimCore
 
@@ -118,3 +119,22 @@ def test_batteries_in_a_world_without_a_dock_are_refused_naming_the_world(world:
     docked = dataclasses.replace(world, docks=())
     with pytest.raises(ConfigError, match=f"{world.source}: robot.battery is on, but the world"):
         SimCore(docked, _cfg())
+
+
+def test_the_report_gives_each_robot_its_battery_block(world: World) -> None:
+    dock = world.dock
+    assert dock is not None
+    sim = SimCore(world, _cfg(capacity_s=100.0))
+    sim.add_robot("off", (1.0, 2.3, 0.0))
+    sim.set_cmd("off", 0.3, 0.0)
+    _run(sim, 1.0)
+    sim.add_robot("on", (dock[0], dock[1], dock[2] + math.pi))
+    _run(sim, 2.0)
+    summary = sim.summary(0.0)
+    on, off = summary.robots.index("on"), summary.robots.index("off")
+    assert battery_of(summary, on) == {
+        "battery": {"min_charge": 1.0, "charges": 1, "charging_s": 2.0, "parked": True}
+    }
+    block = battery_of(summary, off)["battery"]
+    assert block["parked"] is False and block["charges"] == 0 and block["min_charge"] < 1.0
+    assert battery_of(SimCore(world, load_fleet_config()).summary(0.0), 0) == {}
