@@ -29,7 +29,7 @@ from fleet.coordinator.store import JobStore
 from fleet.coordinator.transits import TransitPlanner
 from fleet.params import CoordinatorParams
 from fleet.plausible import Bounds
-from fleet.protocol import Docks, Request, RobotStatus
+from fleet.protocol import Docks, OpsReply, OpsRequest, Request, RobotStatus
 from planners import auction
 from planners.battery import BatterySpec
 
@@ -120,6 +120,23 @@ class ChargingCoordinator(Coordinator):
         super()._serve_floor()
         poses = np.array(self.docks, dtype=float).reshape(-1, 3)
         self.bus.serve(self.keys.docks(), Request, lambda _req: Docks(self.journal.clock, poses))
+        self.bus.serve(self.keys.ops("dock"), OpsRequest, self._on_dock)
+
+    def _on_dock(self, req: OpsRequest) -> OpsReply:
+        """`fleet dock ROBOT`: send it home now."""
+        with self.lock:
+            r = self.job.robots.get(req.name)
+            if req.verb != "dock" or r is None:
+                return OpsReply(False, f"no robot {req.name!r} in the job")
+            if r.liveness == LOST or r.xy is None:
+                return OpsReply(False, f"{req.name} is lost, or has not said where it is")
+            if r.docking:
+                return OpsReply(True, "")
+            market = self.market
+            assert isinstance(market, ChargingMarket)
+            market.send_home(req.name, f"sent home by {req.sender}", parking=self.job.finished)
+            ok = bool(r.docking)
+        return OpsReply(ok, "" if ok else f"no way home for {req.name}")
 
     def _tick(self) -> None:
         """Trips on; robots below the threshold to charge; at the job's end, all home."""
