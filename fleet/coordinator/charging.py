@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import LOST
+from fleet.coordinator.job import EMPTY, LOST
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
@@ -251,10 +251,19 @@ class Docking:
         self.job.robots[rid].docking = ""
         self.dispatcher.plans.pop(rid, None)
 
+    def empty(self, rid: str) -> None:
+        """``rid``'s battery ran out away from a dock: it stands for good, holds no dock and
+        counts as home (its work was taken back when it was sent home)."""
+        t = self.trips.get(rid)
+        self._drop(rid)
+        self.job.robots[rid].docking = EMPTY
+        self.journal.event("empty", rid, t.plan.task if t else "", "its battery ran out")
+
     def home(self) -> bool:
-        """Whether every robot not lost is home: charging, or at the end of its trip."""
+        """Whether every robot not lost is home: charging, or at the end of its trip (or
+        standing for good with an empty battery)."""
         for rid, r in self.job.robots.items():
-            if r.liveness == LOST:
+            if r.liveness == LOST or r.docking == EMPTY:
                 continue
             t = self.trips.get(rid)
             if t is None or not (r.charging or self._at_end(rid, t)):

@@ -21,7 +21,7 @@ import numpy as np
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.charging import Docking, Pose
-from fleet.coordinator.job import LOST, Job
+from fleet.coordinator.job import EMPTY, LOST, Job
 from fleet.coordinator.market import Hook, Market
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
@@ -146,6 +146,9 @@ class ChargingCoordinator(Coordinator):
             market.need_auction = True
         for rid, why, parking in going_home(self.job, self.battery):
             market.send_home(rid, why, parking)
+        for rid, r in self.job.robots.items():
+            if r.charge == 0.0 and not r.charging and r.docking not in ("", EMPTY):
+                self.docking.empty(rid)
 
     def _finished(self) -> bool:
         return self.job.finished and self.docking.home()

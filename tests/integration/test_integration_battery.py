@@ -1,5 +1,6 @@
 """Batteries end to end: real processes on a real router, on the small world with two robots
-whose full charge lasts 120 s of sweeping (the job is about 100 s for each). Each must go to
+whose full charge lasts 100 s of sweeping and who go to charge below 35 % (the job is about
+100 s for each). Each must go to
 charge once on the way, one at a time at the one dock (the other waits by it), the work each
 leaves goes to the other, and the job still finishes with every robot home; `fleet dock
 robot-1` sends robot-1 home early on, and it comes back to work."""
@@ -20,7 +21,9 @@ DOCK_AT_S = 15.0
 
 def _config(path: Path) -> Path:
     data = yaml.safe_load(default_config_path().read_text())
-    data["robot"]["battery"].update(enabled=True, capacity_s=120.0, charge_rate=8.0)
+    data["robot"]["battery"].update(
+        enabled=True, capacity_s=100.0, charge_rate=8.0, recharge_threshold=0.35
+    )
     path.write_text(yaml.safe_dump(data))
     return path
 
