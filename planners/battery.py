@@ -43,8 +43,8 @@ class BatterySpec:
     charge_rate: float = 4.0
     recharge_threshold: float = 0.2
     recharge_to: float = 0.9
-    dock_tolerance: float = 0.1
-    dock_align: float = 0.5
+    dock_tolerance: float = 0.12
+    dock_align: float = 0.8
 
     def validate(self) -> None:
         require_positive(self, "capacity_s", "charge_rate", "dock_tolerance", "dock_align")

@@ -38,8 +38,11 @@ from planners.polyline import without_straight_vertices
 log = logging.getLogger("coordinator")
 
 Pose = tuple[float, float, float]
-# a robot drives onto its dock straight from this far in front of it (m)
+# a robot drives onto its dock straight from this far in front of it (m), and stops this far in
+# front of the dock's pose (within the dock's tolerance): closer, DWA creeps and turns by the
+# dock's body and the robot ends up skewed on it
 APPROACH_M = 0.35
+STOP_SHORT_M = 0.04
 # waiting spots keep this far from a dock's pose and from each other (m), and this far from the
 # line a robot drives onto the dock by
 SPOT_FROM_DOCK_M = 0.7
@@ -176,7 +179,7 @@ class Docking:
                 waypoints = self._path(r.xy, np.array(spot), None)
                 task = f"{WAIT_PREFIX}{k}"
             else:
-                waypoints = self._path(r.xy, _approach(dock), np.array(dock[:2]))
+                waypoints = self._path(r.xy, _approach(dock), _approach(dock, STOP_SHORT_M))
                 task = f"{DOCK_PREFIX}{k}"
         except ValueError as e:
             self.journal.event("unreachable", rid, f"{DOCK_PREFIX}{k}", str(e))
@@ -271,11 +274,10 @@ class Docking:
         return True
 
 
-def _approach(dock: Pose) -> np.ndarray:
-    """The point ``APPROACH_M`` in front of ``dock``, from which a robot drives straight on."""
-    return np.array(
-        [dock[0] + APPROACH_M * math.cos(dock[2]), dock[1] + APPROACH_M * math.sin(dock[2])]
-    )
+def _approach(dock: Pose, ahead: float = APPROACH_M) -> np.ndarray:
+    """The point ``ahead`` m in front of ``dock`` (by default where a robot drives straight on
+    from)."""
+    return np.array([dock[0] + ahead * math.cos(dock[2]), dock[1] + ahead * math.sin(dock[2])])
 
 
 def _to_segment(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
