@@ -36,6 +36,8 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 from agents.control import ControlParams, ControlState, Drive, Heard, control
 from agents.map_keeper import MapKeeper
 from agents.market import MarketClient
@@ -45,10 +47,13 @@ from agents.slam.persistence import SavedState, load_state
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
+from fleet.plan_chain import is_dock_trip
 from fleet.protocol import (
     Award,
     AwardAck,
+    BatteryState,
     Clock,
+    Docks,
     Heartbeat,
     Intent,
     LaserScan,
@@ -94,6 +99,8 @@ class Agent:
         self.pose_source: PoseSource | None = None
         self.odom_stamp = -1.0
         self.velocity = (0.0, 0.0)
+        # the battery sensor's last reading, if any (robot.battery on)
+        self.battery: BatteryState | None = None
         self.latency_s = 0.0
         self.drive = Drive()
         # the latest intent of each other robot
@@ -109,6 +116,7 @@ class Agent:
             cfg.robot.radius,
             cfg.slam.occupied_threshold,
             cfg.slam.free_threshold,
+            cfg.robot.battery,
         )
         self._calls: list[TaskCall] = []
         self._told_no_floor = False
@@ -130,7 +138,7 @@ class Agent:
             saved = load_state(self.state_dir)
             start = saved.pose
         self._subscribe()
-        reply = self._request_spawn(SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
+        reply = request_spawn(self.bus, SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
         if reply.stamp >= 0:
             self.rx.start(reply.stamp)
         with self.lock:
@@ -162,6 +170,7 @@ class Agent:
         # peers are in the job by their liveliness tokens, heard before their intents
         self.bus.watch_alive("agent", self.rx.joined, self.rx.left)
         self.bus.subscribe(k.robot(self.rid, "odom"), Odometry, self._on_odom)
+        self.bus.subscribe(k.robot(self.rid, "battery"), BatteryState, self._on_battery)
         self.bus.subscribe(k.robot(self.rid, "scan"), LaserScan, self._on_scan)
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
         self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
@@ -169,20 +178,6 @@ class Agent:
         self.bus.subscribe(k.task("*"), TaskCall, self._on_call)
         self.bus.subscribe(k.award(self.rid), Award, self._on_award)
         self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
-
-    def _request_spawn(self, req: SpawnRequest, timeout: float) -> SpawnReply:
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                reply = self.bus.request(self.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
-                break
-            except (TimeoutError, RuntimeError) as e:
-                if time.monotonic() > deadline:
-                    raise TimeoutError(f"no simulator answered the spawn request: {e}") from None
-                time.sleep(0.2)
-        if not reply.ok:
-            raise ValueError(f"spawn refused: {reply.error}")
-        return reply
 
     def _pose_source(
         self, saved: SavedState | None, spawned: tuple[float, float, float]
@@ -221,6 +216,10 @@ class Agent:
             self.odom_stamp = msg.stamp
             self.velocity = (msg.v, msg.w)
 
+    def _on_battery(self, key: str, msg: BatteryState) -> None:
+        if self.rx.battery(key, msg):
+            self.battery = msg  # one reference, replaced whole
+
     def _on_scan(self, key: str, msg: LaserScan) -> None:
         if not self.rx.scan(key, msg):
             return
@@ -242,7 +241,7 @@ class Agent:
             if msg.plan_id == self.drive.plan_id:
                 self._cut_plan(msg)
                 return
-            if not self.market.holds(msg.task):
+            if not self.market.holds(msg.task) and not is_dock_trip(msg.task):
                 return
             self.drive = Drive.of(msg, self.market.queue)
         log.info(
@@ -267,7 +266,8 @@ class Agent:
             taken = self.market.on_award(msg)
             follow = self.drive.follow
             driving = follow is not None and not follow.done
-            dropped = taken and driving and not any(self.market.holds(t) for t in self.drive.chain)
+            held = is_dock_trip(self.drive.task) or any(map(self.market.holds, self.drive.chain))
+            dropped = taken and driving and not held
             if dropped:
                 self.drive = dataclasses.replace(self.drive, follow=None, task="")
             seq = self.market.seq
@@ -318,7 +318,7 @@ class Agent:
             commitment = self.market.commitment(
                 self.pose_source.pose(), drive.follow, list(drive.chain), drive.chain_time_s
             )
-            bids = self.market.bids(calls, commitment)
+            bids = self.market.bids(calls, commitment, self.battery)
         for b in bids:
             self.bus.publish(self.keys.bid(b.task, self.rid), b, control=True)
 
@@ -331,8 +331,10 @@ class Agent:
             self._told_no_floor = True
             return
         floor = unpack_grid(msg)
+        docks = fetch_docks(self.bus, self.rid)
         with self.lock:
             self.market.use_floor(floor)
+            self.market.docks = docks
 
     def heartbeat_loop(self) -> None:
         """A heartbeat every 1 / ``agent.heartbeat_hz`` wall seconds, whatever sim time does."""
@@ -371,6 +373,7 @@ class Agent:
                 dict(self.peers),
                 self.latency_s,
                 *self.bus.dropped(),
+                self.battery,
             )
             self.control_state, out = control(
                 heard, self.control_state, self.params, self.pose_source
@@ -429,6 +432,33 @@ class Agent:
             self.maps.save_pose(scan.stamp, self.pose_source)
         except Exception:
             self.bus.handler_failed("robot/*/map")
+
+
+def request_spawn(bus: Bus, req: SpawnRequest, timeout: float) -> SpawnReply:
+    """The simulator's answer to ``req``, asked again until it answers or ``timeout`` (wall s)
+    passes; ValueError when it refuses."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            reply = bus.request(bus.keys.sim_spawn(), req, SpawnReply, timeout=2.0)
+            break
+        except (TimeoutError, RuntimeError) as e:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no simulator answered the spawn request: {e}") from None
+            time.sleep(0.2)
+    if not reply.ok:
+        raise ValueError(f"spawn refused: {reply.error}")
+    return reply
+
+
+def fetch_docks(bus: Bus, rid: str) -> np.ndarray:
+    """Where a robot stands on each dock (K, 2), as the coordinator serves them; none when it
+    serves none (an exploring coordinator)."""
+    try:
+        msg = bus.request(bus.keys.docks(), Request(rid), Docks, 1.0)
+    except (TimeoutError, RuntimeError, ValueError):
+        return np.zeros((0, 2))
+    return np.asarray(msg.poses, dtype=float).reshape(-1, 3)[:, :2]
 
 
 def respawn_window(cfg: FleetConfig) -> tuple[float, float]:

@@ -37,8 +37,17 @@ from agents.peers import cut_out, own_intent, progress, to_avoid
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
 from fleet.params import FleetConfig
-from fleet.plan_chain import chain_of, chain_starts, current_task
-from fleet.protocol import TIME_KINDS, Intent, LaserScan, Plan, PoseEstimate, RobotStatus, Twist
+from fleet.plan_chain import DOCK_PREFIX, chain_of, chain_starts, current_task
+from fleet.protocol import (
+    TIME_KINDS,
+    BatteryState,
+    Intent,
+    LaserScan,
+    Plan,
+    PoseEstimate,
+    RobotStatus,
+    Twist,
+)
 
 MEDIAN_BEAMS = 5
 
@@ -95,7 +104,7 @@ class Heard:
     """What a control step is given: the scan, the stamp and velocity (v, ω) of the latest
     odometry, the plan being driven, each peer's latest intent, the latency of a command (sim
     s from its scan until it is sent) and how many messages the bus has dropped as malformed and
-    as implausible."""
+    as implausible, and the battery sensor's last reading (None without one)."""
 
     scan: LaserScan
     odom_stamp: float
@@ -105,6 +114,7 @@ class Heard:
     latency_s: float
     decode_errors: int
     implausible: int = 0
+    battery: BatteryState | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,13 +227,17 @@ def _command(
     located: Located,
     obstacles: np.ndarray,
 ) -> tuple[ControlState, Command]:
-    """Stop (stale odometry, not localized), keep clear (no path), hold, or follow the path."""
+    """Stop (stale odometry, not localized), keep clear (no path; on its dock, stand), hold,
+    or follow the path."""
     drive, agent, stamp, pose = heard.drive, params.follow.agent, heard.scan.stamp, located.pose
     follow = drive.follow
     if stamp - heard.odom_stamp > agent.stale_after_s:
         return state, Command(0.0, 0.0, "stale", "other", follow)
     if not located.localized:
         return _lost(state, located, follow)
+    if follow is not None and follow.done and drive.task.startswith(DOCK_PREFIX):
+        # on its dock: stepping aside for a peer would take it off the charger
+        return state, Command(0.0, 0.0, "done", "idle", follow)
     if follow is None or follow.done:
         peers = to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, everyone=True)
         now = Situation(pose, heard.velocity, obstacles, peers)
@@ -363,4 +377,6 @@ def _status(heard: Heard, state: ControlState, follow: FollowState | None) -> Ro
         swept_pieces(follow, drive.sweep_from),
         np.array(state.time_s),
         heard.implausible,
+        -1.0 if heard.battery is None else heard.battery.percentage,
+        heard.battery is not None and heard.battery.charging,
     )

@@ -12,6 +12,12 @@ priced at half the top speed because that is about what robots make on them (DWA
 doorways and along walls), while tasks' times come from the coverage plan: at top speed,
 travel would look cheap next to the work a robot already holds, and an idle robot would win
 tasks it takes far longer to reach than their owner would.
+
+With batteries (``robot.battery``) a robot prices the energy too: a task it cannot finish, with
+all it has won before it, and then drive home to the nearest dock from on its charge
+(``planners.battery.can_take``) is declined, not bid for. While it charges (below
+``recharge_to``) or has fallen below ``recharge_threshold`` it does not bid at all: the
+coordinator has taken it out of the market.
 """
 
 from __future__ import annotations
@@ -25,8 +31,9 @@ import numpy as np
 from agents.follow.state import FollowState
 from agents.slam.slam_map import SlamMap
 from fleet import plan_chain
-from fleet.protocol import Award, Bid, TaskCall
+from fleet.protocol import Award, BatteryState, Bid, TaskCall
 from planners import auction
+from planners.battery import BatterySpec, can_take
 from planners.grid import GridMap, dilate
 
 
@@ -50,8 +57,12 @@ class MarketClient:
         radius: float,
         occupied_threshold: float,
         free_threshold: float,
+        battery: BatterySpec | None = None,
     ) -> None:
         self.robot = robot
+        self.battery = battery if battery is not None else BatterySpec()
+        # where the robot stands on each dock (K, 2), from the coordinator
+        self.docks = np.zeros((0, 2))
         self.speed = speed
         self.radius = radius
         self.thresholds = (occupied_threshold, free_threshold)
@@ -116,8 +127,32 @@ class MarketClient:
             current = current.with_task(w.entry, w.exit, w.time_s, travel)
         return current
 
-    def bids(self, calls: Sequence[TaskCall], commitment: auction.Commitment) -> list[Bid]:
-        """This robot's bids on ``calls`` (tasks it already holds are not bid on)."""
+    def resting(self, reading: BatteryState | None) -> bool:
+        """Whether the robot is out of the market on its charge: below the threshold, or
+        charging and not yet at ``recharge_to``."""
+        spec = self.battery
+        if not spec.enabled or reading is None:
+            return False
+        low = reading.percentage < spec.recharge_threshold
+        return low or (reading.charging and reading.percentage < spec.recharge_to)
+
+    def home_s(self, xy: np.ndarray) -> float:
+        """Seconds from ``xy`` to the nearest dock (0 without docks known)."""
+        if not len(self.docks):
+            return 0.0
+        return float(np.min(self._travel(np.asarray(xy, dtype=float), self.docks)))
+
+    def bids(
+        self,
+        calls: Sequence[TaskCall],
+        commitment: auction.Commitment,
+        reading: BatteryState | None = None,
+    ) -> list[Bid]:
+        """This robot's bids on ``calls`` (tasks it already holds are not bid on); with its
+        battery's ``reading``, those it cannot do and then get home from are declined."""
+        if self.resting(reading):
+            return []
+        charge = 1.0 if reading is None else reading.percentage
         out = []
         for c in calls:
             if self.holds(c.task):
@@ -132,8 +167,20 @@ class MarketClient:
                 self._travel,
                 c.gain_s,
             )
+            end = np.array([c.entry_x, c.entry_y] if b.reverse else [c.exit_x, c.exit_y])
+            home = self.home_s(end) if self.battery.enabled else 0.0
+            declined = not can_take(self.battery, charge, b.total_s, home)
             out.append(
-                Bid(c.stamp, c.round, c.task, self.robot, b.marginal_s, b.total_s, b.reverse)
+                Bid(
+                    c.stamp,
+                    c.round,
+                    c.task,
+                    self.robot,
+                    b.marginal_s,
+                    b.total_s,
+                    b.reverse,
+                    declined,
+                )
             )
         return out
 

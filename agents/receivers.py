@@ -35,7 +35,7 @@ import numpy as np
 
 from fleet.params import FleetConfig, LidarParams
 from fleet.plausible import Bounds, PoseTrack, SimClock
-from fleet.protocol import Intent, LaserScan, Odometry
+from fleet.protocol import BatteryState, Intent, LaserScan, Odometry
 
 # drop(key, sender, why, n): n messages on key from sender dropped as implausible
 Drop = Callable[[str, str, str, int], None]
@@ -148,6 +148,12 @@ class Receivers:
             if self._odometry is None:
                 self._odometry = self._track(key, SIM)
             return self._odometry.hear(msg.stamp, (msg.x, msg.y))
+
+    def battery(self, key: str, msg: BatteryState) -> bool:
+        """Whether to believe the robot's battery reading ``msg``: a fraction of a full charge,
+        stamped no later than the clock allows."""
+        why = "" if 0.0 <= msg.percentage <= 1.0 else f"charge {msg.percentage:.3g} not in 0..1"
+        return self._judge(key, SIM, why or self._ahead(msg.stamp))
 
     def scan(self, key: str, msg: LaserScan) -> bool:
         """Whether to believe the robot's scan ``msg``; a believed one is heard by the clock."""

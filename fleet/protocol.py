@@ -24,7 +24,7 @@ from typing import Annotated, Any, ClassVar, TypeVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
@@ -113,6 +113,9 @@ class Keys:
 
     def floor_map(self) -> str:
         return f"{self.root}/coord/map"
+
+    def docks(self) -> str:
+        return f"{self.root}/coord/docks"
 
     def ops(self, verb: str) -> str:
         return f"{self.root}/ops/{verb}"
@@ -216,6 +219,18 @@ class Odometry(Message):
 
 
 @dataclass(frozen=True, eq=False)
+class BatteryState(Message):
+    """sensor_msgs/BatteryState, reduced: ``percentage`` the charge as a fraction of a full
+    one (0..1, as ROS gives it), ``charging`` whether a dock is charging it (sim → its
+    agent, with robot.battery on)."""
+
+    TYPE: ClassVar[str] = "battery"
+    stamp: float
+    percentage: float
+    charging: bool = False
+
+
+@dataclass(frozen=True, eq=False)
 class Twist(Message):
     """cmd_vel. ``stamp`` is the sim time of the newest sensor data the command answers."""
 
@@ -270,7 +285,8 @@ class RobotStatus(Message):
     by its own pose estimate, so the coordinator knows the exact remainder of the task.
     ``time_s`` is the sim time its control steps have spent on each of ``TIME_KINDS`` since it
     started. ``decode_errors`` and ``implausible`` count the messages its agent dropped as
-    malformed and as implausible."""
+    malformed and as implausible. ``charge`` is its battery's last reading (a fraction of a
+    full charge; -1 without a battery sensor heard) and ``charging`` whether a dock charges it."""
 
     TYPE: ClassVar[str] = "status"
     stamp: float
@@ -290,6 +306,8 @@ class RobotStatus(Message):
         default_factory=lambda: np.zeros(0, dtype=np.float64)
     )
     implausible: int = 0
+    charge: float = -1.0
+    charging: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -366,7 +384,9 @@ class TaskCall(Message):
 class Bid(Message):
     """A robot's price for a called task (``coord/bid/<task>/<robot>``): the marginal seconds
     of adding it to what the robot has won, its whole committed time with it, and which end it
-    would enter by (``reverse``: the task's exit)."""
+    would enter by (``reverse``: the task's exit). ``declined``: the robot cannot do it and then
+    get to a dock on its charge; it answers the call, so the round need not wait for it, but
+    never wins."""
 
     TYPE: ClassVar[str] = "bid"
     stamp: float
@@ -376,6 +396,18 @@ class Bid(Message):
     marginal_s: float
     total_s: float
     reverse: bool
+    declined: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class Docks(Message):
+    """The world's docks, served by the coordinator on ``coord/docks``: rows of (x, y,
+    theta), the pose of a robot standing on each (facing away from it); none, a world without
+    docks."""
+
+    TYPE: ClassVar[str] = "docks"
+    stamp: float
+    poses: Annotated[np.ndarray, Arr("<f8", (3,))]
 
 
 @dataclass(frozen=True, eq=False)
@@ -478,7 +510,10 @@ class Collision(Message):
 @dataclass(frozen=True, eq=False)
 class CoverageSummary(Message):
     """Ground-truth cleaning progress and per-robot counters (sim → dashboard and report), and
-    how many messages the simulator has dropped as malformed and as implausible."""
+    how many messages the simulator has dropped as malformed and as implausible. With
+    robot.battery on, per robot too: its ``charge`` now and ``min_charge`` (fractions), the
+    ``charges`` it began on a dock, its ``charging_s`` (sim s) and whether it stands ``docked``
+    (1) now; empty arrays with batteries off."""
 
     TYPE: ClassVar[str] = "coverage"
     stamp: float
@@ -493,6 +528,15 @@ class CoverageSummary(Message):
     robot_collisions: Annotated[np.ndarray, Arr("<i4")]
     decode_errors: int = 0
     implausible: int = 0
+    charge: Annotated[np.ndarray, Arr("<f8")] = field(default_factory=lambda: np.zeros(0))
+    min_charge: Annotated[np.ndarray, Arr("<f8")] = field(default_factory=lambda: np.zeros(0))
+    charges: Annotated[np.ndarray, Arr("<i4")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int32)
+    )
+    charging_s: Annotated[np.ndarray, Arr("<f8")] = field(default_factory=lambda: np.zeros(0))
+    docked: Annotated[np.ndarray, Arr("|u1")] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.uint8)
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -639,6 +683,7 @@ MESSAGES: dict[str, type[Message]] = {
         Clock,
         LaserScan,
         Odometry,
+        BatteryState,
         Twist,
         PoseEstimate,
         TruthPose,
@@ -656,6 +701,7 @@ MESSAGES: dict[str, type[Message]] = {
         Heartbeat,
         TaskCall,
         Bid,
+        Docks,
         Award,
         AwardAck,
         FleetEvent,

@@ -3,8 +3,10 @@
 Two kinds of file load as a world:
 
 * a **world YAML** (``configs/worlds/*.yaml``) with walls as thick segments, furniture as boxes
-  or circles, a charging dock and start poses — or with ``map:`` naming a ROS map_server YAML
-  whose image gives the walls;
+  or circles, charging docks (``dock:`` one pose, or ``docks:`` a list of poses; a pose is
+  where a robot stands on the dock, heading away from the dock's body) and start poses — or
+  with ``map:`` naming a ROS map_server YAML whose image gives the walls (a map world's docks
+  have no body drawn: the image shows what is there);
 * a **ROS map_server YAML** (``image``, ``resolution``, ``origin``, ``negate``,
   ``occupied_thresh``, ``free_thresh``, optional ``mode``), as written by ``map_saver``.
 
@@ -34,6 +36,7 @@ WORLD_FIELDS = {
     "walls",
     "furniture",
     "dock",
+    "docks",
     "starts",
     "map",
 }
@@ -69,9 +72,14 @@ class World:
     walls: tuple[np.ndarray, ...]
     furniture: tuple[Furniture, ...]
     map_grid: GridMap | None
-    dock: Pose | None
+    docks: tuple[Pose, ...]
     starts: tuple[Pose, ...]
     bounds: tuple[float, float, float, float]
+
+    @property
+    def dock(self) -> Pose | None:
+        """The first dock (None without one): where the robots' tour starts from."""
+        return self.docks[0] if self.docks else None
 
     @property
     def polygons(self) -> tuple[np.ndarray, ...]:
@@ -156,7 +164,7 @@ def load_world(path: str | Path, robot_radius: float | None = None) -> World:
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     if "image" in data:
-        world = _world_from_ros_map(path, data, starts=(), dock=None, name=path.stem)
+        world = _world_from_ros_map(path, data, starts=(), docks=(), name=path.stem)
     else:
         world = _world_from_yaml(path, data)
     _check_starts(world, robot_radius)
@@ -199,7 +207,7 @@ def on_stored_map(world: World, map_path: str | Path) -> World:
     rows, cols = grid.shape
     ox, oy = grid.origin
     bounds = (ox, oy, ox + cols * grid.resolution, oy + rows * grid.resolution)
-    return World(world.name, path, (), (), grid, world.dock, world.starts, bounds)
+    return World(world.name, path, (), (), grid, world.docks, world.starts, bounds)
 
 
 def _number(value: Any, where: str) -> float:
@@ -239,7 +247,7 @@ def _world_from_yaml(path: Path, data: dict) -> World:
     starts = tuple(
         _vector(s, 3, f"{path}: starts[{i}]") for i, s in enumerate(_list(data, "starts", path))
     )
-    dock = _vector(data["dock"], 3, f"{path}: dock") if data.get("dock") is not None else None
+    docks = _docks(data, path)
     if "map" in data:
         if data.get("walls") or data.get("furniture"):
             raise ConfigError(
@@ -253,7 +261,7 @@ def _world_from_yaml(path: Path, data: dict) -> World:
         map_data = read_yaml(map_path)
         if not isinstance(map_data, dict):
             raise ConfigError(f"{map_path}: expected a mapping at the top level")
-        return _world_from_ros_map(map_path, map_data, starts, dock, name, source=path)
+        return _world_from_ros_map(map_path, map_data, starts, docks, name, source=path)
 
     thickness = _number(data.get("wall_thickness", 0.1), f"{path}: wall_thickness")
     if thickness <= 0:
@@ -270,10 +278,11 @@ def _world_from_yaml(path: Path, data: dict) -> World:
         _furniture(f, f"{path}: furniture[{i}]")
         for i, f in enumerate(_list(data, "furniture", path))
     ]
-    if dock is not None:
+    for i, dock in enumerate(docks):
         # The dock's body stands behind its pose, against the wall it faces away from.
         back = (dock[0] - math.cos(dock[2]) * 0.3, dock[1] - math.sin(dock[2]) * 0.3)
-        furniture.append(Furniture("dock", _box(back, DOCK_SIZE[::-1], dock[2])))
+        name_i = "dock" if i == 0 else f"dock {i}"
+        furniture.append(Furniture(name_i, _box(back, DOCK_SIZE[::-1], dock[2])))
     pts = np.concatenate(walls)
     bounds = (
         float(pts[:, 0].min()),
@@ -281,7 +290,16 @@ def _world_from_yaml(path: Path, data: dict) -> World:
         float(pts[:, 0].max()),
         float(pts[:, 1].max()),
     )
-    return World(name, path, tuple(walls), tuple(furniture), None, dock, starts, bounds)
+    return World(name, path, tuple(walls), tuple(furniture), None, docks, starts, bounds)
+
+
+def _docks(data: dict, path: Path) -> tuple[Pose, ...]:
+    """The world's docks: ``dock:`` (one pose) and ``docks:`` (a list), the first first."""
+    out = []
+    if data.get("dock") is not None:
+        out.append(_vector(data["dock"], 3, f"{path}: dock"))
+    out += [_vector(d, 3, f"{path}: docks[{i}]") for i, d in enumerate(_list(data, "docks", path))]
+    return tuple(out)
 
 
 def _list(data: dict, key: str, path: Path) -> list:
@@ -378,13 +396,18 @@ def _parse_ros_map(path: Path, data: dict) -> GridMap:
 
 
 def _world_from_ros_map(
-    path: Path, data: dict, starts: tuple, dock: Pose | None, name: str, source: Path | None = None
+    path: Path,
+    data: dict,
+    starts: tuple,
+    docks: tuple[Pose, ...],
+    name: str,
+    source: Path | None = None,
 ) -> World:
     g = _parse_ros_map(path, data)
     rows, cols = g.shape
     ox, oy = g.origin
     bounds = (ox, oy, ox + cols * g.resolution, oy + rows * g.resolution)
-    return World(name, source or path, (), (), g, dock, starts, bounds)
+    return World(name, source or path, (), (), g, docks, starts, bounds)
 
 
 def _resample(g: GridMap, resolution: float) -> GridMap:
@@ -410,12 +433,11 @@ def _resample(g: GridMap, resolution: float) -> GridMap:
 
 
 def _check_starts(world: World, radius: float | None) -> None:
-    if not world.starts and world.dock is None:
+    if not world.starts and not world.docks:
         return
     where = world.source
     named = [(f"starts[{i}]", s) for i, s in enumerate(world.starts)]
-    if world.dock is not None:
-        named.append(("dock", world.dock))
+    named += [(f"docks[{i}]" if i else "dock", d) for i, d in enumerate(world.docks)]
     xy = np.array([p[:2] for _, p in named])
     xmin, ymin, xmax, ymax = world.bounds
     clear = world.clearance(xy)
@@ -423,7 +445,7 @@ def _check_starts(world: World, radius: float | None) -> None:
         x, y = pose[0], pose[1]
         if not (xmin <= x <= xmax and ymin <= y <= ymax):
             raise ConfigError(f"{where}: {field}: ({x}, {y}) lies outside the world {world.bounds}")
-        if field != "dock" and (c <= 0 or (radius is not None and c < radius)):
+        if c <= 0 or (radius is not None and c < radius):
             near = "" if radius is None else f" or closer than the robot radius {radius} m to one"
             raise ConfigError(
                 f"{where}: {field}: ({x}, {y}) is inside an obstacle{near} (clearance {c:.3f} m)"

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from planners.battery import BatterySpec
 from planners.checks import require_positive
 
 # A side brush reaching farther than this beyond the body (m) is no side brush a robot vacuum
@@ -66,7 +67,9 @@ class RobotSpec:
     of its brush swath, centred on the robot and no wider than the body; ``max_vel_x`` (m/s)
     and ``max_vel_theta`` (rad/s) its top speeds, ``acc_lim_x`` (m/s²) and ``acc_lim_theta``
     (rad/s²) its acceleration limits (named as in ROS base_local_planner); ``mass`` (kg);
-    ``side_brush`` its side brush (:class:`SideBrush`; none unless the config gives one).
+    ``side_brush`` its side brush (:class:`SideBrush`; none unless the config gives one);
+    ``battery`` its battery (:class:`planners.battery.BatterySpec`; off unless the config turns
+    it on: the robot never runs down).
     """
 
     radius: float
@@ -78,9 +81,11 @@ class RobotSpec:
     acc_lim_theta: float
     mass: float
     side_brush: SideBrush = field(default_factory=SideBrush)
+    battery: BatterySpec = field(default_factory=BatterySpec)
 
     def validate(self) -> None:
-        require_positive(self, *(f.name for f in fields(self) if f.name != "side_brush"))
+        parts = ("side_brush", "battery")
+        require_positive(self, *(f.name for f in fields(self) if f.name not in parts))
         if self.cleaning_width > 2 * self.radius + 1e-9:
             raise ValueError("cleaning_width must not exceed the robot diameter (2·radius)")
         brush = self.side_brush

@@ -11,10 +11,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fleet.config import ConfigError
 from fleet.params import FleetConfig
-from fleet.protocol import Collision, CoverageSummary, LaserScan, Odometry
+from fleet.protocol import BatteryState, Collision, CoverageSummary, LaserScan, Odometry
 from fleet.world import World
 from planners.polyline import TurnCounter
+from sim_server.battery import Batteries, BatteryLog
 from sim_server.cleaning import CleaningGrid, cleanable_mask
 from sim_server.lidar import (
     SegmentIndex,
@@ -45,6 +47,8 @@ COLLISION_DEBOUNCE_S = 1.0
 CLEANING_HZ = 10.0
 # The true poses go to the dashboard and the report this often.
 TRUTH_HZ = 10.0
+# Each robot's battery sensor reads this often (with robot.battery on).
+BATTERY_HZ = 2.0
 
 
 @dataclass
@@ -65,6 +69,7 @@ class RobotState:
     )
     wall_collisions: int = 0
     robot_collisions: int = 0
+    battery: BatteryLog = field(default_factory=BatteryLog)
 
     def turns(self) -> int:
         return self.trajectory.turns()
@@ -78,6 +83,7 @@ class StepOutput:
     scans: list[tuple[str, LaserScan]] = field(default_factory=list)
     odometry: list[tuple[str, Odometry]] = field(default_factory=list)
     collisions: list[Collision] = field(default_factory=list)
+    batteries: list[tuple[str, BatteryState]] = field(default_factory=list)
     truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     summary: CoverageSummary | None = None
 
@@ -112,6 +118,7 @@ class SimCore:
         self.odom_every = max(1, round(cfg.sim.physics_hz / cfg.odometry.rate_hz))
         self.clean_every = max(1, round(cfg.sim.physics_hz / CLEANING_HZ))
         self.truth_every = max(1, round(cfg.sim.physics_hz / TRUTH_HZ))
+        self.battery_every = max(1, round(cfg.sim.physics_hz / BATTERY_HZ))
         self.summary_every = max(1, round(cfg.sim.physics_hz / cfg.sim.coverage_hz))
         from sim_server.physics import Physics
 
@@ -143,6 +150,13 @@ class SimCore:
         self._path = np.zeros(0)
         self._sampled_xy = np.zeros((0, 2))
         self._odom = OdometryModel(cfg.odometry, self.rng, np.zeros((0, 3)))
+        # None with robot.battery off: nothing drains, as before batteries
+        self.batteries = Batteries(cfg.robot, world.docks) if cfg.robot.battery.enabled else None
+        if self.batteries is not None and not world.docks:
+            raise ConfigError(
+                f"{world.source}: robot.battery is on, but the world has no dock to charge at "
+                "(give it dock: or docks:)"
+            )
 
     # ---- robots -------------------------------------------------------------------------
 
@@ -179,6 +193,8 @@ class SimCore:
         self._path = np.append(self._path, state.path_length_m)
         self._sampled_xy = np.vstack([self._sampled_xy, placed[:, :2]])
         self._odom.add(pose)
+        if self.batteries is not None:
+            self.batteries.add(state.battery)
         self.cleaning.update([rid], placed)
         return pose
 
@@ -198,6 +214,8 @@ class SimCore:
             for a in (self._poses, self._cmd, self._vel, self._path, self._sampled_xy)
         )
         self._odom.remove(i)
+        if self.batteries is not None:
+            self.batteries.remove(i)
         self.departed[rid] = state
 
     def _reindex(self) -> None:
@@ -233,6 +251,9 @@ class SimCore:
         if ids:
             rp = self.cfg.robot
             limit = np.array([rp.acc_lim_x, rp.acc_lim_theta]) * self.dt
+            if self.batteries is not None:
+                # a robot at 0 % stands where it is, whatever it is told
+                self._cmd[self.batteries.empty()] = 0.0
             self._vel += np.clip(self._cmd - self._vel, -limit, limit)
             self.physics.drive(ids, self._vel[:, 0], self._vel[:, 1], self._poses[:, 2])
         self.physics.step(self.dt)
@@ -250,6 +271,13 @@ class SimCore:
         for i in np.nonzero(far >= TRAJECTORY_SAMPLE_M)[0].tolist():
             self.robots[ids[i]].trajectory.append(float(xy[i, 0]), float(xy[i, 1]))
             self._sampled_xy[i] = xy[i]
+        if self.batteries is not None:
+            self.batteries.step(self.dt, self._vel, poses)
+            if self.steps % self.battery_every == 0:
+                out.batteries = [
+                    (rid, BatteryState(self.t, b.charge, b.docked))
+                    for rid, b in zip(ids, self.batteries.logs, strict=True)
+                ]
         if self.steps % self.clean_every == 0:
             self.cleaning.update(ids, poses)
         if self.steps % self.odom_every == 0:
@@ -334,4 +362,19 @@ class SimCore:
             turns=np.array([robots[r].turns() for r in ids], dtype=np.int32),
             wall_collisions=np.array([robots[r].wall_collisions for r in ids], dtype=np.int32),
             robot_collisions=np.array([robots[r].robot_collisions for r in ids], dtype=np.int32),
+            **self._battery_figures(robots, ids),
         )
+
+    def _battery_figures(self, robots: dict[str, RobotState], ids: list[str]) -> dict:
+        """The summary's battery arrays, one entry per robot of ``ids`` (none with batteries
+        off)."""
+        if self.batteries is None:
+            return {}
+        logs = [robots[r].battery for r in ids]
+        return {
+            "charge": np.array([b.charge for b in logs]),
+            "min_charge": np.array([b.min_charge for b in logs]),
+            "charges": np.array([b.charges for b in logs], dtype=np.int32),
+            "charging_s": np.array([b.charging_s for b in logs]),
+            "docked": np.array([b.docked for b in logs], dtype=np.uint8),
+        }

@@ -272,6 +272,8 @@ class SimServer:
                 self.bus.publish(k.collisions(), c, control=True)
             for rid, msg in out.odometry:
                 self.bus.publish(k.robot(rid, "odom"), msg)
+            for rid, msg in out.batteries:
+                self.bus.publish(k.robot(rid, "battery"), msg)
             for rid, msg in out.scans:
                 self.bus.publish(k.robot(rid, "scan"), msg, control=True)
             for rid, (x, y, th) in out.truth.items():

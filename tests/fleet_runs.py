@@ -24,8 +24,11 @@ class FleetRun(RunningFleet):
         world: str = "small",
         timeout_s: float = 300.0,
         speed: float = 0.0,
+        options: tuple[str, ...] = (),
     ) -> None:
-        super().__init__(run_dir, str(WORLDS / f"{world}.yaml"), robots, speed=speed)
+        super().__init__(
+            run_dir, str(WORLDS / f"{world}.yaml"), robots, speed=speed, options=options
+        )
         self.timeout_s = timeout_s
 
     def wait_for(self, pred, timeout: float = 120.0, what: str = "") -> None:

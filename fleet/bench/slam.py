@@ -127,9 +127,7 @@ def shift_world(world: World, dx: float, dy: float) -> World:
         walls=tuple(w + d for w in world.walls),
         furniture=tuple(replace(f, polygon=f.polygon + d) for f in world.furniture),
         map_grid=grid,
-        dock=None
-        if world.dock is None
-        else (world.dock[0] + dx, world.dock[1] + dy, world.dock[2]),
+        docks=tuple((x + dx, y + dy, t) for x, y, t in world.docks),
         starts=tuple((x + dx, y + dy, t) for x, y, t in world.starts),
         bounds=(x0 + dx, y0 + dy, x1 + dx, y1 + dy),
     )

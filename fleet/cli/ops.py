@@ -35,6 +35,7 @@ from fleet.supervisor.ops import (
     OpsError,
     Sig,
     _up_state,
+    ask_dock,
     ask_respawn,
     send_signal,
 )
@@ -114,6 +115,30 @@ def respawn(
     run_dir, table = _table(run_dir)
     try:
         typer.echo(ask_respawn(run_dir, table, name, timeout, sender="cli"))
+    except OpsError as e:
+        _fail(str(e))
+
+
+def dock(
+    name: NameArg,
+    timeout: Annotated[
+        float, typer.Option("--timeout", help="Seconds to wait for the coordinator to answer.")
+    ] = 10.0,
+    run_dir: RunDirOpt = None,
+) -> None:
+    """Send a robot home to a dock now, with robot.battery on.
+
+    The coordinator takes its work back (the unswept rest of its task and its unstarted tasks
+    go back to the market), sends it to the nearest free dock (or to wait by one that is taken)
+    and lets it bid again once it has charged to robot.battery.recharge_to.
+
+    Example: `fleet dock robot-1`.
+    """
+    if timeout <= 0:
+        _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    _, table = _table(run_dir)
+    try:
+        typer.echo(ask_dock(table, name, timeout, sender="cli"))
     except OpsError as e:
         _fail(str(e))
 
@@ -356,5 +381,6 @@ def _rich_table(table_cls: type, columns: tuple[str, ...], rows: list[list[str]]
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
-    for name, command in (("kill", kill), ("respawn", respawn), ("status", status), ("down", down)):
+    commands = (("kill", kill), ("respawn", respawn), ("dock", dock), ("status", status))
+    for name, command in (*commands, ("down", down)):
         app.command(name, help=reflow(command.__doc__ or ""))(command)

@@ -238,6 +238,7 @@ def coordinator(
     import sqlite3
 
     from fleet.config import ConfigError
+    from fleet.coordinator.charging_service import ChargingCoordinator
     from fleet.coordinator.explore_service import ExploringCoordinator
     from fleet.coordinator.exploring import Explorer, MapPlanner
     from fleet.coordinator.planning import TaskPlanner
@@ -283,7 +284,21 @@ def coordinator(
         _fail("--loop and --explore do not go together: exploring ends when no frontier is left")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
     bounds = Bounds.of(cfg)
-    if explore is None:
+    if explore is None and cfg.robot.battery.enabled:
+        if not w.docks:
+            _fail(f"{w.source}: robot.battery is on, but the world has no dock (dock: or docks:)")
+        c = ChargingCoordinator(
+            bus,
+            planner,
+            robots,
+            cfg.coordinator,
+            store,
+            transits,
+            bounds=bounds,
+            battery=cfg.robot.battery,
+            docks=w.docks,
+        )
+    elif explore is None:
         c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=bounds)
     else:
         explorer = Explorer(cfg, MapPlanner(cfg), explore)

@@ -151,7 +151,9 @@ class Auctioneer:
         live = [
             b
             for b in rnd.bids.values()
-            if b.robot in market and (allowed is None or allowed(rnd.lots[b.task], b.robot))
+            if b.robot in market
+            and not b.declined
+            and (allowed is None or allowed(rnd.lots[b.task], b.robot))
         ]
         best = auction.winner(
             (auction.Bid(b.task, b.robot, b.marginal_s, b.total_s, b.reverse) for b in live),
@@ -160,7 +162,7 @@ class Auctioneer:
         if best is None and rnd.bids:
             log.info(
                 "auction round %d: %d bid(s), none may win (its robot left the market, its lot "
-                "changed meanwhile, or its robot tried it)",
+                "changed meanwhile, its robot tried it, or declined it on its charge)",
                 rnd.number,
                 len(rnd.bids),
             )

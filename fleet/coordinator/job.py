@@ -39,6 +39,8 @@ GONE = "gone"
 SETTLED = (DONE, REPLACED, BLOCKED, UNREACHABLE, GONE)
 LEFT_OUT = (BLOCKED, UNREACHABLE)
 ALIVE, LOST, REJOINED = "alive", "lost", "rejoined"
+# a robot whose battery ran out away from a dock: it stands for good (RobotRecord.docking)
+EMPTY = "empty"
 
 
 @dataclass
@@ -77,10 +79,16 @@ class RobotRecord:
     award_seq: int = 0
     acked_seq: int = 0
     xy: tuple[float, float] | None = None
+    # its battery as its status reports it: charge (fraction; -1 without a battery heard) and
+    # whether a dock charges it; ``docking`` names the dock trip that keeps it out of the
+    # market ("" while it works)
+    charge: float = -1.0
+    charging: bool = False
+    docking: str = ""
 
     @property
     def in_market(self) -> bool:
-        return self.liveness != LOST and self.ready and self.xy is not None
+        return self.liveness != LOST and self.ready and self.xy is not None and not self.docking
 
 
 class Job:
@@ -135,6 +143,15 @@ class Job:
     def market(self) -> list[str]:
         """Robots that may bid: not lost, localized, with a known pose."""
         return sorted(rid for rid, r in self.robots.items() if r.in_market)
+
+    def bidders(self) -> list[str]:
+        """Robots that may bid now or once back from charging: whether every one has tried a
+        task (none out charging is left out of that)."""
+        return sorted(
+            rid
+            for rid, r in self.robots.items()
+            if r.liveness != LOST and r.ready and r.xy is not None and r.docking != EMPTY
+        )
 
     # ---- transitions --------------------------------------------------------------------
 
@@ -312,8 +329,9 @@ class Job:
         return made
 
     def settle_unreachable(self) -> list[str]:
-        """Open tasks every robot in the market has tried become unreachable; their ids."""
-        market = set(self.market())
+        """Open tasks every robot that may bid (:meth:`bidders`) has tried become unreachable;
+        their ids."""
+        market = set(self.bidders())
         out = []
         for rec in self.open_tasks():
             if market and market <= rec.tried:
@@ -324,7 +342,7 @@ class Job:
     def reopen(self, body: str | None = None) -> list[str]:
         """The world changed: the tasks ``body`` blocked (with ``body`` given), and the
         unreachable tasks some robot in the market has not tried, open again; their ids."""
-        market = set(self.market())
+        market = set(self.bidders())
         out = []
         for rec in self.tasks.values():
             freed = rec.state == BLOCKED and body is not None and rec.blocked_by == body

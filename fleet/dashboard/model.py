@@ -109,7 +109,8 @@ class RobotRow:
     """One robot as the view shows it. ``liveness`` is alive, silent (no heartbeat for
     ``SILENT_AFTER_S``), lost (the coordinator says so or its liveliness token went) or
     unknown; ``restarts`` is None when no process table is known; ``gave_up`` counts the
-    waypoints given up over all its plans since the view came."""
+    waypoints given up over all its plans since the view came; ``charge`` its battery's last
+    reading (None without batteries) and ``charging`` whether a dock charges it."""
 
     rid: str
     liveness: str
@@ -122,6 +123,8 @@ class RobotRow:
     gave_up: int
     pose: tuple[float, float, float] | None
     intent: np.ndarray | None
+    charge: float | None = None
+    charging: bool = False
 
 
 @dataclass(frozen=True)
@@ -460,6 +463,8 @@ class FleetWatcher:
             gave_up=v.gave_up,
             pose=v.pose,
             intent=v.intent,
+            charge=s.charge if s and s.charge >= 0 else None,
+            charging=bool(s and s.charging),
         )
 
     def _eta(self, now: float) -> float | None:
@@ -492,6 +497,8 @@ class FleetWatcher:
             states = ", ".join(
                 f"{rid}={v.status.state}:{100 * v.status.progress:.0f}%"
                 + (f" ({v.gave_up} waypoints given up)" if v.gave_up else "")
+                + (f" battery {100 * v.status.charge:.0f}%" if v.status.charge >= 0 else "")
+                + (" charging" if v.status.charging else "")
                 for rid, v in sorted(self.robots.items())
                 if v.status is not None
             )

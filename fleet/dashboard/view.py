@@ -337,6 +337,7 @@ ROBOT_COLUMNS = (
     ("heartbeat", 9, True),
     ("restarts", 8, True),
     ("gave up", 7, True),
+    ("battery", 8, True),
 )
 
 
@@ -347,7 +348,7 @@ def _cell(text: str, width: int, right: bool) -> str:
 
 def robot_table(snap: FleetSnapshot, selected: str | None = None) -> list[Line]:
     """A title row, then one row per robot: liveness, state, task, progress, speed, heartbeat
-    age, restarts and waypoints given up; the selected robot's row reversed."""
+    age, restarts, waypoints given up and charge; the selected robot's row reversed."""
     title = " ".join(_cell(name, w, right) for name, w, right in ROBOT_COLUMNS)
     lines: list[Line] = [[(title, "bold")]]
     for r in snap.robots:
@@ -361,6 +362,7 @@ def robot_table(snap: FleetSnapshot, selected: str | None = None) -> list[Line]:
             "—" if r.heartbeat_age is None else f"{r.heartbeat_age:4.1f} s",
             "—" if r.restarts is None else str(r.restarts),
             str(r.gave_up),
+            battery_cell(r.charge, r.charging),
         )
         cells = [_cell(v, w, right) for v, (_, w, right) in zip(values, ROBOT_COLUMNS, strict=True)]
         rev = " reverse" if r.rid == selected else ""
@@ -369,6 +371,13 @@ def robot_table(snap: FleetSnapshot, selected: str | None = None) -> list[Line]:
         line.append((" " + " ".join(cells[2:]), rev.strip()))
         lines.append(line)
     return lines
+
+
+def battery_cell(charge: float | None, charging: bool) -> str:
+    """A robot's charge as the table shows it: "—" without batteries, "+" while charging."""
+    if charge is None:
+        return "—"
+    return f"{'+' if charging else ''}{100 * charge:.0f} %"
 
 
 def events_panel(snap: FleetSnapshot, rows: int = EVENT_ROWS) -> list[Line]:

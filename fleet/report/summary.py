@@ -140,6 +140,22 @@ def side_brush_only(image: CoverageImage) -> float:
     return round(float(only.sum()) / max(int(cleanable.sum()), 1), 5)
 
 
+def battery_of(summary: CoverageSummary, i: int) -> dict[str, dict[str, Any]]:
+    """report.json's ``battery`` of robot ``i`` of ``summary``, as the simulator kept it: its
+    lowest charge (fraction of a full one), the charges it began on a dock, its seconds on one
+    and whether it stood on one when the job ended (``parked``); nothing with batteries off."""
+    if i >= len(summary.charge):
+        return {}
+    return {
+        "battery": {
+            "min_charge": round(float(summary.min_charge[i]), 4),
+            "charges": int(summary.charges[i]),
+            "charging_s": round(float(summary.charging_s[i]), 1),
+            "parked": bool(summary.docked[i]),
+        }
+    }
+
+
 def build_report(
     summary: CoverageSummary,
     makespan_s: float | None,
@@ -163,6 +179,7 @@ def build_report(
             "robot_collisions": int(summary.robot_collisions[i]),
             "skipped_waypoints": skipped.get(rid),
             "time_s": time_use.get(rid),
+            **battery_of(summary, i),
         }
         for i, rid in enumerate(summary.robots)
     }

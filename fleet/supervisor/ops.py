@@ -91,6 +91,25 @@ def ask_respawn(run_dir: Path, table: RunTable, name: str, timeout: float, sende
     )
 
 
+def ask_dock(table: RunTable, name: str, timeout: float, sender: str) -> str:
+    """`fleet dock ROBOT`: ask the run's coordinator to send ``name`` home now (its work goes
+    back to the market; it charges to ``robot.battery.recharge_to`` and bids again). Returns
+    what was done; raises OpsError naming the reason when it cannot be done."""
+    from fleet.protocol import Keys, OpsReply, OpsRequest
+
+    key = Keys(table.fleet).ops("dock")
+    request = OpsRequest(sender=sender, verb="dock", name=name)
+    try:
+        reply = _ask(table, key, request, OpsReply, timeout)
+    except OpsError as e:
+        raise OpsError(
+            f"{e} (only a coordinator with robot.battery on sends robots home)"
+        ) from None
+    if not reply.ok:
+        raise OpsError(f"the coordinator refused: {reply.error}")
+    return f"{name} is on its way to a dock"
+
+
 class ProcessActions:
     """The dashboard's kill and respawn keys: `fleet kill NAME` (SIGTERM) and `fleet respawn
     NAME` on the run in ``run_dir``, read afresh each time; each returns what was done or

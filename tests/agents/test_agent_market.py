@@ -7,7 +7,8 @@ import pytest
 
 from agents.follow.state import FollowState
 from agents.market import MarketClient, swept_pieces
-from fleet.protocol import Award, TaskCall
+from fleet.protocol import Award, BatteryState, TaskCall
+from planners.battery import BatterySpec
 from planners.grid import GridMap
 
 SPEED = 0.25
@@ -93,3 +94,47 @@ def test_a_piece_is_swept_once_the_robot_reached_its_far_end() -> None:
     assert swept_pieces(FollowState(waypoints, index=3), 1).tolist() == [1, 0, 0]
     assert swept_pieces(FollowState(waypoints, index=5), 1).tolist() == [1, 1, 1]
     assert swept_pieces(None, 0).tolist() == []
+
+
+def _battery_client() -> MarketClient:
+    spec = BatterySpec(enabled=True, capacity_s=100.0, recharge_threshold=0.1, recharge_to=0.9)
+    m = MarketClient("robot-0", SPEED, 0.17, 0.65, 0.35, spec)
+    m.docks = np.array([[0.0, 0.0]])
+    return m
+
+
+def test_a_task_it_cannot_finish_and_get_home_from_is_declined() -> None:
+    """At 0.25 m/s: 4 s to the task, 10 s of it, 4 s home from its far end (1 m from the dock
+    at (0, 0)) is 18 s, 0.18 of a 100 s charge."""
+    m = _battery_client()
+    commitment = m.commitment((0.0, 0.0, 0.0), None, [], 0.0)
+    call = _call("t01", (1.0, 0.0), (0.0, 1.0), 10.0)
+    (ok,) = m.bids([call], commitment, BatteryState(0.0, 0.5, False))
+    assert not ok.declined and ok.total_s == pytest.approx(14.0)
+    (short,) = m.bids([call], commitment, BatteryState(0.0, 0.179, False))
+    (enough,) = m.bids([call], commitment, BatteryState(0.0, 0.181, False))
+    assert short.declined and not enough.declined
+    # what it has won counts too: 20 s more work before it
+    m.on_award(_award(1, [("t00", (0.0, 0.0), (0.0, 0.0), 20.0)]))
+    (after,) = m.bids(
+        [call], m.commitment((0.0, 0.0, 0.0), None, [], 0.0), BatteryState(0.0, 0.3, False)
+    )
+    assert after.declined
+
+
+def test_a_robot_below_the_threshold_or_charging_does_not_bid() -> None:
+    m = _battery_client()
+    commitment = m.commitment((0.0, 0.0, 0.0), None, [], 0.0)
+    call = _call("t01", (1.0, 0.0), (0.0, 1.0), 10.0)
+    assert m.bids([call], commitment, BatteryState(0.0, 0.09, False)) == []
+    assert m.bids([call], commitment, BatteryState(0.0, 0.5, True)) == []
+    assert len(m.bids([call], commitment, BatteryState(0.0, 0.95, True))) == 1
+
+
+def test_without_batteries_nothing_is_declined() -> None:
+    (bid,) = _client().bids(
+        [_call("t01", (1.0, 0.0), (0.0, 1.0), 1e6)],
+        _client().commitment((0.0, 0.0, 0.0), None, [], 0.0),
+        BatteryState(0.0, 0.0, False),
+    )
+    assert not bid.declined

@@ -21,7 +21,17 @@ from agents.peers import path_intent
 from agents.receivers import Receivers, ScanShape
 from fleet.params import load_fleet_config
 from fleet.plausible import Bounds
-from fleet.protocol import Clock, Intent, Keys, LaserScan, Message, Odometry, SpawnReply, Twist
+from fleet.protocol import (
+    BatteryState,
+    Clock,
+    Intent,
+    Keys,
+    LaserScan,
+    Message,
+    Odometry,
+    SpawnReply,
+    Twist,
+)
 
 CFG = load_fleet_config()
 STEP = Bounds.of(CFG).clock_step_s
@@ -29,6 +39,7 @@ KEYS = Keys("t")
 ODOM = KEYS.robot("robot-1", "odom")
 SCAN = KEYS.robot("robot-1", "scan")
 INTENT = KEYS.robot("robot-0", "intent")
+BATTERY = KEYS.robot("robot-1", "battery")
 
 
 class Drops:
@@ -144,6 +155,14 @@ def test_a_scan_not_from_the_robots_lidar_is_dropped(change: dict, why: str) -> 
     assert drops.count == 1 and why in drops.rows[0][2] and drops.rows[0][1] == "sim"
     assert rx.now == 10.0
     assert rx.scan(SCAN, _scan(10.1))
+
+
+def test_a_battery_reading_beyond_a_full_charge_or_stamped_ahead_is_dropped() -> None:
+    rx, drops = _rx()
+    assert rx.battery(BATTERY, BatteryState(10.0, 0.5, False))
+    assert not rx.battery(BATTERY, BatteryState(10.0, 1.5, False))
+    assert not rx.battery(BATTERY, BatteryState(60.0, 0.5, False))
+    assert drops.count == 2
 
 
 def test_a_scan_stamped_far_ahead_is_dropped() -> None:

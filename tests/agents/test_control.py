@@ -230,3 +230,18 @@ def test_a_respawned_robot_stands_until_it_finds_itself() -> None:
     state, out = control(_heard(10.2, drive), state, _params(), OdometryPose(START))
     assert out.notes[0] == (logging.INFO, "found itself at (1.00, 3.00, 0.00) in its saved map")
     assert state.mode == "driving"
+
+
+def test_a_robot_on_its_dock_does_not_step_aside() -> None:
+    """At the end of a plan to its dock it stands whoever comes: stepping aside would take it
+    off the charger (it did, and ran out beside the dock)."""
+    through = Intent(
+        10.0, path_intent(np.array([0.4, 3.0]), np.array([[3.0, 3.0]]), 0.3, 10.0, 2.0)
+    )
+    plan = replace(_plan(), task="dock-0", waypoints=np.array([START[:2]]), sweep_from=0)
+    drive = Drive.of(plan, [])
+    assert drive.follow is not None
+    drive = replace(drive, follow=replace(drive.follow, index=1))
+    _, out = _step(_heard(10.0, drive, {"robot-9": through}))
+    assert (out.cmd_vel.v, out.cmd_vel.w) == (0.0, 0.0)
+    assert out.status is not None and out.status.state == "done"

@@ -419,3 +419,11 @@ def test_a_view_started_late_believes_no_stamp_before_its_clock_has_synced() -> 
     status = w.robots["robot-1"].status
     assert status is not None and status.stamp == 10.2
     assert dropped == []
+
+
+def test_the_robot_table_shows_each_robots_charge() -> None:
+    from fleet.dashboard.view import battery_cell
+
+    assert battery_cell(None, False) == "—"
+    assert battery_cell(0.456, False) == "46 %"
+    assert battery_cell(0.456, True) == "+46 %"

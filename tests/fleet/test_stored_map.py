@@ -68,7 +68,10 @@ def test_a_map_with_an_origin_off_the_worlds_frame_is_refused_naming_it(
     assert str(tmp_path / "map.yaml") in str(e.value) and "origin" in str(e.value)
     # the same map in the world's frame is taken
     write_ros_map(tmp_path, truth)
-    assert on_stored_map(world, tmp_path / "map.yaml").map_grid is not None
+    stored = on_stored_map(world, tmp_path / "map.yaml")
+    assert stored.map_grid is not None
+    # the world's docks and starts stay the world's
+    assert stored.docks == world.docks and stored.starts == world.starts
 
 
 def test_a_missing_or_broken_map_is_refused_naming_the_file_and_the_field(tmp_path: Path):

@@ -230,6 +230,22 @@ def test_a_world_loaded_without_a_robot_checks_only_that_its_starts_are_free(
         load_world(in_wall)
 
 
+def test_a_world_names_several_docks_and_keeps_dock(tmp_path: Path) -> None:
+    """``dock:`` is the first dock, ``docks:`` adds more; each gets a body behind its pose."""
+    text = SMALL_ROOM + "dock: [0.5, 1.0, 0.0]\ndocks:\n  - [1.5, 0.4, 1.5707963267948966]\n"
+    world = load_world(_write(tmp_path / "w.yaml", text), RADIUS)
+    assert world.docks == ((0.5, 1.0, 0.0), (1.5, 0.4, math.pi / 2))
+    assert world.dock == (0.5, 1.0, 0.0)
+    assert [f.name for f in world.furniture] == ["dock", "dock 1"]
+    assert load_world(WORLDS / "home.yaml").docks == ((3.2, 0.55, math.pi / 2),)
+
+
+def test_a_dock_inside_a_wall_is_refused_naming_it(tmp_path: Path) -> None:
+    text = SMALL_ROOM + "dock: [0.5, 1.0, 0.0]\ndocks:\n  - [3.0, 1.0, 0.0]\n"
+    msg = _error(_write(tmp_path / "w.yaml", text))
+    assert str(tmp_path / "w.yaml") in msg and "docks[1]" in msg and "inside an obstacle" in msg
+
+
 def test_start_inside_furniture(tmp_path: Path) -> None:
     path = _write(
         tmp_path / "w.yaml",

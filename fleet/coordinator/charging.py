@@ -1,0 +1,286 @@
+"""Docks and the trips to them: which robot charges where, who waits, and when each works again.
+
+With batteries (``robot.battery``) a robot whose charge falls below ``recharge_threshold``, or
+that can do none of the open work on its charge, is sent to charge: the work it holds is taken
+back (the unswept remainder of the task it drives and its unstarted tasks go back to the market,
+as a lost robot's do, none of them counted as tried by it), and it gets a plan to a dock, driven
+like any plan: the transit (A* on the floor plan) to a point in front of the dock, then straight
+onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: the nearest
+dock no robot holds is taken; when every one is held the robot waits at a waiting spot by the
+nearest (free floor near it, clear of its approach), in the order the robots came, and goes on
+once the dock is free. On the dock it charges until ``recharge_to`` and is back in the market.
+At the end of the job every robot is sent home the same way, and the job is finished once each
+is on a dock or at its waiting spot.
+
+What the coordinator knows of a battery is what the robot's status says (its charge, whether a
+dock charges it); it never reads the simulator's truth.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.job import EMPTY, LOST
+from fleet.coordinator.journal import Journal
+from fleet.coordinator.planning import TaskPlanner
+from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
+from fleet.protocol import Plan, RobotStatus
+from planners.battery import BatterySpec
+from planners.grid import clearance
+from planners.polyline import without_straight_vertices
+
+log = logging.getLogger("coordinator")
+
+Pose = tuple[float, float, float]
+# a robot drives onto its dock straight from this far in front of it (m), and stops this far in
+# front of the dock's pose (within the dock's tolerance): closer, DWA creeps and turns by the
+# dock's body and the robot ends up skewed on it
+APPROACH_M = 0.35
+STOP_SHORT_M = 0.04
+# waiting spots keep this far from a dock's pose and from each other (m), and this far from the
+# line a robot drives onto the dock by
+SPOT_FROM_DOCK_M = 0.7
+SPOT_SPACING_M = 0.55
+SPOT_FROM_APPROACH_M = 0.45
+# a robot at the end of a dock plan that does not charge within this (sim s) is sent again
+DOCKING_GRACE_S = 5.0
+DOCKING_TRIES = 3
+# a robot whose statuses do not show it driving its dock plan gets it again after this (wall s)
+RESEND_S = 2.0
+# a robot standing this near a dock's pose holds it, trip or not (m)
+HOLDS_M = 0.3
+
+
+@dataclass
+class Trip:
+    """A robot's way home: to ``dock`` (its index) or, ``waiting``, to a spot by it; ``plan``
+    the plan sent; ``parking``: the job is over; ``tries`` of docking so far, ``sent_wall``
+    when the plan last went out (wall s), ``ended`` when it was first seen at the plan's end
+    (sim s)."""
+
+    dock: int
+    waiting: bool
+    plan: Plan
+    parking: bool
+    tries: int = 1
+    sent_wall: float = 0.0
+    ended: float | None = None
+
+
+class Docking:
+    """The docks, their waiting spots and the robots' trips to them (called with the lock)."""
+
+    def __init__(
+        self,
+        journal: Journal,
+        planner: TaskPlanner,
+        dispatcher: Dispatcher,
+        spec: BatterySpec,
+        docks: tuple[Pose, ...],
+    ) -> None:
+        self.journal = journal
+        self.job = journal.job
+        self.planner = planner
+        self.dispatcher = dispatcher
+        self.spec = spec
+        self.docks = docks
+        self.trips: dict[str, Trip] = {}
+        self.spots = [self._spots(d) for d in docks]
+
+    # ---- geometry ---------------------------------------------------------------------------
+
+    def _spots(self, dock: Pose, n: int = 8) -> list[tuple[float, float]]:
+        """Up to ``n`` waiting spots by ``dock``, nearest first: floor a robot reaches, clear of
+        obstacles, of the dock and of the line onto it."""
+        g = self.planner.grid
+        ok = self.planner.reachable & (clearance(g) >= self.planner.centre_clearance + 0.05)
+        pts = g.cell_to_world(np.argwhere(ok))
+        front = _approach(dock)
+        d_dock = np.hypot(*(pts - np.array(dock[:2])).T)
+        d_line = _to_segment(pts, np.array(dock[:2]), front)
+        keep = (d_dock >= SPOT_FROM_DOCK_M) & (d_line >= SPOT_FROM_APPROACH_M)
+        for other in self.docks:
+            keep &= np.hypot(*(pts - np.array(other[:2])).T) >= SPOT_FROM_DOCK_M
+        order = np.argsort(np.hypot(*(pts - front).T) + 1e9 * ~keep, kind="stable")
+        out: list[tuple[float, float]] = []
+        for p in pts[order[: int(keep.sum())]]:
+            if all(math.dist(p, q) >= SPOT_SPACING_M for q in out):
+                out.append((float(p[0]), float(p[1])))
+                if len(out) == n:
+                    break
+        return out
+
+    def _path(
+        self, xy: tuple[float, float], goal: np.ndarray, onto: np.ndarray | None
+    ) -> np.ndarray:
+        """A* on the floor plan from ``xy`` to ``goal``, then straight to ``onto`` if given."""
+        leg = self.planner.transit.path(np.asarray(xy, dtype=float), goal)
+        leg = without_straight_vertices(np.asarray(leg, dtype=float))
+        return leg if onto is None else np.vstack([leg, onto[None]])
+
+    # ---- who holds what ---------------------------------------------------------------------
+
+    def holder(self, k: int) -> str | None:
+        """The robot that holds dock ``k``: on a trip to it, or standing on it."""
+        for rid, t in self.trips.items():
+            if t.dock == k and not t.waiting:
+                return rid
+        dock = self.docks[k]
+        for rid, r in self.job.robots.items():
+            free = r.liveness == LOST or r.xy is None or rid in self.trips
+            if not free and math.dist(r.xy, dock[:2]) < HOLDS_M:
+                return rid
+        return None
+
+    def _nearest(self, xy: tuple[float, float], free_only: bool) -> int | None:
+        ks = [k for k in range(len(self.docks)) if not free_only or self.holder(k) is None]
+        return min(ks, key=lambda k: math.dist(xy, self.docks[k][:2]), default=None)
+
+    # ---- trips ------------------------------------------------------------------------------
+
+    def send(self, rid: str, why: str, parking: bool) -> bool:
+        """Send ``rid`` (with no work) home: to the nearest free dock, else to wait by the
+        nearest; False when there is no way there."""
+        r = self.job.robots[rid]
+        if r.xy is None or not self.docks:
+            return False
+        k = self._nearest(r.xy, free_only=True)
+        waiting = k is None
+        if k is None:
+            k = self._nearest(r.xy, free_only=False)
+            assert k is not None
+        r.docking = "waiting" if waiting else "docking"
+        if not self._go(rid, k, waiting, parking):
+            r.docking = ""
+            return False
+        where = f"to wait by dock {k}" if waiting else f"to dock {k}"
+        self.journal.event("dock", rid, self.trips[rid].plan.task, f"{why}: {where}")
+        return True
+
+    def _go(self, rid: str, k: int, waiting: bool, parking: bool, tries: int = 1) -> bool:
+        r = self.job.robots[rid]
+        assert r.xy is not None
+        dock = self.docks[k]
+        try:
+            if waiting:
+                taken = {t.plan.waypoints[-1].tobytes() for t in self.trips.values() if t.waiting}
+                spot = next(
+                    (s for s in self.spots[k] if np.array(s).tobytes() not in taken),
+                    self.spots[k][-1] if self.spots[k] else None,
+                )
+                if spot is None:
+                    return False
+                waypoints = self._path(r.xy, np.array(spot), None)
+                task = f"{WAIT_PREFIX}{k}"
+            else:
+                waypoints = self._path(r.xy, _approach(dock), _approach(dock, STOP_SHORT_M))
+                task = f"{DOCK_PREFIX}{k}"
+        except ValueError as e:
+            self.journal.event("unreachable", rid, f"{DOCK_PREFIX}{k}", str(e))
+            return False
+        d = self.dispatcher
+        d.plan_seq += 1
+        n = len(waypoints)
+        plan = Plan(self.journal.clock, d.plan_seq, task, waypoints, n - 1)
+        d.plans[rid] = plan
+        d.schedules.pop(rid, None)
+        self.journal.save_plan(rid, plan)
+        self.journal.set_meta(plan_seq=d.plan_seq)
+        self.trips[rid] = Trip(k, waiting, plan, parking, tries, time.monotonic())
+        d.publish(d.keys.plan(rid), plan, True)
+        return True
+
+    def heard(self, rid: str, msg: RobotStatus) -> None:
+        r = self.job.robots[rid]
+        r.charge, r.charging = msg.charge, msg.charging
+        if r.charging and rid in self.trips and r.docking == "docking":
+            r.docking = "charging"
+            self.journal.event("charging", rid, self.trips[rid].plan.task, f"at {msg.charge:.2f}")
+
+    def tick(self, job_over: bool) -> list[str]:
+        """Move the trips on: robots charged back to work (returned), waiting robots onto
+        freed docks, a missed docking tried again, lost plans sent again."""
+        back = []
+        now = self.journal.clock
+        for rid, t in list(self.trips.items()):
+            r = self.job.robots[rid]
+            if r.liveness == LOST:
+                self._drop(rid)
+                continue
+            if r.docking == "charging" and r.charge >= self.spec.recharge_to and not job_over:
+                self._drop(rid)
+                self.journal.event("charged", rid, t.plan.task, f"at {r.charge:.2f}; bids again")
+                back.append(rid)
+            elif t.waiting and self.holder(t.dock) is None:
+                r.docking = "docking"
+                self._go(rid, t.dock, False, t.parking)
+            elif r.docking == "docking" and not r.charging and self._at_end(rid, t):
+                self._missed(rid, t, now)
+            self._resend(rid)
+        return back
+
+    def _missed(self, rid: str, t: Trip, now: float) -> None:
+        """``rid`` is at the end of its dock plan but does not charge: once that has lasted
+        ``DOCKING_GRACE_S``, it drives onto the dock again (``DOCKING_TRIES`` in all)."""
+        if t.ended is None:
+            t.ended = now
+        elif now - t.ended > DOCKING_GRACE_S and t.tries < DOCKING_TRIES:
+            self.journal.event("dock", rid, t.plan.task, "not on the dock; trying again")
+            self._go(rid, t.dock, False, t.parking, t.tries + 1)
+
+    def _at_end(self, rid: str, t: Trip) -> bool:
+        at = self.dispatcher.progress_of.get(rid)
+        return at is not None and at[0] == t.plan.plan_id and at[1] >= len(t.plan.waypoints)
+
+    def _resend(self, rid: str) -> None:
+        t = self.trips.get(rid)
+        if t is None:
+            return
+        at = self.dispatcher.progress_of.get(rid)
+        now = time.monotonic()
+        if (at is None or at[0] != t.plan.plan_id) and now - t.sent_wall > RESEND_S:
+            t.sent_wall = now
+            d = self.dispatcher
+            d.publish(d.keys.plan(rid), t.plan, True)
+
+    def _drop(self, rid: str) -> None:
+        self.trips.pop(rid, None)
+        self.job.robots[rid].docking = ""
+        self.dispatcher.plans.pop(rid, None)
+
+    def empty(self, rid: str) -> None:
+        """``rid``'s battery ran out away from a dock: it stands for good, holds no dock and
+        counts as home (its work was taken back when it was sent home)."""
+        t = self.trips.get(rid)
+        self._drop(rid)
+        self.job.robots[rid].docking = EMPTY
+        self.journal.event("empty", rid, t.plan.task if t else "", "its battery ran out")
+
+    def home(self) -> bool:
+        """Whether every robot not lost is home: charging, or at the end of its trip (or
+        standing for good with an empty battery)."""
+        for rid, r in self.job.robots.items():
+            if r.liveness == LOST or r.docking == EMPTY:
+                continue
+            t = self.trips.get(rid)
+            if t is None or not (r.charging or self._at_end(rid, t)):
+                return False
+        return True
+
+
+def _approach(dock: Pose, ahead: float = APPROACH_M) -> np.ndarray:
+    """The point ``ahead`` m in front of ``dock`` (by default where a robot drives straight on
+    from)."""
+    return np.array([dock[0] + ahead * math.cos(dock[2]), dock[1] + ahead * math.sin(dock[2])])
+
+
+def _to_segment(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ab = b - a
+    t = np.clip(((pts - a) @ ab) / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+    return np.hypot(*(pts - (a + t[:, None] * ab)).T)

@@ -1,0 +1,169 @@
+"""The coordinator of a fleet with batteries (``robot.battery.enabled``): the job and the
+market as without them, and the robots' trips to charge (:mod:`fleet.coordinator.charging`).
+
+- It serves the world's docks on ``coord/docks``: robots price the way home from each task.
+- A robot whose status reports a charge below ``recharge_threshold`` is taken out of the
+  market and sent to a dock; the work it held goes back to the market.
+- An auction that sells nothing while work is open (every robot declined it on its charge)
+  sends the idle robots that are not charged to ``recharge_to`` to charge.
+- The first allocation sells regions, one per robot, only when each robot's charge covers a
+  region's work; otherwise task by task, so a robot takes what its charge allows.
+- When every task is done, every robot is sent home; the job is finished once each is on a
+  dock or at its waiting spot.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from fleet.bus import Bus
+from fleet.coordinator.auctioneer import Auctioneer, Sale
+from fleet.coordinator.charging import Docking, Pose
+from fleet.coordinator.job import EMPTY, LOST, Job
+from fleet.coordinator.market import Hook, Market
+from fleet.coordinator.planning import TaskPlanner
+from fleet.coordinator.service import Coordinator
+from fleet.coordinator.store import JobStore
+from fleet.coordinator.transits import TransitPlanner
+from fleet.params import CoordinatorParams
+from fleet.plausible import Bounds
+from fleet.protocol import Docks, OpsReply, OpsRequest, Request, RobotStatus
+from planners import auction
+from planners.battery import BatterySpec
+
+log = logging.getLogger("coordinator")
+
+
+class ChargingMarket(Market):
+    """The market, with robots that leave it to charge."""
+
+    docking: Docking
+    battery: BatterySpec
+    sold = 0
+
+    def sell(self, sale: Sale) -> None:
+        self.sold += 1
+        super().sell(sale)
+
+    def auction(self, auctioneer: Auctioneer, each_round: Hook = lambda: None) -> None:
+        """The auction; when it sells nothing while work is open, the idle robots it could not
+        interest (they declined on their charge) and that are not full go to charge."""
+        self.sold = 0
+        super().auction(auctioneer, each_round)
+        with self.lock:
+            if self.sold or not self.job.open_tasks():
+                return
+            for rid in self.job.market():
+                r = self.job.robots[rid]
+                if self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to:
+                    self.send_home(rid, f"can do none of the open work on {r.charge:.2f}")
+
+    def _regions(self) -> tuple[bool, tuple[auction.Lot, ...]]:
+        first, regions = super()._regions()
+        charges = [self.job.robots[rid].charge for rid in self.job.market()]
+        reach_s = min(charges, default=1.0) * self.battery.capacity_s
+        if any(lot.time_s > reach_s for lot in regions):
+            return first, ()
+        return first, regions
+
+    def observe(self, rid: str, msg: RobotStatus) -> None:
+        super().observe(rid, msg)
+        self.docking.heard(rid, msg)
+
+    def send_home(self, rid: str, why: str, parking: bool = False) -> None:
+        """Take ``rid``'s work back (the unswept remainder of the task it drives and its
+        unstarted tasks go back to the market, not as tried by it) and send it home."""
+        queue = [rec.task.id for rec in self.job.queue(rid)]
+        opened = self.job.take_back(queue[0]) if queue else []
+        for tid in opened:
+            self.journal.event("reopened", rid, tid, "its robot went to charge")
+        self.journal.save_tasks(*queue, *opened)
+        self.dispatcher.forget(rid)
+        self.progress.pop(rid, None)
+        self.version += 1
+        self.awards.send()
+        if not self.docking.send(rid, why, parking):
+            log.warning("%s: no way home (%s)", rid, why)
+        self.need_auction = self.need_auction or bool(opened)
+        self.wake.set()
+
+
+class ChargingCoordinator(Coordinator):
+    """The coordinator's loop with the robots' trips to charge."""
+
+    market_class = ChargingMarket
+
+    def __init__(
+        self,
+        bus: Bus,
+        planner: TaskPlanner,
+        expected: int,
+        params: CoordinatorParams,
+        store: JobStore | None = None,
+        transits: TransitPlanner | None = None,
+        *,
+        bounds: Bounds,
+        battery: BatterySpec,
+        docks: tuple[Pose, ...],
+    ) -> None:
+        self.docks = docks
+        self.battery = battery
+        super().__init__(bus, planner, expected, params, store, transits, bounds=bounds)
+        self.docking = Docking(self.journal, planner, self.dispatcher, battery, docks)
+        market = self.market
+        assert isinstance(market, ChargingMarket)
+        market.docking, market.battery = self.docking, battery
+
+    def _serve_floor(self) -> None:
+        super()._serve_floor()
+        poses = np.array(self.docks, dtype=float).reshape(-1, 3)
+        self.bus.serve(self.keys.docks(), Request, lambda _req: Docks(self.journal.clock, poses))
+        self.bus.serve(self.keys.ops("dock"), OpsRequest, self._on_dock)
+
+    def _on_dock(self, req: OpsRequest) -> OpsReply:
+        """`fleet dock ROBOT`: send it home now."""
+        with self.lock:
+            r = self.job.robots.get(req.name)
+            if req.verb != "dock" or r is None:
+                return OpsReply(False, f"no robot {req.name!r} in the job")
+            if r.liveness == LOST or r.xy is None:
+                return OpsReply(False, f"{req.name} is lost, or has not said where it is")
+            if r.docking:
+                return OpsReply(True, "")
+            market = self.market
+            assert isinstance(market, ChargingMarket)
+            market.send_home(req.name, f"sent home by {req.sender}", parking=self.job.finished)
+            ok = bool(r.docking)
+        return OpsReply(ok, "" if ok else f"no way home for {req.name}")
+
+    def _tick(self) -> None:
+        """Trips on; robots below the threshold to charge; at the job's end, all home."""
+        market = self.market
+        assert isinstance(market, ChargingMarket)
+        if self.docking.tick(self.job.finished):
+            market.need_auction = True
+        for rid, why, parking in going_home(self.job, self.battery):
+            market.send_home(rid, why, parking)
+        for rid, r in self.job.robots.items():
+            if r.charge == 0.0 and not r.charging and r.docking not in ("", EMPTY):
+                self.docking.empty(rid)
+
+    def _finished(self) -> bool:
+        return self.job.finished and self.docking.home()
+
+
+def going_home(job: Job, spec: BatterySpec) -> list[tuple[str, str, bool]]:
+    """The robots to send home now, each with why and whether to park: at the job's end every
+    robot not yet on its way home; before it, each robot in the market whose charge has fallen
+    below ``recharge_threshold``."""
+    out = []
+    for rid, r in sorted(job.robots.items()):
+        if r.liveness == LOST or r.docking or r.xy is None:
+            continue
+        if job.finished:
+            out.append((rid, "the job is done", True))
+        elif r.in_market and 0 <= r.charge < spec.recharge_threshold:
+            out.append((rid, f"charge {r.charge:.3f} below {spec.recharge_threshold}", False))
+    return out

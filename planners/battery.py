@@ -1,0 +1,113 @@
+"""A robot's battery: what drains it, what charges it, and what a task costs of it.
+
+Charge is a fraction of a full battery. ``capacity_s`` is how long a full charge lasts sweeping
+(driving at top speed with the brush on); the drain splits that into the wheels (scaled by how
+fast they turn), the brush (while the robot moves) and the electronics (always), each a share
+of the sweeping drain, so the three shares add up to 1. A dock puts back ``charge_rate``
+seconds of sweeping per second. This is the linear state-of-charge (Coulomb-counting) model of
+the fleet managers robots are run by (Open-RMF's battery-aware task planner prices a task the
+same way: energy for the motion, for the device, and for the ambient load over its duration).
+
+The market's energy check (:func:`can_take`) prices work at the sweeping drain, the most a
+second of it can cost, so a robot that bids on a task can finish it and get home to a dock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from planners.checks import require_non_negative, require_positive
+
+Pose = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class BatterySpec:
+    """``enabled``: whether the robot runs down (off: it never does, as before batteries);
+    ``capacity_s`` (s) of sweeping a full charge lasts; ``drive_share``, ``brush_share`` and
+    ``idle_share``: the shares of the sweeping drain the wheels (at top speed), the brush (while
+    moving) and the electronics (always) take, adding up to 1; ``charge_rate``: seconds of
+    sweeping a dock puts back per second; ``recharge_threshold``: below this fraction the
+    robot goes to charge; ``recharge_to``: it charges up to this fraction before it works
+    again; ``dock_tolerance`` (m) and ``dock_align`` (rad): how near the dock's pose its centre
+    and how near the docking heading (facing the dock) its heading must be for it to charge."""
+
+    enabled: bool = False
+    capacity_s: float = 3600.0
+    drive_share: float = 0.5
+    brush_share: float = 0.3
+    idle_share: float = 0.2
+    charge_rate: float = 4.0
+    recharge_threshold: float = 0.2
+    recharge_to: float = 0.9
+    dock_tolerance: float = 0.12
+    dock_align: float = 0.8
+
+    def validate(self) -> None:
+        require_positive(self, "capacity_s", "charge_rate", "dock_tolerance", "dock_align")
+        require_non_negative(self, "drive_share", "brush_share", "idle_share")
+        total = self.drive_share + self.brush_share + self.idle_share
+        if not math.isclose(total, 1.0, abs_tol=1e-6):
+            raise ValueError(
+                f"drive_share + brush_share + idle_share must add up to 1 (they add up to "
+                f"{total:g}): capacity_s is the time a full charge lasts sweeping"
+            )
+        if not 0 <= self.recharge_threshold < 1:
+            raise ValueError(f"recharge_threshold ({self.recharge_threshold}) must be in [0, 1)")
+        if not self.recharge_threshold < self.recharge_to <= 1:
+            raise ValueError(
+                f"recharge_to ({self.recharge_to}) must be in (recharge_threshold, 1]: a robot "
+                "charges to above the level that sends it to charge"
+            )
+        if self.dock_align > math.pi:
+            raise ValueError(f"dock_align ({self.dock_align}) must be at most pi")
+
+
+def drain_per_s(
+    spec: BatterySpec, v: np.ndarray, w: np.ndarray, max_v: float, wheel_base: float
+) -> np.ndarray:
+    """Fraction of a full charge used per second by robots driving at ``v`` (m/s), ``w``
+    (rad/s): the faster wheel's speed over the top speed drives the wheels' share (a turn in
+    place turns them too), the brush runs while the robot moves, the electronics always."""
+    wheel = np.minimum((np.abs(v) + np.abs(w) * wheel_base / 2) / max_v, 1.0)
+    moving = (np.abs(v) > 1e-3) | (np.abs(w) > 1e-3)
+    share = spec.idle_share + spec.brush_share * moving + spec.drive_share * wheel
+    return share / spec.capacity_s
+
+
+def charge_per_s(spec: BatterySpec) -> float:
+    """Fraction of a full charge a dock puts back per second."""
+    return spec.charge_rate / spec.capacity_s
+
+
+def docking_heading(dock: Pose) -> float:
+    """The heading of a robot on ``dock``: facing the dock's body (its contacts), the opposite
+    of the dock's pose, which faces away from the wall."""
+    return math.atan2(-math.sin(dock[2]), -math.cos(dock[2]))
+
+
+def on_dock(spec: BatterySpec, poses: np.ndarray, dock: Pose) -> np.ndarray:
+    """Which of the robots at ``poses`` ((N, 3)) stand on ``dock``: centre within
+    ``dock_tolerance`` of its pose and heading within ``dock_align`` of facing it."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    near = np.hypot(poses[:, 0] - dock[0], poses[:, 1] - dock[1]) <= spec.dock_tolerance
+    off = np.angle(np.exp(1j * (poses[:, 2] - docking_heading(dock))))
+    return near & (np.abs(off) <= spec.dock_align)
+
+
+def work_charge(spec: BatterySpec, seconds: float) -> float:
+    """Fraction of a full charge ``seconds`` of work (driving, sweeping) can use at most."""
+    return max(seconds, 0.0) / spec.capacity_s
+
+
+def can_take(spec: BatterySpec, charge: float, work_s: float, home_s: float) -> bool:
+    """Whether a robot with ``charge`` can do ``work_s`` seconds of work (all it has won and
+    the task it bids on, with the travel between) and then drive ``home_s`` seconds to a dock
+    without running out, each second priced at the sweeping drain. Always, with batteries
+    off."""
+    if not spec.enabled:
+        return True
+    return charge - work_charge(spec, work_s + home_s) >= 0.0

@@ -1,0 +1,202 @@
+"""Robots that go to charge, without a bus: one below the threshold is sent to a dock and its
+work goes back on sale, a dock is never held by two robots (the second waits by it and goes on
+once it is free), a robot that declines all open work on its charge goes to charge, and at the
+end of the job every robot is sent home. The parts are wired as the charging coordinator wires
+them, to a publish stand-in that records what goes out and bids for the robots."""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from robots import ROBOT
+
+from fleet.config import resolve_world
+from fleet.coordinator.auctioneer import Auctioneer
+from fleet.coordinator.awards import Awards
+from fleet.coordinator.charging import SPOT_FROM_DOCK_M, Docking
+from fleet.coordinator.charging_service import ChargingMarket, going_home
+from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.job import DONE, OPEN, Job
+from fleet.coordinator.journal import Journal
+from fleet.coordinator.planning import TaskPlanner
+from fleet.params import CoordinatorParams, load_fleet_config
+from fleet.protocol import Award, AwardAck, Bid, Keys, Message, Plan, RobotStatus, TaskCall
+from fleet.world import World, load_world
+from planners.auction import Task
+from planners.battery import BatterySpec
+from planners.coverage.params import CoverageParams
+
+KEYS = Keys("test")
+SPEC = BatterySpec(enabled=True, capacity_s=100.0, recharge_threshold=0.2, recharge_to=0.9)
+
+
+@pytest.fixture(scope="module")
+def world() -> World:
+    return load_world(resolve_world("small"), ROBOT.radius)
+
+
+@pytest.fixture(scope="module")
+def planner(world: World) -> TaskPlanner:
+    return TaskPlanner(world, load_fleet_config())
+
+
+def _task(i: int) -> Task:
+    """A lane across the small room at y = 1 + 0.3 i, four pieces."""
+    x = np.linspace(1.0, 3.0, 5)
+    return Task(f"t{i:02d}", np.column_stack([x, np.full(5, 1.0 + 0.3 * i)]), 1.0, 8.0, (1,))
+
+
+class Fleet:
+    """The charging market's parts; robots bid ``price`` on every lot, ``declined`` or not."""
+
+    def __init__(self, planner: TaskPlanner, world: World, robots: list[str]) -> None:
+        self.job = Job(CoverageParams(), ROBOT, 0.0)
+        self.job.add_tasks(tuple(_task(i) for i in range(4)))
+        for i, rid in enumerate(robots):
+            r = self.job.robot(rid)
+            r.ready, r.xy, r.charge = True, (1.0 + 0.6 * i, 2.5), 1.0
+        self.sent: list[tuple[str, Message]] = []
+        self.declined = False
+        params = CoordinatorParams(bid_timeout_s=0.2)
+        self.journal = Journal(self.job, None, KEYS, self.publish)
+        self.awards = Awards(self.journal, KEYS, self.publish)
+        self.dispatcher = Dispatcher(self.journal, planner, None, params, KEYS, self.publish)
+        self.market = ChargingMarket(
+            self.journal,
+            self.awards,
+            self.dispatcher,
+            threading.RLock(),
+            threading.Event(),
+            threading.Event(),
+        )
+        self.docking = Docking(self.journal, planner, self.dispatcher, SPEC, world.docks)
+        self.market.docking, self.market.battery = self.docking, SPEC
+        self.auctioneer = Auctioneer(KEYS, self.publish, params, self.market.sell)
+
+    def publish(self, key: str, msg: Message, _control: bool) -> None:
+        self.sent.append((key, msg))
+        if isinstance(msg, Award):
+            self.awards.acked(msg.robot, AwardAck(0.0, msg.seq, msg.robot))
+        if isinstance(msg, TaskCall):
+            for rid in self.job.market():
+                bid = Bid(0.0, msg.round, msg.task, rid, 10.0, 10.0, False, self.declined)
+                self.auctioneer.on_bid(KEYS.bid(msg.task, rid), bid)
+
+    def plans(self, rid: str) -> list[Plan]:
+        return [m for k, m in self.sent if isinstance(m, Plan) and k == KEYS.plan(rid)]
+
+    def status(self, rid: str, charge: float, charging: bool, plan: Plan, done: bool) -> None:
+        """``rid`` reports its battery and how far along ``plan`` it is."""
+        n = len(plan.waypoints)
+        waypoint = n if done else 0
+        self.dispatcher.heard(rid, plan.plan_id, waypoint)
+        msg = RobotStatus(
+            0.0, "done" if done else "driving", plan.task, 1.0, waypoint, n, 0.0,
+            plan_id=plan.plan_id, charge=charge, charging=charging,
+        )  # fmt: skip
+        self.market.observe(rid, msg)
+
+
+def test_a_robot_below_the_threshold_goes_to_a_dock_and_its_work_is_sold_again(
+    planner: TaskPlanner, world: World
+) -> None:
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    job = f.job
+    job.award("t00", "robot-0", False)
+    job.award("t01", "robot-0", False)
+    f.awards.send()
+    job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
+    job.robots["robot-0"].charge = 0.19
+    assert going_home(job, SPEC) == [("robot-0", "charge 0.190 below 0.2", False)]
+    for rid, why, parking in going_home(job, SPEC):
+        f.market.send_home(rid, why, parking)
+    r = job.robots["robot-0"]
+    assert r.docking == "docking" and "robot-0" not in job.market()
+    # the unswept half of t00 and the unstarted t01 are open, not tried by it
+    assert job.tasks["t00.1"].state == OPEN and job.tasks["t01"].state == OPEN
+    assert not job.tasks["t00.1"].tried and job.queue("robot-0") == []
+    assert f.market.need_auction
+    awards = [m for _, m in f.sent if isinstance(m, Award) and m.robot == "robot-0"]
+    assert awards[-1].tasks == []
+    (plan,) = f.plans("robot-0")
+    dock = world.docks[0]
+    assert plan.task == "dock-0"
+    assert np.linalg.norm(plan.waypoints[-1] - dock[:2]) < SPEC.dock_tolerance / 2
+    # it drives onto the dock straight along the dock's axis: facing it when it arrives
+    last = plan.waypoints[-1] - plan.waypoints[-2]
+    assert math.atan2(last[1], last[0]) == pytest.approx(dock[2] + math.pi - 2 * math.pi)
+    # the others bid on its work; it does not
+    f.market.auction(f.auctioneer)
+    assert job.tasks["t00.1"].owner == "robot-1" and job.tasks["t01"].owner == "robot-1"
+
+
+def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
+    planner: TaskPlanner, world: World
+) -> None:
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    for rid in ("robot-0", "robot-1"):
+        f.job.robots[rid].charge = 0.15
+    for rid, why, parking in going_home(f.job, SPEC):
+        f.market.send_home(rid, why, parking)
+    (to_dock,), (to_wait,) = f.plans("robot-0"), f.plans("robot-1")
+    assert to_dock.task == "dock-0" and to_wait.task == "wait-0"
+    dock = np.array(world.docks[0][:2])
+    assert np.linalg.norm(to_wait.waypoints[-1] - dock) >= SPOT_FROM_DOCK_M
+    f.status("robot-0", 0.15, True, to_dock, done=True)
+    f.status("robot-1", 0.14, False, to_wait, done=True)
+    assert f.job.robots["robot-0"].docking == "charging"
+    assert f.docking.tick(False) == [] and len(f.plans("robot-1")) == 1  # still taken
+    f.status("robot-0", 0.95, True, to_dock, done=True)
+    assert f.docking.tick(False) == ["robot-0"]
+    assert "robot-0" in f.job.market()
+    (_, onto) = f.plans("robot-1")
+    assert onto.task == "dock-0" and f.job.robots["robot-1"].docking == "docking"
+
+
+def test_a_robot_that_declines_every_open_task_on_its_charge_goes_to_charge(
+    planner: TaskPlanner, world: World
+) -> None:
+    f = Fleet(planner, world, ["robot-0"])
+    f.job.robots["robot-0"].charge = 0.5
+    f.declined = True
+    f.market.auction(f.auctioneer)
+    assert all(rec.state == OPEN for rec in f.job.tasks.values())
+    assert f.job.robots["robot-0"].docking == "docking"
+
+
+def test_regions_are_sold_only_when_each_robot_can_do_one_on_its_charge(
+    planner: TaskPlanner, world: World
+) -> None:
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    assert len(f.market._regions()[1]) == 2  # 16 s each against 100 s of charge
+    f.job.robots["robot-1"].charge = 0.1
+    assert f.market._regions()[1] == ()
+
+
+def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world: World) -> None:
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    for rec in f.job.tasks.values():
+        rec.state = DONE
+    assert [(rid, parking) for rid, _, parking in going_home(f.job, SPEC)] == [
+        ("robot-0", True),
+        ("robot-1", True),
+    ]
+    for rid, why, parking in going_home(f.job, SPEC):
+        f.market.send_home(rid, why, parking)
+    assert not f.docking.home()
+    f.status("robot-0", 0.5, True, f.plans("robot-0")[-1], done=True)
+    f.status("robot-1", 0.5, False, f.plans("robot-1")[-1], done=True)
+    assert f.docking.home() and going_home(f.job, SPEC) == []
+    # charged at the end of the job, a robot stays on its dock
+    f.status("robot-0", 0.95, True, f.plans("robot-0")[-1], done=True)
+    assert f.docking.tick(True) == [] and f.job.robots["robot-0"].docking == "charging"
+
+
+def test_batteries_off_send_no_one_home(planner: TaskPlanner, world: World) -> None:
+    f = Fleet(planner, world, ["robot-0"])
+    f.job.robots["robot-0"].charge = -1.0  # no battery heard
+    assert going_home(f.job, replace(SPEC, recharge_threshold=0.5)) == []

@@ -1,0 +1,56 @@
+"""Batteries end to end: real processes on a real router, on the small world with two robots
+whose full charge lasts 100 s of sweeping and who go to charge below 35 % (the job is about
+100 s for each). Each must go to
+charge once on the way, one at a time at the one dock (the other waits by it), the work each
+leaves goes to the other, and the job still finishes with every robot home; `fleet dock
+robot-1` sends robot-1 home early on, and it comes back to work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from fleet_runs import FleetRun
+
+from fleet.params import default_config_path
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(900)]
+DOCK_AT_S = 15.0
+
+
+def _config(path: Path) -> Path:
+    data = yaml.safe_load(default_config_path().read_text())
+    data["robot"]["battery"].update(
+        enabled=True, capacity_s=100.0, charge_rate=8.0, recharge_threshold=0.35
+    )
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_robots_run_down_charge_and_the_job_still_finishes(tmp_path: Path) -> None:
+    config = _config(tmp_path / "fleet.yaml")
+    run = FleetRun(tmp_path / "run", robots=2, timeout_s=600.0, options=("--config", str(config)))
+    clock = run.clock()
+    try:
+        run.wait_for(lambda: clock.t >= DOCK_AT_S, timeout=180, what=f"sim time {DOCK_AT_S} s")
+        run.verb("dock", "robot-1")
+        report = run.finish()
+    finally:
+        run.cleanup()
+    assert run.left == [], f"processes left behind: {run.left}"
+    events = run.events()
+    homes = [(e["robot"], e["detail"]) for e in events if e["kind"] == "dock"]
+    assert ("robot-1", "sent home by cli: to dock 0") in homes, run.explained()
+    low = {rid for rid, why in homes if "below" in why}
+    assert low, run.explained()  # the threshold sent a robot to charge
+    charged = {e["robot"] for e in events if e["kind"] == "charged"}
+    assert "robot-1" in charged, run.explained()
+    reopened = [e for e in events if e["kind"] == "reopened" and "charge" in e["detail"]]
+    assert reopened, run.explained()  # the work it left was sold again
+    assert report["status"] == "done" and report["coverage"] >= 0.9, run.explained()
+    batteries = {rid: r["battery"] for rid, r in report["robots"].items()}
+    assert all(b["min_charge"] > 0 for b in batteries.values()), batteries
+    assert all(b["charges"] >= 1 for b in batteries.values()), batteries
+    assert sum(b["parked"] for b in batteries.values()) == 1, batteries  # one dock
+    assert report["collisions"]["robot_robot"] == 0, run.explained()

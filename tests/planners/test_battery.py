@@ -1,0 +1,99 @@
+"""The battery model: what drains it, what charges it, when a robot stands on a dock, and the
+market's energy check."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from robots import ROBOT
+
+from fleet.config import ConfigError
+from fleet.params import default_config_path, load_fleet_config
+from planners.battery import (
+    BatterySpec,
+    can_take,
+    charge_per_s,
+    docking_heading,
+    drain_per_s,
+    on_dock,
+)
+
+SPEC = BatterySpec(enabled=True, capacity_s=1000.0)
+
+
+def _drain(v: float, w: float) -> float:
+    rate = drain_per_s(SPEC, np.array([v]), np.array([w]), ROBOT.max_vel_x, ROBOT.wheel_base)
+    return float(rate[0])
+
+
+def test_sweeping_at_top_speed_lasts_capacity_s() -> None:
+    assert _drain(ROBOT.max_vel_x, 0.0) == pytest.approx(1 / SPEC.capacity_s)
+
+
+def test_standing_drains_the_electronics_only() -> None:
+    assert _drain(0.0, 0.0) == pytest.approx(SPEC.idle_share / SPEC.capacity_s)
+
+
+def test_half_speed_drains_half_the_wheels_share_and_the_whole_brush() -> None:
+    share = SPEC.idle_share + SPEC.brush_share + SPEC.drive_share / 2
+    assert _drain(ROBOT.max_vel_x / 2, 0.0) == pytest.approx(share / SPEC.capacity_s)
+
+
+def test_a_turn_in_place_turns_the_wheels() -> None:
+    assert _drain(0.0, 1.0) > _drain(0.0, 0.0) + SPEC.brush_share / SPEC.capacity_s
+
+
+def test_a_dock_puts_back_charge_rate_seconds_of_sweeping_per_second() -> None:
+    assert charge_per_s(SPEC) == pytest.approx(SPEC.charge_rate / SPEC.capacity_s)
+
+
+def test_a_robot_is_on_a_dock_near_its_pose_and_facing_it() -> None:
+    dock = (1.0, 0.5, math.pi / 2)  # the dock's body is to the south; a robot on it faces south
+    assert docking_heading(dock) == pytest.approx(-math.pi / 2)
+    poses = np.array(
+        [
+            [1.0, 0.5, -math.pi / 2],  # on it
+            [1.05, 0.45, -math.pi / 2 + 0.3],  # within the tolerances
+            [1.0, 0.5, math.pi / 2],  # backwards
+            [1.0, 0.65, -math.pi / 2],  # too far
+        ]
+    )
+    assert on_dock(SPEC, poses, dock).tolist() == [True, True, False, False]
+
+
+def test_the_energy_check_refuses_work_it_cannot_finish_and_get_home_from() -> None:
+    """Half a charge is 500 s of work at the sweeping drain: 400 s and 100 s home fit, 401 s
+    do not."""
+    assert can_take(SPEC, 0.5, 400.0, 100.0)
+    assert not can_take(SPEC, 0.5, 401.0, 100.0)
+    assert not can_take(SPEC, 0.5, 300.0, 201.0)
+
+
+def test_without_batteries_any_work_is_taken() -> None:
+    assert can_take(BatterySpec(enabled=False, capacity_s=1.0), 0.0, 1e6, 1e6)
+
+
+def _config_error(tmp_path: Path, **battery: object) -> str:
+    data = yaml.safe_load(default_config_path().read_text())
+    data["robot"]["battery"].update(battery)
+    path = tmp_path / "fleet.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError) as info:
+        load_fleet_config(path)
+    return str(info.value)
+
+
+def test_the_config_names_the_battery_field_it_refuses(tmp_path: Path) -> None:
+    assert "robot.battery: capacity_s must be > 0" in _config_error(tmp_path, capacity_s=0)
+    msg = _config_error(tmp_path, drive_share=0.9)
+    assert "robot.battery: drive_share + brush_share + idle_share must add up to 1" in msg
+    msg = _config_error(tmp_path, recharge_to=0.1)
+    assert "robot.battery: recharge_to (0.1) must be in (recharge_threshold, 1]" in msg
+
+
+def test_batteries_are_off_by_default() -> None:
+    assert not load_fleet_config().robot.battery.enabled
