@@ -11,23 +11,28 @@ within ``adjacent_m`` of each other) the way graph partitioners do it: greedy gr
 SIAM J. Sci. Comput. 1998, GGGP), then boundary refinement in the manner of Fiduccia–Mattheyses
 (1982), but on the makespan instead of the cut:
 
-1. **Seeds.** Robots in order of how near they are to any task each take the task nearest them
-   (travel to its nearer end) that no robot took before.
-2. **Growing.** The group with the least estimated time so far (travel from its robot's start to
-   its seed, plus its tasks' times) takes the task adjacent to it, not yet taken, that lies
-   nearest its robot's start; a group with nothing adjacent left stops. Tasks no group reaches
-   (a task graph in pieces) go to the group that is then the least loaded.
+1. **Growing, one robot after another** (the one farthest from any task first). A robot's seed
+   is the task nearest it (travel to its nearer end), unless a robot still to come is nearer
+   to that task; then its nearest task that is no other robot's nearest. Its group then takes,
+   again and again, a task bordering it, together with whatever that task's taking cuts off
+   from the tasks not taken, while the group ends nearer its share of the work left (estimated
+   time: travel from its start to its seed, and its tasks' times) with it than without:
+   preferably a task that is no robot's nearest, then one that cuts nothing off, then the one
+   nearest the seed. It leaves a task for each robot still to come. The last robot takes the
+   rest.
+2. **Repair.** A piece of a group cut off from its seed goes to a neighbouring group, one whose
+   seed it reaches if there is one (DARP's connectivity step).
 3. **Driving order.** Each group is ordered from its robot's start by the coverage planner's own
    tour heuristic (:func:`planners.coverage.tour.plan_tour`: greedy, 2-opt with reversal, Or-opt,
    each task forwards or backwards), on the travel times between task ends; a group's time is
    that tour's: travel from the start, the tasks' times and the travel between them.
-4. **Refinement.** While a task on a group's border can move to an adjacent group (never its
-   seed, and leaving the group connected) so that the longer time of the two goes down, a move
-   is made: out of the slowest group that can give one, the one that lowers that time most
-   (priced with the task cut out of one tour and put into the other where it adds least). The
-   two groups are then ordered again from there. Moves between any two neighbours, not only
-   out of the slowest, let a group hemmed in at the dock take work over from its neighbours
-   while they take over from theirs.
+4. **Refinement.** While a task on a group's border can move to a neighbouring group, with
+   whatever of its group only it joins to the group's seed (never the seed itself), so that
+   the longer time of the two goes down, a move is made: out of the slowest group that can
+   give one, the one that lowers that time most (priced with the tasks cut out of one tour and
+   put into the other one by one where each adds least). The two groups are then ordered again
+   from there. Moves between any two neighbours, not only out of the slowest, let a group
+   hemmed in at the dock take work over from its neighbours while they take over from theirs.
 
 Times come from one ``travel(from_xy, targets_xy)`` callable, the market's own
 (:class:`planners.auction.TravelGrid`), so a region is priced as its bids will price it.
@@ -46,7 +51,7 @@ from planners.auction.tasks import Task
 from planners.coverage.tour import TaskEnds, plan_tour, tour_cost
 from planners.polyline import densify
 
-# refinement moves at most this many tasks per task (a bound; it stops far sooner)
+# the refinement makes at most this many moves per task (a bound; it stops far sooner)
 _MOVES_PER_TASK = 4
 _EPS = 1e-6
 
@@ -114,12 +119,6 @@ def adjacency(tasks: Sequence[Task], adjacent_m: float) -> np.ndarray:
         out[i, np.unique(label[np.concatenate([np.asarray(x, dtype=int) for x in near])])] = True
     np.fill_diagonal(out, False)
     return out | out.T
-
-
-def connected(members: Sequence[int], adjacent: np.ndarray) -> bool:
-    """Whether ``members`` (task indices) form one connected piece of the adjacency graph."""
-    idx = list(members)
-    return len(idx) < 2 or bool((pieces(adjacent[np.ix_(idx, idx)]) == 0).all())
 
 
 def pieces(adjacent: np.ndarray) -> np.ndarray:

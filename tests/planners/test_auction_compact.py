@@ -8,7 +8,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from planners.auction import Lot, Region, Task, compact_regions, region_lot
-from planners.auction.compact import adjacency, connected
+from planners.auction.compact import adjacency, pieces
 
 SPEED = 0.25
 ADJACENT_M = 0.3
@@ -51,6 +51,11 @@ def _piece_of(tasks: list[Task], first: int) -> set[int]:
         seen |= new
         todo += list(new)
     return seen
+
+
+def connected(members: list[int], adjacent: np.ndarray) -> bool:
+    """Whether ``members`` (task indices) form one connected piece of the adjacency graph."""
+    return len(members) < 2 or bool((pieces(adjacent[np.ix_(members, members)]) == 0).all())
 
 
 def _nearest(task: Task, start: np.ndarray) -> float:
