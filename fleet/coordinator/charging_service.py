@@ -15,6 +15,7 @@ market as without them, and the robots' trips to charge (:mod:`fleet.coordinator
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 import numpy as np
 
@@ -60,13 +61,17 @@ class ChargingMarket(Market):
                 if self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to:
                     self.send_home(rid, f"can do none of the open work on {r.charge:.2f}")
 
-    def _regions(self) -> tuple[bool, tuple[auction.Lot, ...]]:
-        first, regions = super()._regions()
+    def _regions(self) -> tuple[bool, Callable[[], tuple[auction.Lot, ...]]]:
+        """The market's regions, none unless every robot's charge covers the longest."""
+        first, cut = super()._regions()
         charges = [self.job.robots[rid].charge for rid in self.job.market()]
         reach_s = min(charges, default=1.0) * self.battery.capacity_s
-        if any(lot.time_s > reach_s for lot in regions):
-            return first, ()
-        return first, regions
+
+        def within_charge() -> tuple[auction.Lot, ...]:
+            regions = cut()
+            return () if any(lot.time_s > reach_s for lot in regions) else regions
+
+        return first, within_charge
 
     def observe(self, rid: str, msg: RobotStatus) -> None:
         super().observe(rid, msg)

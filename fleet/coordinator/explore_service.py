@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 
 from fleet.bus import Bus
 from fleet.coordinator.exploring import Change, Explorer
@@ -37,8 +38,8 @@ class ExploringMarket(Market):
 
     explorer: Explorer
 
-    def _regions(self) -> tuple[bool, tuple[auction.Lot, ...]]:
-        return False, ()
+    def _regions(self) -> tuple[bool, Callable[[], tuple[auction.Lot, ...]]]:
+        return False, tuple
 
     def _untried(self, lot: auction.Lot, robot: str) -> bool:
         """Only a robot without work may win: each drives to one frontier at a time (a robot

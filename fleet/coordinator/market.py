@@ -4,9 +4,12 @@ or an idle one changes.
 Sequential single-item auctions (Koenig et al. 2006, :mod:`fleet.coordinator.auctioneer`): the
 auction runs rounds until nothing is open or no robot bids, one lot sold per round. Runs of the
 tour are sold as regions, one per robot in the market (``planners.auction.regions``): all tasks
-in the first allocation, and the work a lost robot leaves; everything else task by task. The
-winner's whole queue goes out as its award (:mod:`fleet.coordinator.awards`). The first
-allocation's makespan (the longest of the winners' committed times) is the job's estimate.
+in the first allocation, and the work a lost robot leaves; everything else task by task. With
+``coordinator.first_regions: compact`` the first allocation sells compact groups instead, one
+grown from each robot's start (``planners.auction.compact_regions``), each only to its robot;
+a lot's tasks keep the directions its group's driving order gives them. The winner's whole
+queue goes out as its award (:mod:`fleet.coordinator.awards`). The first allocation's makespan
+(the longest of the winners' committed times) is the job's estimate.
 
 A task is done when its pieces are swept; a plan that ends with pieces of a tour task unswept
 (waypoints given up) gives them back to the market once, as a remainder (``Job.give_back``).
@@ -49,6 +52,7 @@ from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import ASSIGNED, LOST, OPEN, Job
 from fleet.coordinator.journal import Journal
+from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import chain_pieces, piece_count
 from fleet.protocol import Plan, RobotStatus
 from planners import auction
@@ -110,6 +114,7 @@ class Market:
         self.progress: dict[str, Progress] = {}
         self.stall_s = math.inf
         self.stall_progress_m = 0.0
+        self.first_regions = "tour"  # or "compact" (coordinator.first_regions)
 
     # ---- selling --------------------------------------------------------------------------
 
@@ -120,7 +125,8 @@ class Market:
         t0 = time.monotonic()
         committed: list[float] = []
         with self.lock:
-            first, regions = self._regions()
+            first, cut = self._regions()
+        regions = cut()
         while not self.stop.is_set():
             with self.lock:
                 each_round()
@@ -154,9 +160,10 @@ class Market:
         """The auctioneer's result: award the lot's tasks to the winner (in the order it drives
         them), log the round, send the winner its queue."""
         lot, best = sale.lot, sale.best
-        order = lot.tasks[::-1] if best.reverse else lot.tasks
-        for tid in order:
-            self.job.award(tid, best.robot, best.reverse)
+        driven = lot.driven(best.reverse)
+        order = [tid for tid, _ in driven]
+        for tid, reverse in driven:
+            self.job.award(tid, best.robot, reverse)
             lost_at = self.lost_at.pop(tid, None)
             if lost_at is None:
                 self.journal.event("awarded", best.robot, tid, f"{lot.id}: {best.total_s:.1f} s")
@@ -181,28 +188,24 @@ class Market:
         self.journal.set_meta(round_seq=sale.round)
         self.awards.send()
 
-    def _regions(self) -> tuple[bool, tuple[auction.Lot, ...]]:
-        """Whether this is the first allocation, and the runs of the tour sold as regions, one
-        per robot in the market (``planners.auction.regions``): all tasks in the first
-        allocation, and the work a lost robot leaves; everything else goes task by task."""
+    def _regions(self) -> tuple[bool, Callable[[], tuple[auction.Lot, ...]]]:
+        """Whether this is the first allocation, and how the regions sold are cut
+        (:func:`region_lots`): all tasks at first, and the work a lost robot leaves."""
         first = all(r.state == "open" for r in self.job.tasks.values())
         if first:
             self.region_sale = list(self.job.tasks)
-        for_sale = sorted(
-            (t for t in self.region_sale if self.job.tasks[t].state == "open"), key=_tour_key
-        )
-        self.region_sale = []
-        bidders = self.job.market()
-        runs = [self.job.tasks[t].task for t in for_sale]
-        return first, auction.regions(runs, len(bidders)) if bidders else ()
+        sale, self.region_sale = self.region_sale, []
+        compact = first and self.first_regions == "compact"
+        return first, region_lots(self.job, sale, self.dispatcher.planner if compact else None)
 
     def _bidders(self) -> list[str]:
         """The robots called to bid: those in the market."""
         return self.job.market()
 
     def _untried(self, lot: auction.Lot, robot: str) -> bool:
-        """Whether ``robot`` may win ``lot``: it has tried none of its tasks."""
-        return not any(robot in self.job.tasks[t].tried for t in lot.tasks)
+        """Whether ``robot`` may win ``lot``: it is for any robot or for it, untried by it."""
+        tried = any(robot in self.job.tasks[t].tried for t in lot.tasks)
+        return lot.robot in (None, robot) and not tried
 
     def _settle(self) -> None:
         """Open tasks every robot in the market has tried are unreachable, and said so."""
@@ -456,6 +459,25 @@ def await_ack(lock: threading.RLock, job: Job, rid: str, timeout_s: float) -> No
             if r is None or r.acked_seq >= r.award_seq or rid not in job.market():
                 return
         time.sleep(ACK_POLL_S)
+
+
+def region_lots(
+    job: Job, sale: list[str], compact: TaskPlanner | None = None
+) -> Callable[[], tuple[auction.Lot, ...]]:
+    """The open tasks of ``sale`` as regions, one per robot in the market: runs of the tour
+    (``planners.auction.regions``), or with ``compact`` its compact groups, each for one robot
+    (:meth:`TaskPlanner.compact_lots`); none without robots. Read from the job now, cut when
+    called: a compact partition takes a second or so, which the market's lock must not wait
+    for (robots' heartbeats would wait with it)."""
+    bidders = job.market()
+    open_ = (t for t in sale if job.tasks[t].state == OPEN)
+    runs = [job.tasks[t].task for t in sorted(open_, key=_tour_key)]
+    if not bidders:
+        return lambda: ()
+    if compact is not None:
+        starts = {rid: job.robots[rid].xy for rid in bidders}
+        return lambda: compact.compact_lots(runs, starts)
+    return lambda: auction.regions(runs, len(bidders))
 
 
 def _tour_key(task_id: str) -> tuple[int, ...]:

@@ -172,9 +172,9 @@ def test_regions_are_sold_only_when_each_robot_can_do_one_on_its_charge(
     planner: TaskPlanner, world: World
 ) -> None:
     f = Fleet(planner, world, ["robot-0", "robot-1"])
-    assert len(f.market._regions()[1]) == 2  # 16 s each against 100 s of charge
+    assert len(f.market._regions()[1]()) == 2  # 16 s each against 100 s of charge
     f.job.robots["robot-1"].charge = 0.1
-    assert f.market._regions()[1] == ()
+    assert f.market._regions()[1]() == ()
 
 
 def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world: World) -> None:
