@@ -7,9 +7,9 @@ have already observed all but a small share of the cells it observed (the robot 
 floor: they hold its walls), with its grid and its likelihood field; its log-odds are first
 folded into those older submaps' grids, so the map composed from them keeps the evidence. Unlike
 Cartographer's trimmer it leaves the submap's pose and nodes in the pose graph: dropping them
-cost accuracy, and they weigh a few dozen bytes each. The
-kept submaps are those that added floor, so their number is bounded by the floor's size, not by
-how long the robot drives.
+cost accuracy, and they weigh a few dozen bytes each. The kept submaps are those that added
+floor, so their number is bounded by the floor's size, not by how long the robot drives (the
+pose graph still grows with the drive, by a node per scan that moved enough).
 """
 
 from __future__ import annotations
