@@ -13,7 +13,7 @@ At the end of the job every robot is sent home the same way, and the job is fini
 is on a dock or at its waiting spot.
 
 What the coordinator knows of a battery is what the robot's status says (its charge, whether a
-dock charges it); it never reads the simulator's truth.
+dock charges it), and nothing from the simulator.
 """
 
 from __future__ import annotations
