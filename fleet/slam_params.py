@@ -92,6 +92,9 @@ class SlamParams:
     loop_sigma_theta: float = 0.02
     huber_scale: float = 1.0  # in standard deviations: a wrong loop closure is down-weighted
     optimize_every_nodes: int = 20  # optimize at most this often, and only after new closures
+    # Optimize the newest this many poses only, the older held (0: all): bounded memory and
+    # time per optimization on long runs; a home job adds about 1000-2000 per robot.
+    optimize_window_nodes: int = 2000
     # A finished submap is dropped, its log-odds folded into older kept submaps, when they hold
     # at least this share of its wall cells as walls: the robot re-mapped known floor.
     trim_overlap: float = 0.9
@@ -155,6 +158,11 @@ class SlamParams:
             raise ValueError("patch_tolerance must be within 0..100")
         if self.submap_nodes < 2:
             raise ValueError("submap_nodes must be >= 2")
+        if self.optimize_window_nodes < 0:
+            raise ValueError(
+                "optimize_window_nodes must be >= 0 (0: the whole graph), "
+                f"got {self.optimize_window_nodes}"
+            )
         if not 0 < self.trim_overlap <= 1:
             raise ValueError(f"trim_overlap must be within (0, 1], got {self.trim_overlap}")
         require_positive(

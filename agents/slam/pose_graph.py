@@ -4,6 +4,13 @@ Every constraint says "pose b seen from pose a is z": residual r = (a⁻¹ ⊕ b
 its standard deviations (the SPA formulation of Konolige et al. 2010, as used for submaps and
 scan nodes in Hess et al. 2016). A Huber loss bounds the pull of a wrong loop closure. The
 Jacobian is analytic and sparse: each constraint touches six variables.
+
+On a long run the graph is optimized over a window of the newest poses only: older poses are
+held where the last optimization that reached them left them, and constraints between two held
+poses leave the graph (the fixed-lag idea of incremental smoothers, Kaess et al. 2008, iSAM;
+Cartographer's pure localization trims old trajectory nodes the same way, Hess et al. 2016).
+A new scan that closes a loop against an old submap is pulled onto it, as a robot localizing on
+a finished map; memory and time per optimization stay bounded however long the robot drives.
 """
 
 from __future__ import annotations
@@ -28,29 +35,44 @@ class OptimizationReport:
 
 
 class PoseGraph:
-    """Poses (x, y, θ) and relative-pose constraints; pose 0 is held fixed (the gauge)."""
+    """Poses (x, y, θ) and relative-pose constraints; pose 0 is held fixed (the gauge).
 
-    def __init__(self) -> None:
-        self._poses = np.zeros((0, 3))
-        # one row per constraint: a, b, z (3), weights 1/σ (3); grown by doubling, so a
-        # constraint costs 64 bytes, not a list entry and two small arrays each
+    ``window``: the optimization moves only the newest ``window`` poses (0: every pose)."""
+
+    def __init__(self, window: int = 0) -> None:
+        if window < 0:
+            raise ValueError(f"window must be >= 0, got {window}")
+        self.window = window
+        # poses and constraints grow by doubling: a pose costs 24 bytes, a constraint one
+        # 64-byte row (a, b, z (3), weights 1/σ (3)), not a list entry and small arrays each
+        self._pose_rows = np.zeros((64, 3))
+        self._n = 0
         self._rows = np.zeros((64, 8))
         self._m = 0
+        self._held = 0
 
     @property
     def poses(self) -> np.ndarray:
-        return self._poses
+        return self._pose_rows[: self._n]
 
     @property
     def num_constraints(self) -> int:
         return self._m
 
+    @property
+    def held(self) -> int:
+        """Poses below this index are held fixed: older than the optimization window."""
+        return self._held
+
     def add_pose(self, pose: np.ndarray) -> int:
-        self._poses = np.vstack([self._poses, np.asarray(pose, dtype=float)[None, :]])
-        return self._poses.shape[0] - 1
+        if self._n == len(self._pose_rows):
+            self._pose_rows = np.vstack([self._pose_rows, np.zeros_like(self._pose_rows)])
+        self._pose_rows[self._n] = np.asarray(pose, dtype=float)
+        self._n += 1
+        return self._n - 1
 
     def set_pose(self, index: int, pose: np.ndarray) -> None:
-        self._poses[index] = pose
+        self._pose_rows[index] = pose
 
     def add_constraint(
         self, a: int, b: int, z: np.ndarray, sigma_xy: float, sigma_theta: float
@@ -71,19 +93,23 @@ class PoseGraph:
         variable moves by ``tolerance`` or after ``max_iterations``."""
         if not self._m:
             return OptimizationReport(0, 0.0, 0.0)
+        self._hold_old()
         rows = self._rows[: self._m]
         a = rows[:, 0].astype(np.int64)
         b = rows[:, 1].astype(np.int64)
         z = rows[:, 2:5]
         w = rows[:, 5:8]
-        n = self._poses.shape[0]
+        n, free = self._n, self._held
         m = a.size
-        anchor = self._poses[0].copy()
+        # with no pose held, pose 0 is pinned by a stiff prior (the gauge); else the held do it
+        anchored = free == 0
+        anchor = self._pose_rows[0].copy()
         anchor_w = 1e4
+        full = self._pose_rows[:n].copy()
 
         def residuals(flat: np.ndarray) -> np.ndarray:
-            x = flat.reshape(n, 3)
-            pa, pb = x[a], x[b]
+            full[free:] = flat.reshape(n - free, 3)
+            pa, pb = full[a], full[b]
             c, s = np.cos(pa[:, 2]), np.sin(pa[:, 2])
             dx, dy = pb[:, 0] - pa[:, 0], pb[:, 1] - pa[:, 1]
             r = np.empty((m, 3))
@@ -91,38 +117,30 @@ class PoseGraph:
             r[:, 1] = -s * dx + c * dy - z[:, 1]
             r[:, 2] = wrap_angle(pb[:, 2] - pa[:, 2] - z[:, 2])
             r *= w
-            return np.concatenate([r.reshape(-1), anchor_w * (x[0] - anchor)])
+            if not anchored:
+                return r.reshape(-1)
+            return np.concatenate([r.reshape(-1), anchor_w * (full[0] - anchor)])
 
-        rows3 = 3 * np.arange(m)
-        row_idx = np.concatenate(
-            [
-                np.repeat(rows3, 5),
-                np.repeat(rows3 + 1, 5),
-                np.repeat(rows3 + 2, 2),
-                3 * m + np.arange(3),
-            ]
-        )
-        cols_xy = np.stack([3 * a, 3 * a + 1, 3 * a + 2, 3 * b, 3 * b + 1], axis=1).reshape(-1)
-        cols_t = np.stack([3 * a + 2, 3 * b + 2], axis=1).reshape(-1)
-        col_idx = np.concatenate([cols_xy, cols_xy, cols_t, np.arange(3)])
+        row_idx, col_idx, moving = _jacobian_pattern(a, b, free, anchored)
+        n_rows = 3 * m + (3 if anchored else 0)
 
         def jacobian(flat: np.ndarray) -> sp.csr_matrix:
-            x = flat.reshape(n, 3)
-            pa, pb = x[a], x[b]
+            full[free:] = flat.reshape(n - free, 3)
+            pa, pb = full[a], full[b]
             c, s = np.cos(pa[:, 2]), np.sin(pa[:, 2])
             dx, dy = pb[:, 0] - pa[:, 0], pb[:, 1] - pa[:, 1]
             jx = np.stack([-c, -s, -s * dx + c * dy, c, s], axis=1) * w[:, :1]
             jy = np.stack([s, -c, -c * dx - s * dy, -s, c], axis=1) * w[:, 1:2]
             jt = np.stack([-np.ones(m), np.ones(m)], axis=1) * w[:, 2:3]
-            data = np.concatenate(
-                [jx.reshape(-1), jy.reshape(-1), jt.reshape(-1), np.full(3, anchor_w)]
-            )
-            return sp.csr_matrix((data, (row_idx, col_idx)), shape=(3 * m + 3, 3 * n))
+            data = np.concatenate([jx.reshape(-1), jy.reshape(-1), jt.reshape(-1)])[moving]
+            if anchored:
+                data = np.concatenate([data, np.full(3, anchor_w)])
+            return sp.csr_matrix((data, (row_idx, col_idx)), shape=(n_rows, 3 * (n - free)))
 
         # A tiny Levenberg damping keeps poses that no constraint touches yet (a submap just
         # started) from making the normal equations singular; it moves nothing else.
-        damping = sp.identity(3 * n, format="csr") * 1e-9
-        x = self._poses.reshape(-1).copy()
+        damping = sp.identity(3 * (n - free), format="csr") * 1e-9
+        x = self._pose_rows[free:n].reshape(-1).copy()
         initial = final = _huber_cost(residuals(x), m, huber_scale)
         iterations = 0
         while iterations < max_iterations:
@@ -137,10 +155,43 @@ class PoseGraph:
             final = _huber_cost(residuals(x), m, huber_scale)
             if np.max(np.abs(step)) < tolerance:
                 break
-        x = x.reshape(n, 3)
+        x = x.reshape(n - free, 3)
         x[:, 2] = wrap_angle(x[:, 2])
-        self._poses = x
+        self._pose_rows[free:n] = x
         return OptimizationReport(iterations, initial, final)
+
+    def _hold_old(self) -> None:
+        """Hold every pose older than the window, and drop the constraints between two held
+        poses: nothing can move them any more."""
+        if not self.window or self._n - self._held <= self.window:
+            return
+        self._held = self._n - self.window
+        rows = self._rows[: self._m]
+        live = rows[(rows[:, 0] >= self._held) | (rows[:, 1] >= self._held)]
+        self._rows[: len(live)] = live
+        self._m = len(live)
+
+
+def _jacobian_pattern(
+    a: np.ndarray, b: np.ndarray, free: int, anchored: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows and columns of the Jacobian's entries, five per x and y residual and two per θ
+    residual (then the gauge's three), columns counted from the first pose not held; and which
+    of the constraints' entries stay (those of held poses leave)."""
+    m = a.size
+    rows3 = 3 * np.arange(m)
+    row_idx = np.concatenate(
+        [np.repeat(rows3, 5), np.repeat(rows3 + 1, 5), np.repeat(rows3 + 2, 2)]
+    )
+    cols_xy = np.stack([3 * a, 3 * a + 1, 3 * a + 2, 3 * b, 3 * b + 1], axis=1).reshape(-1)
+    cols_t = np.stack([3 * a + 2, 3 * b + 2], axis=1).reshape(-1)
+    col_idx = np.concatenate([cols_xy, cols_xy, cols_t]) - 3 * free
+    moving = col_idx >= 0
+    row_idx, col_idx = row_idx[moving], col_idx[moving]
+    if anchored:
+        row_idx = np.concatenate([row_idx, 3 * m + np.arange(3)])
+        col_idx = np.concatenate([col_idx, np.arange(3)])
+    return row_idx, col_idx, moving
 
 
 def _huber_weights(r: np.ndarray, m: int, scale: float) -> np.ndarray:

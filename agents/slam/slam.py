@@ -85,7 +85,7 @@ class Slam:
         self.range_min = range_min
         self.range_max = min(range_max, params.max_range)
         self._matcher = CorrelativeMatcher(params)
-        self._graph = PoseGraph()
+        self._graph = PoseGraph(params.optimize_window_nodes)
         self._submaps = Submaps(params, self._graph, self.range_max)
         self._loops = LoopCloser(params, self._graph)
         self._pose = np.asarray(initial_pose, dtype=float)
