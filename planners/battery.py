@@ -10,11 +10,18 @@ same way: energy for the motion, for the device, and for the ambient load over i
 
 The market's energy check (:func:`can_take`) prices work at the sweeping drain, the most a
 second of it can cost, so a robot that bids on a task can finish it and get home to a dock.
+
+A dock charges one robot at a time, so the charge a robot needs to get home is not a fixed
+reserve: :func:`go_home_below` adds to ``recharge_threshold`` (the margin it arrives with) the
+trip at the sweeping drain and the wait behind the robots ahead of it at that dock (each
+charging from its charge to ``recharge_to``) at the idle drain — the reserve of Open-RMF's
+battery-aware planner, with the dock's queue counted as a ``wait`` task before the charge.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,3 +118,21 @@ def can_take(spec: BatterySpec, charge: float, work_s: float, home_s: float) -> 
     if not spec.enabled:
         return True
     return charge - work_charge(spec, work_s + home_s) >= 0.0
+
+
+def queue_wait_s(spec: BatterySpec, ahead: Sequence[float]) -> float:
+    """Seconds a robot waits at a dock behind robots charged ``ahead`` (charging there, or on
+    their way or waiting), each charging to ``recharge_to`` at ``charge_rate`` in turn."""
+    need = sum(max(spec.recharge_to - max(c, 0.0), 0.0) for c in ahead)
+    return need / charge_per_s(spec)
+
+
+def go_home_below(spec: BatterySpec, trip_s: float, ahead: Sequence[float]) -> float:
+    """The charge below which a robot goes to charge now: ``recharge_threshold`` kept on
+    arrival, plus its ``trip_s`` seconds to the dock at the sweeping drain, plus its wait
+    behind ``ahead`` (:func:`queue_wait_s`) standing, at the electronics' drain. 0 with
+    batteries off."""
+    if not spec.enabled:
+        return 0.0
+    wait = queue_wait_s(spec, ahead) * spec.idle_share / spec.capacity_s
+    return spec.recharge_threshold + work_charge(spec, trip_s) + wait

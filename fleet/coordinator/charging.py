@@ -8,9 +8,10 @@ like any plan: the transit (A* on the floor plan) to a point in front of the doc
 onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: the nearest
 dock no robot holds is taken; when every one is held the robot waits at a waiting spot by the
 nearest (free floor near it, clear of its approach), in the order the robots came, and goes on
-once the dock is free. On the dock it charges until ``recharge_to`` and is back in the market.
-At the end of the job every robot is sent home the same way, and the job is finished once each
-is on a dock or at its waiting spot.
+once the dock is free. The charge below which a robot is sent counts its trip and the queue
+ahead of it at that dock (:meth:`Docking.go_home_below`). On the dock it charges until
+``recharge_to`` and is back in the market. At the end of the job every robot is sent home the
+same way, and the job is finished once each is on a dock or at its waiting spot.
 
 What the coordinator knows of a battery is what the robot's status says (its charge, whether a
 dock charges it), and nothing from the simulator.
@@ -31,7 +32,7 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
-from planners.battery import BatterySpec
+from planners.battery import BatterySpec, go_home_below
 from planners.grid import clearance
 from planners.polyline import without_straight_vertices
 
@@ -92,6 +93,7 @@ class Docking:
         self.docks = docks
         self.trips: dict[str, Trip] = {}
         self.spots = [self._spots(d) for d in docks]
+        self.travel = planner.travel()
 
     # ---- geometry ---------------------------------------------------------------------------
 
@@ -141,6 +143,28 @@ class Docking:
     def _nearest(self, xy: tuple[float, float], free_only: bool) -> int | None:
         ks = [k for k in range(len(self.docks)) if not free_only or self.holder(k) is None]
         return min(ks, key=lambda k: math.dist(xy, self.docks[k][:2]), default=None)
+
+    def ahead(self, k: int) -> list[float]:
+        """The charges of the robots ahead of a newcomer at dock ``k``: on their way to it,
+        waiting by it or charging on it (parking at the job's end aside)."""
+        robots = self.job.robots
+        return [
+            robots[rid].charge for rid, t in self.trips.items() if t.dock == k and not t.parking
+        ]
+
+    def go_home_below(self, rid: str) -> float:
+        """The charge below which ``rid`` goes to charge now: the threshold plus its trip to the
+        dock it would be sent to (the nearest free one, else the nearest) and the wait behind
+        the robots ahead of it there (``planners.battery.go_home_below``)."""
+        r = self.job.robots[rid]
+        k = None if r.xy is None else self._nearest(r.xy, free_only=True)
+        if k is None and r.xy is not None:
+            k = self._nearest(r.xy, free_only=False)
+        if k is None or r.xy is None:
+            return self.spec.recharge_threshold
+        dock = np.array(self.docks[k][:2])
+        trip_s = float(self.travel(dock, np.array([r.xy]))[0])
+        return go_home_below(self.spec, trip_s, self.ahead(k))
 
     # ---- trips ------------------------------------------------------------------------------
 

@@ -2,8 +2,9 @@
 market as without them, and the robots' trips to charge (:mod:`fleet.coordinator.charging`).
 
 - It serves the world's docks on ``coord/docks``: robots price the way home from each task.
-- A robot whose status reports a charge below ``recharge_threshold`` is taken out of the
-  market and sent to a dock; the work it held goes back to the market.
+- A robot whose status reports a charge below ``recharge_threshold`` plus what its trip to a
+  dock and the queue ahead of it there cost (:meth:`Docking.go_home_below`) is taken out of
+  the market and sent to a dock; the work it held goes back to the market.
 - An auction that sells nothing while work is open (every robot declined it on its charge)
   sends the idle robots that are not charged to ``recharge_to`` to charge.
 - The first allocation sells regions, one per robot, only when each robot's charge covers a
@@ -149,7 +150,7 @@ class ChargingCoordinator(Coordinator):
         assert isinstance(market, ChargingMarket)
         if self.docking.tick(self.job.finished):
             market.need_auction = True
-        for rid, why, parking in going_home(self.job, self.battery):
+        for rid, why, parking in going_home(self.job, self.docking.go_home_below):
             market.send_home(rid, why, parking)
         for rid, r in self.job.robots.items():
             if r.charge == 0.0 and not r.charging and r.docking not in ("", EMPTY):
@@ -159,16 +160,16 @@ class ChargingCoordinator(Coordinator):
         return self.job.finished and self.docking.home()
 
 
-def going_home(job: Job, spec: BatterySpec) -> list[tuple[str, str, bool]]:
+def going_home(job: Job, below: Callable[[str], float]) -> list[tuple[str, str, bool]]:
     """The robots to send home now, each with why and whether to park: at the job's end every
     robot not yet on its way home; before it, each robot in the market whose charge has fallen
-    below ``recharge_threshold``."""
+    below what it needs to get to a dock and wait there (``below(robot)``)."""
     out = []
     for rid, r in sorted(job.robots.items()):
         if r.liveness == LOST or r.docking or r.xy is None:
             continue
         if job.finished:
             out.append((rid, "the job is done", True))
-        elif r.in_market and 0 <= r.charge < spec.recharge_threshold:
-            out.append((rid, f"charge {r.charge:.3f} below {spec.recharge_threshold}", False))
+        elif r.in_market and r.charge >= 0 and r.charge < (need := below(rid)):
+            out.append((rid, f"charge {r.charge:.3f} below {need:.3f}", False))
     return out

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -111,8 +110,9 @@ def test_a_robot_below_the_threshold_goes_to_a_dock_and_its_work_is_sold_again(
     f.awards.send()
     job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
     job.robots["robot-0"].charge = 0.19
-    assert going_home(job, SPEC) == [("robot-0", "charge 0.190 below 0.2", False)]
-    for rid, why, parking in going_home(job, SPEC):
+    ((rid, why, parking),) = going_home(job, f.docking.go_home_below)
+    assert rid == "robot-0" and why.startswith("charge 0.190 below 0.") and not parking
+    for rid, why, parking in going_home(job, f.docking.go_home_below):
         f.market.send_home(rid, why, parking)
     r = job.robots["robot-0"]
     assert r.docking == "docking" and "robot-0" not in job.market()
@@ -140,7 +140,7 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     f = Fleet(planner, world, ["robot-0", "robot-1"])
     for rid in ("robot-0", "robot-1"):
         f.job.robots[rid].charge = 0.15
-    for rid, why, parking in going_home(f.job, SPEC):
+    for rid, why, parking in going_home(f.job, f.docking.go_home_below):
         f.market.send_home(rid, why, parking)
     (to_dock,), (to_wait,) = f.plans("robot-0"), f.plans("robot-1")
     assert to_dock.task == "dock-0" and to_wait.task == "wait-0"
@@ -155,6 +155,25 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     assert "robot-0" in f.job.market()
     (_, onto) = f.plans("robot-1")
     assert onto.task == "dock-0" and f.job.robots["robot-1"].docking == "docking"
+
+
+def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_dock(
+    planner: TaskPlanner, world: World
+) -> None:
+    """Alone, robot-2 needs the threshold and its trip; behind two robots on their way to the
+    one dock at 0.1 it needs 2 × 0.8 × 25 s of their charging more at the idle drain (0.2 of
+    it): 0.08 on a 100 s charge. At a charge between the two it stays at work alone and goes
+    behind the queue."""
+    f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
+    alone = f.docking.go_home_below("robot-2")
+    assert SPEC.recharge_threshold < alone < SPEC.recharge_threshold + 0.2  # the trip
+    f.job.robots["robot-2"].charge = alone + 0.04
+    assert going_home(f.job, f.docking.go_home_below) == []
+    for rid in ("robot-0", "robot-1"):
+        f.job.robots[rid].charge = 0.1
+        f.market.send_home(rid, "low", False)
+    assert f.docking.go_home_below("robot-2") == pytest.approx(alone + 0.08, abs=1e-9)
+    assert [rid for rid, _, _ in going_home(f.job, f.docking.go_home_below)] == ["robot-2"]
 
 
 def test_a_robot_that_declines_every_open_task_on_its_charge_goes_to_charge(
@@ -181,16 +200,16 @@ def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world
     f = Fleet(planner, world, ["robot-0", "robot-1"])
     for rec in f.job.tasks.values():
         rec.state = DONE
-    assert [(rid, parking) for rid, _, parking in going_home(f.job, SPEC)] == [
+    assert [(rid, parking) for rid, _, parking in going_home(f.job, f.docking.go_home_below)] == [
         ("robot-0", True),
         ("robot-1", True),
     ]
-    for rid, why, parking in going_home(f.job, SPEC):
+    for rid, why, parking in going_home(f.job, f.docking.go_home_below):
         f.market.send_home(rid, why, parking)
     assert not f.docking.home()
     f.status("robot-0", 0.5, True, f.plans("robot-0")[-1], done=True)
     f.status("robot-1", 0.5, False, f.plans("robot-1")[-1], done=True)
-    assert f.docking.home() and going_home(f.job, SPEC) == []
+    assert f.docking.home() and going_home(f.job, f.docking.go_home_below) == []
     # charged at the end of the job, a robot stays on its dock
     f.status("robot-0", 0.95, True, f.plans("robot-0")[-1], done=True)
     assert f.docking.tick(True) == [] and f.job.robots["robot-0"].docking == "charging"
@@ -199,4 +218,4 @@ def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world
 def test_batteries_off_send_no_one_home(planner: TaskPlanner, world: World) -> None:
     f = Fleet(planner, world, ["robot-0"])
     f.job.robots["robot-0"].charge = -1.0  # no battery heard
-    assert going_home(f.job, replace(SPEC, recharge_threshold=0.5)) == []
+    assert going_home(f.job, lambda _rid: 0.5) == []

@@ -19,7 +19,9 @@ from planners.battery import (
     charge_per_s,
     docking_heading,
     drain_per_s,
+    go_home_below,
     on_dock,
+    queue_wait_s,
 )
 
 SPEC = BatterySpec(enabled=True, capacity_s=1000.0)
@@ -75,6 +77,27 @@ def test_the_energy_check_refuses_work_it_cannot_finish_and_get_home_from() -> N
 
 def test_without_batteries_any_work_is_taken() -> None:
     assert can_take(BatterySpec(enabled=False, capacity_s=1.0), 0.0, 1e6, 1e6)
+
+
+def test_the_wait_at_a_dock_is_the_charging_of_each_robot_ahead() -> None:
+    """charge_rate 4 on 1000 s: 250 s from 0 to a full charge. recharge_to 0.9: a robot at 0.1
+    charges 200 s, one at 0.5 100 s; a robot above recharge_to adds nothing."""
+    assert queue_wait_s(SPEC, []) == 0.0
+    assert queue_wait_s(SPEC, [0.1]) == pytest.approx(200.0)
+    assert queue_wait_s(SPEC, [0.1, 0.5, 0.95]) == pytest.approx(300.0)
+
+
+def test_a_robot_goes_home_earlier_by_its_trip_and_its_wait_behind_the_queue() -> None:
+    """Threshold 0.2; a 50 s trip at the sweeping drain is 0.05; 300 s waiting behind two
+    robots at the electronics' drain (0.2 of it) is 0.06."""
+    alone = go_home_below(SPEC, 0.0, [])
+    assert alone == pytest.approx(0.2)
+    assert go_home_below(SPEC, 50.0, []) == pytest.approx(0.25)
+    assert go_home_below(SPEC, 50.0, [0.1, 0.5]) == pytest.approx(0.31)
+    # the more robots ahead, the earlier it goes
+    third = go_home_below(SPEC, 50.0, [0.1, 0.5, 0.3])
+    assert third > go_home_below(SPEC, 50.0, [0.1, 0.5])
+    assert go_home_below(BatterySpec(enabled=False), 50.0, [0.1]) == 0.0
 
 
 def _config_error(tmp_path: Path, **battery: object) -> str:
