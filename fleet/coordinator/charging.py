@@ -8,7 +8,9 @@ like any plan: the transit (A* on the floor plan) to a point in front of the doc
 onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: the nearest
 dock no robot holds is taken; when every one is held the robot waits at a waiting spot by the
 nearest (free floor near it, clear of its approach), in the order the robots came, and goes on
-once the dock is free. The charge below which a robot is sent counts its trip and the queue
+once the dock is free. A dock with a body on it or on the line onto it (a lost robot's, or one
+whose battery ran out) is not used; a robot with no dock left works until it runs out. The
+charge below which a robot is sent counts its trip and the queue
 ahead of it at that dock (:meth:`Docking.go_home_below`). On the dock it charges until
 ``recharge_to`` and is back in the market. At the end of the job every robot is sent home the
 same way, and the job is finished once each is on a dock or at its waiting spot.
@@ -140,8 +142,18 @@ class Docking:
                 return rid
         return None
 
+    def usable(self, k: int) -> bool:
+        """Whether a robot can drive onto dock ``k``: no body (a lost robot's, or one out of
+        charge) stands on it or on the line onto it."""
+        dock = self.docks[k]
+        return not self.planner.near_bodies(np.vstack([_approach(dock), dock[:2]]))
+
     def _nearest(self, xy: tuple[float, float], free_only: bool) -> int | None:
-        ks = [k for k in range(len(self.docks)) if not free_only or self.holder(k) is None]
+        ks = [
+            k
+            for k in range(len(self.docks))
+            if self.usable(k) and (not free_only or self.holder(k) is None)
+        ]
         return min(ks, key=lambda k: math.dist(xy, self.docks[k][:2]), default=None)
 
     def ahead(self, k: int) -> list[float]:
@@ -161,7 +173,7 @@ class Docking:
         if k is None and r.xy is not None:
             k = self._nearest(r.xy, free_only=False)
         if k is None or r.xy is None:
-            return self.spec.recharge_threshold
+            return 0.0  # no dock it can charge on: it works until it runs out
         dock = np.array(self.docks[k][:2])
         trip_s = float(self.travel(dock, np.array([r.xy]))[0])
         return go_home_below(self.spec, trip_s, self.ahead(k))
@@ -178,7 +190,8 @@ class Docking:
         waiting = k is None
         if k is None:
             k = self._nearest(r.xy, free_only=False)
-            assert k is not None
+        if k is None:
+            return False
         r.docking = "waiting" if waiting else "docking"
         if not self._go(rid, k, waiting, parking):
             r.docking = ""
@@ -237,6 +250,10 @@ class Docking:
             if r.liveness == LOST:
                 self._drop(rid)
                 continue
+            if not self.usable(t.dock) and not r.charging:
+                if self._blocked(rid, t):
+                    back.append(rid)
+                continue
             if r.docking == "charging" and r.charge >= self.spec.recharge_to and not job_over:
                 self._drop(rid)
                 self.journal.event("charged", rid, t.plan.task, f"at {r.charge:.2f}; bids again")
@@ -248,6 +265,17 @@ class Docking:
                 self._missed(rid, t, now)
             self._resend(rid)
         return back
+
+    def _blocked(self, rid: str, t: Trip) -> bool:
+        """A body now stands on ``rid``'s dock or on the line onto it: it goes on to the
+        nearest other dock it can use; with none, it is back in the market (True) and works
+        until it runs out."""
+        self._drop(rid)
+        self.journal.event("dock", rid, t.plan.task, f"dock {t.dock} is blocked by a body")
+        if self.send(rid, "its dock is blocked", t.parking):
+            return False
+        self.journal.event("dock", rid, "", "no dock it can charge on: back to work")
+        return True
 
     def _missed(self, rid: str, t: Trip, now: float) -> None:
         """``rid`` is at the end of its dock plan but does not charge: once that has lasted
@@ -280,7 +308,8 @@ class Docking:
 
     def empty(self, rid: str) -> None:
         """``rid``'s battery ran out away from a dock: it stands for good, holds no dock and
-        counts as home (its work was taken back when it was sent home)."""
+        counts as home (its work taken back, its body planned round:
+        ``ChargingMarket.run_flat``)."""
         t = self.trips.get(rid)
         self._drop(rid)
         self.job.robots[rid].docking = EMPTY

@@ -9,6 +9,10 @@ market as without them, and the robots' trips to charge (:mod:`fleet.coordinator
   sends the idle robots that are not charged to ``recharge_to`` to charge.
 - The first allocation sells regions, one per robot, only when each robot's charge covers a
   region's work; otherwise task by task, so a robot takes what its charge allows.
+- A robot whose battery runs out off a dock stands for good: its work goes back to the market
+  and its body is planned round like a lost robot's (a dock it blocks is not used). When no
+  robot can work any more, the open work is left out (event ``stranded``) and the job ends
+  ``incomplete``.
 - When every task is done, every robot is sent home; the job is finished once each is on a
   dock or at its waiting spot.
 """
@@ -59,7 +63,8 @@ class ChargingMarket(Market):
                 return
             for rid in self.job.market():
                 r = self.job.robots[rid]
-                if self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to:
+                idle = self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to
+                if idle and self.docking.go_home_below(rid) > 0:  # a dock it can charge on
                     self.send_home(rid, f"can do none of the open work on {r.charge:.2f}")
 
     def _regions(self) -> tuple[bool, Callable[[], tuple[auction.Lot, ...]]]:
@@ -81,19 +86,55 @@ class ChargingMarket(Market):
     def send_home(self, rid: str, why: str, parking: bool = False) -> None:
         """Take ``rid``'s work back (the unswept remainder of the task it drives and its
         unstarted tasks go back to the market, not as tried by it) and send it home."""
+        self._take_back(rid, "its robot went to charge")
+        if not self.docking.send(rid, why, parking):
+            log.warning("%s: no way home (%s)", rid, why)
+        self.wake.set()
+
+    def run_flat(self, rid: str) -> None:
+        """``rid``'s battery ran out off a dock: it stands for good. Its work goes back to the
+        market, and its body is planned round as a lost robot's is (tasks near it re-cut,
+        transits round it, a dock it blocks not used)."""
+        self._take_back(rid, "its robot ran out of charge")
+        self.docking.empty(rid)
+        xy = self.job.robots[rid].xy
+        if xy is not None:
+            self.bodies[rid] = xy
+            where = f"({xy[0]:.2f}, {xy[1]:.2f})"
+            self.journal.event("body", rid, "", f"out of charge at {where}; planned around")
+            self.plan_around_bodies(rid)
+        self.need_auction = True
+        self.wake.set()
+
+    def check_flat(self) -> None:
+        """Robots whose status reports 0 % off a dock stand for good (:meth:`run_flat`); when
+        no robot can work any more (each lost or out of charge, one at least out of charge)
+        while work is open, the open work is left out and the job ends ``incomplete`` rather
+        than wait for robots that will not come."""
+        for rid, r in self.job.robots.items():
+            if r.charge == 0.0 and not r.charging and r.docking != EMPTY and r.liveness != LOST:
+                self.run_flat(rid)
+        robots = self.job.robots.values()
+        if self.job.bidders() or not any(r.docking == EMPTY for r in robots):
+            return
+        left = self.job.strand()
+        if left:
+            self.journal.event(
+                "stranded", "", "", f"no robot can work any more: {len(left)} task(s) left open"
+            )
+            self.journal.save_tasks(*left)
+
+    def _take_back(self, rid: str, why: str) -> None:
         queue = [rec.task.id for rec in self.job.queue(rid)]
         opened = self.job.take_back(queue[0]) if queue else []
         for tid in opened:
-            self.journal.event("reopened", rid, tid, "its robot went to charge")
+            self.journal.event("reopened", rid, tid, why)
         self.journal.save_tasks(*queue, *opened)
         self.dispatcher.forget(rid)
         self.progress.pop(rid, None)
         self.version += 1
         self.awards.send()
-        if not self.docking.send(rid, why, parking):
-            log.warning("%s: no way home (%s)", rid, why)
         self.need_auction = self.need_auction or bool(opened)
-        self.wake.set()
 
 
 class ChargingCoordinator(Coordinator):
@@ -152,9 +193,7 @@ class ChargingCoordinator(Coordinator):
             market.need_auction = True
         for rid, why, parking in going_home(self.job, self.docking.go_home_below):
             market.send_home(rid, why, parking)
-        for rid, r in self.job.robots.items():
-            if r.charge == 0.0 and not r.charging and r.docking not in ("", EMPTY):
-                self.docking.empty(rid)
+        market.check_flat()
 
     def _finished(self) -> bool:
         return self.job.finished and self.docking.home()

@@ -16,14 +16,24 @@ from robots import ROBOT
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
-from fleet.coordinator.charging import SPOT_FROM_DOCK_M, Docking
+from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M, Docking
 from fleet.coordinator.charging_service import ChargingMarket, going_home
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import DONE, OPEN, Job
+from fleet.coordinator.job import DONE, EMPTY, OPEN, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.params import CoordinatorParams, load_fleet_config
-from fleet.protocol import Award, AwardAck, Bid, Keys, Message, Plan, RobotStatus, TaskCall
+from fleet.protocol import (
+    Award,
+    AwardAck,
+    Bid,
+    FleetEvent,
+    Keys,
+    Message,
+    Plan,
+    RobotStatus,
+    TaskCall,
+)
 from fleet.world import World, load_world
 from planners.auction import Task
 from planners.battery import BatterySpec
@@ -84,6 +94,9 @@ class Fleet:
             for rid in self.job.market():
                 bid = Bid(0.0, msg.round, msg.task, rid, 10.0, 10.0, False, self.declined)
                 self.auctioneer.on_bid(KEYS.bid(msg.task, rid), bid)
+
+    def events(self) -> list[tuple[str, str, str]]:
+        return [(m.kind, m.robot, m.detail) for _, m in self.sent if isinstance(m, FleetEvent)]
 
     def plans(self, rid: str) -> list[Plan]:
         return [m for k, m in self.sent if isinstance(m, Plan) and k == KEYS.plan(rid)]
@@ -174,6 +187,46 @@ def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_d
         f.market.send_home(rid, "low", False)
     assert f.docking.go_home_below("robot-2") == pytest.approx(alone + 0.08, abs=1e-9)
     assert [rid for rid, _, _ in going_home(f.job, f.docking.go_home_below)] == ["robot-2"]
+
+
+def test_a_robot_out_of_charge_by_the_dock_is_a_body_and_the_job_ends_instead_of_hanging(
+    planner: TaskPlanner, world: World
+) -> None:
+    """robot-0 runs out on the line onto the one dock, robot-1 waits by it, robot-2 works:
+    robot-0's body is planned round and blocks the dock, so robot-1 goes back to work (with no
+    dock, it is not sent to charge again); robot-2's work goes back to the market when it runs
+    out; once robot-1 runs out too, no robot is left, the open work is left out and the job is
+    finished with every robot counted home."""
+    planner = TaskPlanner(world, load_fleet_config())  # its bodies are this test's own
+    f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
+    job = f.job
+    job.award("t00", "robot-2", False)
+    f.awards.send()
+    for rid in ("robot-0", "robot-1"):
+        job.robots[rid].charge = 0.1
+        f.market.send_home(rid, "low", False)
+    assert job.robots["robot-1"].docking == "waiting"
+    dock = world.docks[0]
+    on_the_line = (
+        dock[0] + 0.5 * APPROACH_M * math.cos(dock[2]),
+        dock[1] + 0.5 * APPROACH_M * math.sin(dock[2]),
+    )
+    job.robots["robot-0"].xy, job.robots["robot-0"].charge = on_the_line, 0.0
+    f.market.check_flat()
+    assert job.robots["robot-0"].docking == EMPTY and "robot-0" in f.market.bodies
+    assert not f.docking.usable(0)
+    assert f.docking.tick(False) == ["robot-1"]
+    assert job.robots["robot-1"].docking == "" and "robot-1" in job.market()
+    assert going_home(job, f.docking.go_home_below) == []
+    job.robots["robot-2"].charge = 0.0
+    f.market.check_flat()
+    assert job.robots["robot-2"].docking == EMPTY and job.tasks["t00"].state == OPEN
+    assert not job.finished
+    job.robots["robot-1"].charge = 0.0
+    f.market.check_flat()
+    assert job.finished and all(r.state == UNREACHABLE for r in job.tasks.values())
+    assert [e for e in f.events() if e[0] == "stranded"], f.events()
+    assert f.docking.home()
 
 
 def test_a_robot_that_declines_every_open_task_on_its_charge_goes_to_charge(
