@@ -13,6 +13,8 @@ market as without them, and the robots' trips to charge (:mod:`fleet.coordinator
   and its body is planned round like a lost robot's (a dock it blocks is not used). When no
   robot can work any more, the open work is left out (event ``stranded``) and the job ends
   ``incomplete``.
+- The job's estimate (``plan_estimate_s``) counts the charges: the first allocation's regions
+  worked from each robot's charge, queueing at the docks for the charges they need.
 - When every task is done, every robot is sent home; the job is finished once each is on a
   dock or at its waiting spot.
 """
@@ -28,7 +30,7 @@ from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.charging import Docking, Pose
 from fleet.coordinator.job import EMPTY, LOST, Job
-from fleet.coordinator.market import Hook, Market
+from fleet.coordinator.market import Hook, Market, estimate
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
@@ -37,7 +39,7 @@ from fleet.params import CoordinatorParams
 from fleet.plausible import Bounds
 from fleet.protocol import Docks, OpsReply, OpsRequest, Request, RobotStatus
 from planners import auction
-from planners.battery import BatterySpec
+from planners.battery import BatterySpec, makespan_with_charging
 
 log = logging.getLogger("coordinator")
 
@@ -48,6 +50,8 @@ class ChargingMarket(Market):
     docking: Docking
     battery: BatterySpec
     sold = 0
+    # the work (s) of each region the first allocation cut, one per robot
+    first_regions_s: tuple[float, ...] = ()
 
     def sell(self, sale: Sale) -> None:
         self.sold += 1
@@ -75,9 +79,28 @@ class ChargingMarket(Market):
 
         def within_charge() -> tuple[auction.Lot, ...]:
             regions = cut()
+            if first:
+                self.first_regions_s = tuple(lot.time_s for lot in regions)
             return () if any(lot.time_s > reach_s for lot in regions) else regions
 
         return first, within_charge
+
+    def estimate_first(self, committed: list[float]) -> None:
+        """The job's estimate with the charges in it, whether or not the first allocation sold
+        everything (robots decline what their charge cannot cover): the first allocation's
+        regions, one per robot, each worked from its robot's charge with the charges it needs
+        at the docks in turn (``planners.battery.makespan_with_charging``)."""
+        work = sorted(self.first_regions_s, reverse=True)
+        charges = sorted((self._charge(rid) for rid in self.job.market()), reverse=True)
+        if not work or len(work) != len(charges):
+            super().estimate_first(committed)
+            return
+        docks = len(self.docking.docks)
+        estimate(self.journal, makespan_with_charging(self.battery, work, charges, docks))
+
+    def _charge(self, rid: str) -> float:
+        charge = self.job.robots[rid].charge
+        return 1.0 if charge < 0 else charge
 
     def observe(self, rid: str, msg: RobotStatus) -> None:
         super().observe(rid, msg)

@@ -36,7 +36,7 @@ from fleet.protocol import (
 )
 from fleet.world import World, load_world
 from planners.auction import Task
-from planners.battery import BatterySpec
+from planners.battery import BatterySpec, makespan_with_charging
 from planners.coverage.params import CoverageParams
 
 KEYS = Keys("test")
@@ -227,6 +227,26 @@ def test_a_robot_out_of_charge_by_the_dock_is_a_body_and_the_job_ends_instead_of
     assert job.finished and all(r.state == UNREACHABLE for r in job.tasks.values())
     assert [e for e in f.events() if e[0] == "stranded"], f.events()
     assert f.docking.home()
+
+
+@pytest.mark.parametrize("declined", [False, True])
+def test_the_first_allocation_estimates_the_makespan_with_the_charges_in_it(
+    planner: TaskPlanner, world: World, declined: bool
+) -> None:
+    """Two robots at 0.25 of a 100 s charge, two regions of about 16 s: each must charge
+    after 5 s of work, one after the other at the one dock. The estimate counts that, whether
+    the auction sold the regions or every robot declined them on its charge."""
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    for rid in ("robot-0", "robot-1"):
+        f.job.robots[rid].charge = 0.25
+    f.declined = declined
+    f.market.auction(f.auctioneer)
+    work = f.market.first_regions_s
+    assert len(work) == 2 and all(w > 10.0 for w in work)
+    want = makespan_with_charging(SPEC, sorted(work, reverse=True), [0.25, 0.25], 1)
+    assert want > max(work) + 2 * 0.65 * SPEC.capacity_s / SPEC.charge_rate  # two charges in turn
+    (detail,) = [d for kind, _, d in f.events() if kind == "estimated"]
+    assert detail == f"makespan {want:.1f} s"
 
 
 def test_a_robot_that_declines_every_open_task_on_its_charge_goes_to_charge(

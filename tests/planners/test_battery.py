@@ -20,6 +20,7 @@ from planners.battery import (
     docking_heading,
     drain_per_s,
     go_home_below,
+    makespan_with_charging,
     on_dock,
     queue_wait_s,
 )
@@ -98,6 +99,30 @@ def test_a_robot_goes_home_earlier_by_its_trip_and_its_wait_behind_the_queue() -
     third = go_home_below(SPEC, 50.0, [0.1, 0.5, 0.3])
     assert third > go_home_below(SPEC, 50.0, [0.1, 0.5])
     assert go_home_below(BatterySpec(enabled=False), 50.0, [0.1]) == 0.0
+
+
+SHORT = BatterySpec(enabled=True, capacity_s=300.0)  # threshold 0.2, to 0.9, rate 4
+
+
+def test_the_makespan_without_a_charge_due_is_the_longest_work() -> None:
+    assert makespan_with_charging(SHORT, [100.0, 200.0], [1.0, 1.0], 1) == 200.0
+    off = BatterySpec(enabled=False, capacity_s=1.0)
+    assert makespan_with_charging(off, [500.0], [0.0], 1) == 500.0
+
+
+def test_the_makespan_counts_each_charge_a_robot_needs_on_the_way() -> None:
+    """480 s of work on a 300 s charge: 240 s to the threshold, 52.5 s to charge 0.7 back,
+    210 s more, a second charge, the last 30 s."""
+    assert makespan_with_charging(SHORT, [480.0], [1.0], 1) == pytest.approx(585.0)
+
+
+def test_robots_due_together_at_one_dock_charge_in_turn() -> None:
+    """Two robots fall due at 240 s: the second waits the first's 52.5 s charge (0.035 of
+    idle drain), charges 0.735 in 55.125 s and finishes its last 60 s after; with a dock each
+    neither waits."""
+    one = makespan_with_charging(SHORT, [300.0, 300.0], [1.0, 1.0], 1)
+    assert one == pytest.approx(240.0 + 52.5 + 55.125 + 60.0)
+    assert makespan_with_charging(SHORT, [300.0, 300.0], [1.0, 1.0], 2) == pytest.approx(352.5)
 
 
 def _config_error(tmp_path: Path, **battery: object) -> str:
