@@ -10,11 +10,24 @@ same way: energy for the motion, for the device, and for the ambient load over i
 
 The market's energy check (:func:`can_take`) prices work at the sweeping drain, the most a
 second of it can cost, so a robot that bids on a task can finish it and get home to a dock.
+
+A dock charges one robot at a time, so the charge a robot needs to get home is not a fixed
+reserve: :func:`go_home_below` adds to ``recharge_threshold`` (the margin it arrives with) the
+trip at the sweeping drain and the wait behind the robots ahead of it at that dock (each
+charging from its charge to ``recharge_to``) at the idle drain — the reserve of Open-RMF's
+battery-aware planner, with the dock's queue counted as a ``wait`` task before the charge.
+
+:func:`makespan_with_charging` is the job's makespan with the charges in it: each robot works
+down to ``recharge_threshold``, queues for the first free dock (first come, first served),
+charges to ``recharge_to`` and works on — a discrete-event simulation of the docks as servers
+of a queue, every second of work priced at the sweeping drain as :func:`can_take` prices it.
 """
 
 from __future__ import annotations
 
+import heapq
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,3 +124,65 @@ def can_take(spec: BatterySpec, charge: float, work_s: float, home_s: float) -> 
     if not spec.enabled:
         return True
     return charge - work_charge(spec, work_s + home_s) >= 0.0
+
+
+def queue_wait_s(spec: BatterySpec, ahead: Sequence[float]) -> float:
+    """Seconds a robot waits at a dock behind robots charged ``ahead`` (charging there, or on
+    their way or waiting), each charging to ``recharge_to`` at ``charge_rate`` in turn."""
+    need = sum(max(spec.recharge_to - max(c, 0.0), 0.0) for c in ahead)
+    return need / charge_per_s(spec)
+
+
+def go_home_below(spec: BatterySpec, trip_s: float, ahead: Sequence[float]) -> float:
+    """The charge below which a robot goes to charge now: ``recharge_threshold`` kept on
+    arrival, plus its ``trip_s`` seconds to the dock at the sweeping drain, plus its wait
+    behind ``ahead`` (:func:`queue_wait_s`) standing, at the electronics' drain. 0 with
+    batteries off."""
+    if not spec.enabled:
+        return 0.0
+    wait = queue_wait_s(spec, ahead) * spec.idle_share / spec.capacity_s
+    return spec.recharge_threshold + work_charge(spec, trip_s) + wait
+
+
+def makespan_with_charging(
+    spec: BatterySpec, work_s: Sequence[float], charges: Sequence[float], docks: int
+) -> float:
+    """When the last robot finishes its ``work_s`` (one entry per robot) from its charge
+    (``charges``, same order), counting the charges on the way: a robot works until its charge
+    is at ``recharge_threshold`` (each second of work at the sweeping drain), takes the dock
+    that frees first of ``docks`` (robots in the order they fall due), waits there at the
+    electronics' drain, and charges to ``recharge_to`` at ``charge_rate``. Trips to the dock
+    are not counted. With batteries off, or no dock, the longest work."""
+    if len(work_s) != len(charges):
+        raise ValueError(f"{len(work_s)} work times for {len(charges)} charges")
+    longest = max(work_s, default=0.0)
+    if not spec.enabled or docks < 1:
+        return longest
+    free = [0.0] * docks  # when each dock is free again
+    # (when its charge is due or it finishes, robot, work left, charge)
+    due: list[tuple[float, int, float, float]] = []
+    for i, (w, c) in enumerate(zip(work_s, charges, strict=True)):
+        heapq.heappush(due, _next_event(spec, 0.0, i, max(w, 0.0), min(max(c, 0.0), 1.0)))
+    end = 0.0
+    while due:
+        t, i, left, charge = heapq.heappop(due)
+        if left <= 0.0:
+            end = max(end, t)
+            continue
+        k = min(range(docks), key=free.__getitem__)
+        start = max(t, free[k])
+        arrived = max(charge - (start - t) * spec.idle_share / spec.capacity_s, 0.0)
+        free[k] = start + (spec.recharge_to - arrived) / charge_per_s(spec)
+        heapq.heappush(due, _next_event(spec, free[k], i, left, spec.recharge_to))
+    return end
+
+
+def _next_event(
+    spec: BatterySpec, t: float, i: int, left: float, charge: float
+) -> tuple[float, int, float, float]:
+    """Robot ``i`` works from ``t`` with ``left`` seconds of work on ``charge``: when it
+    finishes (nothing left after), or when it falls to the threshold (the work left then)."""
+    reach = max(charge - spec.recharge_threshold, 0.0) * spec.capacity_s
+    if left <= reach:
+        return (t + left, i, 0.0, charge - work_charge(spec, left))
+    return (t + reach, i, left - reach, spec.recharge_threshold)

@@ -8,9 +8,12 @@ like any plan: the transit (A* on the floor plan) to a point in front of the doc
 onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: the nearest
 dock no robot holds is taken; when every one is held the robot waits at a waiting spot by the
 nearest (free floor near it, clear of its approach), in the order the robots came, and goes on
-once the dock is free. On the dock it charges until ``recharge_to`` and is back in the market.
-At the end of the job every robot is sent home the same way, and the job is finished once each
-is on a dock or at its waiting spot.
+once the dock is free. A dock with a body on it or on the line onto it (a lost robot's, or one
+whose battery ran out) is not used; a robot with no dock left works until it runs out. The
+charge below which a robot is sent counts its trip and the queue
+ahead of it at that dock (:meth:`Docking.go_home_below`). On the dock it charges until
+``recharge_to`` and is back in the market. At the end of the job every robot is sent home the
+same way, and the job is finished once each is on a dock or at its waiting spot.
 
 What the coordinator knows of a battery is what the robot's status says (its charge, whether a
 dock charges it), and nothing from the simulator.
@@ -31,7 +34,7 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
-from planners.battery import BatterySpec
+from planners.battery import BatterySpec, go_home_below
 from planners.grid import clearance
 from planners.polyline import without_straight_vertices
 
@@ -92,6 +95,7 @@ class Docking:
         self.docks = docks
         self.trips: dict[str, Trip] = {}
         self.spots = [self._spots(d) for d in docks]
+        self.travel = planner.travel()
 
     # ---- geometry ---------------------------------------------------------------------------
 
@@ -138,9 +142,41 @@ class Docking:
                 return rid
         return None
 
+    def usable(self, k: int) -> bool:
+        """Whether a robot can drive onto dock ``k``: no body (a lost robot's, or one out of
+        charge) stands on it or on the line onto it."""
+        dock = self.docks[k]
+        return not self.planner.near_bodies(np.vstack([_approach(dock), dock[:2]]))
+
     def _nearest(self, xy: tuple[float, float], free_only: bool) -> int | None:
-        ks = [k for k in range(len(self.docks)) if not free_only or self.holder(k) is None]
+        ks = [
+            k
+            for k in range(len(self.docks))
+            if self.usable(k) and (not free_only or self.holder(k) is None)
+        ]
         return min(ks, key=lambda k: math.dist(xy, self.docks[k][:2]), default=None)
+
+    def ahead(self, k: int) -> list[float]:
+        """The charges of the robots ahead of a newcomer at dock ``k``: on their way to it,
+        waiting by it or charging on it (parking at the job's end aside)."""
+        robots = self.job.robots
+        return [
+            robots[rid].charge for rid, t in self.trips.items() if t.dock == k and not t.parking
+        ]
+
+    def go_home_below(self, rid: str) -> float:
+        """The charge below which ``rid`` goes to charge now: the threshold plus its trip to the
+        dock it would be sent to (the nearest free one, else the nearest) and the wait behind
+        the robots ahead of it there (``planners.battery.go_home_below``)."""
+        r = self.job.robots[rid]
+        k = None if r.xy is None else self._nearest(r.xy, free_only=True)
+        if k is None and r.xy is not None:
+            k = self._nearest(r.xy, free_only=False)
+        if k is None or r.xy is None:
+            return 0.0  # no dock it can charge on: it works until it runs out
+        dock = np.array(self.docks[k][:2])
+        trip_s = float(self.travel(dock, np.array([r.xy]))[0])
+        return go_home_below(self.spec, trip_s, self.ahead(k))
 
     # ---- trips ------------------------------------------------------------------------------
 
@@ -154,7 +190,8 @@ class Docking:
         waiting = k is None
         if k is None:
             k = self._nearest(r.xy, free_only=False)
-            assert k is not None
+        if k is None:
+            return False
         r.docking = "waiting" if waiting else "docking"
         if not self._go(rid, k, waiting, parking):
             r.docking = ""
@@ -213,6 +250,10 @@ class Docking:
             if r.liveness == LOST:
                 self._drop(rid)
                 continue
+            if not self.usable(t.dock) and not r.charging:
+                if self._blocked(rid, t):
+                    back.append(rid)
+                continue
             if r.docking == "charging" and r.charge >= self.spec.recharge_to and not job_over:
                 self._drop(rid)
                 self.journal.event("charged", rid, t.plan.task, f"at {r.charge:.2f}; bids again")
@@ -224,6 +265,17 @@ class Docking:
                 self._missed(rid, t, now)
             self._resend(rid)
         return back
+
+    def _blocked(self, rid: str, t: Trip) -> bool:
+        """A body now stands on ``rid``'s dock or on the line onto it: it goes on to the
+        nearest other dock it can use; with none, it is back in the market (True) and works
+        until it runs out."""
+        self._drop(rid)
+        self.journal.event("dock", rid, t.plan.task, f"dock {t.dock} is blocked by a body")
+        if self.send(rid, "its dock is blocked", t.parking):
+            return False
+        self.journal.event("dock", rid, "", "no dock it can charge on: back to work")
+        return True
 
     def _missed(self, rid: str, t: Trip, now: float) -> None:
         """``rid`` is at the end of its dock plan but does not charge: once that has lasted
@@ -256,7 +308,8 @@ class Docking:
 
     def empty(self, rid: str) -> None:
         """``rid``'s battery ran out away from a dock: it stands for good, holds no dock and
-        counts as home (its work was taken back when it was sent home)."""
+        counts as home (its work taken back, its body planned round:
+        ``ChargingMarket.run_flat``)."""
         t = self.trips.get(rid)
         self._drop(rid)
         self.job.robots[rid].docking = EMPTY

@@ -2,12 +2,19 @@
 market as without them, and the robots' trips to charge (:mod:`fleet.coordinator.charging`).
 
 - It serves the world's docks on ``coord/docks``: robots price the way home from each task.
-- A robot whose status reports a charge below ``recharge_threshold`` is taken out of the
-  market and sent to a dock; the work it held goes back to the market.
+- A robot whose status reports a charge below ``recharge_threshold`` plus what its trip to a
+  dock and the queue ahead of it there cost (:meth:`Docking.go_home_below`) is taken out of
+  the market and sent to a dock; the work it held goes back to the market.
 - An auction that sells nothing while work is open (every robot declined it on its charge)
   sends the idle robots that are not charged to ``recharge_to`` to charge.
 - The first allocation sells regions, one per robot, only when each robot's charge covers a
   region's work; otherwise task by task, so a robot takes what its charge allows.
+- A robot whose battery runs out off a dock stands for good: its work goes back to the market
+  and its body is planned round like a lost robot's (a dock it blocks is not used). When no
+  robot can work any more, the open work is left out (event ``stranded``) and the job ends
+  ``incomplete``.
+- The job's estimate (``plan_estimate_s``) counts the charges: the first allocation's regions
+  worked from each robot's charge, queueing at the docks for the charges they need.
 - When every task is done, every robot is sent home; the job is finished once each is on a
   dock or at its waiting spot.
 """
@@ -23,7 +30,7 @@ from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.charging import Docking, Pose
 from fleet.coordinator.job import EMPTY, LOST, Job
-from fleet.coordinator.market import Hook, Market
+from fleet.coordinator.market import Hook, Market, estimate
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
@@ -32,7 +39,7 @@ from fleet.params import CoordinatorParams
 from fleet.plausible import Bounds
 from fleet.protocol import Docks, OpsReply, OpsRequest, Request, RobotStatus
 from planners import auction
-from planners.battery import BatterySpec
+from planners.battery import BatterySpec, makespan_with_charging
 
 log = logging.getLogger("coordinator")
 
@@ -43,6 +50,8 @@ class ChargingMarket(Market):
     docking: Docking
     battery: BatterySpec
     sold = 0
+    # the work (s) of each region the first allocation cut, one per robot
+    first_regions_s: tuple[float, ...] = ()
 
     def sell(self, sale: Sale) -> None:
         self.sold += 1
@@ -58,7 +67,8 @@ class ChargingMarket(Market):
                 return
             for rid in self.job.market():
                 r = self.job.robots[rid]
-                if self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to:
+                idle = self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to
+                if idle and self.docking.go_home_below(rid) > 0:  # a dock it can charge on
                     self.send_home(rid, f"can do none of the open work on {r.charge:.2f}")
 
     def _regions(self) -> tuple[bool, Callable[[], tuple[auction.Lot, ...]]]:
@@ -69,9 +79,28 @@ class ChargingMarket(Market):
 
         def within_charge() -> tuple[auction.Lot, ...]:
             regions = cut()
+            if first:
+                self.first_regions_s = tuple(lot.time_s for lot in regions)
             return () if any(lot.time_s > reach_s for lot in regions) else regions
 
         return first, within_charge
+
+    def estimate_first(self, committed: list[float]) -> None:
+        """The job's estimate with the charges in it, whether or not the first allocation sold
+        everything (robots decline what their charge cannot cover): the first allocation's
+        regions, one per robot, each worked from its robot's charge with the charges it needs
+        at the docks in turn (``planners.battery.makespan_with_charging``)."""
+        work = sorted(self.first_regions_s, reverse=True)
+        charges = sorted((self._charge(rid) for rid in self.job.market()), reverse=True)
+        if not work or len(work) != len(charges):
+            super().estimate_first(committed)
+            return
+        docks = len(self.docking.docks)
+        estimate(self.journal, makespan_with_charging(self.battery, work, charges, docks))
+
+    def _charge(self, rid: str) -> float:
+        charge = self.job.robots[rid].charge
+        return 1.0 if charge < 0 else charge
 
     def observe(self, rid: str, msg: RobotStatus) -> None:
         super().observe(rid, msg)
@@ -80,19 +109,55 @@ class ChargingMarket(Market):
     def send_home(self, rid: str, why: str, parking: bool = False) -> None:
         """Take ``rid``'s work back (the unswept remainder of the task it drives and its
         unstarted tasks go back to the market, not as tried by it) and send it home."""
+        self._take_back(rid, "its robot went to charge")
+        if not self.docking.send(rid, why, parking):
+            log.warning("%s: no way home (%s)", rid, why)
+        self.wake.set()
+
+    def run_flat(self, rid: str) -> None:
+        """``rid``'s battery ran out off a dock: it stands for good. Its work goes back to the
+        market, and its body is planned round as a lost robot's is (tasks near it re-cut,
+        transits round it, a dock it blocks not used)."""
+        self._take_back(rid, "its robot ran out of charge")
+        self.docking.empty(rid)
+        xy = self.job.robots[rid].xy
+        if xy is not None:
+            self.bodies[rid] = xy
+            where = f"({xy[0]:.2f}, {xy[1]:.2f})"
+            self.journal.event("body", rid, "", f"out of charge at {where}; planned around")
+            self.plan_around_bodies(rid)
+        self.need_auction = True
+        self.wake.set()
+
+    def check_flat(self) -> None:
+        """Robots whose status reports 0 % off a dock stand for good (:meth:`run_flat`); when
+        no robot can work any more (each lost or out of charge, one at least out of charge)
+        while work is open, the open work is left out and the job ends ``incomplete`` rather
+        than wait for robots that will not come."""
+        for rid, r in self.job.robots.items():
+            if r.charge == 0.0 and not r.charging and r.docking != EMPTY and r.liveness != LOST:
+                self.run_flat(rid)
+        robots = self.job.robots.values()
+        if self.job.bidders() or not any(r.docking == EMPTY for r in robots):
+            return
+        left = self.job.strand()
+        if left:
+            self.journal.event(
+                "stranded", "", "", f"no robot can work any more: {len(left)} task(s) left open"
+            )
+            self.journal.save_tasks(*left)
+
+    def _take_back(self, rid: str, why: str) -> None:
         queue = [rec.task.id for rec in self.job.queue(rid)]
         opened = self.job.take_back(queue[0]) if queue else []
         for tid in opened:
-            self.journal.event("reopened", rid, tid, "its robot went to charge")
+            self.journal.event("reopened", rid, tid, why)
         self.journal.save_tasks(*queue, *opened)
         self.dispatcher.forget(rid)
         self.progress.pop(rid, None)
         self.version += 1
         self.awards.send()
-        if not self.docking.send(rid, why, parking):
-            log.warning("%s: no way home (%s)", rid, why)
         self.need_auction = self.need_auction or bool(opened)
-        self.wake.set()
 
 
 class ChargingCoordinator(Coordinator):
@@ -149,26 +214,24 @@ class ChargingCoordinator(Coordinator):
         assert isinstance(market, ChargingMarket)
         if self.docking.tick(self.job.finished):
             market.need_auction = True
-        for rid, why, parking in going_home(self.job, self.battery):
+        for rid, why, parking in going_home(self.job, self.docking.go_home_below):
             market.send_home(rid, why, parking)
-        for rid, r in self.job.robots.items():
-            if r.charge == 0.0 and not r.charging and r.docking not in ("", EMPTY):
-                self.docking.empty(rid)
+        market.check_flat()
 
     def _finished(self) -> bool:
         return self.job.finished and self.docking.home()
 
 
-def going_home(job: Job, spec: BatterySpec) -> list[tuple[str, str, bool]]:
+def going_home(job: Job, below: Callable[[str], float]) -> list[tuple[str, str, bool]]:
     """The robots to send home now, each with why and whether to park: at the job's end every
     robot not yet on its way home; before it, each robot in the market whose charge has fallen
-    below ``recharge_threshold``."""
+    below what it needs to get to a dock and wait there (``below(robot)``)."""
     out = []
     for rid, r in sorted(job.robots.items()):
         if r.liveness == LOST or r.docking or r.xy is None:
             continue
         if job.finished:
             out.append((rid, "the job is done", True))
-        elif r.in_market and 0 <= r.charge < spec.recharge_threshold:
-            out.append((rid, f"charge {r.charge:.3f} below {spec.recharge_threshold}", False))
+        elif r.in_market and r.charge >= 0 and r.charge < (need := below(rid)):
+            out.append((rid, f"charge {r.charge:.3f} below {need:.3f}", False))
     return out

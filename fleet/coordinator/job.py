@@ -339,6 +339,15 @@ class Job:
                 out.append(rec.task.id)
         return out
 
+    def strand(self) -> list[str]:
+        """No robot can work any more (each is lost or out of charge): every open task is
+        ``unreachable``; their ids."""
+        out = []
+        for rec in self.open_tasks():
+            rec.state = UNREACHABLE
+            out.append(rec.task.id)
+        return out
+
     def reopen(self, body: str | None = None) -> list[str]:
         """The world changed: the tasks ``body`` blocked (with ``body`` given), and the
         unreachable tasks some robot in the market has not tried, open again; their ids."""

@@ -146,15 +146,19 @@ class Market:
                 break
             committed.append(sale.best.total_s)
             await_ack(self.lock, self.job, sale.best.robot, auctioneer.params.bid_timeout_s)
-        if first and committed:
+        if first:
             with self.lock:
-                if not self.job.open_tasks():
-                    estimate(self.journal, max(committed))
+                self.estimate_first(committed)
         if committed:
             ms = 1e3 * (time.monotonic() - t0)
             log.info("auction: %d lots sold in %.0f ms", len(committed), ms)
             with self.lock:
                 self.journal.event("auction", "", "", f"{len(committed)} lots in {ms:.0f} ms")
+
+    def estimate_first(self, committed: list[float]) -> None:
+        """The job's estimate: the longest of the winners' ``committed`` times, if all sold."""
+        if committed and not self.job.open_tasks():
+            estimate(self.journal, max(committed))
 
     def sell(self, sale: Sale) -> None:
         """The auctioneer's result: award the lot's tasks to the winner (in the order it drives
@@ -290,7 +294,7 @@ class Market:
         """``rid`` is heard from again: its body is a robot again, so the work it blocked opens
         again, and so does the work no robot could reach (one more robot may)."""
         if self.bodies.pop(rid, None) is not None:
-            self.dispatcher.planner.set_bodies(self._body_centres())
+            self.dispatcher.planner.set_bodies(body_centres(self.bodies))
             self.journal.event("body", rid, "", "its robot is back: no longer planned around")
         reopened = self.job.reopen(rid)
         for tid in reopened:
@@ -298,14 +302,11 @@ class Market:
         self.journal.save_tasks(*reopened)
         self.rebalance()
 
-    def _body_centres(self) -> np.ndarray:
-        return np.array(list(self.bodies.values()), dtype=float).reshape(-1, 2)
-
     def plan_around_bodies(self, body: str) -> None:
         """Take back every task whose path comes near a body (its owner's queue from there
         on), and replace it by what a robot can drive round the bodies and what they block."""
         planner = self.dispatcher.planner
-        planner.set_bodies(self._body_centres())
+        planner.set_bodies(body_centres(self.bodies))
         near = [
             rec.task.id
             for rec in self.job.tasks.values()
@@ -428,6 +429,10 @@ class Market:
         self.awards.send()
         self.need_auction = True
         self.wake.set()
+
+
+def body_centres(bodies: Mapping[str, tuple[float, float]]) -> np.ndarray:
+    return np.array(list(bodies.values()), dtype=float).reshape(-1, 2)
 
 
 def estimate(journal: Journal, makespan_s: float) -> None:

@@ -209,7 +209,9 @@ def job_report(state: Path) -> dict[str, Any]:
     is lost. ``overlaps`` lists tasks held by two robots at once (it should stay empty);
     ``rejected_bids`` counts the bids the auctions ignored, by why (late, duplicate,
     malformed, not in the market); ``plan_estimate_s`` is the makespan the first allocation
-    priced (the longest of the winners' committed times), None if it never completed;
+    priced (the longest of the winners' committed times; with batteries, its regions worked
+    with the charges they need, ``planners.battery.makespan_with_charging``), None if it never
+    completed;
     ``given_up_waypoints`` the waypoints each robot gave up over all its plans, as the
     coordinator counted them (robots that gave up none are left out); ``left_out`` the work no
     robot could do (state ``blocked``: under or behind the body of ``blocked_by``; or

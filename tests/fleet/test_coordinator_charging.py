@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,17 +16,27 @@ from robots import ROBOT
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
-from fleet.coordinator.charging import SPOT_FROM_DOCK_M, Docking
+from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M, Docking
 from fleet.coordinator.charging_service import ChargingMarket, going_home
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import DONE, OPEN, Job
+from fleet.coordinator.job import DONE, EMPTY, OPEN, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.params import CoordinatorParams, load_fleet_config
-from fleet.protocol import Award, AwardAck, Bid, Keys, Message, Plan, RobotStatus, TaskCall
+from fleet.protocol import (
+    Award,
+    AwardAck,
+    Bid,
+    FleetEvent,
+    Keys,
+    Message,
+    Plan,
+    RobotStatus,
+    TaskCall,
+)
 from fleet.world import World, load_world
 from planners.auction import Task
-from planners.battery import BatterySpec
+from planners.battery import BatterySpec, makespan_with_charging
 from planners.coverage.params import CoverageParams
 
 KEYS = Keys("test")
@@ -86,6 +95,9 @@ class Fleet:
                 bid = Bid(0.0, msg.round, msg.task, rid, 10.0, 10.0, False, self.declined)
                 self.auctioneer.on_bid(KEYS.bid(msg.task, rid), bid)
 
+    def events(self) -> list[tuple[str, str, str]]:
+        return [(m.kind, m.robot, m.detail) for _, m in self.sent if isinstance(m, FleetEvent)]
+
     def plans(self, rid: str) -> list[Plan]:
         return [m for k, m in self.sent if isinstance(m, Plan) and k == KEYS.plan(rid)]
 
@@ -111,8 +123,9 @@ def test_a_robot_below_the_threshold_goes_to_a_dock_and_its_work_is_sold_again(
     f.awards.send()
     job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
     job.robots["robot-0"].charge = 0.19
-    assert going_home(job, SPEC) == [("robot-0", "charge 0.190 below 0.2", False)]
-    for rid, why, parking in going_home(job, SPEC):
+    ((rid, why, parking),) = going_home(job, f.docking.go_home_below)
+    assert rid == "robot-0" and why.startswith("charge 0.190 below 0.") and not parking
+    for rid, why, parking in going_home(job, f.docking.go_home_below):
         f.market.send_home(rid, why, parking)
     r = job.robots["robot-0"]
     assert r.docking == "docking" and "robot-0" not in job.market()
@@ -140,7 +153,7 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     f = Fleet(planner, world, ["robot-0", "robot-1"])
     for rid in ("robot-0", "robot-1"):
         f.job.robots[rid].charge = 0.15
-    for rid, why, parking in going_home(f.job, SPEC):
+    for rid, why, parking in going_home(f.job, f.docking.go_home_below):
         f.market.send_home(rid, why, parking)
     (to_dock,), (to_wait,) = f.plans("robot-0"), f.plans("robot-1")
     assert to_dock.task == "dock-0" and to_wait.task == "wait-0"
@@ -155,6 +168,85 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     assert "robot-0" in f.job.market()
     (_, onto) = f.plans("robot-1")
     assert onto.task == "dock-0" and f.job.robots["robot-1"].docking == "docking"
+
+
+def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_dock(
+    planner: TaskPlanner, world: World
+) -> None:
+    """Alone, robot-2 needs the threshold and its trip; behind two robots on their way to the
+    one dock at 0.1 it needs 2 × 0.8 × 25 s of their charging more at the idle drain (0.2 of
+    it): 0.08 on a 100 s charge. At a charge between the two it stays at work alone and goes
+    behind the queue."""
+    f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
+    alone = f.docking.go_home_below("robot-2")
+    assert SPEC.recharge_threshold < alone < SPEC.recharge_threshold + 0.2  # the trip
+    f.job.robots["robot-2"].charge = alone + 0.04
+    assert going_home(f.job, f.docking.go_home_below) == []
+    for rid in ("robot-0", "robot-1"):
+        f.job.robots[rid].charge = 0.1
+        f.market.send_home(rid, "low", False)
+    assert f.docking.go_home_below("robot-2") == pytest.approx(alone + 0.08, abs=1e-9)
+    assert [rid for rid, _, _ in going_home(f.job, f.docking.go_home_below)] == ["robot-2"]
+
+
+def test_a_robot_out_of_charge_by_the_dock_is_a_body_and_the_job_ends_instead_of_hanging(
+    planner: TaskPlanner, world: World
+) -> None:
+    """robot-0 runs out on the line onto the one dock, robot-1 waits by it, robot-2 works:
+    robot-0's body is planned round and blocks the dock, so robot-1 goes back to work (with no
+    dock, it is not sent to charge again); robot-2's work goes back to the market when it runs
+    out; once robot-1 runs out too, no robot is left, the open work is left out and the job is
+    finished with every robot counted home."""
+    planner = TaskPlanner(world, load_fleet_config())  # its bodies are this test's own
+    f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
+    job = f.job
+    job.award("t00", "robot-2", False)
+    f.awards.send()
+    for rid in ("robot-0", "robot-1"):
+        job.robots[rid].charge = 0.1
+        f.market.send_home(rid, "low", False)
+    assert job.robots["robot-1"].docking == "waiting"
+    dock = world.docks[0]
+    on_the_line = (
+        dock[0] + 0.5 * APPROACH_M * math.cos(dock[2]),
+        dock[1] + 0.5 * APPROACH_M * math.sin(dock[2]),
+    )
+    job.robots["robot-0"].xy, job.robots["robot-0"].charge = on_the_line, 0.0
+    f.market.check_flat()
+    assert job.robots["robot-0"].docking == EMPTY and "robot-0" in f.market.bodies
+    assert not f.docking.usable(0)
+    assert f.docking.tick(False) == ["robot-1"]
+    assert job.robots["robot-1"].docking == "" and "robot-1" in job.market()
+    assert going_home(job, f.docking.go_home_below) == []
+    job.robots["robot-2"].charge = 0.0
+    f.market.check_flat()
+    assert job.robots["robot-2"].docking == EMPTY and job.tasks["t00"].state == OPEN
+    assert not job.finished
+    job.robots["robot-1"].charge = 0.0
+    f.market.check_flat()
+    assert job.finished and all(r.state == UNREACHABLE for r in job.tasks.values())
+    assert [e for e in f.events() if e[0] == "stranded"], f.events()
+    assert f.docking.home()
+
+
+@pytest.mark.parametrize("declined", [False, True])
+def test_the_first_allocation_estimates_the_makespan_with_the_charges_in_it(
+    planner: TaskPlanner, world: World, declined: bool
+) -> None:
+    """Two robots at 0.25 of a 100 s charge, two regions of about 16 s: each must charge
+    after 5 s of work, one after the other at the one dock. The estimate counts that, whether
+    the auction sold the regions or every robot declined them on its charge."""
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    for rid in ("robot-0", "robot-1"):
+        f.job.robots[rid].charge = 0.25
+    f.declined = declined
+    f.market.auction(f.auctioneer)
+    work = f.market.first_regions_s
+    assert len(work) == 2 and all(w > 10.0 for w in work)
+    want = makespan_with_charging(SPEC, sorted(work, reverse=True), [0.25, 0.25], 1)
+    assert want > max(work) + 2 * 0.65 * SPEC.capacity_s / SPEC.charge_rate  # two charges in turn
+    (detail,) = [d for kind, _, d in f.events() if kind == "estimated"]
+    assert detail == f"makespan {want:.1f} s"
 
 
 def test_a_robot_that_declines_every_open_task_on_its_charge_goes_to_charge(
@@ -181,16 +273,16 @@ def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world
     f = Fleet(planner, world, ["robot-0", "robot-1"])
     for rec in f.job.tasks.values():
         rec.state = DONE
-    assert [(rid, parking) for rid, _, parking in going_home(f.job, SPEC)] == [
+    assert [(rid, parking) for rid, _, parking in going_home(f.job, f.docking.go_home_below)] == [
         ("robot-0", True),
         ("robot-1", True),
     ]
-    for rid, why, parking in going_home(f.job, SPEC):
+    for rid, why, parking in going_home(f.job, f.docking.go_home_below):
         f.market.send_home(rid, why, parking)
     assert not f.docking.home()
     f.status("robot-0", 0.5, True, f.plans("robot-0")[-1], done=True)
     f.status("robot-1", 0.5, False, f.plans("robot-1")[-1], done=True)
-    assert f.docking.home() and going_home(f.job, SPEC) == []
+    assert f.docking.home() and going_home(f.job, f.docking.go_home_below) == []
     # charged at the end of the job, a robot stays on its dock
     f.status("robot-0", 0.95, True, f.plans("robot-0")[-1], done=True)
     assert f.docking.tick(True) == [] and f.job.robots["robot-0"].docking == "charging"
@@ -199,4 +291,4 @@ def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world
 def test_batteries_off_send_no_one_home(planner: TaskPlanner, world: World) -> None:
     f = Fleet(planner, world, ["robot-0"])
     f.job.robots["robot-0"].charge = -1.0  # no battery heard
-    assert going_home(f.job, replace(SPEC, recharge_threshold=0.5)) == []
+    assert going_home(f.job, lambda _rid: 0.5) == []

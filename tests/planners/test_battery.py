@@ -19,7 +19,10 @@ from planners.battery import (
     charge_per_s,
     docking_heading,
     drain_per_s,
+    go_home_below,
+    makespan_with_charging,
     on_dock,
+    queue_wait_s,
 )
 
 SPEC = BatterySpec(enabled=True, capacity_s=1000.0)
@@ -75,6 +78,51 @@ def test_the_energy_check_refuses_work_it_cannot_finish_and_get_home_from() -> N
 
 def test_without_batteries_any_work_is_taken() -> None:
     assert can_take(BatterySpec(enabled=False, capacity_s=1.0), 0.0, 1e6, 1e6)
+
+
+def test_the_wait_at_a_dock_is_the_charging_of_each_robot_ahead() -> None:
+    """charge_rate 4 on 1000 s: 250 s from 0 to a full charge. recharge_to 0.9: a robot at 0.1
+    charges 200 s, one at 0.5 100 s; a robot above recharge_to adds nothing."""
+    assert queue_wait_s(SPEC, []) == 0.0
+    assert queue_wait_s(SPEC, [0.1]) == pytest.approx(200.0)
+    assert queue_wait_s(SPEC, [0.1, 0.5, 0.95]) == pytest.approx(300.0)
+
+
+def test_a_robot_goes_home_earlier_by_its_trip_and_its_wait_behind_the_queue() -> None:
+    """Threshold 0.2; a 50 s trip at the sweeping drain is 0.05; 300 s waiting behind two
+    robots at the electronics' drain (0.2 of it) is 0.06."""
+    alone = go_home_below(SPEC, 0.0, [])
+    assert alone == pytest.approx(0.2)
+    assert go_home_below(SPEC, 50.0, []) == pytest.approx(0.25)
+    assert go_home_below(SPEC, 50.0, [0.1, 0.5]) == pytest.approx(0.31)
+    # the more robots ahead, the earlier it goes
+    third = go_home_below(SPEC, 50.0, [0.1, 0.5, 0.3])
+    assert third > go_home_below(SPEC, 50.0, [0.1, 0.5])
+    assert go_home_below(BatterySpec(enabled=False), 50.0, [0.1]) == 0.0
+
+
+SHORT = BatterySpec(enabled=True, capacity_s=300.0)  # threshold 0.2, to 0.9, rate 4
+
+
+def test_the_makespan_without_a_charge_due_is_the_longest_work() -> None:
+    assert makespan_with_charging(SHORT, [100.0, 200.0], [1.0, 1.0], 1) == 200.0
+    off = BatterySpec(enabled=False, capacity_s=1.0)
+    assert makespan_with_charging(off, [500.0], [0.0], 1) == 500.0
+
+
+def test_the_makespan_counts_each_charge_a_robot_needs_on_the_way() -> None:
+    """480 s of work on a 300 s charge: 240 s to the threshold, 52.5 s to charge 0.7 back,
+    210 s more, a second charge, the last 30 s."""
+    assert makespan_with_charging(SHORT, [480.0], [1.0], 1) == pytest.approx(585.0)
+
+
+def test_robots_due_together_at_one_dock_charge_in_turn() -> None:
+    """Two robots fall due at 240 s: the second waits the first's 52.5 s charge (0.035 of
+    idle drain), charges 0.735 in 55.125 s and finishes its last 60 s after; with a dock each
+    neither waits."""
+    one = makespan_with_charging(SHORT, [300.0, 300.0], [1.0, 1.0], 1)
+    assert one == pytest.approx(240.0 + 52.5 + 55.125 + 60.0)
+    assert makespan_with_charging(SHORT, [300.0, 300.0], [1.0, 1.0], 2) == pytest.approx(352.5)
 
 
 def _config_error(tmp_path: Path, **battery: object) -> str:
