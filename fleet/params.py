@@ -173,6 +173,7 @@ class CoordinatorParams:
     explore_min_gain_m2: float = 0.1
     explore_match_m: float = 0.5
     explore_step_m: float = 0.05
+    map_check_every_s: float = 2.0
 
     def validate(self) -> None:
         if self.first_regions not in FIRST_REGIONS:
@@ -186,6 +187,7 @@ class CoordinatorParams:
             "explore_every_s",
             "explore_match_m",
             "explore_step_m",
+            "map_check_every_s",
             "task_target_s",
             "heartbeat_timeout_s",
             "bid_timeout_s",

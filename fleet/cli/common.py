@@ -12,6 +12,9 @@ import typer
 
 from fleet.bus import DEFAULT_ENDPOINT
 
+# the coordinator on a stored map (`--map`) stopped the run: the robots' scans do not match it
+WRONG_MAP_EXIT = 5
+
 ConnectOpt = Annotated[
     list[str] | None,
     typer.Option(

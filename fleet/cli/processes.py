@@ -10,6 +10,7 @@ import typer
 
 from fleet.bus import DEFAULT_ENDPOINT
 from fleet.cli.common import (
+    WRONG_MAP_EXIT,
     ConfigOpt,
     ConnectOpt,
     DeconflictionOpt,
@@ -227,7 +228,8 @@ def coordinator(
             "--map",
             help="Plan on this stored ROS map (map.yaml, as `fleet explore` writes it, in the "
             "world's frame) instead of the world's floor plan; the dock and starts stay the "
-            "world's.",
+            "world's. When most robots' own maps do not match it (another building), the "
+            "coordinator stops with a message naming the file and exit status 5.",
         ),
     ] = None,
 ) -> None:
@@ -241,6 +243,7 @@ def coordinator(
     from fleet.coordinator.charging_service import ChargingCoordinator
     from fleet.coordinator.explore_service import ExploringCoordinator
     from fleet.coordinator.exploring import Explorer, MapPlanner
+    from fleet.coordinator.map_watch import MapWatch
     from fleet.coordinator.planning import TaskPlanner
     from fleet.coordinator.service import Coordinator
     from fleet.coordinator.store import JobStore, StoreError
@@ -303,12 +306,19 @@ def coordinator(
     else:
         explorer = Explorer(cfg, MapPlanner(cfg), explore)
         c = ExploringCoordinator(bus, explorer, robots, cfg.coordinator, store, bounds=bounds)
+    watch = None
+    if floor_map is not None and w.map_grid is not None:
+        watch = MapWatch(bus, c, w.map_grid, w.source, cfg)
+        watch.start()
     _stop_on_signals(c.stop)
     try:
         c.run(cfg.coordinator.expected_robots_grace_s, loop)
     finally:
         c.close()
         bus.close()
+    if watch is not None and watch.refusal is not None:
+        typer.secho(f"error: {watch.refusal}", fg="red", err=True)
+        raise typer.Exit(WRONG_MAP_EXIT)
 
 
 def register(

@@ -21,6 +21,7 @@ import numpy as np
 import typer
 
 from fleet.cli.common import (
+    WRONG_MAP_EXIT,
     ConfigOpt,
     DeconflictionOpt,
     WorldOpt,
@@ -32,6 +33,9 @@ from fleet.cli.common import (
 TIMED_OUT_EXIT = 3
 # the job finished, but with work no robot could reach (report.json's left_out)
 INCOMPLETE_EXIT = 4
+# the run's status (report.json) when the coordinator stopped it: the robots' scans do not
+# match the stored map of --map (exit status WRONG_MAP_EXIT)
+WRONG_MAP = "wrong-map"
 # The simulator is asked for the report this long at a time (wall seconds), again while it
 # works (it lives and uses CPU: a starved machine slows it down), for at most REPORT_GIVE_UP_S;
 # a query nothing serves yet (a simulator still starting) returns at once, and is asked again
@@ -125,6 +129,9 @@ def up(
     in the way, or tried by every robot in vain) ends `incomplete`: the end message and
     report.json's `left_out` name each piece and its area, report.png marks them, and the
     exit status is 4. With `--until-done`, a run stopped by `--timeout` exits with 3.
+    With `--map`, a run whose robots' own maps do not match the stored map (another
+    building's, or one not in the world's frame) is stopped by the coordinator, with a message
+    naming the map file and report.json's status `wrong-map`; the exit status is 5.
 
     With `--map MAP.yaml` the coordinator plans on a stored map (the one `fleet explore`
     wrote) instead of the world file; with `--explore` the fleet first explores the world,
@@ -307,6 +314,14 @@ def up(
         raise typer.Exit(1)
     if status == "incomplete":
         raise typer.Exit(INCOMPLETE_EXIT)
+    if status == WRONG_MAP:
+        typer.secho(
+            f"error: the robots' scans do not match the stored map {floor_map}: the fleet "
+            f"stopped instead of cleaning on it (events and {run_dir}/coordinator.log say why)",
+            fg="red",
+            err=True,
+        )
+        raise typer.Exit(WRONG_MAP_EXIT)
     if status not in ("done", "stopped", "timeout"):
         raise typer.Exit(1 if status != "interrupted" else 130)
 
@@ -736,6 +751,9 @@ def _watch(watcher, feed, launcher, calls, stop, until_done, timeout, headless, 
                 if view is not None:
                     view.stop()
                     view = None
+                if name == "coordinator" and code == WRONG_MAP_EXIT:
+                    say(f"the coordinator refused the stored map; see {log}", "error")
+                    return WRONG_MAP
                 say(f"{name} exited with code {code}; see {log}", "error")
                 return "error"
             for name, code in dead.items():

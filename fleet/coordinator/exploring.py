@@ -123,7 +123,7 @@ class Explorer:
         self.params = cfg.coordinator
         self.planner = planner
         self.out_dir = out_dir
-        self.limits = (_logit(slam.p_min), _logit(slam.p_max))
+        self.limits = (logit(slam.p_min), logit(slam.p_max))
         self.thresholds = (slam.occupied_threshold, slam.free_threshold)
         self.match = MatchParams(
             sigma=slam.match_sigma,
@@ -252,5 +252,6 @@ def write_ros_map(out_dir: Path, grid: GridMap) -> None:
     tmp.replace(out_dir / MAP_YAML)
 
 
-def _logit(p: float) -> float:
+def logit(p: float) -> float:
+    """log(p / (1 − p)): a probability as log-odds."""
     return float(np.log(p / (1.0 - p)))

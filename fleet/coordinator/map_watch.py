@@ -1,0 +1,159 @@
+"""The coordinator on a stored map (``--map``) checks that the map is the floor the robots see.
+
+A stored map of another building (or of this one in another frame) would have the fleet drive
+blind: lanes through walls, transits into furniture. The robots' own SLAM maps come in as
+their changed tiles (``robot/<id>/map``, kept by :class:`fleet.coordinator.exploring.RobotMaps`;
+a gap has the whole map fetched by query). Every ``coordinator.map_check_every_s`` sim seconds
+each robot's map not yet judged is matched against the stored map
+(``planners.map_check.check_map``), on a thread of its own (a match takes a tenth of a second
+or more, which the market's lock should not wait for). Once more than half of the fleet's
+robots agree with the map the watch ends, saying so in a ``map checked`` event; once more than
+half differ, it tells why in a ``wrong map`` event that names the map file and stops the
+coordinator, whose process then exits with :data:`fleet.cli.common.WRONG_MAP_EXIT`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from pathlib import Path
+
+from fleet.bus import Bus
+from fleet.coordinator.exploring import RobotMaps, logit
+from fleet.coordinator.service import Coordinator
+from fleet.params import FleetConfig
+from fleet.protocol import MapPatches, Request
+from planners.grid import GridMap
+from planners.map_check import (
+    AGREES,
+    DIFFERS,
+    MapCheck,
+    MapCheckParams,
+    check_map,
+    fleet_verdict,
+)
+from planners.map_match import MatchParams
+from planners.map_merge import LogOddsMap
+
+log = logging.getLogger("coordinator")
+
+# wall seconds between looks at the sim clock, and a robot's whole map is waited for
+POLL_S = 0.2
+WHOLE_MAP_TIMEOUT_S = 2.0
+
+
+def map_check_params(cfg: FleetConfig) -> MapCheckParams:
+    """The matcher as the exploring coordinator merges with it: the SLAM map's wall width and
+    thresholds, the acceptance test's defaults."""
+    slam = cfg.slam
+    return MapCheckParams(
+        MatchParams(
+            sigma=slam.match_sigma,
+            occupied_threshold=slam.occupied_threshold,
+            free_threshold=slam.free_threshold,
+        )
+    )
+
+
+class MapWatch:
+    """The robots' maps against the stored map ``stored`` read from ``source``."""
+
+    def __init__(
+        self, bus: Bus, coordinator: Coordinator, stored: GridMap, source: Path, cfg: FleetConfig
+    ) -> None:
+        self.bus = bus
+        self.coordinator = coordinator
+        self.stored = stored
+        self.source = source
+        self.params = map_check_params(cfg)
+        self.every_s = cfg.coordinator.map_check_every_s
+        self.limits = (logit(cfg.slam.p_min), logit(cfg.slam.p_max))
+        self.robots = coordinator.expected
+        self.maps = RobotMaps()
+        self.checks: dict[str, MapCheck] = {}
+        # why the map was refused (None while it is not)
+        self.refusal: str | None = None
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._run, name="map-watch", daemon=True)
+        bus.subscribe(bus.keys.all_robots("map"), MapPatches, self._on_map)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _on_map(self, key: str, msg: MapPatches) -> None:
+        c = self.coordinator
+        rid = c.keys.robot_of(key)
+        with c.lock:
+            if c._implausible(key, rid, msg.stamp):
+                return
+        with self._lock:
+            self.maps.hear(rid, msg)
+
+    def _run(self) -> None:
+        checked_at = -float("inf")
+        stop = self.coordinator.stop
+        while not stop.wait(POLL_S):
+            clock = self.coordinator.journal.clock
+            if clock - checked_at < self.every_s:
+                continue
+            checked_at = clock
+            self._fetch_whole_maps()
+            verdict = self.check()
+            if verdict == AGREES:
+                self._tell(
+                    "map checked",
+                    f"{self.source}: the robots' maps agree with it: {self._summary()}",
+                )
+                return
+            if verdict == DIFFERS:
+                self.refusal = (
+                    f"{self.source}: the robots' scans do not match this stored map (another "
+                    f"building, or not in the world's frame); stopped instead of driving on it: "
+                    + self._summary()
+                )
+                self._tell("wrong map", self.refusal)
+                log.error("%s", self.refusal)
+                stop.set()
+                return
+
+    def check(self) -> str:
+        """Judge each robot's map not yet judged; the fleet's verdict
+        (``planners.map_check.fleet_verdict``)."""
+        with self._lock:
+            maps = {
+                rid: LogOddsMap.from_ros(cells.copy(), *self.maps.geometry[rid], self.limits)
+                for rid, cells in self.maps.cells.items()
+                if rid not in self.checks or self.checks[rid].verdict not in (AGREES, DIFFERS)
+            }
+        m = self.params.match
+        for rid, lo in sorted(maps.items()):
+            seen = lo.to_gridmap(m.occupied_threshold, m.free_threshold)
+            self.checks[rid] = check_map(seen, self.stored, self.params)
+            log.info("map check %s: %s", rid, self.checks[rid].reason)
+        return fleet_verdict(self.checks.values(), self.robots)
+
+    def _summary(self) -> str:
+        return "; ".join(f"{rid} {c.verdict}: {c.reason}" for rid, c in sorted(self.checks.items()))
+
+    def _tell(self, kind: str, detail: str) -> None:
+        c = self.coordinator
+        with c.lock:
+            c.journal.event(kind, "", "", detail)
+
+    def _fetch_whole_maps(self) -> None:
+        """Ask each robot whose patches had a gap for its whole map."""
+        with self._lock:
+            missing = sorted(self.maps.missing)
+        for rid in missing:
+            try:
+                msg = self.bus.request(
+                    self.bus.keys.robot(rid, "map"),
+                    Request("coordinator"),
+                    MapPatches,
+                    WHOLE_MAP_TIMEOUT_S,
+                )
+            except (TimeoutError, RuntimeError) as e:
+                log.info("%s: no whole map yet (%s)", rid, e)
+                continue
+            with self._lock:
+                self.maps.hear(rid, msg)
