@@ -83,7 +83,7 @@ class ExploringCoordinator(Coordinator):
     def _on_map(self, key: str, msg: MapPatches) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            if self._implausible(key, rid, msg.stamp):
+            if self.implausible(key, rid, msg.stamp):
                 return
             self.explorer.maps.hear(rid, msg)
 

@@ -84,7 +84,7 @@ class MapWatch:
         c = self.coordinator
         rid = c.keys.robot_of(key)
         with c.lock:
-            if c._implausible(key, rid, msg.stamp):
+            if c.implausible(key, rid, msg.stamp):
                 return
         with self._lock:
             self.maps.hear(rid, msg)

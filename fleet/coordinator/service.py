@@ -206,7 +206,7 @@ class Coordinator:
         if self.sim_clock.hear(msg.stamp):
             self.journal.heard(self.sim_clock.now)
 
-    def _implausible(self, key: str, rid: str, stamp: float | None = None) -> bool:
+    def implausible(self, key: str, rid: str, stamp: float | None = None) -> bool:
         """Drop (count and log) a message from ``rid`` that is not in the job (counted unless its
         token comes soon after: :class:`fleet.plausible.Strangers`), or with a sensor ``stamp``
         farther ahead of the clock than a robot's can be; whether it was dropped. A
@@ -229,7 +229,7 @@ class Coordinator:
     def _on_pose(self, key: str, msg: PoseEstimate) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            if self._implausible(key, rid, msg.stamp):
+            if self.implausible(key, rid, msg.stamp):
                 return
             track = self.tracks.get(rid)
             if track is None:
@@ -246,7 +246,7 @@ class Coordinator:
         with self.lock:
             # stamped with the agent's clock, which moves nothing here: a wrong one must not
             # turn a working robot into a lost one
-            if self._implausible(key, rid):
+            if self.implausible(key, rid):
                 return
             r = self.job.robots[rid]
             r.heartbeat_wall = time.time()
@@ -282,7 +282,7 @@ class Coordinator:
     def _on_status(self, key: str, msg: RobotStatus) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            if self._implausible(key, rid, msg.stamp):
+            if self.implausible(key, rid, msg.stamp):
                 return
             r = self.job.robots[rid]
             r.state, r.task, r.progress = msg.state, msg.task, msg.progress
@@ -295,7 +295,7 @@ class Coordinator:
     def _on_ack(self, key: str, msg: AwardAck) -> None:
         rid = self.keys.robot_of(key)
         with self.lock:
-            if self._implausible(key, rid):
+            if self.implausible(key, rid):
                 return
             if self.awards.acked(rid, msg):
                 self.wake.set()
