@@ -163,7 +163,11 @@ class RateMeter:
         now = time.monotonic() if now is None else now
         pattern = key_class(key)
         with self._lock:
-            self._seen.setdefault(pattern, deque()).append((now, n))
+            seen = self._seen.setdefault(pattern, deque())
+            seen.append((now, n))
+            # pruned here too, not only when read: `fleet up --headless` never reads the rates
+            while seen[0][0] < now - self.window_s:
+                seen.popleft()
 
     def rates(self, now: float | None = None) -> list[tuple[str, float]]:
         """(pattern, messages per second), busiest first."""

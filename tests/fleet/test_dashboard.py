@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fleet.bus import Bus, open_router
-from fleet.dashboard.model import BusFeed, FleetWatcher
+from fleet.dashboard.model import BusFeed, FleetWatcher, RateMeter
 from fleet.dashboard.term import DOWN, KILL, QUIT, UP, ViewControl, parse_keys
 from fleet.dashboard.view import LOST_MARK, WALL, header, heading_arrow, plain, screen
 from fleet.floor_map import pack_grid
@@ -427,3 +427,14 @@ def test_the_robot_table_shows_each_robots_charge() -> None:
     assert battery_cell(None, False) == "—"
     assert battery_cell(0.456, False) == "46 %"
     assert battery_cell(0.456, True) == "+46 %"
+
+
+def test_the_rate_meter_holds_one_window_of_counts_when_nobody_reads_it():
+    """`fleet up --headless` counts every message and never reads the rates: what the meter
+    holds must stay one window's worth, not the whole run's."""
+    meter = RateMeter(window_s=5.0)
+    for k in range(20_000):
+        meter.count("robot/robot-0/odom", 1, now=0.01 * k)
+    held = sum(len(seen) for seen in meter._seen.values())
+    assert held <= 5.0 / 0.01 + 1
+    assert meter.rates(now=0.01 * 19_999) == [("odom", pytest.approx(100.0, rel=0.01))]
