@@ -11,8 +11,12 @@ it stops ``fleet up`` (SIGTERM: the report is written as after Ctrl-C).
 The verdict (:func:`verdict`), against the issue's targets, after a warm-up of ``warmup_s``
 sim seconds (the first job's planning, SLAM maps filling up, the allocator's pools):
 
-- memory: each process's RSS at the end at most ``Targets.rss_growth`` above its RSS at the
-  first sample past the warm-up;
+- memory: each process's RSS level at the end at most ``Targets.rss_growth`` above its level
+  just past the warm-up, each level the median of the samples over ``Targets.level_span_s``
+  (the first that long past the warm-up, the last that long before the end): a process that
+  allocates ten megabytes for a second (a pose-graph optimization, a job's planning) and gives
+  them back shows in one sample, not in its level, while a leak moves the level. The growth
+  between the single first and last samples is reported beside it;
 - open files: no growth: the most open in the later half of the samples past the warm-up
   is at most the most open in the earlier half (a leak of one file per job shows as a rise);
 - run dir: bounded: past the warm-up it grows by at most ``Targets.dir_mb_per_h`` megabytes
@@ -30,6 +34,7 @@ import math
 import os
 import signal
 import sqlite3
+import statistics
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -58,6 +63,7 @@ class Targets:
     rss_growth: float = 0.05
     dir_mb_per_h: float = 50.0
     warmup_s: float = 600.0
+    level_span_s: float = 300.0
 
 
 @dataclass(frozen=True)
@@ -156,8 +162,10 @@ def process_verdict(samples: Sequence[Sample], name: str, targets: Targets) -> d
     out: dict[str, Any] = {"restarted": len(mine) < len([s for s in samples if name in s.pid])}
     if len(past) < 2:
         return out | {"judged": False}
-    first, last = past[0].rss_kb[name], past[-1].rss_kb[name]
-    assert first is not None and last is not None
+    rss = [(s.sim_s, s.rss_kb[name] or 0) for s in past]
+    span = targets.level_span_s
+    first = statistics.median(kb for t, kb in rss if t <= rss[0][0] + span)
+    last = statistics.median(kb for t, kb in rss if t >= rss[-1][0] - span)
     fds = [s.fds[name] for s in past if s.fds.get(name) is not None]
     half = len(fds) // 2
     fds_grew = bool(fds[:half]) and max(fds[half:]) > max(fds[:half])
@@ -168,6 +176,7 @@ def process_verdict(samples: Sequence[Sample], name: str, targets: Targets) -> d
         "rss_mb_at_end": round(last / 1024, 1),
         "rss_mb_peak": round(max(s.rss_kb[name] or 0 for s in mine) / 1024, 1),
         "rss_growth": round(growth, 4),
+        "rss_growth_last_sample": round(rss[-1][1] / rss[0][1] - 1, 4) if rss[0][1] else 0.0,
         "fds_min": min(fds),
         "fds_max": max(fds),
         "fds_grew": fds_grew,

@@ -23,14 +23,21 @@ TARGETS = Targets(rss_growth=0.05, dir_mb_per_h=50.0, warmup_s=600.0)
 
 
 def _samples(
-    rss: list[int], fds: list[int] | None = None, mb: list[float] | None = None, pid: int = 7
+    rss: list[int],
+    fds: list[int] | None = None,
+    mb: list[float] | None = None,
+    pid: int = 7,
+    every: float = 300.0,
 ) -> list[Sample]:
-    """One process, ``p``, sampled every 300 sim s from 300 s on (the warm-up ends at 600)."""
+    """One process, ``p``, sampled every ``every`` sim s from then on (the warm-up ends at
+    600)."""
     n = len(rss)
     fds = fds or [20] * n
     mb = mb or [10.0] * n
     return [
-        Sample(300.0 * (i + 1), 150.0 * (i + 1), {"p": pid}, {"p": r}, {"p": f}, int(m * 1e6), i)
+        Sample(
+            every * (i + 1), every * (i + 1) / 2, {"p": pid}, {"p": r}, {"p": f}, int(m * 1e6), i
+        )
         for i, (r, f, m) in enumerate(zip(rss, fds, mb, strict=True))
     ]
 
@@ -66,15 +73,29 @@ def test_flat_memory_and_files_and_a_slow_growing_dir_pass() -> None:
     v = verdict(_samples([100_000, 150_000, 151_000, 152_000, 154_000]), TARGETS)
     p = v["processes"]["p"]
     assert p["judged"] and p["ok"], p
-    assert p["rss_mb_at_warmup"] == round(150_000 / 1024, 1)
-    assert p["rss_growth"] == round(154_000 / 150_000 - 1, 4)
+    # levels: the medians of the samples 300 s past the warm-up and 300 s before the end
+    assert p["rss_mb_at_warmup"] == round(150_500 / 1024, 1)
+    assert p["rss_mb_at_end"] == round(153_000 / 1024, 1)
+    assert p["rss_growth"] == round(153_000 / 150_500 - 1, 4)
+    assert p["rss_growth_last_sample"] == round(154_000 / 150_000 - 1, 4)
     assert v["run_dir"]["ok"] and v["ok"]
 
 
 def test_memory_growing_past_5_percent_after_the_warm_up_fails() -> None:
-    v = verdict(_samples([150_000, 150_000, 153_000, 156_000, 159_000]), TARGETS)
+    v = verdict(_samples([150_000, 150_000, 154_000, 158_000, 162_000, 166_000]), TARGETS)
     assert v["processes"]["p"]["rss_growth"] > 0.05
     assert not v["processes"]["p"]["ok"] and not v["ok"]
+
+
+def test_a_spike_in_the_last_sample_is_not_growth_but_a_rising_level_is() -> None:
+    """Sampled every 60 s: a process that holds 15 % more for one sample and gives it back is
+    flat; one whose level rises by 6 % over its last five minutes is not."""
+    flat = [100_000] * 9 + [150_000, 151_000, 150_000, 149_000, 150_000] * 6
+    spike = verdict(_samples([*flat, 172_000], every=60.0), TARGETS)["processes"]["p"]
+    assert spike["ok"] and spike["rss_growth"] <= 0.01, spike
+    assert spike["rss_growth_last_sample"] > 0.14
+    rising = verdict(_samples([*flat, *[159_000] * 5], every=60.0), TARGETS)["processes"]["p"]
+    assert not rising["ok"] and rising["rss_growth"] > 0.05, rising
 
 
 def test_open_files_that_rise_in_the_later_half_fail_and_ones_that_come_and_go_pass() -> None:
@@ -101,7 +122,7 @@ def test_a_restarted_process_is_named_and_judged_on_its_samples_since() -> None:
         Sample(1800.0, 900.0, {"p": 8}, {"p": 152_000}, {"p": 20}, 10_000_000, 6),
     ]
     p = verdict(before + after, TARGETS)["processes"]["p"]
-    assert p["restarted"] and p["ok"] and p["rss_mb_at_warmup"] == round(150_000 / 1024, 1)
+    assert p["restarted"] and p["ok"] and p["rss_mb_at_warmup"] == round(150_500 / 1024, 1)
 
 
 def test_a_run_too_short_to_judge_does_not_pass() -> None:
