@@ -170,6 +170,43 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     assert onto.task == "dock-0" and f.job.robots["robot-1"].docking == "docking"
 
 
+def test_a_robot_that_stands_still_on_its_dock_trip_is_planned_again_then_sent_to_wait(
+    planner: TaskPlanner, world: World
+) -> None:
+    """robot-0, alone on its way to the one dock, makes no progress for the stall time: its
+    trip is planned again from where it stands; standing still once more, it is sent to a
+    waiting spot instead, and goes on to the dock only once there. A robot that moves on does
+    not stall."""
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    f.market.stall_s = 30.0
+    r = f.job.robots["robot-0"]
+    r.charge = 0.15
+    f.market.send_home("robot-0", "low", False)
+    (first,) = f.plans("robot-0")
+    r.xy = (1.3, 2.2)
+    f.status("robot-0", 0.15, False, first, done=False)
+    f.journal.clock = 29.0
+    f.market.check_stalls()
+    assert len(f.plans("robot-0")) == 1
+    f.journal.clock = 31.0
+    f.market.check_stalls()
+    (_, again) = f.plans("robot-0")
+    assert again.task == "dock-0" and again.plan_id != first.plan_id
+    assert np.allclose(again.waypoints[0], r.xy) and r.docking == "docking"
+    assert np.allclose(again.waypoints[-1], first.waypoints[-1])
+    f.status("robot-0", 0.14, False, again, done=False)
+    f.journal.clock = 62.0
+    f.market.check_stalls()
+    (*_, wait) = f.plans("robot-0")
+    assert wait.task == "wait-0" and r.docking == "waiting"
+    assert [e[0] for e in f.events()].count("dock") == 3, f.events()
+    # the dock is free, but it goes on to it from its waiting spot, not from where it stood
+    assert f.docking.tick(False) == [] and f.plans("robot-0")[-1] is wait
+    f.status("robot-0", 0.13, False, wait, done=True)
+    f.docking.tick(False)
+    assert f.plans("robot-0")[-1].task == "dock-0" and r.docking == "docking"
+
+
 def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_dock(
     planner: TaskPlanner, world: World
 ) -> None:
