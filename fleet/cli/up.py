@@ -285,17 +285,7 @@ def up(
             err=True,
         )
         for piece in report.get("left_out") or []:
-            x, y = np.mean(piece["path"], axis=0)
-            why = (
-                f"behind {piece['blocked_by']}'s body"
-                if piece["blocked_by"]
-                else f"tried by {', '.join(piece['tried'])}"
-            )
-            out(
-                f"  not reached: {piece['id']}, {piece['area_m2']:.2f} m² around "
-                f"({x:.1f}, {y:.1f}) ({why})",
-                err=True,
-            )
+            out(f"  {left_out_line(piece)}", err=True)
     except (TimeoutError, RuntimeError, ReportError) as e:
         typer.secho(
             f"error: could not collect the report: {e}; logs in {run_dir}/", fg="red", err=True
@@ -855,3 +845,18 @@ def register(
     app.command("up")(up)
     app.command("explore")(explore)
     bench_app.command("sim")(bench_sim)
+
+
+def left_out_line(piece: dict[str, Any]) -> str:
+    """The end text's line for a piece of report.json's ``left_out``: its id, area, where it
+    lies and why no robot did it."""
+    x, y = np.mean(piece["path"], axis=0)
+    if piece["state"] == "stranded":
+        why = "stranded: no robot left with charge"
+    elif piece["blocked_by"]:
+        why = f"behind {piece['blocked_by']}'s body"
+    else:
+        why = f"tried by {', '.join(piece['tried'])}"
+    return (
+        f"not reached: {piece['id']}, {piece['area_m2']:.2f} m² around ({x:.1f}, {y:.1f}) ({why})"
+    )

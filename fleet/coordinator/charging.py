@@ -8,7 +8,9 @@ like any plan: the transit (A* on the floor plan) to a point in front of the doc
 onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: the nearest
 dock no robot holds is taken; when every one is held the robot waits at a waiting spot by the
 nearest (free floor near it, clear of its approach), in the order the robots came, and goes on
-once the dock is free. A dock with a body on it or on the line onto it (a lost robot's, or one
+once the dock is free. A robot that makes no progress on its trip for the stall time gets it
+planned again from where it stands, then another dock or waiting spot
+(:meth:`Docking.stalled`). A dock with a body on it or on the line onto it (a lost robot's, or one
 whose battery ran out) is not used; a robot with no dock left works until it runs out. The
 charge below which a robot is sent counts its trip and the queue
 ahead of it at that dock (:meth:`Docking.go_home_below`). On the dock it charges until
@@ -63,15 +65,16 @@ HOLDS_M = 0.3
 @dataclass
 class Trip:
     """A robot's way home: to ``dock`` (its index) or, ``waiting``, to a spot by it; ``plan``
-    the plan sent; ``parking``: the job is over; ``tries`` of docking so far, ``sent_wall``
-    when the plan last went out (wall s), ``ended`` when it was first seen at the plan's end
-    (sim s)."""
+    the plan sent; ``parking``: the job is over; ``tries`` of docking so far, ``stalls``: how
+    often it has stood still on its way, ``sent_wall`` when the plan last went out (wall s),
+    ``ended`` when it was first seen at the plan's end (sim s)."""
 
     dock: int
     waiting: bool
     plan: Plan
     parking: bool
     tries: int = 1
+    stalls: int = 0
     sent_wall: float = 0.0
     ended: float | None = None
 
@@ -200,13 +203,30 @@ class Docking:
         self.journal.event("dock", rid, self.trips[rid].plan.task, f"{why}: {where}")
         return True
 
-    def _go(self, rid: str, k: int, waiting: bool, parking: bool, tries: int = 1) -> bool:
+    def _go(
+        self,
+        rid: str,
+        k: int,
+        waiting: bool,
+        parking: bool,
+        tries: int = 1,
+        stalls: int = 0,
+        avoid: np.ndarray | None = None,
+    ) -> bool:
+        """Plan ``rid``'s trip from where it stands to dock ``k`` or, ``waiting``, to the
+        first waiting spot by it no other robot is bound for (nor ``avoid``), and send it."""
         r = self.job.robots[rid]
         assert r.xy is not None
         dock = self.docks[k]
         try:
             if waiting:
-                taken = {t.plan.waypoints[-1].tobytes() for t in self.trips.values() if t.waiting}
+                taken = {
+                    t.plan.waypoints[-1].tobytes()
+                    for other, t in self.trips.items()
+                    if t.waiting and other != rid
+                }
+                if avoid is not None:
+                    taken.add(np.asarray(avoid, dtype=float).tobytes())
                 spot = next(
                     (s for s in self.spots[k] if np.array(s).tobytes() not in taken),
                     self.spots[k][-1] if self.spots[k] else None,
@@ -229,7 +249,7 @@ class Docking:
         d.schedules.pop(rid, None)
         self.journal.save_plan(rid, plan)
         self.journal.set_meta(plan_seq=d.plan_seq)
-        self.trips[rid] = Trip(k, waiting, plan, parking, tries, time.monotonic())
+        self.trips[rid] = Trip(k, waiting, plan, parking, tries, stalls, time.monotonic())
         d.publish(d.keys.plan(rid), plan, True)
         return True
 
@@ -258,13 +278,53 @@ class Docking:
                 self._drop(rid)
                 self.journal.event("charged", rid, t.plan.task, f"at {r.charge:.2f}; bids again")
                 back.append(rid)
-            elif t.waiting and self.holder(t.dock) is None:
+            elif t.waiting and self.holder(t.dock) is None and self._may_go_on(rid, t):
                 r.docking = "docking"
-                self._go(rid, t.dock, False, t.parking)
+                self._go(rid, t.dock, False, t.parking, stalls=t.stalls)
             elif r.docking == "docking" and not r.charging and self._at_end(rid, t):
                 self._missed(rid, t, now)
             self._resend(rid)
         return back
+
+    def _may_go_on(self, rid: str, t: Trip) -> bool:
+        """A robot sent to wait because it stood still on its way goes on to the dock from its
+        waiting spot, not straight back along the way it stood still on."""
+        return not t.stalls or self._at_end(rid, t)
+
+    def stalled(self, rid: str, why: str) -> None:
+        """``rid`` has made no progress on its trip for the stall time (in a doorway, face to
+        face with a robot at work, say). The first time, its trip is planned again from where
+        it stands (round the bodies); after that it is sent to the nearest other dock no robot
+        holds, else to another waiting spot, so the way it stood still on is not the only one
+        it tries."""
+        t = self.trips[rid]
+        r = self.job.robots[rid]
+        if r.xy is None:
+            return
+        stalls = t.stalls + 1
+        if stalls == 1:
+            self.journal.event("dock", rid, t.plan.task, f"{why}: planned again from where it is")
+            self._go(rid, t.dock, t.waiting, t.parking, t.tries, stalls)
+            return
+        others = [
+            k
+            for k in range(len(self.docks))
+            if k != t.dock and self.usable(k) and self.holder(k) is None
+        ]
+        if others:
+            k = min(others, key=lambda k: math.dist(r.xy, self.docks[k][:2]))
+            r.docking = "docking"
+            sent = self._go(rid, k, False, t.parking, 1, stalls)
+            where = f"to dock {k}"
+        else:
+            r.docking = "waiting"
+            avoid = t.plan.waypoints[-1] if t.waiting else None
+            sent = self._go(rid, t.dock, True, t.parking, 1, stalls, avoid)
+            where = (
+                f"to another spot by dock {t.dock}" if t.waiting else f"to wait by dock {t.dock}"
+            )
+        if sent:
+            self.journal.event("dock", rid, self.trips[rid].plan.task, f"{why}: {where}")
 
     def _blocked(self, rid: str, t: Trip) -> bool:
         """A body now stands on ``rid``'s dock or on the line onto it: it goes on to the

@@ -102,6 +102,19 @@ class ChargingMarket(Market):
         charge = self.job.robots[rid].charge
         return 1.0 if charge < 0 else charge
 
+    def check_stalls(self) -> None:
+        """Robots with work as without batteries; and robots on a trip to a dock or a waiting
+        spot that have made no progress on it for ``stall_s`` (:meth:`Docking.stalled`)."""
+        super().check_stalls()
+        now = self.journal.clock
+        for rid, p in list(self.progress.items()):
+            t = self.docking.trips.get(rid)
+            if t is None or self.job.robots[rid].charging or t.plan.plan_id != p.plan_id:
+                continue
+            if now - p.since >= self.stall_s:
+                self.progress.pop(rid)
+                self.docking.stalled(rid, f"no progress on its trip for {now - p.since:.0f} s")
+
     def observe(self, rid: str, msg: RobotStatus) -> None:
         super().observe(rid, msg)
         self.docking.heard(rid, msg)

@@ -14,9 +14,11 @@ is unit-tested without processes:
 - Work no robot can do is never counted done. A task that ends with pieces unswept goes back to
   the market as its remainder, remembering who tried it (``tried``); once every robot in the
   market has tried a task, it is ``unreachable``. A task or stretch of one that lies under or
-  behind a lost robot's body is ``blocked`` by that body (``replace``). Both open again when
-  the world changes: a body goes, or a robot joins (``reopen``). The job is finished when no
-  task is open or assigned, and ``incomplete`` when it finished with work left out.
+  behind a lost robot's body is ``blocked`` by that body (``replace``). Work left open because
+  no robot can work any more (each lost or out of charge) is ``stranded`` (``strand``). All
+  three open again when the world changes: a body goes, or a robot joins (``reopen``). The job
+  is finished when no task is open or assigned, and ``incomplete`` when it finished with work
+  left out.
 """
 
 from __future__ import annotations
@@ -33,11 +35,11 @@ from planners.coverage.params import CoverageParams
 from planners.robot import RobotSpec
 
 OPEN, ASSIGNED, DONE, REPLACED = "open", "assigned", "done", "replaced"
-BLOCKED, UNREACHABLE = "blocked", "unreachable"
+BLOCKED, UNREACHABLE, STRANDED = "blocked", "unreachable", "stranded"
 GONE = "gone"
 # states of work that is over: done, gone, or left out for good unless the world changes
-SETTLED = (DONE, REPLACED, BLOCKED, UNREACHABLE, GONE)
-LEFT_OUT = (BLOCKED, UNREACHABLE)
+SETTLED = (DONE, REPLACED, BLOCKED, UNREACHABLE, STRANDED, GONE)
+LEFT_OUT = (BLOCKED, UNREACHABLE, STRANDED)
 ALIVE, LOST, REJOINED = "alive", "lost", "rejoined"
 # a robot whose battery ran out away from a dock: it stands for good (RobotRecord.docking)
 EMPTY = "empty"
@@ -121,7 +123,7 @@ class Job:
         return q[0] if q else None
 
     def counts(self) -> dict[str, int]:
-        out = {OPEN: 0, ASSIGNED: 0, DONE: 0, BLOCKED: 0, UNREACHABLE: 0}
+        out = {OPEN: 0, ASSIGNED: 0, DONE: 0, BLOCKED: 0, UNREACHABLE: 0, STRANDED: 0}
         for r in self.tasks.values():
             if r.state in out:
                 out[r.state] += 1
@@ -133,7 +135,7 @@ class Job:
         return bool(self.tasks) and all(r.state in SETTLED for r in self.tasks.values())
 
     def left_out(self) -> list[TaskRecord]:
-        """The tasks no robot could do: blocked by a body, or unreachable."""
+        """The tasks no robot could do: blocked by a body, unreachable, or stranded."""
         return [r for r in self.tasks.values() if r.state in LEFT_OUT]
 
     @property
@@ -341,21 +343,23 @@ class Job:
 
     def strand(self) -> list[str]:
         """No robot can work any more (each is lost or out of charge): every open task is
-        ``unreachable``; their ids."""
+        ``stranded`` (not ``unreachable``: no robot with charge left tried it); their ids."""
         out = []
         for rec in self.open_tasks():
-            rec.state = UNREACHABLE
+            rec.state = STRANDED
             out.append(rec.task.id)
         return out
 
     def reopen(self, body: str | None = None) -> list[str]:
         """The world changed: the tasks ``body`` blocked (with ``body`` given), and the
-        unreachable tasks some robot in the market has not tried, open again; their ids."""
+        unreachable tasks some robot in the market has not tried, and the stranded ones once a
+        robot may bid again, open again; their ids."""
         market = set(self.bidders())
         out = []
         for rec in self.tasks.values():
             freed = rec.state == BLOCKED and body is not None and rec.blocked_by == body
             retry = rec.state == UNREACHABLE and not market <= rec.tried
+            retry = retry or (rec.state == STRANDED and bool(market))
             if freed or retry:
                 rec.state, rec.blocked_by = OPEN, None
                 out.append(rec.task.id)

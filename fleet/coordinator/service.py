@@ -49,6 +49,7 @@ from fleet.coordinator.job import (
     BLOCKED,
     LOST,
     REJOINED,
+    STRANDED,
     UNREACHABLE,
     GivenUpWaypoints,
     Job,
@@ -382,7 +383,7 @@ class Coordinator:
             detail = ""
             if left:
                 area = sum(r.task.area_m2 for r in left)
-                detail = f"incomplete: {area:.2f} m² in {len(left)} task(s) no robot could reach: "
+                detail = f"incomplete: {area:.2f} m² in {len(left)} task(s) left out: "
                 detail += ", ".join(_left_out(r) for r in left)
                 log.warning("the job ends %s", detail)
             self.journal.event("finished", "", "", detail)
@@ -450,7 +451,7 @@ def fleet_state(job: Job, clock: float, phase: str, dropped: tuple[int, int]) ->
         counts["open"],
         counts[ASSIGNED],
         counts["done"],
-        counts[BLOCKED] + counts[UNREACHABLE],
+        counts[BLOCKED] + counts[UNREACHABLE] + counts[STRANDED],
         *dropped,
     )
 
@@ -458,7 +459,12 @@ def fleet_state(job: Job, clock: float, phase: str, dropped: tuple[int, int]) ->
 def _left_out(rec: TaskRecord) -> str:
     """A task left out, for the end message: its id, area, where it lies and why."""
     x, y = rec.task.path.mean(axis=0)
-    why = f"behind {rec.blocked_by}'s body" if rec.blocked_by else "tried by every robot"
+    if rec.state == STRANDED:
+        why = "stranded: no robot left with charge"
+    elif rec.blocked_by:
+        why = f"behind {rec.blocked_by}'s body"
+    else:
+        why = f"tried by {', '.join(sorted(rec.tried))}: every robot that could still work"
     return f"{rec.task.id} ({rec.task.area_m2:.2f} m² at ({x:.1f}, {y:.1f}), {why})"
 
 

@@ -88,7 +88,7 @@ STATUS_COLUMNS = ("sim_s", "robot", "plan_id", "waypoint", *TIME_KINDS)
 MISSED_BANDS_M = (0.1, 0.3)
 MISSED_BANDS = ("under_0.1m", "0.1_to_0.3m", "over_0.3m")
 # the coordinator's task states of work no robot could do (fleet.coordinator.job.LEFT_OUT)
-LEFT_OUT_STATES = ("blocked", "unreachable")
+LEFT_OUT_STATES = ("blocked", "unreachable", "stranded")
 # report.json fields the pictures read, and their JSON types
 REPORT_FIELDS: dict[str, type | tuple[type, ...]] = {
     "status": str,
@@ -215,7 +215,8 @@ def job_report(state: Path) -> dict[str, Any]:
     ``given_up_waypoints`` the waypoints each robot gave up over all its plans, as the
     coordinator counted them (robots that gave up none are left out); ``left_out`` the work no
     robot could do (state ``blocked``: under or behind the body of ``blocked_by``; or
-    ``unreachable``: every robot in ``tried`` tried it), each with its area and path, and
+    ``unreachable``: every robot in ``tried`` tried it; or ``stranded``: left open because no
+    robot could work any more, each lost or out of charge), each with its area and path, and
     ``left_out_m2`` their area; ``plan`` the one-robot tour's own figures as the coordinator
     computed them when it planned (``fleet.coordinator.planning.tour_figures``)."""
     if not state.exists():

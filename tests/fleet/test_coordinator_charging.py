@@ -8,20 +8,24 @@ from __future__ import annotations
 
 import math
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
 from robots import ROBOT
 
+from fleet.cli.up import left_out_line
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M, Docking
 from fleet.coordinator.charging_service import ChargingMarket, going_home
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import DONE, EMPTY, OPEN, UNREACHABLE, Job
+from fleet.coordinator.job import DONE, EMPTY, OPEN, STRANDED, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
+from fleet.coordinator.service import _left_out
+from fleet.coordinator.store import JobStore
 from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import (
     Award,
@@ -34,6 +38,7 @@ from fleet.protocol import (
     RobotStatus,
     TaskCall,
 )
+from fleet.report.summary import job_report
 from fleet.world import World, load_world
 from planners.auction import Task
 from planners.battery import BatterySpec, makespan_with_charging
@@ -170,6 +175,43 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     assert onto.task == "dock-0" and f.job.robots["robot-1"].docking == "docking"
 
 
+def test_a_robot_that_stands_still_on_its_dock_trip_is_planned_again_then_sent_to_wait(
+    planner: TaskPlanner, world: World
+) -> None:
+    """robot-0, alone on its way to the one dock, makes no progress for the stall time: its
+    trip is planned again from where it stands; standing still once more, it is sent to a
+    waiting spot instead, and goes on to the dock only once there. A robot that moves on does
+    not stall."""
+    f = Fleet(planner, world, ["robot-0", "robot-1"])
+    f.market.stall_s = 30.0
+    r = f.job.robots["robot-0"]
+    r.charge = 0.15
+    f.market.send_home("robot-0", "low", False)
+    (first,) = f.plans("robot-0")
+    r.xy = (1.3, 2.2)
+    f.status("robot-0", 0.15, False, first, done=False)
+    f.journal.clock = 29.0
+    f.market.check_stalls()
+    assert len(f.plans("robot-0")) == 1
+    f.journal.clock = 31.0
+    f.market.check_stalls()
+    (_, again) = f.plans("robot-0")
+    assert again.task == "dock-0" and again.plan_id != first.plan_id
+    assert np.allclose(again.waypoints[0], r.xy) and r.docking == "docking"
+    assert np.allclose(again.waypoints[-1], first.waypoints[-1])
+    f.status("robot-0", 0.14, False, again, done=False)
+    f.journal.clock = 62.0
+    f.market.check_stalls()
+    (*_, wait) = f.plans("robot-0")
+    assert wait.task == "wait-0" and r.docking == "waiting"
+    assert [e[0] for e in f.events()].count("dock") == 3, f.events()
+    # the dock is free, but it goes on to it from its waiting spot, not from where it stood
+    assert f.docking.tick(False) == [] and f.plans("robot-0")[-1] is wait
+    f.status("robot-0", 0.13, False, wait, done=True)
+    f.docking.tick(False)
+    assert f.plans("robot-0")[-1].task == "dock-0" and r.docking == "docking"
+
+
 def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_dock(
     planner: TaskPlanner, world: World
 ) -> None:
@@ -224,9 +266,37 @@ def test_a_robot_out_of_charge_by_the_dock_is_a_body_and_the_job_ends_instead_of
     assert not job.finished
     job.robots["robot-1"].charge = 0.0
     f.market.check_flat()
-    assert job.finished and all(r.state == UNREACHABLE for r in job.tasks.values())
+    assert job.finished and all(r.state == STRANDED for r in job.tasks.values())
+    assert [r.task.id for r in job.left_out()] == ["t00", "t01", "t02", "t03"]
     assert [e for e in f.events() if e[0] == "stranded"], f.events()
     assert f.docking.home()
+
+
+def test_work_stranded_by_robots_out_of_charge_is_not_called_tried_by_every_robot(
+    tmp_path: Path,
+) -> None:
+    """The open work a job leaves when no robot can work any more is ``stranded``, and the end
+    message, report.json's ``left_out`` and the CLI's end text say so, not that every robot
+    tried it; a task every robot tried keeps its wording."""
+    job = Job(CoverageParams(), ROBOT, 0.0)
+    job.add_tasks((_task(0), _task(1)))
+    job.tasks["t01"].tried = frozenset({"robot-0", "robot-1"})
+    job.tasks["t01"].state = UNREACHABLE
+    assert job.strand() == ["t00"] and job.finished and len(job.left_out()) == 2
+    message = _left_out(job.tasks["t00"])
+    assert "stranded: no robot left with charge" in message and "tried" not in message
+    assert "tried by robot-0, robot-1" in _left_out(job.tasks["t01"])
+    store = JobStore(tmp_path / "coordinator.sqlite")
+    store.save_tasks(list(job.tasks.values()))
+    store.close()
+    stranded, unreachable = job_report(tmp_path / "coordinator.sqlite")["left_out"]
+    assert stranded["state"] == "stranded" and unreachable["state"] == UNREACHABLE
+    assert left_out_line(stranded).endswith("(stranded: no robot left with charge)")
+    assert left_out_line(unreachable).endswith("(tried by robot-0, robot-1)")
+    # a robot back in the market takes stranded work up again
+    job.robots["robot-0"] = job.robot("robot-0")
+    job.robots["robot-0"].ready, job.robots["robot-0"].xy = True, (1.0, 2.5)
+    assert job.reopen() == ["t00"]
 
 
 @pytest.mark.parametrize("declined", [False, True])

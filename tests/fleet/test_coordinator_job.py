@@ -17,6 +17,7 @@ from fleet.coordinator.job import (
     LOST,
     OPEN,
     REPLACED,
+    STRANDED,
     UNREACHABLE,
     GivenUpWaypoints,
     Job,
@@ -49,7 +50,7 @@ def test_awards_build_each_robots_queue_in_order(job: Job):
     job.award("t01", "robot-1", False)
     assert [r.task.id for r in job.queue("robot-0")] == ["t00", "t02"]
     assert job.current("robot-1").task.id == "t01"
-    assert job.counts() == {OPEN: 1, ASSIGNED: 3, DONE: 0, BLOCKED: 0, UNREACHABLE: 0}
+    assert job.counts() == {OPEN: 1, ASSIGNED: 3, DONE: 0, BLOCKED: 0, UNREACHABLE: 0, STRANDED: 0}
     with pytest.raises(ValueError, match="not open"):
         job.award("t00", "robot-1", False)
 
