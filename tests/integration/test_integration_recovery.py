@@ -56,9 +56,17 @@ def _restart_the_coordinator(fleet: FleetRun) -> None:
 def _send_garbage(fleet: FleetRun) -> None:
     table = json.loads((fleet.dir / "processes.json").read_text())
     keys = Keys(table["fleet"])
+    log = fleet.dir / "coordinator.log"
     with Bus("cli", "garbage", [table["endpoint"]], fleet=table["fleet"]) as bus:
-        for key in (keys.bid("t00", "robot-1"), keys.award("robot-0"), keys.ack("robot-2")):
-            bus.session.put(key, b"\x93not a message")
+        # sent again until the coordinator has dropped one: on a starved machine the restarted
+        # coordinator's subscriptions can reach the router after a single send has passed
+        deadline = time.monotonic() + 30.0
+        while True:
+            for key in (keys.bid("t00", "robot-1"), keys.award("robot-0"), keys.ack("robot-2")):
+                bus.session.put(key, b"\x93not a message")
+            time.sleep(0.5)
+            if "dropped malformed payload" in log.read_text() or time.monotonic() > deadline:
+                break
         # well-formed but out of place: a round that is not running, a robot posing as another
         bus.publish(keys.bid("t01", "robot-0"), Bid(0.0, 999, "t01", "robot-0", 1.0, 1.0, False))
         bus.publish(keys.bid("t01", "robot-2"), Bid(0.0, 1, "t01", "robot-0", 1.0, 1.0, False))
