@@ -13,24 +13,18 @@ frontier with no task open or assigned.
 
 from __future__ import annotations
 
-import logging
 import threading
 from collections.abc import Callable
 
 from fleet.bus import Bus
-from fleet.coordinator.exploring import Change, Explorer
+from fleet.coordinator.exploring import Change, Explorer, fetch_whole_maps
 from fleet.coordinator.market import Market
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
 from fleet.params import CoordinatorParams
 from fleet.plausible import Bounds
-from fleet.protocol import MapPatches, Request
+from fleet.protocol import MapPatches
 from planners import auction
-
-log = logging.getLogger("coordinator")
-
-# wall seconds a robot's whole map is waited for when its patches had a gap
-WHOLE_MAP_TIMEOUT_S = 2.0
 
 
 class ExploringMarket(Market):
@@ -87,25 +81,15 @@ class ExploringCoordinator(Coordinator):
                 return
             self.explorer.maps.hear(rid, msg)
 
-    def _fetch_whole_maps(self) -> None:
-        """Ask each robot whose patches had a gap for its whole map (on a thread of its own:
-        the main loop holds the lock)."""
-        with self.lock:
-            missing = sorted(self.explorer.maps.missing)
-        for rid in missing:
-            key = self.keys.robot(rid, "map")
-            try:
-                msg = self.bus.request(key, Request("coordinator"), MapPatches, WHOLE_MAP_TIMEOUT_S)
-            except (TimeoutError, RuntimeError) as e:
-                log.info("%s: no whole map yet (%s)", rid, e)
-                continue
-            with self.lock:
-                self.explorer.maps.hear(rid, msg)
-
     def _tick(self) -> None:
         """Every ``explore_every_s`` sim seconds: merge the maps, update the frontier tasks."""
         if self.explorer.maps.missing and not (self._fetching and self._fetching.is_alive()):
-            self._fetching = threading.Thread(target=self._fetch_whole_maps, daemon=True)
+            # on a thread of its own: the main loop holds the lock
+            self._fetching = threading.Thread(
+                target=fetch_whole_maps,
+                args=(self.bus, self.explorer.maps, self.lock),
+                daemon=True,
+            )
             self._fetching.start()
         if self.journal.clock - self.explored_at < self.params.explore_every_s:
             return

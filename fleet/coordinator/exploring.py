@@ -28,18 +28,20 @@ after every update.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
+from fleet.bus import Bus
 from fleet.coordinator.job import ASSIGNED, GONE, OPEN, REPLACED, UNREACHABLE, Job
 from fleet.coordinator.planning import TaskPlanner
 from fleet.floor_map import apply_patches
 from fleet.params import FleetConfig
-from fleet.protocol import MapPatches
+from fleet.protocol import MapPatches, Request
 from planners.auction import Lot, Task, task_lot
 from planners.frontier_tasks import call_values, goal_task, new_frontiers, still_there
 from planners.frontiers import Frontier, centre_reachable, find_frontiers
@@ -54,6 +56,8 @@ MAP_PGM = "map.pgm"
 # ROS map_saver's trinary pixels and thresholds
 PGM_FREE, PGM_OCCUPIED, PGM_UNKNOWN = 254, 0, 205
 FREE_THRESH, OCCUPIED_THRESH = 0.196, 0.65
+# wall seconds a robot's whole map is waited for
+WHOLE_MAP_TIMEOUT_S = 2.0
 
 
 class RobotMaps:
@@ -81,12 +85,34 @@ class RobotMaps:
         if msg.full:
             self.missing.discard(rid)
 
-    def log_odds(self, limits: tuple[float, float]) -> dict[str, LogOddsMap]:
-        """Each robot's map as log-odds, by robot id."""
+    def log_odds(
+        self, limits: tuple[float, float], robots: Iterable[str] | None = None
+    ) -> dict[str, LogOddsMap]:
+        """Each robot's map (of ``robots`` only, when given) as log-odds, by robot id."""
+        wanted = None if robots is None else set(robots)
         return {
             rid: LogOddsMap.from_ros(cells, *self.geometry[rid], limits)
             for rid, cells in sorted(self.cells.items())
+            if wanted is None or rid in wanted
         }
+
+
+def fetch_whole_maps(bus: Bus, maps: RobotMaps, lock: AbstractContextManager) -> None:
+    """Ask each robot whose patches had a gap for its whole map, and write it into ``maps``
+    (guarded by ``lock``, which is not held while a robot answers). A caller runs this on a
+    thread of its own: each query may wait :data:`WHOLE_MAP_TIMEOUT_S`."""
+    with lock:
+        missing = sorted(maps.missing)
+    for rid in missing:
+        try:
+            msg = bus.request(
+                bus.keys.robot(rid, "map"), Request("coordinator"), MapPatches, WHOLE_MAP_TIMEOUT_S
+            )
+        except (TimeoutError, RuntimeError) as e:
+            log.info("%s: no whole map yet (%s)", rid, e)
+            continue
+        with lock:
+            maps.hear(rid, msg)
 
 
 class MapPlanner(TaskPlanner):

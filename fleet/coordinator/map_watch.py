@@ -19,10 +19,10 @@ import threading
 from pathlib import Path
 
 from fleet.bus import Bus
-from fleet.coordinator.exploring import RobotMaps, logit
+from fleet.coordinator.exploring import RobotMaps, fetch_whole_maps, logit
 from fleet.coordinator.service import Coordinator
 from fleet.params import FleetConfig
-from fleet.protocol import MapPatches, Request
+from fleet.protocol import MapPatches
 from planners.grid import GridMap
 from planners.map_check import (
     AGREES,
@@ -33,13 +33,11 @@ from planners.map_check import (
     fleet_verdict,
 )
 from planners.map_match import MatchParams
-from planners.map_merge import LogOddsMap
 
 log = logging.getLogger("coordinator")
 
-# wall seconds between looks at the sim clock, and a robot's whole map is waited for
+# wall seconds between looks at the sim clock
 POLL_S = 0.2
-WHOLE_MAP_TIMEOUT_S = 2.0
 
 
 def map_check_params(cfg: FleetConfig) -> MapCheckParams:
@@ -97,7 +95,7 @@ class MapWatch:
             if clock - checked_at < self.every_s:
                 continue
             checked_at = clock
-            self._fetch_whole_maps()
+            fetch_whole_maps(self.bus, self.maps, self._lock)
             verdict = self.check()
             if verdict == AGREES:
                 self._tell(
@@ -119,12 +117,9 @@ class MapWatch:
     def check(self) -> str:
         """Judge each robot's map not yet judged; the fleet's verdict
         (``planners.map_check.fleet_verdict``)."""
+        judged = {rid for rid, c in self.checks.items() if c.verdict in (AGREES, DIFFERS)}
         with self._lock:
-            maps = {
-                rid: LogOddsMap.from_ros(cells.copy(), *self.maps.geometry[rid], self.limits)
-                for rid, cells in self.maps.cells.items()
-                if rid not in self.checks or self.checks[rid].verdict not in (AGREES, DIFFERS)
-            }
+            maps = self.maps.log_odds(self.limits, set(self.maps.cells) - judged)
         m = self.params.match
         for rid, lo in sorted(maps.items()):
             seen = lo.to_gridmap(m.occupied_threshold, m.free_threshold)
@@ -139,21 +134,3 @@ class MapWatch:
         c = self.coordinator
         with c.lock:
             c.journal.event(kind, "", "", detail)
-
-    def _fetch_whole_maps(self) -> None:
-        """Ask each robot whose patches had a gap for its whole map."""
-        with self._lock:
-            missing = sorted(self.maps.missing)
-        for rid in missing:
-            try:
-                msg = self.bus.request(
-                    self.bus.keys.robot(rid, "map"),
-                    Request("coordinator"),
-                    MapPatches,
-                    WHOLE_MAP_TIMEOUT_S,
-                )
-            except (TimeoutError, RuntimeError) as e:
-                log.info("%s: no whole map yet (%s)", rid, e)
-                continue
-            with self._lock:
-                self.maps.hear(rid, msg)
