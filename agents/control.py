@@ -296,7 +296,6 @@ def _follow(
         agent.stale_after_s,
         everyone=False,
         skip=ordered,
-        at=(np.array(pose[:2]), params.follow.robot.radius),
     )
     predicted = predict(pose, state.command, heard.latency_s)
     follow, result = follow_step(

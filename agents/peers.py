@@ -10,11 +10,7 @@ way, stops it short of a crossing, or — through the follower's escape move —
 aside when one of them comes at it. The robot with the right of way sees the other only in its
 scan. A fixed priority order is the simplest rule under which two robots never both yield to
 each other (prioritized planning, Erdmann and Lozano-Pérez 1987, applied to the robots'
-short-term trajectories). A robot without work gives way to everyone. A robot on its way keeps
-clear only of the part of an intent the peer can drive (:func:`passable`): when the peer's path
-runs through it, as when it drives ahead of the peer into the same doorway, the intent beyond
-its own body is the peer's to drive only once it has moved on, and keeping clear of that would
-stop it where it blocks the peer.
+short-term trajectories). A robot without work gives way to everyone.
 
 The intents also say where the peers are (:func:`peer_discs`), which the agent cuts out of the
 scan it gives SLAM (:func:`cut_out`, :func:`without_peers`): a robot that drives past one
@@ -121,17 +117,6 @@ def intent_centres(intents: Iterable[np.ndarray], now: float, max_age_s: float) 
     return np.vstack(centres) if centres else np.zeros((0, 2))
 
 
-def passable(points: np.ndarray, xy: np.ndarray, robot_radius: float) -> np.ndarray:
-    """The rows (t, x, y) of a peer's intent ``points`` it can drive while a robot stands at
-    ``xy``: all of them, unless the intent runs through that robot's body (a sample within one
-    radius of ``xy``), then those before the first sample within two radii, where the peer
-    would touch it. The peer cannot pass that robot; the rest of its intent lies beyond it."""
-    d = np.hypot(points[:, 1] - xy[0], points[:, 2] - xy[1])
-    if not (d < robot_radius).any():
-        return points
-    return points[: int(np.argmax(d < 2 * robot_radius))]
-
-
 def to_avoid(
     me: str,
     intents: Mapping[str, Intent],
@@ -139,21 +124,19 @@ def to_avoid(
     max_age_s: float,
     everyone: bool,
     skip: frozenset[str] = frozenset(),
-    at: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """The centres of the discs (see :func:`intent_centres`) that the peers robot ``me`` keeps
     clear of will cover: those it gives way to (:func:`gives_way`), or all of them with
-    ``everyone`` (a robot without work); none of those in ``skip``. With ``at`` (the robot's
-    position and radius), only the part of each intent the peer can drive before it reaches
-    the robot (:func:`passable`)."""
-    chosen = [
-        i.points
-        for rid, i in intents.items()
-        if rid not in skip and (everyone or gives_way(me, rid))
-    ]
-    if at is not None:
-        chosen = [passable(pts, *at) for pts in chosen]
-    return intent_centres(chosen, now, max_age_s)
+    ``everyone`` (a robot without work); none of those in ``skip``."""
+    return intent_centres(
+        [
+            i.points
+            for rid, i in intents.items()
+            if rid not in skip and (everyone or gives_way(me, rid))
+        ],
+        now,
+        max_age_s,
+    )
 
 
 def rim_points(centres: np.ndarray, robot_radius: float) -> np.ndarray:
