@@ -32,7 +32,11 @@ from fleet.protocol import Intent, LaserScan
 from planners.dwa import rollout
 from planners.robot import RobotSpec
 
-RIM_POINTS = 12
+# A centre kept r + m from N points on a peer's rim of radius r can come within
+# r·cos(π/N) + √((r + m)² − r²·sin²(π/N)) of the peer's centre between two of them: with 12
+# points and dwa.safety_margin 0.01 m that is 1.3 mm short of 2r (bodies overlapping), with
+# 24 it keeps 7 mm clear.
+RIM_POINTS = 24
 PEER_MASK_MARGIN_M = 0.05
 # an intent announces at most this many waypoints of the path ahead
 INTENT_WAYPOINTS = 30

@@ -53,6 +53,12 @@ class DWAParams:
       only, as ROS's path cost does by default; ``mean`` (our default) averages it over the
       rollout's points (ROS's MapGridCostFunction offers a ``Sum`` aggregation for the same
       purpose), so an arc that ends on the path but bulges off it in between scores worse.
+
+    ``safety_margin`` (default 0.01 m, the lidar's range noise σ) covers what the obstacle
+    points miss at a convex corner: there the nearest obstacle is one point, seen by one or two
+    beams, which no filter can average, and a 5-beam median moves it outward (the corner is a
+    minimum of range over bearing). Beside a straight wall the nearest of many noisy points
+    errs inward, so a zero margin is safe there, but at a corner it lets rollouts graze it.
     """
 
     min_vel_x: float = 0.0
@@ -63,7 +69,7 @@ class DWAParams:
     path_distance_bias: float = 32.0
     goal_distance_bias: float = 24.0
     occdist_scale: float = 0.1
-    safety_margin: float = 0.0
+    safety_margin: float = 0.01
     forward_point_distance: float = 0.325
     goal_lookahead: float = 1.0
     corner_angle: float = 1.0

@@ -56,6 +56,19 @@ def test_intent_centres_drop_stale_intents_and_rims_ring_each_centre() -> None:
     assert np.allclose(np.hypot(*(rim - centres[:2, None, :]).transpose(2, 0, 1)), 0.17)
 
 
+def test_dwa_keeps_every_point_of_a_peers_body_off_its_rim_points() -> None:
+    """DWA keeps a robot's centre ``radius + safety_margin`` from each rim point; between two
+    of them it must still be kept off the peer's body (centres 2r apart). With 12 rim points
+    and no margin a centre 11.6 mm inside 2r passed, with 12 and a 1 cm margin 1.3 mm."""
+    peer = np.zeros((1, 2))
+    rim = rim_points(peer, ROBOT.radius)
+    angles = np.linspace(0.0, 2 * np.pi, 720, endpoint=False)
+    for d in np.linspace(ROBOT.radius, 2 * ROBOT.radius - 1e-4, 40):
+        centres = d * np.column_stack([np.cos(angles), np.sin(angles)])
+        nearest = np.hypot(*(centres[:, None, :] - rim[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+        assert nearest.max() < ROBOT.radius + DWA.safety_margin, d
+
+
 def test_path_intent_announces_the_path_ahead_even_when_stopped() -> None:
     pts = path_intent(np.array([0.0, 0.0]), np.array([[1.0, 0.0], [1.0, 1.0]]), 0.5, 3.0, 2.0)
     assert np.allclose(pts[:, 0], np.linspace(3.0, 5.0, 11))

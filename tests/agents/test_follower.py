@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 from robots import ROBOT
 
+from agents.control import scan_points
 from agents.follow.escape import ESCAPE_MARGIN_M, escape_heading, escape_step, start_escape
 from agents.follow.motion import advance, follow_step, peer_in_the_way, stop_speed
 from agents.follow.primitives import rotate_in_place
 from agents.follow.state import FollowParams, FollowState, Situation
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, DWAResult, rollout
+from sim_server.lidar import add_noise, cast_scans, polygon_edges
 
 AGENT = AgentParams()
 DWA = DWAParams()
@@ -234,3 +236,49 @@ def test_a_waypoint_given_up_far_short_is_missed(at: float, missed: tuple[int, .
     state, _ = _step(state, (at, 0.0, 0.0), (0.0, 0.0), NONE)
     assert state.index == 2 and state.skipped == 1
     assert state.missed == missed
+
+
+def _round_a_corner(seed: int) -> float:
+    """The robot's least true clearance from a table's convex corner while it follows the
+    stored-map plan that touched it: lanes 1.75 cm wider than the radius from the table's
+    face, turning at its corner, on noisy scans through the agent's 5-beam median."""
+    table = np.array([[2.0, 1.3], [2.8, 1.3], [2.8, 1.9], [2.0, 1.9]])
+    beams = -math.pi + np.arange(360) * (2 * math.pi / 360)
+    path = np.array(
+        [[3.7125, 1.3125], [3.4125, 1.225], [3.2875, 1.225], [2.9875, 1.3125], [2.9875, 1.1875]]
+    )
+    rng = np.random.default_rng(seed)
+    pose, velocity, state = (3.7125, 1.3125, math.pi), (0.0, 0.0), FollowState(path, index=1)
+    least = math.inf
+    for _ in range(200):
+        ranges = cast_scans(
+            np.array([pose[:2]]),
+            np.array([pose[2]]),
+            beams,
+            polygon_edges([table]),
+            np.zeros((0, 3)),
+            6.0,
+        )[0]
+        seen = scan_points(
+            pose, add_noise(ranges, 0.01, 0.1, 6.0, rng), -math.pi, beams[1] - beams[0]
+        )
+        state, result = _step(state, pose, velocity, seen)
+        if result is None:
+            break
+        velocity = (result.v, result.w)
+        xs, ys, ths = rollout(
+            pose, np.array([result.v]), np.array([result.w]), np.linspace(0, DT, 11)
+        )
+        gaps = np.hypot(xs[0] - np.clip(xs[0], 2.0, 2.8), ys[0] - np.clip(ys[0], 1.3, 1.9))
+        least = min(least, float(gaps.min()))
+        pose = (float(xs[0, -1]), float(ys[0, -1]), float(ths[0, -1]))
+    assert state.done
+    return least
+
+
+def test_a_convex_corner_is_passed_without_contact_on_noisy_scans() -> None:
+    """A corner is one scan point, which errs outward as often as not: with no safety margin
+    DWA grazed it on 6 of these 20 seeds (5 mm deep), as robot-0 did the table's at (2.80,
+    1.30) on the stored small map."""
+    least = [_round_a_corner(seed) for seed in range(20)]
+    assert min(least) >= ROBOT.radius, least
