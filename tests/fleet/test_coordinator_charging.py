@@ -362,3 +362,44 @@ def test_batteries_off_send_no_one_home(planner: TaskPlanner, world: World) -> N
     f = Fleet(planner, world, ["robot-0"])
     f.job.robots["robot-0"].charge = -1.0  # no battery heard
     assert going_home(f.job, lambda _rid: 0.5) == []
+
+
+@pytest.fixture(scope="module")
+def corridor() -> World:
+    return load_world(resolve_world("corridor"), ROBOT.radius)
+
+
+def test_at_the_end_of_the_job_each_dock_goes_to_the_robot_nearest_it(corridor: World) -> None:
+    """The corridor world, a dock per room: robot-1 stands by the right room's dock, robot-0
+    farther off in the same room, robot-2 in the left room. Each dock goes to the robot
+    nearest it and the third waits in its room; in id order robot-0 would take the right
+    dock and robot-1 cross the corridor to the left one."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    where = {"robot-0": (5.6, 2.5), "robot-1": (7.0, 0.9), "robot-2": (1.2, 2.2)}
+    for rid, xy in where.items():
+        r = f.job.robot(rid)
+        r.ready, r.xy, r.charge = True, xy, 0.5
+    for rec in f.job.tasks.values():
+        rec.state = DONE
+    home = {rid: (why, p) for rid, why, p in going_home(f.job, f.docking.go_home_below)}
+    for rid in f.docking.nearest_first(list(home)):
+        f.market.send_home(rid, *home[rid])
+    tasks = {rid: f.plans(rid)[-1].task for rid in where}
+    assert tasks == {"robot-0": "wait-1", "robot-1": "dock-1", "robot-2": "dock-0"}, tasks
+    assert all(f.plans(rid)[-1].waypoints[:, 0].min() > 5.0 for rid in ("robot-0", "robot-1"))
+
+
+def test_a_robot_at_work_passing_over_a_dock_does_not_hold_it(corridor: World) -> None:
+    """A robot sweeping a lane over a dock's pose leaves it free for a robot going to charge;
+    one standing there without work, or charging, holds it."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
+    f.market.auction(f.auctioneer)
+    worker, other = f.job.robots["robot-0"], f.job.robots["robot-1"]
+    assert f.job.queue("robot-0")
+    worker.xy, other.xy, other.charge = (7.5, 1.05), (7.0, 2.6), 0.1
+    assert f.docking.holder(1) is None
+    f.market.send_home("robot-1", "charge low", False)
+    assert f.plans("robot-1")[-1].task == "dock-1"
+    g = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    g.job.robots["robot-0"].xy = (7.5, 1.05)
+    assert g.job.queue("robot-0") == [] and g.docking.holder(1) == "robot-0"
