@@ -148,6 +148,9 @@ class Docking:
                 return rid
         return None
 
+    def _on(self, k: int, xy: tuple[float, float]) -> bool:
+        return math.dist(xy, self.docks[k][:2]) < HOLDS_M
+
     def usable(self, k: int) -> bool:
         """Whether a robot can drive onto dock ``k``: no body (a lost robot's, or one out of
         charge) stands on it or on the line onto it."""
@@ -284,7 +287,11 @@ class Docking:
     def heard(self, rid: str, msg: RobotStatus) -> None:
         r = self.job.robots[rid]
         r.charge, r.charging = msg.charge, msg.charging
-        if r.charging and rid in self.trips and r.docking == "docking":
+        # a robot charges on any dock it stands on: passing over another on its way is not
+        # being on its own
+        t = self.trips.get(rid)
+        on_its_dock = t is not None and r.xy is not None and self._on(t.dock, r.xy)
+        if r.charging and on_its_dock and r.docking == "docking":
             r.docking = "charging"
             self.journal.event("charging", rid, self.trips[rid].plan.task, f"at {msg.charge:.2f}")
 

@@ -107,7 +107,10 @@ class Fleet:
         return [m for k, m in self.sent if isinstance(m, Plan) and k == KEYS.plan(rid)]
 
     def status(self, rid: str, charge: float, charging: bool, plan: Plan, done: bool) -> None:
-        """``rid`` reports its battery and how far along ``plan`` it is."""
+        """``rid`` reports its battery and how far along ``plan`` it is; charging, it stands
+        at the plan's end (on the dock)."""
+        if charging:
+            self.job.robots[rid].xy = tuple(plan.waypoints[-1])
         n = len(plan.waypoints)
         waypoint = n if done else 0
         self.dispatcher.heard(rid, plan.plan_id, waypoint)
@@ -171,6 +174,10 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     f.status("robot-0", 0.95, True, to_dock, done=True)
     assert f.docking.tick(False) == ["robot-0"]
     assert "robot-0" in f.job.market()
+    assert len(f.plans("robot-1")) == 1  # robot-0 still stands on the dock
+    r0 = f.job.robots["robot-0"]
+    r0.xy, r0.charging = (1.0, 2.5), False  # it drives off
+    f.docking.tick(False)
     (_, onto) = f.plans("robot-1")
     assert onto.task == "dock-0" and f.job.robots["robot-1"].docking == "docking"
 
@@ -403,3 +410,24 @@ def test_a_robot_at_work_passing_over_a_dock_does_not_hold_it(corridor: World) -
     g = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
     g.job.robots["robot-0"].xy = (7.5, 1.05)
     assert g.job.queue("robot-0") == [] and g.docking.holder(1) == "robot-0"
+
+
+def test_a_robot_passing_over_another_dock_on_its_way_is_not_charging_on_its_own(
+    corridor: World,
+) -> None:
+    """The simulator charges a robot on any dock it stands on; one on its way to the right
+    room's dock that passes over the left one is still on its way, not charging on its dock."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
+    f.job.robots["robot-0"].xy = (1.0, 0.6)
+    f.market.send_home("robot-0", "charge low", False)  # it takes the left dock
+    f.job.robots["robot-1"].xy = (1.2, 2.2)
+    f.market.send_home("robot-1", "charge low", False)
+    (trip,) = f.plans("robot-1")
+    assert trip.task == "dock-1"
+    f.job.robots["robot-1"].xy = (0.5, 1.5)  # over the left dock
+    status = RobotStatus(
+        0.0, "driving", trip.task, 0.5, 1, 4, 0.0, plan_id=trip.plan_id, charge=0.3, charging=True
+    )
+    f.market.observe("robot-1", status)
+    assert f.job.robots["robot-1"].docking == "docking"
+    assert not [e for e in f.events() if e[0] == "charging" and e[1] == "robot-1"]
