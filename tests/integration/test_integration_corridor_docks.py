@@ -9,8 +9,8 @@ dock, robot-0 is sent home and crosses left to right to it while robot-2 is stil
 A full charge lasts 120 s of sweeping, so robots also go to charge on their own during the job.
 
 The recorded true tracks must show a robot crossing left to right and another right to left
-within the same window, the job done with every robot home, no robot–robot contact and no
-robot out of charge."""
+at the same time (in the corridor or at its mouths), the job done with every robot home, no
+robot–robot contact and no robot out of charge."""
 
 from __future__ import annotations
 
@@ -26,11 +26,9 @@ from fleet.params import default_config_path
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(900)]
 
-# the corridor runs from x = 3 to x = 5 m
-LEFT_X, RIGHT_X = 3.0, 5.0
-# two passages the opposite way begin within this (sim s; a passage takes about 10 s): one
-# robot waited for the other at the corridor
-WINDOW_S = 20.0
+# the corridor runs from x = 3 to x = 5 m; a passage is counted from and to 0.5 m beyond its
+# ends, so a robot waiting at a mouth for another to come out is in its passage
+LEFT_X, RIGHT_X = 2.5, 5.5
 # robot-1 starts a metre in front of the right room's dock, facing it; robot-2 in the far corner
 STARTS = [[0.9, 1.5, 0.0], [6.6, 1.0, 0.0], [7.55, 2.6, math.pi]]
 RIGHT_DOCK = (7.55, 1.0)
@@ -59,26 +57,27 @@ def passages(tracks: Path) -> list[tuple[str, str, float, float]]:
     return out
 
 
-def both_ways(found: list[tuple[str, str, float, float]], window_s: float) -> list[tuple]:
-    """Pairs of passages by two robots, one each way, that began within ``window_s``."""
+def both_ways(found: list[tuple[str, str, float, float]]) -> list[tuple]:
+    """Pairs of passages by two robots, one each way, at the same time (their spans overlap)."""
     return [
         (a, b)
         for a in found
         for b in found
-        if a[1] == "LR" and b[1] == "RL" and a[0] != b[0] and abs(a[2] - b[2]) <= window_s
+        if a[1] == "LR" and b[1] == "RL" and a[0] != b[0] and a[2] < b[3] and b[2] < a[3]
     ]
 
 
 def test_passages_are_read_from_the_tracks(tmp_path: Path) -> None:
     """The reading itself: one robot goes left to right while another comes back."""
-    rows = [(0.0, "a", 2.5), (0.0, "b", 5.5), (5.0, "a", 4.0), (6.0, "b", 4.5)]
-    rows += [(10.0, "a", 5.2), (14.0, "b", 2.8), (20.0, "a", 4.5)]
+    rows = [(0.0, "a", 2.0), (0.0, "b", 6.0), (5.0, "a", 4.0), (6.0, "b", 4.5)]
+    rows += [(10.0, "a", 5.8), (14.0, "b", 2.2), (20.0, "a", 4.5)]
     path = tmp_path / "tracks.csv"
     path.write_text("sim_s,robot,x,y\n" + "".join(f"{t},{r},{x},1.45\n" for t, r, x in rows))
     found = passages(path)
     assert found == [("a", "LR", 5.0, 10.0), ("b", "RL", 6.0, 14.0)]
-    assert both_ways(found, 1.0) == [(found[0], found[1])]
-    assert both_ways(found, 0.5) == []
+    assert both_ways(found) == [(found[0], found[1])]
+    assert both_ways([found[0], ("b", "RL", 10.5, 14.0)]) == []
+    assert both_ways([found[0], ("b", "LR", 6.0, 14.0)]) == []
 
 
 def _world(path: Path) -> Path:
@@ -132,7 +131,7 @@ def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Pa
     assert ("robot-2", "sent home by cli: to dock 0") in sent, run.explained()
     assert ("robot-0", "sent home by cli: to dock 1") in sent, run.explained()
     found = passages(tracks)
-    assert both_ways(found, WINDOW_S), f"no crossing both ways at once: {found}"
+    assert both_ways(found), f"no crossing both ways at once: {found}"
     assert report["status"] == "done", run.explained()
     assert report["collisions"]["robot_robot"] == 0, run.explained()
     batteries = {rid: r["battery"] for rid, r in report["robots"].items()}
