@@ -15,7 +15,8 @@ WORLDS = Path(__file__).resolve().parents[1] / "configs" / "worlds"
 class FleetRun(RunningFleet):
     """``fleet up`` on ``configs/worlds/<world>.yaml`` (or a world file's path) with three
     robots, with no wall ``--timeout``: :meth:`finish` waits ``timeout_s`` wall seconds, and on
-    while the sim clock moves (:meth:`RunningFleet.guard`), so a run slowed down by a busy machine is not cut."""
+    while the sim clock moves (:meth:`RunningFleet.guard`), so a run slowed down by a busy
+    machine is not cut."""
 
     def __init__(
         self,
