@@ -25,7 +25,7 @@ from PIL import Image, ImageDraw
 from scipy import ndimage
 
 from fleet.config import ConfigError, read_yaml, unknown_field
-from planners.grid import GridMap
+from planners.grid import GridMap, reachable
 
 Pose = tuple[float, float, float]
 
@@ -54,6 +54,8 @@ CIRCLE_SIDES = 24
 # a stored map in the world's frame has (nearly) no free floor outside the world's outer walls;
 # one whose origin is off has a strip of it there
 MAP_OUTSIDE_MAX = 0.02
+# the grid (m) starts and docks are checked on for their clearance and reach
+CLEARANCE_RES = 0.025
 DOCK_SIZE = (0.35, 0.2)
 
 
@@ -103,7 +105,7 @@ class World:
         occ = np.array(img, dtype=bool)
         return GridMap(occ, np.zeros_like(occ), resolution, (xmin, ymin))
 
-    def clearance(self, xy: np.ndarray, resolution: float = 0.025) -> np.ndarray:
+    def clearance(self, xy: np.ndarray, resolution: float = CLEARANCE_RES) -> np.ndarray:
         """Distance (m) from points to the nearest occupied or unknown cell (0 outside the map)."""
         g = self.grid(resolution)
         blocked = g.occupied | g.unknown
@@ -167,7 +169,7 @@ def load_world(path: str | Path, robot_radius: float | None = None) -> World:
         world = _world_from_ros_map(path, data, starts=(), docks=(), name=path.stem)
     else:
         world = _world_from_yaml(path, data)
-    _check_starts(world, robot_radius)
+    _check_starts(world, robot_radius, _dock_fields(data))
     return world
 
 
@@ -302,6 +304,13 @@ def _docks(data: dict, path: Path) -> tuple[Pose, ...]:
     return tuple(out)
 
 
+def _dock_fields(data: dict) -> list[str]:
+    """The fields of the file that name the world's docks, in :func:`_docks`' order."""
+    first = ["dock"] if data.get("dock") is not None else []
+    extra = data.get("docks")
+    return first + [f"docks[{i}]" for i in range(len(extra) if isinstance(extra, list) else 0)]
+
+
 def _list(data: dict, key: str, path: Path) -> list:
     value = data.get(key) or []
     if not isinstance(value, list):
@@ -432,12 +441,15 @@ def _resample(g: GridMap, resolution: float) -> GridMap:
     )
 
 
-def _check_starts(world: World, radius: float | None) -> None:
+def _check_starts(world: World, radius: float | None, dock_fields: list[str]) -> None:
+    """Starts and docks lie in the world, outside obstacles; with ``radius`` they keep it from
+    obstacles, starts from each other's robots, and a robot centre reaches each from the
+    first (a dock in a closed-off room is out of reach). Each error names the file's field."""
     if not world.starts and not world.docks:
         return
     where = world.source
     named = [(f"starts[{i}]", s) for i, s in enumerate(world.starts)]
-    named += [(f"docks[{i}]" if i else "dock", d) for i, d in enumerate(world.docks)]
+    named += list(zip(dock_fields, world.docks, strict=True))
     xy = np.array([p[:2] for _, p in named])
     xmin, ymin, xmax, ymax = world.bounds
     clear = world.clearance(xy)
@@ -457,3 +469,20 @@ def _check_starts(world: World, radius: float | None) -> None:
             a, b = world.starts[i], world.starts[j]
             if math.hypot(a[0] - b[0], a[1] - b[1]) < 2 * radius:
                 raise ConfigError(f"{where}: starts[{i}]: overlaps starts[{j}]")
+    _check_reach(world, named, radius)
+
+
+def _check_reach(world: World, named: list[tuple[str, Pose]], radius: float) -> None:
+    """Every pose of ``named`` lies on floor a robot centre reaches from the first one's
+    (cells keeping ``radius`` from obstacles, as :meth:`World.clearance` measures it)."""
+    res = CLEARANCE_RES
+    g = world.grid(res)
+    dist = ndimage.distance_transform_edt(~(g.occupied | g.unknown)) * res - res / 2
+    rc = np.clip(g.world_to_cell(np.array([p[:2] for _, p in named])), 0, np.array(dist.shape) - 1)
+    reach = reachable(dist >= radius, rc[:1])
+    for (field, pose), (r, c) in zip(named, rc, strict=True):
+        if not reach[r, c]:
+            raise ConfigError(
+                f"{world.source}: {field}: ({pose[0]}, {pose[1]}) is out of reach: no way for "
+                f"a robot of radius {radius} m from {named[0][0]}"
+            )

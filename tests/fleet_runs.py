@@ -13,9 +13,10 @@ WORLDS = Path(__file__).resolve().parents[1] / "configs" / "worlds"
 
 
 class FleetRun(RunningFleet):
-    """``fleet up`` on ``configs/worlds/<world>.yaml`` with three robots, with no wall
-    ``--timeout``: :meth:`finish` waits ``timeout_s`` wall seconds, and on while the sim clock
-    moves (:meth:`RunningFleet.guard`), so a run slowed down by a busy machine is not cut."""
+    """``fleet up`` on ``configs/worlds/<world>.yaml`` (or a world file's path) with three
+    robots, with no wall ``--timeout``: :meth:`finish` waits ``timeout_s`` wall seconds, and on
+    while the sim clock moves (:meth:`RunningFleet.guard`), so a run slowed down by a busy
+    machine is not cut."""
 
     def __init__(
         self,
@@ -26,9 +27,8 @@ class FleetRun(RunningFleet):
         speed: float = 0.0,
         options: tuple[str, ...] = (),
     ) -> None:
-        super().__init__(
-            run_dir, str(WORLDS / f"{world}.yaml"), robots, speed=speed, options=options
-        )
+        path = world if world.endswith(".yaml") else str(WORLDS / f"{world}.yaml")
+        super().__init__(run_dir, path, robots, speed=speed, options=options)
         self.timeout_s = timeout_s
 
     def wait_for(self, pred, timeout: float = 120.0, what: str = "") -> None:

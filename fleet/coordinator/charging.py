@@ -134,16 +134,22 @@ class Docking:
     # ---- who holds what ---------------------------------------------------------------------
 
     def holder(self, k: int) -> str | None:
-        """The robot that holds dock ``k``: on a trip to it, or standing on it."""
+        """The robot that holds dock ``k``: on a trip to it, or standing on it charging (just
+        charged, before it drives off) or without work. A robot at work that passes over the
+        dock's pose (lanes along the wall run over it) does not hold it."""
         for rid, t in self.trips.items():
             if t.dock == k and not t.waiting:
                 return rid
         dock = self.docks[k]
         for rid, r in self.job.robots.items():
             free = r.liveness == LOST or r.xy is None or rid in self.trips
-            if not free and math.dist(r.xy, dock[:2]) < HOLDS_M:
+            stays = r.charging or not self.job.queue(rid)
+            if not free and stays and math.dist(r.xy, dock[:2]) < HOLDS_M:
                 return rid
         return None
+
+    def _on(self, k: int, xy: tuple[float, float]) -> bool:
+        return math.dist(xy, self.docks[k][:2]) < HOLDS_M
 
     def usable(self, k: int) -> bool:
         """Whether a robot can drive onto dock ``k``: no body (a lost robot's, or one out of
@@ -151,13 +157,40 @@ class Docking:
         dock = self.docks[k]
         return not self.planner.near_bodies(np.vstack([_approach(dock), dock[:2]]))
 
+    def _trip_s(self, k: int, xy: tuple[float, float]) -> float:
+        """Travel time on the floor plan from ``xy`` to dock ``k`` (inf where there is no way):
+        the dock in the next room may be nearer as the crow flies than this room's."""
+        return float(self.travel(np.array(self.docks[k][:2]), np.array([xy]))[0])
+
     def _nearest(self, xy: tuple[float, float], free_only: bool) -> int | None:
         ks = [
             k
             for k in range(len(self.docks))
             if self.usable(k) and (not free_only or self.holder(k) is None)
         ]
-        return min(ks, key=lambda k: math.dist(xy, self.docks[k][:2]), default=None)
+        return min(ks, key=lambda k: self._trip_s(k, xy), default=None)
+
+    def nearest_first(self, rids: list[str]) -> list[str]:
+        """``rids`` in the order to send them home so that each free dock goes to the robot
+        nearest it (greedy matching over robot–dock pairs by travel time, the nearest pair
+        first), then the robots left over (they wait) in the given order. Sent one by one in id
+        order, the first robot would take the dock nearest it even when another robot stands
+        by that dock, and the other would cross the floor to the far one."""
+        free = [k for k in range(len(self.docks)) if self.usable(k) and self.holder(k) is None]
+        placed = [rid for rid in rids if self.job.robots[rid].xy is not None]
+        pairs = sorted(
+            (self._trip_s(k, xy), rid, k)
+            for rid in placed
+            for k in free
+            if (xy := self.job.robots[rid].xy) is not None
+        )
+        first: list[str] = []
+        taken: set[int] = set()
+        for _, rid, k in pairs:
+            if rid not in first and k not in taken:
+                first.append(rid)
+                taken.add(k)
+        return first + [rid for rid in rids if rid not in first]
 
     def ahead(self, k: int) -> list[float]:
         """The charges of the robots ahead of a newcomer at dock ``k``: on their way to it,
@@ -177,9 +210,7 @@ class Docking:
             k = self._nearest(r.xy, free_only=False)
         if k is None or r.xy is None:
             return 0.0  # no dock it can charge on: it works until it runs out
-        dock = np.array(self.docks[k][:2])
-        trip_s = float(self.travel(dock, np.array([r.xy]))[0])
-        return go_home_below(self.spec, trip_s, self.ahead(k))
+        return go_home_below(self.spec, self._trip_s(k, r.xy), self.ahead(k))
 
     # ---- trips ------------------------------------------------------------------------------
 
@@ -256,7 +287,11 @@ class Docking:
     def heard(self, rid: str, msg: RobotStatus) -> None:
         r = self.job.robots[rid]
         r.charge, r.charging = msg.charge, msg.charging
-        if r.charging and rid in self.trips and r.docking == "docking":
+        # a robot charges on any dock it stands on: passing over another on its way is not
+        # being on its own
+        t = self.trips.get(rid)
+        on_its_dock = t is not None and r.xy is not None and self._on(t.dock, r.xy)
+        if r.charging and on_its_dock and r.docking == "docking":
             r.docking = "charging"
             self.journal.event("charging", rid, self.trips[rid].plan.task, f"at {msg.charge:.2f}")
 

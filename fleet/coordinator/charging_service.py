@@ -227,8 +227,12 @@ class ChargingCoordinator(Coordinator):
         assert isinstance(market, ChargingMarket)
         if self.docking.tick(self.job.finished):
             market.need_auction = True
-        for rid, why, parking in going_home(self.job, self.docking.go_home_below):
-            market.send_home(rid, why, parking)
+        home = {
+            rid: (why, parking)
+            for rid, why, parking in going_home(self.job, self.docking.go_home_below)
+        }
+        for rid in self.docking.nearest_first(list(home)):
+            market.send_home(rid, *home[rid])
         market.check_flat()
 
     def _finished(self) -> bool:

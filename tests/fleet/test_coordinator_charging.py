@@ -107,7 +107,10 @@ class Fleet:
         return [m for k, m in self.sent if isinstance(m, Plan) and k == KEYS.plan(rid)]
 
     def status(self, rid: str, charge: float, charging: bool, plan: Plan, done: bool) -> None:
-        """``rid`` reports its battery and how far along ``plan`` it is."""
+        """``rid`` reports its battery and how far along ``plan`` it is; charging, it stands
+        at the plan's end (on the dock)."""
+        if charging:
+            self.job.robots[rid].xy = tuple(plan.waypoints[-1])
         n = len(plan.waypoints)
         waypoint = n if done else 0
         self.dispatcher.heard(rid, plan.plan_id, waypoint)
@@ -171,6 +174,10 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     f.status("robot-0", 0.95, True, to_dock, done=True)
     assert f.docking.tick(False) == ["robot-0"]
     assert "robot-0" in f.job.market()
+    assert len(f.plans("robot-1")) == 1  # robot-0 still stands on the dock
+    r0 = f.job.robots["robot-0"]
+    r0.xy, r0.charging = (1.0, 2.5), False  # it drives off
+    f.docking.tick(False)
     (_, onto) = f.plans("robot-1")
     assert onto.task == "dock-0" and f.job.robots["robot-1"].docking == "docking"
 
@@ -362,3 +369,65 @@ def test_batteries_off_send_no_one_home(planner: TaskPlanner, world: World) -> N
     f = Fleet(planner, world, ["robot-0"])
     f.job.robots["robot-0"].charge = -1.0  # no battery heard
     assert going_home(f.job, lambda _rid: 0.5) == []
+
+
+@pytest.fixture(scope="module")
+def corridor() -> World:
+    return load_world(resolve_world("corridor"), ROBOT.radius)
+
+
+def test_at_the_end_of_the_job_each_dock_goes_to_the_robot_nearest_it(corridor: World) -> None:
+    """The corridor world, a dock per room: robot-1 stands by the right room's dock, robot-0
+    farther off in the same room, robot-2 in the left room. Each dock goes to the robot
+    nearest it and the third waits in its room; in id order robot-0 would take the right
+    dock and robot-1 cross the corridor to the left one."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    where = {"robot-0": (5.6, 2.5), "robot-1": (7.0, 0.9), "robot-2": (1.2, 2.2)}
+    for rid, xy in where.items():
+        r = f.job.robot(rid)
+        r.ready, r.xy, r.charge = True, xy, 0.5
+    for rec in f.job.tasks.values():
+        rec.state = DONE
+    home = {rid: (why, p) for rid, why, p in going_home(f.job, f.docking.go_home_below)}
+    for rid in f.docking.nearest_first(list(home)):
+        f.market.send_home(rid, *home[rid])
+    tasks = {rid: f.plans(rid)[-1].task for rid in where}
+    assert tasks == {"robot-0": "wait-1", "robot-1": "dock-1", "robot-2": "dock-0"}, tasks
+    assert all(f.plans(rid)[-1].waypoints[:, 0].min() > 5.0 for rid in ("robot-0", "robot-1"))
+
+
+def test_a_robot_at_work_passing_over_a_dock_does_not_hold_it(corridor: World) -> None:
+    """A robot sweeping a lane over a dock's pose leaves it free for a robot going to charge;
+    one standing there without work, or charging, holds it."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
+    f.market.auction(f.auctioneer)
+    worker, other = f.job.robots["robot-0"], f.job.robots["robot-1"]
+    assert f.job.queue("robot-0")
+    worker.xy, other.xy, other.charge = (7.5, 1.05), (7.0, 2.6), 0.1
+    assert f.docking.holder(1) is None
+    f.market.send_home("robot-1", "charge low", False)
+    assert f.plans("robot-1")[-1].task == "dock-1"
+    g = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    g.job.robots["robot-0"].xy = (7.5, 1.05)
+    assert g.job.queue("robot-0") == [] and g.docking.holder(1) == "robot-0"
+
+
+def test_a_robot_passing_over_another_dock_on_its_way_is_not_charging_on_its_own(
+    corridor: World,
+) -> None:
+    """The simulator charges a robot on any dock it stands on; one on its way to the right
+    room's dock that passes over the left one is still on its way, not charging on its dock."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
+    f.job.robots["robot-0"].xy = (1.0, 0.6)
+    f.market.send_home("robot-0", "charge low", False)  # it takes the left dock
+    f.job.robots["robot-1"].xy = (1.2, 2.2)
+    f.market.send_home("robot-1", "charge low", False)
+    (trip,) = f.plans("robot-1")
+    assert trip.task == "dock-1"
+    f.job.robots["robot-1"].xy = (0.5, 1.5)  # over the left dock
+    status = RobotStatus(
+        0.0, "driving", trip.task, 0.5, 1, 4, 0.0, plan_id=trip.plan_id, charge=0.3, charging=True
+    )
+    f.market.observe("robot-1", status)
+    assert f.job.robots["robot-1"].docking == "docking"
+    assert not [e for e in f.events() if e[0] == "charging" and e[1] == "robot-1"]

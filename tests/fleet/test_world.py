@@ -241,9 +241,25 @@ def test_a_world_names_several_docks_and_keeps_dock(tmp_path: Path) -> None:
 
 
 def test_a_dock_inside_a_wall_is_refused_naming_it(tmp_path: Path) -> None:
+    """Named by the file's own field: beside ``dock:``, the list's first entry is docks[0]."""
     text = SMALL_ROOM + "dock: [0.5, 1.0, 0.0]\ndocks:\n  - [3.0, 1.0, 0.0]\n"
     msg = _error(_write(tmp_path / "w.yaml", text))
-    assert str(tmp_path / "w.yaml") in msg and "docks[1]" in msg and "inside an obstacle" in msg
+    assert str(tmp_path / "w.yaml") in msg and "docks[0]" in msg and "inside an obstacle" in msg
+    listed = SMALL_ROOM + "docks:\n  - [0.5, 1.0, 0.0]\n  - [1.5, 0.4, 1.57]\n  - [3.0, 1.0, 0]\n"
+    msg = _error(_write(tmp_path / "l.yaml", listed))
+    assert str(tmp_path / "l.yaml") in msg and "docks[2]" in msg and "inside an obstacle" in msg
+
+
+def test_a_dock_out_of_reach_is_refused_naming_it(tmp_path: Path) -> None:
+    """A dock on free floor the robots cannot get to (a closed box in the room) is refused
+    when the world is loaded for a robot; loaded for its floor plan alone it is not checked."""
+    box = "  - [2.0, 0.3, 3.0, 0.3]\n  - [3.0, 0.3, 3.0, 1.3]\n  - [3.0, 1.3, 2.0, 1.3]\n"
+    box += "  - [2.0, 1.3, 2.0, 0.3]\n"
+    text = SMALL_ROOM + box + "docks:\n  - [0.5, 1.0, 0.0]\n  - [2.5, 0.8, 0.0]\n"
+    path = _write(tmp_path / "w.yaml", text)
+    msg = _error(path)
+    assert str(path) in msg and "docks[1]" in msg and "out of reach" in msg
+    assert load_world(path).docks[1] == (2.5, 0.8, 0.0)
 
 
 def test_start_inside_furniture(tmp_path: Path) -> None:

@@ -1,0 +1,139 @@
+"""Traffic both ways through the corridor world's corridor, with batteries: real processes on a
+real router, three robots, a dock in each room, `--deconfliction prioritized`. The world's own
+starts are all in the left room and its robots go to the nearest free dock, so crossings both
+ways at once would be left to chance; here robot-0 starts in the left room and robot-1 and
+robot-2 in the right one (the walls and docks are the world's), and `fleet dock` makes the
+traffic: robot-1 is sent home and takes the right room's dock, robot-2 after it finds that dock
+held and crosses right to left to the free one, and once robot-1 has charged and driven off its
+dock, robot-0 is sent home and crosses left to right to it while robot-2 is still on its way.
+A full charge lasts 120 s of sweeping, so robots also go to charge on their own during the job.
+
+The recorded true tracks must show a robot crossing left to right and another right to left
+at the same time (in the corridor or at its mouths), the job done with every robot home, no
+robot–robot contact and no robot out of charge."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+from fleet_runs import WORLDS, FleetRun
+
+from fleet.params import default_config_path
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(900)]
+
+# the corridor runs from x = 3 to x = 5 m; a passage is counted from and to 0.5 m beyond its
+# ends, so a robot waiting at a mouth for another to come out is in its passage
+LEFT_X, RIGHT_X = 2.5, 5.5
+# robot-1 starts a metre in front of the right room's dock, facing it; robot-2 in the far corner
+STARTS = [[0.9, 1.5, 0.0], [6.6, 1.0, 0.0], [7.55, 2.6, math.pi]]
+RIGHT_DOCK = (7.55, 1.0)
+# robots are sent home once the first allocation has been made (sim s)
+SEND_AT_S = 12.0
+
+
+def passages(tracks: Path) -> list[tuple[str, str, float, float]]:
+    """Each whole passage through the corridor by the true tracks: (robot, "LR" or "RL", sim s
+    it entered, sim s it came out on the other side)."""
+    side: dict[str, str] = {}
+    entered: dict[str, float] = {}
+    out = []
+    with tracks.open() as f:
+        for row in csv.DictReader(f):
+            rid, t, x = row["robot"], float(row["sim_s"]), float(row["x"])
+            now = "L" if x < LEFT_X else "R" if x > RIGHT_X else None
+            if now is None:
+                entered.setdefault(rid, t)
+                continue
+            was = side.get(rid)
+            if was is not None and was != now and rid in entered:
+                out.append((rid, was + now, entered[rid], t))
+            entered.pop(rid, None)
+            side[rid] = now
+    return out
+
+
+def both_ways(found: list[tuple[str, str, float, float]]) -> list[tuple]:
+    """Pairs of passages by two robots, one each way, at the same time (their spans overlap)."""
+    return [
+        (a, b)
+        for a in found
+        for b in found
+        if a[1] == "LR" and b[1] == "RL" and a[0] != b[0] and a[2] < b[3] and b[2] < a[3]
+    ]
+
+
+def test_passages_are_read_from_the_tracks(tmp_path: Path) -> None:
+    """The reading itself: one robot goes left to right while another comes back."""
+    rows = [(0.0, "a", 2.0), (0.0, "b", 6.0), (5.0, "a", 4.0), (6.0, "b", 4.5)]
+    rows += [(10.0, "a", 5.8), (14.0, "b", 2.2), (20.0, "a", 4.5)]
+    path = tmp_path / "tracks.csv"
+    path.write_text("sim_s,robot,x,y\n" + "".join(f"{t},{r},{x},1.45\n" for t, r, x in rows))
+    found = passages(path)
+    assert found == [("a", "LR", 5.0, 10.0), ("b", "RL", 6.0, 14.0)]
+    assert both_ways(found) == [(found[0], found[1])]
+    assert both_ways([found[0], ("b", "RL", 10.5, 14.0)]) == []
+    assert both_ways([found[0], ("b", "LR", 6.0, 14.0)]) == []
+
+
+def _world(path: Path) -> Path:
+    data = yaml.safe_load((WORLDS / "corridor.yaml").read_text())
+    data["starts"] = STARTS
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _config(path: Path) -> Path:
+    data = yaml.safe_load(default_config_path().read_text())
+    data["robot"]["battery"].update(enabled=True, capacity_s=120.0, charge_rate=8.0)
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _last_xy(tracks: Path, robot: str) -> tuple[float, float] | None:
+    """``robot``'s newest true position in the run's tracks (appended as the run goes)."""
+    xy = None
+    if tracks.exists():
+        with tracks.open() as f:
+            for row in csv.DictReader(f):
+                if row["robot"] == robot:
+                    xy = (float(row["x"]), float(row["y"]))
+    return xy
+
+
+def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Path) -> None:
+    options = ("--config", str(_config(tmp_path / "fleet.yaml")), "--deconfliction", "prioritized")
+    world = str(_world(tmp_path / "corridor.yaml"))
+    run = FleetRun(tmp_path / "run", robots=3, world=world, timeout_s=600.0, options=options)
+    tracks = tmp_path / "run" / "tracks.csv"
+    clock = run.clock()
+    try:
+        run.wait_for(lambda: clock.t >= SEND_AT_S, timeout=180, what=f"sim time {SEND_AT_S} s")
+        run.verb("dock", "robot-1")
+        run.verb("dock", "robot-2")
+        run.wait_for(lambda: run.events("charged", "robot-1"), timeout=180, what="robot-1 charged")
+
+        def off_its_dock() -> bool:
+            xy = _last_xy(tracks, "robot-1")
+            return xy is not None and math.dist(xy, RIGHT_DOCK) > 0.4
+
+        run.wait_for(off_its_dock, timeout=120, what="robot-1 off the right dock")
+        run.verb("dock", "robot-0")
+        report = run.finish()
+    finally:
+        run.cleanup()
+    assert run.left == [], f"processes left behind: {run.left}"
+    sent = {(e["robot"], e["detail"]) for e in run.events("dock")}
+    assert ("robot-2", "sent home by cli: to dock 0") in sent, run.explained()
+    assert ("robot-0", "sent home by cli: to dock 1") in sent, run.explained()
+    found = passages(tracks)
+    assert both_ways(found), f"no crossing both ways at once: {found}"
+    assert report["status"] == "done", run.explained()
+    assert report["collisions"]["robot_robot"] == 0, run.explained()
+    batteries = {rid: r["battery"] for rid, r in report["robots"].items()}
+    assert all(b["min_charge"] > 0 for b in batteries.values()), batteries
+    assert sum(b["parked"] for b in batteries.values()) == 2, batteries  # a robot on each dock
