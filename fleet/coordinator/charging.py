@@ -36,7 +36,7 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
-from planners.battery import BatterySpec, go_home_below
+from planners.battery import BatterySpec, DockUser, go_home_below
 from planners.grid import clearance
 from planners.polyline import without_straight_vertices
 
@@ -180,6 +180,35 @@ class Docking:
         dock = np.array(self.docks[k][:2])
         trip_s = float(self.travel(dock, np.array([r.xy]))[0])
         return go_home_below(self.spec, trip_s, self.ahead(k))
+
+    def dock_user(self, rid: str) -> tuple[int, DockUser] | None:
+        """The dock ``rid`` would charge at (the nearest it can use) and what the stagger rule
+        needs of it (``planners.battery.charge_early``): its charge, its trip there and its
+        seconds of work, at the sweeping drain, until it falls to its go-home point."""
+        r = self.job.robots[rid]
+        k = None if r.xy is None else self._nearest(r.xy, free_only=False)
+        if k is None or r.xy is None:
+            return None
+        trip_s = float(self.travel(np.array(self.docks[k][:2]), np.array([r.xy]))[0])
+        below = go_home_below(self.spec, trip_s, self.ahead(k))
+        return k, DockUser(r.charge, trip_s, (r.charge - below) * self.spec.capacity_s)
+
+    def free(self, k: int) -> bool:
+        """Whether dock ``k`` is free now: usable, held by no robot, and nobody bound for it."""
+        return (
+            self.usable(k)
+            and self.holder(k) is None
+            and not any(t.dock == k for t in self.trips.values())
+        )
+
+    def trip_s(self, points: np.ndarray) -> float:
+        """The mean travel time (s) between ``points`` ((N, 2)) and the dock nearest each, on
+        the floor plan at the transit speed (0 with no dock reached)."""
+        if not self.docks or not len(points):
+            return 0.0
+        each = np.min([self.travel(np.array(d[:2]), points) for d in self.docks], axis=0)
+        each = each[np.isfinite(each)]
+        return float(each.mean()) if len(each) else 0.0
 
     # ---- trips ------------------------------------------------------------------------------
 
