@@ -34,7 +34,7 @@ import numpy as np
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.charging import Docking, Pose
-from fleet.coordinator.job import EMPTY, LOST, Job
+from fleet.coordinator.job import ASSIGNED, EMPTY, LOST, OPEN, Job, TaskRecord
 from fleet.coordinator.market import Hook, Market, estimate
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
@@ -280,10 +280,14 @@ def going_home(job: Job, below: Callable[[str], float]) -> list[tuple[str, str, 
 def charging_early(job: Job, docking: Docking) -> list[tuple[str, str]]:
     """The robots to send to charge before their go-home point, each with why: per free dock,
     the one the stagger rule picks (``planners.battery.charge_early``) among the robots at
-    work that would charge there and need to (the work they hold and the trip home are more
-    than their charge covers). None once the job is done."""
+    work that would charge there and need to before the job ends (their charge does not cover
+    the work they hold, nor their share of the work left, and the trip home). None once the
+    job is done."""
     if job.finished:
         return []
+    left = [rec for rec in job.tasks.values() if rec.state in (OPEN, ASSIGNED)]
+    working = [r for r in job.robots.values() if r.liveness != LOST and r.docking != EMPTY]
+    share_s = sum(_left_s(rec) for rec in left) / max(len(working), 1)
     users: dict[int, list[tuple[str, DockUser]]] = {}
     for rid, r in sorted(job.robots.items()):
         if not r.in_market or r.charge < 0:
@@ -292,8 +296,8 @@ def charging_early(job: Job, docking: Docking) -> list[tuple[str, str]]:
         if found is None:
             continue
         k, user = found
-        held_s = sum(rec.task.time_s * (1.0 - _swept(rec.swept)) for rec in job.queue(rid))
-        if not can_take(docking.spec, user.charge, held_s, user.trip_s):
+        need_s = max(sum(_left_s(rec) for rec in job.queue(rid)), share_s)
+        if not can_take(docking.spec, user.charge, need_s, user.trip_s):
             users.setdefault(k, []).append((rid, user))
     out = []
     for k, group in sorted(users.items()):
@@ -306,5 +310,7 @@ def charging_early(job: Job, docking: Docking) -> list[tuple[str, str]]:
     return out
 
 
-def _swept(pieces: np.ndarray) -> float:
-    return float(pieces.mean()) if pieces.size else 0.0
+def _left_s(rec: TaskRecord) -> float:
+    """The work (s) left of a task: its time less the share of its pieces swept."""
+    swept = float(rec.swept.mean()) if rec.swept.size else 0.0
+    return rec.task.time_s * (1.0 - swept)

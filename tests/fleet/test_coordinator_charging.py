@@ -373,14 +373,15 @@ def test_of_two_robots_falling_due_together_the_first_is_sent_to_the_free_dock_e
     """Two robots at work that both need a charge for the work they hold, both a few seconds
     from their go-home points: the one due first goes to the free dock now, so it is charged
     before the other falls due. Not while another robot is bound for the dock, and not for
-    robots whose charge covers what they hold (robot-2, idle, never)."""
+    robots whose charge covers what they hold and their share of the work left (robot-2, idle
+    on 0.5 or more, never)."""
     f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
     spec = BatterySpec(enabled=True, capacity_s=40.0)
     f.docking.spec = f.market.battery = spec
     for i, rid in enumerate(("robot-0", "robot-1")):
         for tid in (f"t{2 * i:02d}", f"t{2 * i + 1:02d}"):
             f.job.award(tid, rid, False)
-    for rid, ahead in (("robot-0", 0.06), ("robot-1", 0.05), ("robot-2", 0.0)):
+    for rid, ahead in (("robot-0", 0.06), ("robot-1", 0.05), ("robot-2", 0.5)):
         found = f.docking.dock_user(rid)
         assert found is not None
         f.job.robots[rid].charge = 0.2 + found[1].trip_s / spec.capacity_s + ahead
@@ -393,3 +394,5 @@ def test_of_two_robots_falling_due_together_the_first_is_sent_to_the_free_dock_e
     for tid in ("t02", "t03"):
         f.job.tasks[tid].swept[:] = True  # robot-1 has swept all it holds: its charge covers it
     assert charging_early(f.job, f.docking) == []
+    f.job.add_tasks(tuple(_task(i) for i in range(4, 8)))  # unless much work is still on sale
+    assert [rid for rid, _ in charging_early(f.job, f.docking)] == ["robot-1"]
