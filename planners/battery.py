@@ -233,14 +233,14 @@ def charge_early(spec: BatterySpec, robots: Sequence[DockUser]) -> int | None:
     """The robot (index into ``robots``, the robots at work that share one dock, which is free
     now and nobody is bound for) to send to charge now, before its go-home point, or None.
 
-    Opportunistic charging, as fleet managers do it (Open-RMF's and MiR's "charge while the
-    charger is free"), timed by the backward pass of the critical-path method (latest start
-    times, Kelley & Walker 1959): the robots take the dock in the order they fall due; the last
-    may leave at its go-home point, and each earlier one must leave late enough to be charged
-    and off the dock before the next one falls due (:func:`latest_leave_s`). When the first
-    one's latest leave has come (or passed, the charges already overlapping) before its own
-    go-home point, it goes now, so the charges are staggered instead of queued. A robot at or
-    above ``recharge_to`` is never sent: the dock would give it nothing."""
+    Opportunistic charging, as fleet managers call it (a robot charges while the charger is
+    free, before it must), timed by the backward pass of the critical-path method (latest
+    start times, Kelley & Walker 1959): the robots take the dock in the order they fall due;
+    the last may leave at its go-home point, and each earlier one must leave late enough to be
+    charged and off the dock before the next one falls due (:func:`latest_leave_s`). When the
+    first one's latest leave has come (or passed, the charges already overlapping) before its
+    own go-home point, it goes now, so the charges are staggered instead of queued. A robot at
+    or above ``recharge_to`` is never sent: the dock would give it nothing."""
     if not spec.enabled or len(robots) < 2:
         return None
     order = sorted(range(len(robots)), key=lambda i: robots[i].due_s)
