@@ -18,9 +18,14 @@ charging from its charge to ``recharge_to``) at the idle drain — the reserve o
 battery-aware planner, with the dock's queue counted as a ``wait`` task before the charge.
 
 :func:`makespan_with_charging` is the job's makespan with the charges in it: each robot works
-down to ``recharge_threshold``, queues for the first free dock (first come, first served),
-charges to ``recharge_to`` and works on — a discrete-event simulation of the docks as servers
-of a queue, every second of work priced at the sweeping drain as :func:`can_take` prices it.
+down to ``recharge_threshold`` plus its trip to the dock, drives there, queues for the first
+free dock (first come, first served), charges to ``recharge_to``, drives back and works on,
+and drives home at the end — a discrete-event simulation of the docks as servers of a queue,
+every second of work and trip priced at the sweeping drain as :func:`can_take` prices it.
+
+:func:`charge_early` staggers the charges at a dock: robots that would fall due together are
+sent one by one while the dock is free, each late enough to be charged and off it before the
+next falls due (latest start times counted back from the last one's go-home point).
 """
 
 from __future__ import annotations
@@ -145,24 +150,33 @@ def go_home_below(spec: BatterySpec, trip_s: float, ahead: Sequence[float]) -> f
 
 
 def makespan_with_charging(
-    spec: BatterySpec, work_s: Sequence[float], charges: Sequence[float], docks: int
+    spec: BatterySpec,
+    work_s: Sequence[float],
+    charges: Sequence[float],
+    docks: int,
+    trips_s: Sequence[float] | None = None,
 ) -> float:
     """When the last robot finishes its ``work_s`` (one entry per robot) from its charge
-    (``charges``, same order), counting the charges on the way: a robot works until its charge
-    is at ``recharge_threshold`` (each second of work at the sweeping drain), takes the dock
-    that frees first of ``docks`` (robots in the order they fall due), waits there at the
-    electronics' drain, and charges to ``recharge_to`` at ``charge_rate``. Trips to the dock
-    are not counted. With batteries off, or no dock, the longest work."""
-    if len(work_s) != len(charges):
-        raise ValueError(f"{len(work_s)} work times for {len(charges)} charges")
+    (``charges``, same order) and is home, counting the charges on the way: a robot works until
+    its charge is at ``recharge_threshold`` plus its trip to the dock (``trips_s``, seconds
+    each way between its work and a dock; none: 0), drives there, takes the dock that frees
+    first of ``docks`` (robots in the order they arrive), waits there at the electronics'
+    drain, charges to ``recharge_to`` at ``charge_rate``, drives back and works on; at the end
+    it drives home. Work and trips are priced at the sweeping drain. With batteries off, or no
+    dock, the longest work; ``math.inf`` when a robot charged to ``recharge_to`` cannot get to
+    its work and back with the threshold left (it would shuttle for ever)."""
+    trips = [0.0] * len(work_s) if trips_s is None else [max(t, 0.0) for t in trips_s]
+    if not len(work_s) == len(charges) == len(trips):
+        raise ValueError(f"{len(work_s)} work times for {len(charges)} charges, {len(trips)} trips")
     longest = max(work_s, default=0.0)
     if not spec.enabled or docks < 1:
         return longest
     free = [0.0] * docks  # when each dock is free again
-    # (when its charge is due or it finishes, robot, work left, charge)
+    # (when it arrives at a dock or is home, robot, work left, charge)
     due: list[tuple[float, int, float, float]] = []
     for i, (w, c) in enumerate(zip(work_s, charges, strict=True)):
-        heapq.heappush(due, _next_event(spec, 0.0, i, max(w, 0.0), min(max(c, 0.0), 1.0)))
+        charge = min(max(c, 0.0), 1.0)
+        heapq.heappush(due, _next_event(spec, 0.0, i, max(w, 0.0), charge, trips[i]))
     end = 0.0
     while due:
         t, i, left, charge = heapq.heappop(due)
@@ -173,16 +187,67 @@ def makespan_with_charging(
         start = max(t, free[k])
         arrived = max(charge - (start - t) * spec.idle_share / spec.capacity_s, 0.0)
         free[k] = start + (spec.recharge_to - arrived) / charge_per_s(spec)
-        heapq.heappush(due, _next_event(spec, free[k], i, left, spec.recharge_to))
+        back = spec.recharge_to - work_charge(spec, trips[i])
+        if back - work_charge(spec, trips[i]) <= spec.recharge_threshold:
+            return math.inf
+        heapq.heappush(due, _next_event(spec, free[k] + trips[i], i, left, back, trips[i]))
     return end
 
 
 def _next_event(
-    spec: BatterySpec, t: float, i: int, left: float, charge: float
+    spec: BatterySpec, t: float, i: int, left: float, charge: float, trip_s: float
 ) -> tuple[float, int, float, float]:
-    """Robot ``i`` works from ``t`` with ``left`` seconds of work on ``charge``: when it
-    finishes (nothing left after), or when it falls to the threshold (the work left then)."""
-    reach = max(charge - spec.recharge_threshold, 0.0) * spec.capacity_s
+    """Robot ``i`` works from ``t`` with ``left`` seconds of work on ``charge``, ``trip_s``
+    from a dock: when it is home (nothing left after), or when it reaches the dock, having
+    worked until its charge was the threshold plus the trip (the work left then)."""
+    home = work_charge(spec, trip_s)
+    reach = max(charge - spec.recharge_threshold - home, 0.0) * spec.capacity_s
     if left <= reach:
-        return (t + left, i, 0.0, charge - work_charge(spec, left))
-    return (t + reach, i, left - reach, spec.recharge_threshold)
+        return (t + left + trip_s, i, 0.0, charge - work_charge(spec, left) - home)
+    return (t + reach + trip_s, i, left - reach, max(charge - work_charge(spec, reach) - home, 0.0))
+
+
+@dataclass(frozen=True)
+class DockUser:
+    """A robot at work that will charge at a dock: its ``charge``, its ``trip_s`` to the dock
+    and ``due_s``, the seconds of work (at the sweeping drain) until its charge falls to its
+    go-home point (:func:`go_home_below`)."""
+
+    charge: float
+    trip_s: float
+    due_s: float
+
+
+def latest_leave_s(spec: BatterySpec, robot: DockUser, free_by_s: float) -> float:
+    """The latest moment (s from now) ``robot`` can leave for the dock and be charged to
+    ``recharge_to`` and off it by ``free_by_s``: leaving at ``s`` it arrives with its charge
+    less ``s`` + its trip at the sweeping drain, so ``s + trip + (recharge_to - arrival) /
+    charge rate <= free_by_s``, solved for ``s``. Never later than its own go-home point."""
+    rate = spec.charge_rate
+    fill_s = (spec.recharge_to - robot.charge) * spec.capacity_s / rate
+    leave = (free_by_s - fill_s) / (1.0 + 1.0 / rate) - robot.trip_s
+    return min(robot.due_s, leave)
+
+
+def charge_early(spec: BatterySpec, robots: Sequence[DockUser]) -> int | None:
+    """The robot (index into ``robots``, the robots at work that share one dock, which is free
+    now and nobody is bound for) to send to charge now, before its go-home point, or None.
+
+    Opportunistic charging, as fleet managers call it (a robot charges while the charger is
+    free, before it must), timed by the backward pass of the critical-path method (latest
+    start times, Kelley & Walker 1959): the robots take the dock in the order they fall due;
+    the last may leave at its go-home point, and each earlier one must leave late enough to be
+    charged and off the dock before the next one falls due (:func:`latest_leave_s`). When the
+    first one's latest leave has come (or passed, the charges already overlapping) before its
+    own go-home point, it goes now, so the charges are staggered instead of queued. A robot at
+    or above ``recharge_to`` is never sent: the dock would give it nothing."""
+    if not spec.enabled or len(robots) < 2:
+        return None
+    order = sorted(range(len(robots)), key=lambda i: robots[i].due_s)
+    leave = robots[order[-1]].due_s
+    for i in reversed(order[:-1]):
+        leave = latest_leave_s(spec, robots[i], leave)
+    first = robots[order[0]]
+    if leave <= 0.0 < first.due_s and first.charge < spec.recharge_to:
+        return order[0]
+    return None

@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,7 +37,7 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
-from planners.battery import BatterySpec, go_home_below
+from planners.battery import BatterySpec, DockUser, go_home_below
 from planners.grid import clearance
 from planners.polyline import without_straight_vertices
 
@@ -97,31 +98,10 @@ class Docking:
         self.spec = spec
         self.docks = docks
         self.trips: dict[str, Trip] = {}
-        self.spots = [self._spots(d) for d in docks]
+        self.spots = [waiting_spots(planner, d, docks) for d in docks]
         self.travel = planner.travel()
 
     # ---- geometry ---------------------------------------------------------------------------
-
-    def _spots(self, dock: Pose, n: int = 8) -> list[tuple[float, float]]:
-        """Up to ``n`` waiting spots by ``dock``, nearest first: floor a robot reaches, clear of
-        obstacles, of the dock and of the line onto it."""
-        g = self.planner.grid
-        ok = self.planner.reachable & (clearance(g) >= self.planner.centre_clearance + 0.05)
-        pts = g.cell_to_world(np.argwhere(ok))
-        front = _approach(dock)
-        d_dock = np.hypot(*(pts - np.array(dock[:2])).T)
-        d_line = _to_segment(pts, np.array(dock[:2]), front)
-        keep = (d_dock >= SPOT_FROM_DOCK_M) & (d_line >= SPOT_FROM_APPROACH_M)
-        for other in self.docks:
-            keep &= np.hypot(*(pts - np.array(other[:2])).T) >= SPOT_FROM_DOCK_M
-        order = np.argsort(np.hypot(*(pts - front).T) + 1e9 * ~keep, kind="stable")
-        out: list[tuple[float, float]] = []
-        for p in pts[order[: int(keep.sum())]]:
-            if all(math.dist(p, q) >= SPOT_SPACING_M for q in out):
-                out.append((float(p[0]), float(p[1])))
-                if len(out) == n:
-                    break
-        return out
 
     def _path(
         self, xy: tuple[float, float], goal: np.ndarray, onto: np.ndarray | None
@@ -178,18 +158,12 @@ class Docking:
         by that dock, and the other would cross the floor to the far one."""
         free = [k for k in range(len(self.docks)) if self.usable(k) and self.holder(k) is None]
         placed = [rid for rid in rids if self.job.robots[rid].xy is not None]
-        pairs = sorted(
+        first = nearest_pairs_first(
             (self._trip_s(k, xy), rid, k)
             for rid in placed
             for k in free
             if (xy := self.job.robots[rid].xy) is not None
         )
-        first: list[str] = []
-        taken: set[int] = set()
-        for _, rid, k in pairs:
-            if rid not in first and k not in taken:
-                first.append(rid)
-                taken.add(k)
         return first + [rid for rid in rids if rid not in first]
 
     def ahead(self, k: int) -> list[float]:
@@ -211,6 +185,35 @@ class Docking:
         if k is None or r.xy is None:
             return 0.0  # no dock it can charge on: it works until it runs out
         return go_home_below(self.spec, self._trip_s(k, r.xy), self.ahead(k))
+
+    def dock_user(self, rid: str) -> tuple[int, DockUser] | None:
+        """The dock ``rid`` would charge at (the nearest it can use) and what the stagger rule
+        needs of it (``planners.battery.charge_early``): its charge, its trip there and its
+        seconds of work, at the sweeping drain, until it falls to its go-home point."""
+        r = self.job.robots[rid]
+        k = None if r.xy is None else self._nearest(r.xy, free_only=False)
+        if k is None or r.xy is None:
+            return None
+        trip_s = self._trip_s(k, r.xy)
+        below = go_home_below(self.spec, trip_s, self.ahead(k))
+        return k, DockUser(r.charge, trip_s, (r.charge - below) * self.spec.capacity_s)
+
+    def free(self, k: int) -> bool:
+        """Whether dock ``k`` is free now: usable, held by no robot, and nobody bound for it."""
+        return (
+            self.usable(k)
+            and self.holder(k) is None
+            and not any(t.dock == k for t in self.trips.values())
+        )
+
+    def trip_s(self, points: np.ndarray) -> float:
+        """The mean travel time (s) between ``points`` ((N, 2)) and the dock nearest each, on
+        the floor plan at the transit speed (0 with no dock reached)."""
+        if not self.docks or not len(points):
+            return 0.0
+        each = np.min([self.travel(np.array(d[:2]), points) for d in self.docks], axis=0)
+        each = each[np.isfinite(each)]
+        return float(each.mean()) if len(each) else 0.0
 
     # ---- trips ------------------------------------------------------------------------------
 
@@ -420,6 +423,44 @@ class Docking:
             if t is None or not (r.charging or self._at_end(rid, t)):
                 return False
         return True
+
+
+def waiting_spots(
+    planner: TaskPlanner, dock: Pose, docks: Sequence[Pose], n: int = 8
+) -> list[tuple[float, float]]:
+    """Up to ``n`` waiting spots by ``dock``, nearest first: floor a robot reaches on
+    ``planner``'s floor plan, clear of obstacles, of every dock of ``docks`` and of the line
+    onto ``dock``."""
+    g = planner.grid
+    ok = planner.reachable & (clearance(g) >= planner.centre_clearance + 0.05)
+    pts = g.cell_to_world(np.argwhere(ok))
+    front = _approach(dock)
+    d_dock = np.hypot(*(pts - np.array(dock[:2])).T)
+    d_line = _to_segment(pts, np.array(dock[:2]), front)
+    keep = (d_dock >= SPOT_FROM_DOCK_M) & (d_line >= SPOT_FROM_APPROACH_M)
+    for other in docks:
+        keep &= np.hypot(*(pts - np.array(other[:2])).T) >= SPOT_FROM_DOCK_M
+    order = np.argsort(np.hypot(*(pts - front).T) + 1e9 * ~keep, kind="stable")
+    out: list[tuple[float, float]] = []
+    for p in pts[order[: int(keep.sum())]]:
+        if all(math.dist(p, q) >= SPOT_SPACING_M for q in out):
+            out.append((float(p[0]), float(p[1])))
+            if len(out) == n:
+                break
+    return out
+
+
+def nearest_pairs_first(pairs: Iterable[tuple[float, str, int]]) -> list[str]:
+    """Greedy matching of robots to docks over ``pairs`` (travel time, robot, dock): the
+    nearest pair first, then the nearest of the robots and docks left; the robots matched, in
+    that order."""
+    first: list[str] = []
+    taken: set[int] = set()
+    for _, rid, k in sorted(pairs):
+        if rid not in first and k not in taken:
+            first.append(rid)
+            taken.add(k)
+    return first
 
 
 def _approach(dock: Pose, ahead: float = APPROACH_M) -> np.ndarray:

@@ -5,6 +5,9 @@ market as without them, and the robots' trips to charge (:mod:`fleet.coordinator
 - A robot whose status reports a charge below ``recharge_threshold`` plus what its trip to a
   dock and the queue ahead of it there cost (:meth:`Docking.go_home_below`) is taken out of
   the market and sent to a dock; the work it held goes back to the market.
+- Charges are staggered: while a dock is free and nobody is bound for it, the robot at work
+  that falls due first there is sent early when waiting longer would put its charge in the
+  way of the next robot's (``planners.battery.charge_early``, :func:`charging_early`).
 - An auction that sells nothing while work is open (every robot declined it on its charge)
   sends the idle robots that are not charged to ``recharge_to`` to charge.
 - The first allocation sells regions, one per robot, only when each robot's charge covers a
@@ -14,7 +17,9 @@ market as without them, and the robots' trips to charge (:mod:`fleet.coordinator
   robot can work any more, the open work is left out (event ``stranded``) and the job ends
   ``incomplete``.
 - The job's estimate (``plan_estimate_s``) counts the charges: the first allocation's regions
-  worked from each robot's charge, queueing at the docks for the charges they need.
+  worked from each robot's charge, the trips to a dock and back (each region's mean travel to
+  its nearest dock on the floor plan), queueing at the docks for the charges they need, and
+  the trip home at the end.
 - When every task is done, every robot is sent home; the job is finished once each is on a
   dock or at its waiting spot.
 """
@@ -29,7 +34,7 @@ import numpy as np
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.charging import Docking, Pose
-from fleet.coordinator.job import EMPTY, LOST, Job
+from fleet.coordinator.job import ASSIGNED, EMPTY, LOST, OPEN, Job, TaskRecord
 from fleet.coordinator.market import Hook, Market, estimate
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import Coordinator
@@ -39,7 +44,7 @@ from fleet.params import CoordinatorParams
 from fleet.plausible import Bounds
 from fleet.protocol import Docks, OpsReply, OpsRequest, Request, RobotStatus
 from planners import auction
-from planners.battery import BatterySpec, makespan_with_charging
+from planners.battery import BatterySpec, DockUser, can_take, charge_early, makespan_with_charging
 
 log = logging.getLogger("coordinator")
 
@@ -50,8 +55,13 @@ class ChargingMarket(Market):
     docking: Docking
     battery: BatterySpec
     sold = 0
-    # the work (s) of each region the first allocation cut, one per robot
-    first_regions_s: tuple[float, ...] = ()
+    # the first allocation's regions, one per robot: each one's work (s), its mean trip to a
+    # dock (s) and the robot it was cut for
+    first_regions: tuple[tuple[float, float, str | None], ...] = ()
+
+    @property
+    def first_regions_s(self) -> tuple[float, ...]:
+        return tuple(work for work, _, _ in self.first_regions)
 
     def sell(self, sale: Sale) -> None:
         self.sold += 1
@@ -80,23 +90,38 @@ class ChargingMarket(Market):
         def within_charge() -> tuple[auction.Lot, ...]:
             regions = cut()
             if first:
-                self.first_regions_s = tuple(lot.time_s for lot in regions)
+                self.first_regions = tuple(
+                    (lot.time_s, self._trip_s(lot), lot.robot) for lot in regions
+                )
             return () if any(lot.time_s > reach_s for lot in regions) else regions
 
         return first, within_charge
 
+    def _trip_s(self, lot: auction.Lot) -> float:
+        """A region's trip to a dock: the mean, over where its tasks start, of the travel to
+        the nearest dock (a robot goes to charge from somewhere in its region)."""
+        starts = [self.job.tasks[tid].task.path[0] for tid in lot.tasks if tid in self.job.tasks]
+        return self.docking.trip_s(np.array(starts, dtype=float).reshape(-1, 2))
+
     def estimate_first(self, committed: list[float]) -> None:
         """The job's estimate with the charges in it, whether or not the first allocation sold
         everything (robots decline what their charge cannot cover): the first allocation's
-        regions, one per robot, each worked from its robot's charge with the charges it needs
-        at the docks in turn (``planners.battery.makespan_with_charging``)."""
-        work = sorted(self.first_regions_s, reverse=True)
-        charges = sorted((self._charge(rid) for rid in self.job.market()), reverse=True)
-        if not work or len(work) != len(charges):
+        regions, one per robot, each worked from its robot's charge with the trips to a dock
+        and back and the charges it needs at the docks in turn, and the trip home at the end
+        (``planners.battery.makespan_with_charging``)."""
+        regions = sorted(self.first_regions, key=lambda r: -r[0])
+        market = self.job.market()
+        if not regions or len(regions) != len(market):
             super().estimate_first(committed)
             return
+        if all(rid in market for _, _, rid in regions):
+            charges = [self._charge(rid) for _, _, rid in regions if rid is not None]
+        else:
+            charges = sorted((self._charge(rid) for rid in market), reverse=True)
+        work = [w for w, _, _ in regions]
+        trips = [t for _, t, _ in regions]
         docks = len(self.docking.docks)
-        estimate(self.journal, makespan_with_charging(self.battery, work, charges, docks))
+        estimate(self.journal, makespan_with_charging(self.battery, work, charges, docks, trips))
 
     def _charge(self, rid: str) -> float:
         charge = self.job.robots[rid].charge
@@ -233,6 +258,8 @@ class ChargingCoordinator(Coordinator):
         }
         for rid in self.docking.nearest_first(list(home)):
             market.send_home(rid, *home[rid])
+        for rid, why in charging_early(self.job, self.docking):
+            market.send_home(rid, why)
         market.check_flat()
 
     def _finished(self) -> bool:
@@ -252,3 +279,42 @@ def going_home(job: Job, below: Callable[[str], float]) -> list[tuple[str, str, 
         elif r.in_market and r.charge >= 0 and r.charge < (need := below(rid)):
             out.append((rid, f"charge {r.charge:.3f} below {need:.3f}", False))
     return out
+
+
+def charging_early(job: Job, docking: Docking) -> list[tuple[str, str]]:
+    """The robots to send to charge before their go-home point, each with why: per free dock,
+    the one the stagger rule picks (``planners.battery.charge_early``) among the robots at
+    work that would charge there and need to before the job ends (their charge does not cover
+    the work they hold, nor their share of the work left, and the trip home). None once the
+    job is done."""
+    if job.finished:
+        return []
+    left = [rec for rec in job.tasks.values() if rec.state in (OPEN, ASSIGNED)]
+    working = [r for r in job.robots.values() if r.liveness != LOST and r.docking != EMPTY]
+    share_s = sum(_left_s(rec) for rec in left) / max(len(working), 1)
+    users: dict[int, list[tuple[str, DockUser]]] = {}
+    for rid, r in sorted(job.robots.items()):
+        if not r.in_market or r.charge < 0:
+            continue
+        found = docking.dock_user(rid)
+        if found is None:
+            continue
+        k, user = found
+        need_s = max(sum(_left_s(rec) for rec in job.queue(rid)), share_s)
+        if not can_take(docking.spec, user.charge, need_s, user.trip_s):
+            users.setdefault(k, []).append((rid, user))
+    out = []
+    for k, group in sorted(users.items()):
+        if not docking.free(k):
+            continue
+        pick = charge_early(docking.spec, [user for _, user in group])
+        if pick is not None:
+            rid, user = group[pick]
+            out.append((rid, f"charge {user.charge:.3f}, dock {k} free: charging early"))
+    return out
+
+
+def _left_s(rec: TaskRecord) -> float:
+    """The work (s) left of a task: its time less the share of its pieces swept."""
+    swept = float(rec.swept.mean()) if rec.swept.size else 0.0
+    return rec.task.time_s * (1.0 - swept)

@@ -19,7 +19,7 @@ from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M, Docking
-from fleet.coordinator.charging_service import ChargingMarket, going_home
+from fleet.coordinator.charging_service import ChargingMarket, charging_early, going_home
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import DONE, EMPTY, OPEN, STRANDED, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
@@ -318,10 +318,13 @@ def test_the_first_allocation_estimates_the_makespan_with_the_charges_in_it(
         f.job.robots[rid].charge = 0.25
     f.declined = declined
     f.market.auction(f.auctioneer)
-    work = f.market.first_regions_s
+    regions = sorted(f.market.first_regions, key=lambda r: -r[0])
+    work, trips = [w for w, _, _ in regions], [t for _, t, _ in regions]
     assert len(work) == 2 and all(w > 10.0 for w in work)
-    want = makespan_with_charging(SPEC, sorted(work, reverse=True), [0.25, 0.25], 1)
-    assert want > max(work) + 2 * 0.65 * SPEC.capacity_s / SPEC.charge_rate  # two charges in turn
+    assert all(t > 0.5 for t in trips)  # the small room's dock is a few metres from the lanes
+    want = makespan_with_charging(SPEC, work, [0.25, 0.25], 1, trips)
+    no_trips = makespan_with_charging(SPEC, work, [0.25, 0.25], 1)
+    assert want > no_trips > max(work) + 2 * 0.65 * SPEC.capacity_s / SPEC.charge_rate
     (detail,) = [d for kind, _, d in f.events() if kind == "estimated"]
     assert detail == f"makespan {want:.1f} s"
 
@@ -431,3 +434,34 @@ def test_a_robot_passing_over_another_dock_on_its_way_is_not_charging_on_its_own
     f.market.observe("robot-1", status)
     assert f.job.robots["robot-1"].docking == "docking"
     assert not [e for e in f.events() if e[0] == "charging" and e[1] == "robot-1"]
+
+
+def test_of_two_robots_falling_due_together_the_first_is_sent_to_the_free_dock_early(
+    planner: TaskPlanner, world: World
+) -> None:
+    """Two robots at work that both need a charge for the work they hold, both a few seconds
+    from their go-home points: the one due first goes to the free dock now, so it is charged
+    before the other falls due. Not while another robot is bound for the dock, and not for
+    robots whose charge covers what they hold and their share of the work left (robot-2, idle
+    on 0.5 or more, never)."""
+    f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
+    spec = BatterySpec(enabled=True, capacity_s=40.0)
+    f.docking.spec = f.market.battery = spec
+    for i, rid in enumerate(("robot-0", "robot-1")):
+        for tid in (f"t{2 * i:02d}", f"t{2 * i + 1:02d}"):
+            f.job.award(tid, rid, False)
+    for rid, ahead in (("robot-0", 0.06), ("robot-1", 0.05), ("robot-2", 0.5)):
+        found = f.docking.dock_user(rid)
+        assert found is not None
+        f.job.robots[rid].charge = 0.2 + found[1].trip_s / spec.capacity_s + ahead
+    assert going_home(f.job, f.docking.go_home_below) == []  # none at its go-home point
+    assert f.docking.send("robot-2", "sent by hand", False)
+    assert charging_early(f.job, f.docking) == []  # the dock is taken
+    f.docking._drop("robot-2")
+    ((rid, why),) = charging_early(f.job, f.docking)
+    assert rid == "robot-1" and "charging early" in why
+    for tid in ("t02", "t03"):
+        f.job.tasks[tid].swept[:] = True  # robot-1 has swept all it holds: its charge covers it
+    assert charging_early(f.job, f.docking) == []
+    f.job.add_tasks(tuple(_task(i) for i in range(4, 8)))  # unless much work is still on sale
+    assert [rid for rid, _ in charging_early(f.job, f.docking)] == ["robot-1"]

@@ -15,14 +15,18 @@ from fleet.config import ConfigError
 from fleet.params import default_config_path, load_fleet_config
 from planners.battery import (
     BatterySpec,
+    DockUser,
     can_take,
+    charge_early,
     charge_per_s,
     docking_heading,
     drain_per_s,
     go_home_below,
+    latest_leave_s,
     makespan_with_charging,
     on_dock,
     queue_wait_s,
+    work_charge,
 )
 
 SPEC = BatterySpec(enabled=True, capacity_s=1000.0)
@@ -123,6 +127,62 @@ def test_robots_due_together_at_one_dock_charge_in_turn() -> None:
     one = makespan_with_charging(SHORT, [300.0, 300.0], [1.0, 1.0], 1)
     assert one == pytest.approx(240.0 + 52.5 + 55.125 + 60.0)
     assert makespan_with_charging(SHORT, [300.0, 300.0], [1.0, 1.0], 2) == pytest.approx(352.5)
+
+
+def test_the_makespan_counts_the_trips_to_the_dock_and_back_and_home() -> None:
+    """480 s of work, 15 s from the dock: it leaves at 0.25 (the threshold and its trip) after
+    225 s, arrives at 240 s, charges 52.5 s, is back at work at 307.5 s on 0.85, works 180 s to
+    0.25 again, the same trip and charge (arrives 502.5 s, back at 570 s), its last 75 s of
+    work and 15 s home: 660 s. Work that needs no charge ends with the trip home."""
+    assert makespan_with_charging(SHORT, [480.0], [1.0], 1, [15.0]) == pytest.approx(660.0)
+    assert makespan_with_charging(SHORT, [100.0], [1.0], 1, [15.0]) == pytest.approx(115.0)
+    assert makespan_with_charging(SHORT, [480.0], [1.0], 1, [0.0]) == pytest.approx(585.0)
+
+
+def test_a_robot_too_far_from_its_dock_to_work_between_charges_never_finishes() -> None:
+    """110 s each way on a 300 s charge: charged to 0.9 it is back at its work on 0.53, already
+    below the 0.57 it must leave at again."""
+    assert makespan_with_charging(SHORT, [480.0], [1.0], 1, [110.0]) == math.inf
+
+
+def _due(spec: BatterySpec, charge: float, trip_s: float) -> DockUser:
+    return DockUser(charge, trip_s, (charge - go_home_below(spec, trip_s, [])) * spec.capacity_s)
+
+
+def test_the_latest_leave_clears_the_dock_just_as_the_next_robot_falls_due() -> None:
+    """Leaving at the latest leave, the robot drives there, charges to ``recharge_to`` from
+    what it arrives with, and is off the dock at ``free_by_s`` exactly; never after its own
+    go-home point."""
+    robot = _due(SHORT, 0.7, 20.0)
+    leave = latest_leave_s(SHORT, robot, 150.0)
+    arrival = robot.charge - work_charge(SHORT, leave + robot.trip_s)
+    off = leave + robot.trip_s + (SHORT.recharge_to - arrival) / charge_per_s(SHORT)
+    assert 0.0 < leave < robot.due_s and off == pytest.approx(150.0)
+    assert latest_leave_s(SHORT, robot, 1e6) == robot.due_s
+
+
+def test_robots_falling_due_together_are_sent_one_by_one_before_their_go_home_point() -> None:
+    """Three robots 25 s from the one dock, 0.01 apart: full, none is sent; run down to about
+    0.6, the lowest goes (before its go-home point at 0.28), so that each charge is over
+    before the next robot falls due, instead of the three queueing at the same moment."""
+
+    def three(c: float) -> list[DockUser]:
+        return [_due(SHORT, c + d, 25.0) for d in (0.02, 0.0, 0.01)]
+
+    assert charge_early(SHORT, three(0.9)) is None
+    assert charge_early(SHORT, three(0.75)) is None
+    assert charge_early(SHORT, three(0.6)) == 1  # the lowest, wherever it is listed
+    assert three(0.6)[1].due_s > 0  # not yet at its go-home point
+
+
+def test_no_robot_is_sent_early_alone_full_far_apart_or_without_batteries() -> None:
+    low = _due(SHORT, 0.35, 25.0)
+    assert charge_early(SHORT, [low]) is None  # a dock to itself: its go-home point is enough
+    assert charge_early(SHORT, [low, _due(SHORT, 0.95, 25.0)]) is None  # the next is far off
+    full = DockUser(0.9, 25.0, 5.0)
+    assert charge_early(SHORT, [full, _due(SHORT, 0.35, 25.0)]) is None  # nothing to charge
+    off = BatterySpec(enabled=False, capacity_s=300.0)
+    assert charge_early(off, [low, low]) is None
 
 
 def _config_error(tmp_path: Path, **battery: object) -> str:
