@@ -29,16 +29,6 @@ from fleet.params import default_config_path
 # runs before it robots ran out of charge on dock trips (issue 28, BENCHMARKS.md "The corridor
 # world with a dock in each room"); it also takes 4-6 min of a loaded machine.
 RUN_IT = os.environ.get("FLEET_UNRELIABLE_TESTS") == "1"
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.slow,
-    pytest.mark.timeout(900),
-    pytest.mark.skipif(
-        not RUN_IT,
-        reason="both-ways corridor run with batteries: not yet reliable (robots can run out of "
-        "charge on dock trips, issue 28); set FLEET_UNRELIABLE_TESTS=1 to run it",
-    ),
-]
 
 # the corridor runs from x = 3 to x = 5 m; a passage is counted from and to 0.5 m beyond its
 # ends, so a robot waiting at a mouth for another to come out is in its passage
@@ -119,6 +109,14 @@ def _last_xy(tracks: Path, robot: str) -> tuple[float, float] | None:
     return xy
 
 
+@pytest.mark.integration
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+@pytest.mark.skipif(
+    not RUN_IT,
+    reason="both-ways corridor run with batteries: not yet reliable (robots can run out of "
+    "charge on dock trips, issue 28); set FLEET_UNRELIABLE_TESTS=1 to run it",
+)
 def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Path) -> None:
     options = ("--config", str(_config(tmp_path / "fleet.yaml")), "--deconfliction", "prioritized")
     world = str(_world(tmp_path / "corridor.yaml"))
