@@ -120,11 +120,9 @@ class Docking:
         for rid, t in self.trips.items():
             if t.dock == k and not t.waiting:
                 return rid
-        dock = self.docks[k]
         for rid, r in self.job.robots.items():
             free = r.liveness == LOST or r.xy is None or rid in self.trips
-            stays = r.charging or not self.job.queue(rid)
-            if not free and stays and math.dist(r.xy, dock[:2]) < HOLDS_M:
+            if not free and self._on(k, r.xy) and (r.charging or not self.job.queue(rid)):
                 return rid
         return None
 
@@ -156,11 +154,10 @@ class Docking:
         first), then the robots left over (they wait) in the given order. Sent one by one in id
         order, the first robot would take the dock nearest it even when another robot stands
         by that dock, and the other would cross the floor to the far one."""
-        free = [k for k in range(len(self.docks)) if self.usable(k) and self.holder(k) is None]
-        placed = [rid for rid in rids if self.job.robots[rid].xy is not None]
+        free = [k for k in range(len(self.docks)) if self.free(k)]
         first = nearest_pairs_first(
             (self._trip_s(k, xy), rid, k)
-            for rid in placed
+            for rid in rids
             for k in free
             if (xy := self.job.robots[rid].xy) is not None
         )
@@ -350,7 +347,7 @@ class Docking:
             if k != t.dock and self.usable(k) and self.holder(k) is None
         ]
         if others:
-            k = min(others, key=lambda k: math.dist(r.xy, self.docks[k][:2]))
+            k = min(others, key=lambda k: self._trip_s(k, r.xy))
             r.docking = "docking"
             sent = self._go(rid, k, False, t.parking, 1, stalls)
             where = f"to dock {k}"
