@@ -207,6 +207,93 @@ def _next_event(
     return (t + reach + trip_s, i, left - reach, max(charge - work_charge(spec, reach) - home, 0.0))
 
 
+def pick_dock(
+    spec: BatterySpec, charge: float, trips_s: Sequence[float], ahead: Sequence[Sequence[float]]
+) -> int | None:
+    """The dock (index into ``trips_s``, the travel to each dock, inf where there is none) a
+    robot with ``charge`` goes to charge at, ``ahead`` at each the charges of the robots before
+    it there: of the docks its charge covers (:func:`go_home_below`), the one it is on soonest
+    (trip + wait); when it covers none, the one that needs least charge. So a robot waits by
+    the near dock behind another's charge when that costs less than crossing to a free one, and
+    crosses when it is sooner and its charge covers the trip. None with no dock in reach."""
+    options = [
+        (go_home_below(spec, trip, ahead[k]), trip + queue_wait_s(spec, ahead[k]), k)
+        for k, trip in enumerate(trips_s)
+        if math.isfinite(trip)
+    ]
+    covered = [o for o in options if o[0] <= charge]
+    if covered:
+        return min(covered, key=lambda o: (o[1], o[0]))[2]
+    return min(options, default=(0.0, 0.0, None))[2]
+
+
+@dataclass(frozen=True)
+class GoHome:
+    """A robot at work as the go-home rule sees it: its ``charge`` and its ``trips_s`` (s) to
+    each dock (inf where it has none)."""
+
+    charge: float
+    trips_s: tuple[float, ...]
+
+
+def go_home_points(
+    spec: BatterySpec, robots: Sequence[GoHome], ahead: Sequence[Sequence[float]]
+) -> list[tuple[int, int | None, float]]:
+    """Per robot of ``robots`` (at work, sharing the docks), in the order they fall due: its
+    index, the dock it charges at when it falls due and its go-home point, the charge below
+    which it goes now; ``ahead``: per dock, the charges of the robots already bound for it.
+
+    A go-home point counted for the dock each robot would take alone breaks when robots fall
+    due together: the one that loses the dock is sent on to wait or to the far dock on a reserve
+    counted for a free near one. So the robots are list-scheduled (Graham 1969) in the order
+    they fall due (their margin over their own cheapest dock as the docks stand): each counts,
+    at every dock, the earlier robots that will still be there when it falls due (on their way,
+    waiting or charging, each arriving with ``recharge_threshold`` and charging to
+    ``recharge_to``), and its go-home point is the least :func:`go_home_below` over the docks
+    with them counted: the near dock behind them, or a far one with its trip there. Falling
+    due is timed at the sweeping drain, and a robot's own go-home point, which the robots
+    counted can only raise, is found again until it stops changing. Robots sent in this order
+    find the docks as their go-home points counted them. With batteries off, or no dock in
+    reach, (None, 0)."""
+    if not spec.enabled:
+        return [(i, None, 0.0) for i in range(len(robots))]
+    n_docks = len(ahead)
+    fill_s = (spec.recharge_to - spec.recharge_threshold) * spec.capacity_s / spec.charge_rate
+
+    def best(i: int, extra: Sequence[Sequence[float]]) -> tuple[float, int | None]:
+        trips = robots[i].trips_s
+        return min(
+            (
+                (go_home_below(spec, trips[k], [*ahead[k], *extra[k]]), k)
+                for k in range(n_docks)
+                if math.isfinite(trips[k])
+            ),
+            default=(0.0, None),
+        )
+
+    none: list[list[float]] = [[] for _ in range(n_docks)]
+    alone = [best(i, none)[0] for i in range(len(robots))]
+    out: list[tuple[int, int | None, float]] = []
+    leaves: list[tuple[int, float]] = []  # (dock, when it is off it, s from now) of those before
+    for i in sorted(range(len(robots)), key=lambda i: robots[i].charge - alone[i]):
+        point, extra = alone[i], none
+        for _ in range(len(robots) + 1):
+            due_s = max(robots[i].charge - point, 0.0) * spec.capacity_s
+            extra = [
+                [spec.recharge_threshold for kj, off in leaves if kj == kk and off > due_s]
+                for kk in range(n_docks)
+            ]
+            again, k = best(i, extra)
+            if again == point:
+                break
+            point = again
+        out.append((i, k, point))
+        if k is not None:
+            wait_s = queue_wait_s(spec, [*ahead[k], *extra[k]])
+            leaves.append((k, due_s + robots[i].trips_s[k] + wait_s + fill_s))
+    return out
+
+
 @dataclass(frozen=True)
 class DockUser:
     """A robot at work that will charge at a dock: its ``charge``, its ``trip_s`` to the dock

@@ -31,13 +31,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fleet.coordinator import go_home
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import EMPTY, LOST
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
-from planners.battery import BatterySpec, DockUser, go_home_below
+from planners.battery import BatterySpec, DockUser, pick_dock
 from planners.grid import clearance
 from planners.polyline import without_straight_vertices
 
@@ -135,7 +136,7 @@ class Docking:
         dock = self.docks[k]
         return not self.planner.near_bodies(np.vstack([_approach(dock), dock[:2]]))
 
-    def _trip_s(self, k: int, xy: tuple[float, float]) -> float:
+    def trip_to(self, k: int, xy: tuple[float, float]) -> float:
         """Travel time on the floor plan from ``xy`` to dock ``k`` (inf where there is no way):
         the dock in the next room may be nearer as the crow flies than this room's."""
         return float(self.travel(np.array(self.docks[k][:2]), np.array([xy]))[0])
@@ -146,7 +147,7 @@ class Docking:
             for k in range(len(self.docks))
             if self.usable(k) and (not free_only or self.holder(k) is None)
         ]
-        return min(ks, key=lambda k: self._trip_s(k, xy), default=None)
+        return min(ks, key=lambda k: self.trip_to(k, xy), default=None)
 
     def nearest_first(self, rids: list[str]) -> list[str]:
         """``rids`` in the order to send them home so that each free dock goes to the robot
@@ -156,7 +157,7 @@ class Docking:
         by that dock, and the other would cross the floor to the far one."""
         free = [k for k in range(len(self.docks)) if self.free(k)]
         first = nearest_pairs_first(
-            (self._trip_s(k, xy), rid, k)
+            (self.trip_to(k, xy), rid, k)
             for rid in rids
             for k in free
             if (xy := self.job.robots[rid].xy) is not None
@@ -172,27 +173,23 @@ class Docking:
         ]
 
     def go_home_below(self, rid: str) -> float:
-        """The charge below which ``rid`` goes to charge now: the threshold plus its trip to the
-        dock it would be sent to (the nearest free one, else the nearest) and the wait behind
-        the robots ahead of it there (``planners.battery.go_home_below``)."""
-        r = self.job.robots[rid]
-        k = None if r.xy is None else self._nearest(r.xy, free_only=True)
-        if k is None and r.xy is not None:
-            k = self._nearest(r.xy, free_only=False)
-        if k is None or r.xy is None:
-            return 0.0  # no dock it can charge on: it works until it runs out
-        return go_home_below(self.spec, self._trip_s(k, r.xy), self.ahead(k))
+        """The charge below which ``rid`` goes to charge now (0: no dock it can charge on; it
+        works until it runs out): the threshold plus its trip to the dock it would take and its
+        wait there behind the robots ahead of it, those at work that fall due with or before it
+        included (:func:`fleet.coordinator.go_home.points`)."""
+        found = go_home.points(self).get(rid)
+        return found[1] if found is not None else go_home.alone(self, rid)[1]
 
     def dock_user(self, rid: str) -> tuple[int, DockUser] | None:
-        """The dock ``rid`` would charge at (the nearest it can use) and what the stagger rule
-        needs of it (``planners.battery.charge_early``): its charge, its trip there and its
-        seconds of work, at the sweeping drain, until it falls to its go-home point."""
+        """The dock ``rid`` would charge at and what the stagger rule needs of it
+        (``planners.battery.charge_early``): its charge, its trip there and its seconds of
+        work, at the sweeping drain, until it falls to its go-home point with the docks as they
+        stand (the stagger rule orders the robots at work at a dock itself)."""
+        k, below = go_home.alone(self, rid)
         r = self.job.robots[rid]
-        k = None if r.xy is None else self._nearest(r.xy, free_only=False)
         if k is None or r.xy is None:
             return None
-        trip_s = self._trip_s(k, r.xy)
-        below = go_home_below(self.spec, trip_s, self.ahead(k))
+        trip_s = self.trip_to(k, r.xy)
         return k, DockUser(r.charge, trip_s, (r.charge - below) * self.spec.capacity_s)
 
     def free(self, k: int) -> bool:
@@ -215,15 +212,22 @@ class Docking:
     # ---- trips ------------------------------------------------------------------------------
 
     def send(self, rid: str, why: str, parking: bool) -> bool:
-        """Send ``rid`` (with no work) home: to the nearest free dock, else to wait by the
-        nearest; False when there is no way there."""
+        """Send ``rid`` (with no work) home; False when there is no way there. To charge: to
+        the dock its charge covers that it is on soonest, counting the robots ahead there
+        (``planners.battery.pick_dock``), to wait by it when it is held. To park at the job's
+        end: to the nearest free dock, else to wait by the nearest."""
         r = self.job.robots[rid]
         if r.xy is None or not self.docks:
             return False
-        k = self._nearest(r.xy, free_only=True)
-        waiting = k is None
-        if k is None:
-            k = self._nearest(r.xy, free_only=False)
+        if parking:
+            k = self._nearest(r.xy, free_only=True)
+            waiting = k is None
+            if k is None:
+                k = self._nearest(r.xy, free_only=False)
+        else:
+            ahead = [self.ahead(k) for k in range(len(self.docks))]
+            k = pick_dock(self.spec, r.charge, go_home.trips_s(self, r.xy), ahead)
+            waiting = k is not None and self.holder(k) is not None
         if k is None:
             return False
         r.docking = "waiting" if waiting else "docking"
@@ -347,7 +351,7 @@ class Docking:
             if k != t.dock and self.usable(k) and self.holder(k) is None
         ]
         if others:
-            k = min(others, key=lambda k: self._trip_s(k, r.xy))
+            k = min(others, key=lambda k: self.trip_to(k, r.xy))
             r.docking = "docking"
             sent = self._go(rid, k, False, t.parking, 1, stalls)
             where = f"to dock {k}"

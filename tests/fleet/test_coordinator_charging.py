@@ -19,7 +19,12 @@ from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M, Docking
-from fleet.coordinator.charging_service import ChargingMarket, charging_early, going_home
+from fleet.coordinator.charging_service import (
+    ChargingMarket,
+    charging_early,
+    going_home,
+    homeward,
+)
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import DONE, EMPTY, OPEN, STRANDED, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
@@ -41,7 +46,7 @@ from fleet.protocol import (
 from fleet.report.summary import job_report
 from fleet.world import World, load_world
 from planners.auction import Task
-from planners.battery import BatterySpec, makespan_with_charging
+from planners.battery import BatterySpec, go_home_below, makespan_with_charging
 from planners.coverage.params import CoverageParams
 
 KEYS = Keys("test")
@@ -424,7 +429,7 @@ def test_a_robot_passing_over_another_dock_on_its_way_is_not_charging_on_its_own
     f.job.robots["robot-0"].xy = (1.0, 0.6)
     f.market.send_home("robot-0", "charge low", False)  # it takes the left dock
     f.job.robots["robot-1"].xy = (1.2, 2.2)
-    f.market.send_home("robot-1", "charge low", False)
+    f.market.send_home("robot-1", "the job is done", True)  # to the free dock
     (trip,) = f.plans("robot-1")
     assert trip.task == "dock-1"
     f.job.robots["robot-1"].xy = (0.5, 1.5)  # over the left dock
@@ -465,3 +470,36 @@ def test_of_two_robots_falling_due_together_the_first_is_sent_to_the_free_dock_e
     assert charging_early(f.job, f.docking) == []
     f.job.add_tasks(tuple(_task(i) for i in range(4, 8)))  # unless much work is still on sale
     assert [rid for rid, _ in charging_early(f.job, f.docking)] == ["robot-1"]
+
+
+def test_of_two_robots_falling_due_in_one_tick_by_one_dock_the_second_waits_on_a_reserve_for_it(
+    corridor: World,
+) -> None:
+    """The corridor world at capacity 120 s: robot-1 and robot-2, both in the right room, fall
+    due in the same tick, the right room's dock near both. One takes it; the other waits by it
+    (behind a charge of about 21 s at the idle drain) rather than cross the corridor to the left
+    one (a trip of some 25 s at the sweeping drain), and the charge each is sent on covers the
+    reserve for where it is actually sent: its trip there and the robot ahead of it."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    spec = BatterySpec(enabled=True, capacity_s=120.0)
+    f.docking.spec = f.market.battery = spec
+    where = {"robot-0": (1.2, 2.2), "robot-1": (6.2, 0.6), "robot-2": (6.0, 2.5)}
+    for rid, xy in where.items():
+        r = f.job.robot(rid)
+        r.ready, r.xy, r.charge = True, xy, 0.9
+    for _ in range(3):  # each a step below its go-home point, counting the other's charge
+        for rid in ("robot-1", "robot-2"):
+            f.job.robots[rid].charge = f.docking.go_home_below(rid) - 0.001
+    home = homeward(f.job, f.docking)
+    assert sorted(rid for rid, _, _ in home) == ["robot-1", "robot-2"]
+    ahead: dict[int, list[float]] = {}
+    for rid, why, parking in home:
+        f.market.send_home(rid, why, parking)
+        trip = f.plans(rid)[-1]
+        k = int(trip.task.split("-")[1])
+        r = f.job.robots[rid]
+        reserve = go_home_below(spec, f.docking.trip_to(k, r.xy), ahead.get(k, []))
+        assert r.charge > reserve - 0.002, (rid, trip.task, r.charge, reserve)  # fell due by 0.001
+        ahead.setdefault(k, []).append(r.charge)
+    tasks = sorted(f.plans(rid)[-1].task for rid in ("robot-1", "robot-2"))
+    assert tasks == ["dock-1", "wait-1"], tasks
