@@ -17,6 +17,11 @@ trip at the sweeping drain and the wait behind the robots ahead of it at that do
 charging from its charge to ``recharge_to``) at the idle drain — the reserve of Open-RMF's
 battery-aware planner, with the dock's queue counted as a ``wait`` task before the charge.
 
+Robots at work that fall due together compete for the docks: :func:`go_home_points` counts
+their go-home points together (list scheduling in the order they fall due, each counting the
+earlier ones still at a dock when it falls due), and :func:`pick_dock` sends a robot to the dock
+its charge covers that it is on soonest, trip and wait counted.
+
 :func:`makespan_with_charging` is the job's makespan with the charges in it: each robot works
 down to ``recharge_threshold`` plus its trip to the dock, drives there, queues for the first
 free dock (first come, first served), charges to ``recharge_to``, drives back and works on,

@@ -5,17 +5,19 @@ that can do none of the open work on its charge, is sent to charge: the work it 
 back (the unswept remainder of the task it drives and its unstarted tasks go back to the market,
 as a lost robot's do, none of them counted as tried by it), and it gets a plan to a dock, driven
 like any plan: the transit (A* on the floor plan) to a point in front of the dock, then straight
-onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: the nearest
-dock no robot holds is taken; when every one is held the robot waits at a waiting spot by the
-nearest (free floor near it, clear of its approach), in the order the robots came, and goes on
-once the dock is free. A robot that makes no progress on its trip for the stall time gets it
+onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: a robot going
+to charge takes the dock its charge covers that it is on soonest, its trip and its wait behind the
+robots ahead there counted (``planners.battery.pick_dock``); when that dock is held it waits at a
+waiting spot by it (free floor near it, clear of its approach), in the order the robots came, and
+goes on once the dock is free. At the job's end a robot parks at the nearest dock no robot holds,
+else waits by the nearest. A robot that makes no progress on its trip for the stall time gets it
 planned again from where it stands, then another dock or waiting spot
-(:meth:`Docking.stalled`). A dock with a body on it or on the line onto it (a lost robot's, or one
-whose battery ran out) is not used; a robot with no dock left works until it runs out. The
-charge below which a robot is sent counts its trip and the queue
-ahead of it at that dock (:meth:`Docking.go_home_below`). On the dock it charges until
-``recharge_to`` and is back in the market. At the end of the job every robot is sent home the
-same way, and the job is finished once each is on a dock or at its waiting spot.
+(:meth:`Docking.stalled`). A dock with a body on it or on the line onto it (a lost robot's, or
+one whose battery ran out) is not used; a robot with no dock left works until it runs out. The
+charge below which a robot is sent counts its trip and the queue ahead of it at that dock, the
+robots at work that fall due with or before it included (:meth:`Docking.go_home_below`). On the
+dock it charges until ``recharge_to`` and is back in the market. At the end of the job every
+robot is sent home, and the job is finished once each is on a dock or at its waiting spot.
 
 What the coordinator knows of a battery is what the robot's status says (its charge, whether a
 dock charges it), and nothing from the simulator.
