@@ -118,14 +118,21 @@ class Docking:
 
     def holder(self, k: int) -> str | None:
         """The robot that holds dock ``k``: on a trip to it, or standing on it charging (just
-        charged, before it drives off) or without work. A robot at work that passes over the
-        dock's pose (lanes along the wall run over it) does not hold it."""
+        charged, before it drives off) or without work. Not a robot at work passing over the
+        dock's pose (lanes along the wall run over it), nor one charged and without work while
+        a robot waits for the dock (it steps aside from a robot coming at it)."""
         for rid, t in self.trips.items():
             if t.dock == k and not t.waiting:
                 return rid
+        waited = any(t.dock == k for t in self.trips.values())
         for rid, r in self.job.robots.items():
             free = r.liveness == LOST or r.xy is None or rid in self.trips
-            if not free and self._on(k, r.xy) and (r.charging or not self.job.queue(rid)):
+            if free or not self._on(k, r.xy):
+                continue
+            idle = not self.job.queue(rid)
+            if idle and waited and r.charge >= self.spec.recharge_to:
+                continue
+            if r.charging or idle:
                 return rid
         return None
 

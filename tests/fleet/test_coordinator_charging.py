@@ -177,6 +177,7 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     assert f.job.robots["robot-0"].docking == "charging"
     assert f.docking.tick(False) == [] and len(f.plans("robot-1")) == 1  # still taken
     f.status("robot-0", 0.95, True, to_dock, done=True)
+    f.job.award("t00", "robot-0", False)  # it has work: it drives off the dock to it
     assert f.docking.tick(False) == ["robot-0"]
     assert "robot-0" in f.job.market()
     assert len(f.plans("robot-1")) == 1  # robot-0 still stands on the dock
@@ -503,3 +504,30 @@ def test_of_two_robots_falling_due_in_one_tick_by_one_dock_the_second_waits_on_a
         ahead.setdefault(k, []).append(r.charge)
     tasks = sorted(f.plans(rid)[-1].task for rid in ("robot-1", "robot-2"))
     assert tasks == ["dock-1", "wait-1"], tasks
+
+
+def test_a_charged_robot_without_work_on_the_dock_lets_a_waiting_robot_on(
+    corridor: World,
+) -> None:
+    """robot-2 has charged on the right room's dock and won no work: it holds the dock, so
+    robot-0, sent to charge, waits by it; but it would stand there until it won work, so once
+    robot-0 waits it no longer holds the dock and robot-0 goes on (robot-2, without work, steps
+    aside from it). Below ``recharge_to`` it still holds the dock."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    spec = BatterySpec(enabled=True, capacity_s=120.0)
+    f.docking.spec = f.market.battery = spec
+    on_dock = (corridor.docks[1][0] - 0.04, corridor.docks[1][1])
+    for rid, xy, charge in (("robot-0", (6.2, 0.6), 0.3), ("robot-2", on_dock, 0.92)):
+        r = f.job.robot(rid)
+        r.ready, r.xy, r.charge, r.charging = True, xy, charge, rid == "robot-2"
+    assert f.docking.holder(1) == "robot-2"
+    f.market.send_home("robot-0", "charge low", False)
+    assert f.plans("robot-0")[-1].task == "wait-1"
+    f.job.robots["robot-2"].charge = 0.85
+    assert f.docking.holder(1) == "robot-2"
+    f.docking.tick(False)
+    assert f.plans("robot-0")[-1].task == "wait-1"
+    f.job.robots["robot-2"].charge = 0.92
+    assert f.docking.holder(1) is None
+    f.docking.tick(False)
+    assert f.plans("robot-0")[-1].task == "dock-1"
