@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,11 +120,11 @@ class Docking:
         """The robot that holds dock ``k``: on a trip to it, or standing on it charging (just
         charged, before it drives off) or without work. Not a robot at work passing over the
         dock's pose (lanes along the wall run over it), nor one charged and without work while
-        a robot waits for the dock (it steps aside from a robot coming at it)."""
+        a robot waits by the dock at its spot (it steps aside from a robot coming at it)."""
         for rid, t in self.trips.items():
             if t.dock == k and not t.waiting:
                 return rid
-        waited = any(t.dock == k for t in self.trips.values())
+        waited = any(t.dock == k and self._at_end(rid, t) for rid, t in self.trips.items())
         for rid, r in self.job.robots.items():
             free = r.liveness == LOST or r.xy is None or rid in self.trips
             if free or not self._on(k, r.xy):
@@ -157,21 +157,6 @@ class Docking:
             if self.usable(k) and (not free_only or self.holder(k) is None)
         ]
         return min(ks, key=lambda k: self.trip_to(k, xy), default=None)
-
-    def nearest_first(self, rids: list[str]) -> list[str]:
-        """``rids`` in the order to send them home so that each free dock goes to the robot
-        nearest it (greedy matching over robot–dock pairs by travel time, the nearest pair
-        first), then the robots left over (they wait) in the given order. Sent one by one in id
-        order, the first robot would take the dock nearest it even when another robot stands
-        by that dock, and the other would cross the floor to the far one."""
-        free = [k for k in range(len(self.docks)) if self.free(k)]
-        first = nearest_pairs_first(
-            (self.trip_to(k, xy), rid, k)
-            for rid in rids
-            for k in free
-            if (xy := self.job.robots[rid].xy) is not None
-        )
-        return first + [rid for rid in rids if rid not in first]
 
     def ahead(self, k: int) -> list[float]:
         """The charges of the robots ahead of a newcomer at dock ``k``: on their way to it,
@@ -307,6 +292,11 @@ class Docking:
         if r.charging and on_its_dock and r.docking == "docking":
             r.docking = "charging"
             self.journal.event("charging", rid, self.trips[rid].plan.task, f"at {msg.charge:.2f}")
+        elif t and r.docking == "charging" and not r.charging and r.charge < self.spec.recharge_to:
+            # it stopped off the dock (pushed, or it only passed within the dock's tolerance):
+            # docking again, as a robot at the end of its plan that does not charge
+            r.docking = "docking"
+            self.journal.event("dock", rid, t.plan.task, f"off the dock at {r.charge:.2f}")
 
     def tick(self, job_over: bool) -> list[str]:
         """Move the trips on: robots charged back to work (returned), waiting robots onto
@@ -458,19 +448,6 @@ def waiting_spots(
             if len(out) == n:
                 break
     return out
-
-
-def nearest_pairs_first(pairs: Iterable[tuple[float, str, int]]) -> list[str]:
-    """Greedy matching of robots to docks over ``pairs`` (travel time, robot, dock): the
-    nearest pair first, then the nearest of the robots and docks left; the robots matched, in
-    that order."""
-    first: list[str] = []
-    taken: set[int] = set()
-    for _, rid, k in sorted(pairs):
-        if rid not in first and k not in taken:
-            first.append(rid)
-            taken.add(k)
-    return first
 
 
 def _approach(dock: Pose, ahead: float = APPROACH_M) -> np.ndarray:

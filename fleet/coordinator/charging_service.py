@@ -280,7 +280,7 @@ def going_home(job: Job, below: Callable[[str], float]) -> list[tuple[str, str, 
 
 def homeward(job: Job, docking: Docking) -> list[tuple[str, str, bool]]:
     """:func:`going_home` in the order to send them: at the job's end so that each free dock
-    goes to the robot nearest it (:meth:`Docking.nearest_first`); before it in the order they
+    goes to the robot nearest it (``go_home.nearest_first``); before it in the order they
     fall due, the order their go-home points were counted in (``go_home.points``),
     so each robot finds the docks as its go-home point counted them."""
     points = go_home.points(docking)
@@ -290,7 +290,7 @@ def homeward(job: Job, docking: Docking) -> list[tuple[str, str, bool]]:
 
     home = {rid: (why, parking) for rid, why, parking in going_home(job, below)}
     if job.finished:
-        order = docking.nearest_first(list(home))
+        order = go_home.nearest_first(docking, list(home))
     else:
         order = [rid for rid in points if rid in home] + [r for r in home if r not in points]
     return [(rid, *home[rid]) for rid in order]

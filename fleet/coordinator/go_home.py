@@ -1,12 +1,12 @@
 """When each robot at work goes to charge, and where: the go-home points of the robots at work
 counted together (``planners.battery.go_home_points``) on the docks as the coordinator's
 ``Docking`` (:mod:`fleet.coordinator.charging`) sees them: the robots bound for each dock, the
-docks a body blocks."""
+docks a body blocks; and the order robots are sent home in at the job's end."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Protocol
 
 from fleet.coordinator.job import Job
@@ -27,6 +27,8 @@ class Docking(Protocol):
     def trip_to(self, k: int, xy: tuple[float, float]) -> float: ...
 
     def ahead(self, k: int) -> list[float]: ...
+
+    def free(self, k: int) -> bool: ...
 
 
 def at_work(job: Job) -> list[str]:
@@ -66,6 +68,35 @@ def alone(docking: Docking, rid: str) -> tuple[int | None, float]:
     ahead = [docking.ahead(k) for k in range(len(docking.docks))]
     ((_, k, p),) = go_home_points(docking.spec, [GoHome(r.charge, trips_s(docking, r.xy))], ahead)
     return k, p
+
+
+def nearest_first(docking: Docking, rids: list[str]) -> list[str]:
+    """``rids`` in the order to send them home so that each free dock goes to the robot nearest
+    it (greedy matching over robot–dock pairs by travel time, the nearest pair first), then the
+    robots left over (they wait) in the given order. Sent one by one in id order, the first
+    robot would take the dock nearest it even when another robot stands by that dock, and the
+    other would cross the floor to the far one."""
+    free = [k for k in range(len(docking.docks)) if docking.free(k)]
+    first = nearest_pairs_first(
+        (docking.trip_to(k, xy), rid, k)
+        for rid in rids
+        for k in free
+        if (xy := docking.job.robots[rid].xy) is not None
+    )
+    return first + [rid for rid in rids if rid not in first]
+
+
+def nearest_pairs_first(pairs: Iterable[tuple[float, str, int]]) -> list[str]:
+    """Greedy matching of robots to docks over ``pairs`` (travel time, robot, dock): the
+    nearest pair first, then the nearest of the robots and docks left; the robots matched, in
+    that order."""
+    first: list[str] = []
+    taken: set[int] = set()
+    for _, rid, k in sorted(pairs):
+        if rid not in first and k not in taken:
+            first.append(rid)
+            taken.add(k)
+    return first
 
 
 def _xy(docking: Docking, rid: str) -> tuple[float, float]:

@@ -26,6 +26,7 @@ from fleet.coordinator.charging_service import (
     homeward,
 )
 from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.go_home import nearest_first
 from fleet.coordinator.job import DONE, EMPTY, OPEN, STRANDED, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
@@ -398,7 +399,7 @@ def test_at_the_end_of_the_job_each_dock_goes_to_the_robot_nearest_it(corridor: 
     for rec in f.job.tasks.values():
         rec.state = DONE
     home = {rid: (why, p) for rid, why, p in going_home(f.job, f.docking.go_home_below)}
-    for rid in f.docking.nearest_first(list(home)):
+    for rid in nearest_first(f.docking, list(home)):
         f.market.send_home(rid, *home[rid])
     tasks = {rid: f.plans(rid)[-1].task for rid in where}
     assert tasks == {"robot-0": "wait-1", "robot-1": "dock-1", "robot-2": "dock-0"}, tasks
@@ -511,8 +512,8 @@ def test_a_charged_robot_without_work_on_the_dock_lets_a_waiting_robot_on(
 ) -> None:
     """robot-2 has charged on the right room's dock and won no work: it holds the dock, so
     robot-0, sent to charge, waits by it; but it would stand there until it won work, so once
-    robot-0 waits it no longer holds the dock and robot-0 goes on (robot-2, without work, steps
-    aside from it). Below ``recharge_to`` it still holds the dock."""
+    robot-0 stands at its waiting spot robot-2 no longer holds the dock and robot-0 goes on
+    (robot-2, without work, steps aside from it). Below ``recharge_to`` it still holds it."""
     f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
     spec = BatterySpec(enabled=True, capacity_s=120.0)
     f.docking.spec = f.market.battery = spec
@@ -522,12 +523,36 @@ def test_a_charged_robot_without_work_on_the_dock_lets_a_waiting_robot_on(
         r.ready, r.xy, r.charge, r.charging = True, xy, charge, rid == "robot-2"
     assert f.docking.holder(1) == "robot-2"
     f.market.send_home("robot-0", "charge low", False)
-    assert f.plans("robot-0")[-1].task == "wait-1"
-    f.job.robots["robot-2"].charge = 0.85
-    assert f.docking.holder(1) == "robot-2"
+    (wait,) = f.plans("robot-0")
+    assert wait.task == "wait-1"
     f.docking.tick(False)
-    assert f.plans("robot-0")[-1].task == "wait-1"
+    assert f.plans("robot-0") == [wait]  # on its way to the spot: robot-2 may still drive off
+    f.status("robot-0", 0.28, False, wait, done=True)
+    f.job.robots["robot-2"].charge = 0.85
+    f.docking.tick(False)
+    assert f.plans("robot-0") == [wait]
     f.job.robots["robot-2"].charge = 0.92
     assert f.docking.holder(1) is None
     f.docking.tick(False)
     assert f.plans("robot-0")[-1].task == "dock-1"
+
+
+def test_a_robot_that_stops_charging_off_its_dock_docks_again(
+    planner: TaskPlanner, world: World
+) -> None:
+    """robot-0 charged on arriving at the dock, then stopped charging below ``recharge_to``
+    (it stood just off the dock's tolerance): it is docking again and, after the grace,
+    drives onto the dock again instead of standing there until it runs out."""
+    f = Fleet(planner, world, ["robot-0"])
+    f.job.robots["robot-0"].charge = 0.15
+    f.market.send_home("robot-0", "low", False)
+    (trip,) = f.plans("robot-0")
+    f.status("robot-0", 0.15, True, trip, done=True)
+    assert f.job.robots["robot-0"].docking == "charging"
+    f.status("robot-0", 0.3, False, trip, done=True)
+    assert f.job.robots["robot-0"].docking == "docking"
+    f.docking.tick(False)
+    f.journal.clock = 10.0
+    f.docking.tick(False)
+    (_, again) = f.plans("robot-0")
+    assert again.task == "dock-0" and again.plan_id != trip.plan_id
