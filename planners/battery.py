@@ -257,45 +257,75 @@ def go_home_points(
     ``recharge_to``), and its go-home point is the least :func:`go_home_below` over the docks
     with them counted: the near dock behind them, or a far one with its trip there. Falling
     due is timed at the sweeping drain, and a robot's own go-home point, which the robots
-    counted can only raise, is found again until it stops changing. Robots sent in this order
-    find the docks as their go-home points counted them. With batteries off, or no dock in
-    reach, (None, 0)."""
+    counted can only raise, is found again until it stops changing. Counting the earlier robots
+    can make a later one fall due first; so a second pass schedules them in the order the first
+    pass's points put them, and each robot keeps the higher of its two points: robots falling
+    due together count each other. Robots sent in the order of their margins over these points
+    find the docks as their points counted them. With batteries off, or no dock in reach,
+    (None, 0)."""
     if not spec.enabled:
         return [(i, None, 0.0) for i in range(len(robots))]
-    n_docks = len(ahead)
+    none: list[list[float]] = [[] for _ in ahead]
+    alone = [_cheapest(spec, r.trips_s, ahead, none)[0] for r in robots]
+    first = _schedule(
+        spec, robots, ahead, sorted(range(len(robots)), key=lambda i: robots[i].charge - alone[i])
+    )
+    second = _schedule(
+        spec, robots, ahead, sorted(first, key=lambda i: robots[i].charge - first[i][1])
+    )
+    final = {i: max(first[i], second[i], key=lambda kp: kp[1]) for i in first}
+    order = sorted(final, key=lambda i: robots[i].charge - final[i][1])
+    return [(i, *final[i]) for i in order]
+
+
+def _cheapest(
+    spec: BatterySpec,
+    trips_s: Sequence[float],
+    ahead: Sequence[Sequence[float]],
+    extra: Sequence[Sequence[float]],
+) -> tuple[float, int | None]:
+    """The least :func:`go_home_below` over the docks in reach, with ``ahead`` and ``extra``
+    at each, and that dock."""
+    return min(
+        (
+            (go_home_below(spec, trip, [*ahead[k], *extra[k]]), k)
+            for k, trip in enumerate(trips_s)
+            if math.isfinite(trip)
+        ),
+        default=(0.0, None),
+    )
+
+
+def _schedule(
+    spec: BatterySpec,
+    robots: Sequence[GoHome],
+    ahead: Sequence[Sequence[float]],
+    order: Sequence[int],
+) -> dict[int, tuple[int | None, float]]:
+    """One pass of :func:`go_home_points`: the robots in ``order``, each counting the earlier
+    ones still at a dock when it falls due; per robot its dock and go-home point."""
     fill_s = (spec.recharge_to - spec.recharge_threshold) * spec.capacity_s / spec.charge_rate
-
-    def best(i: int, extra: Sequence[Sequence[float]]) -> tuple[float, int | None]:
-        trips = robots[i].trips_s
-        return min(
-            (
-                (go_home_below(spec, trips[k], [*ahead[k], *extra[k]]), k)
-                for k in range(n_docks)
-                if math.isfinite(trips[k])
-            ),
-            default=(0.0, None),
-        )
-
-    none: list[list[float]] = [[] for _ in range(n_docks)]
-    alone = [best(i, none)[0] for i in range(len(robots))]
-    out: list[tuple[int, int | None, float]] = []
+    none: list[list[float]] = [[] for _ in ahead]
+    out: dict[int, tuple[int | None, float]] = {}
     leaves: list[tuple[int, float]] = []  # (dock, when it is off it, s from now) of those before
-    for i in sorted(range(len(robots)), key=lambda i: robots[i].charge - alone[i]):
-        point, extra = alone[i], none
+    for i in order:
+        trips = robots[i].trips_s
+        point, k = _cheapest(spec, trips, ahead, none)
+        extra: list[list[float]] = none
         for _ in range(len(robots) + 1):
             due_s = max(robots[i].charge - point, 0.0) * spec.capacity_s
             extra = [
                 [spec.recharge_threshold for kj, off in leaves if kj == kk and off > due_s]
-                for kk in range(n_docks)
+                for kk in range(len(ahead))
             ]
-            again, k = best(i, extra)
+            again, k = _cheapest(spec, trips, ahead, extra)
             if again == point:
                 break
             point = again
-        out.append((i, k, point))
+        out[i] = (k, point)
         if k is not None:
             wait_s = queue_wait_s(spec, [*ahead[k], *extra[k]])
-            leaves.append((k, due_s + robots[i].trips_s[k] + wait_s + fill_s))
+            leaves.append((k, due_s + trips[k] + wait_s + fill_s))
     return out
 
 

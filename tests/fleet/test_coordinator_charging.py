@@ -234,9 +234,10 @@ def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_d
     it): 0.08 on a 100 s charge. At a charge between the two it stays at work alone and goes
     behind the queue."""
     f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
-    alone = f.docking.go_home_below("robot-2")
+    alone = go_home_below(SPEC, f.docking.trip_to(0, f.job.robots["robot-2"].xy), [])
     assert SPEC.recharge_threshold < alone < SPEC.recharge_threshold + 0.2  # the trip
     f.job.robots["robot-2"].charge = alone + 0.04
+    assert f.docking.go_home_below("robot-2") == pytest.approx(alone)  # the others far from due
     assert going_home(f.job, f.docking.go_home_below) == []
     for rid in ("robot-0", "robot-1"):
         f.job.robots[rid].charge = 0.1

@@ -229,25 +229,41 @@ def test_pick_dock_waits_by_the_near_dock_when_that_is_sooner_than_crossing() ->
 
 
 def test_two_robots_falling_due_together_by_one_dock_count_each_other() -> None:
-    """Robots 0 and 1, 5 s and 8 s from dock 0 (dock 1 40 s off), fall due together: robot 0,
-    due first, keeps its point alone; robot 1's point holds the wait behind robot 0 charging
-    from the threshold at dock 0, which is less than its trip across. A third robot due long
-    after robot 0 has charged and left counts no one."""
+    """Robots 0 and 1, 5 s and 8 s from dock 0 (dock 1 40 s off), fall due together: each
+    point holds the wait behind the other charging from the threshold at dock 0 (less than the
+    trip across), whichever the docks take first; robot 0, the nearer to its point, goes first.
+    A robot due long after the other has charged and left counts no one."""
     spec = CORRIDOR
     alone0 = go_home_below(spec, 5.0, [])
     alone1 = go_home_below(spec, 8.0, [])
     robots = [GoHome(alone0 - 0.001, (5.0, 40.0)), GoHome(alone1, (8.0, 40.0))]
     out = go_home_points(spec, robots, [[], []])
     assert [i for i, _, _ in out] == [0, 1]
-    assert out[0][1:] == (0, pytest.approx(alone0))
-    behind = go_home_below(spec, 8.0, [spec.recharge_threshold])
-    assert behind < go_home_below(spec, 40.0, [])
-    assert out[1][1:] == (0, pytest.approx(behind))
+    behind0 = go_home_below(spec, 5.0, [spec.recharge_threshold])
+    behind1 = go_home_below(spec, 8.0, [spec.recharge_threshold])
+    assert behind1 < go_home_below(spec, 40.0, [])
+    assert out[0][1:] == (0, pytest.approx(behind0))
+    assert out[1][1:] == (0, pytest.approx(behind1))
     late = GoHome(0.95, (8.0, 40.0))  # 0.7 of a charge (84 s) from due: robot 0 is long gone
     out = go_home_points(spec, [robots[0], late], [[], []])
+    assert out[0][1:] == (0, pytest.approx(alone0))
     assert out[1][1:] == (0, pytest.approx(alone1))
     off = BatterySpec(enabled=False)
     assert go_home_points(off, robots, [[], []]) == [(0, None, 0.0), (1, None, 0.0)]
+
+
+def test_a_robot_that_counting_the_other_makes_due_first_is_counted_by_it() -> None:
+    """Robot 0 is 0.02 above its point alone, robot 1 0.03 above: counting robot 0 ahead of
+    it (0.035 at the idle drain) puts robot 1 below its point before robot 0 reaches its
+    point alone, so robot 0's point must count robot 1 too (one pass in the order they fall due
+    alone would leave robot 0 on its point alone): they count each other."""
+    spec = CORRIDOR
+    alone0 = go_home_below(spec, 5.0, [])
+    alone1 = go_home_below(spec, 8.0, [])
+    robots = [GoHome(alone0 + 0.02, (5.0, 40.0)), GoHome(alone1 + 0.03, (8.0, 40.0))]
+    out = dict((i, (k, p)) for i, k, p in go_home_points(spec, robots, [[], []]))
+    assert out[1] == (0, pytest.approx(go_home_below(spec, 8.0, [spec.recharge_threshold])))
+    assert out[0] == (0, pytest.approx(go_home_below(spec, 5.0, [spec.recharge_threshold])))
 
 
 def test_a_robot_whose_near_dock_is_held_long_counts_the_trip_across() -> None:
