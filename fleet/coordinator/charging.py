@@ -71,7 +71,8 @@ class Trip:
     """A robot's way home: to ``dock`` (its index) or, ``waiting``, to a spot by it; ``plan``
     the plan sent; ``parking``: the job is over; ``tries`` of docking so far, ``stalls``: how
     often it has stood still on its way, ``sent_wall`` when the plan last went out (wall s),
-    ``ended`` when it was first seen at the plan's end (sim s)."""
+    ``ended`` when it was first seen at the plan's end (sim s); ``clearing``: a charged robot
+    sent off the dock to a spot, back in the market once there."""
 
     dock: int
     waiting: bool
@@ -81,6 +82,7 @@ class Trip:
     stalls: int = 0
     sent_wall: float = 0.0
     ended: float | None = None
+    clearing: bool = False
 
 
 class Docking:
@@ -118,21 +120,14 @@ class Docking:
 
     def holder(self, k: int) -> str | None:
         """The robot that holds dock ``k``: on a trip to it, or standing on it charging (just
-        charged, before it drives off) or without work. Not a robot at work passing over the
-        dock's pose (lanes along the wall run over it), nor one charged and without work while
-        a robot waits by the dock at its spot (it steps aside from a robot coming at it)."""
+        charged, before it drives off) or without work. A robot at work that passes over the
+        dock's pose (lanes along the wall run over it) does not hold it."""
         for rid, t in self.trips.items():
             if t.dock == k and not t.waiting:
                 return rid
-        waited = any(t.dock == k and self._at_end(rid, t) for rid, t in self.trips.items())
         for rid, r in self.job.robots.items():
             free = r.liveness == LOST or r.xy is None or rid in self.trips
-            if free or not self._on(k, r.xy):
-                continue
-            idle = not self.job.queue(rid)
-            if idle and waited and r.charge >= self.spec.recharge_to:
-                continue
-            if r.charging or idle:
+            if not free and self._on(k, r.xy) and (r.charging or not self.job.queue(rid)):
                 return rid
         return None
 
@@ -303,10 +298,15 @@ class Docking:
         freed docks, a missed docking tried again, lost plans sent again."""
         back = []
         now = self.journal.clock
+        _clear_docks(self)
         for rid, t in list(self.trips.items()):
             r = self.job.robots[rid]
-            if r.liveness == LOST:
+            if r.liveness == LOST or (t.clearing and self._at_end(rid, t)):
                 self._drop(rid)
+                back += [rid] if t.clearing else []
+                continue
+            if t.clearing:
+                self._resend(rid)
                 continue
             if not self.usable(t.dock) and not r.charging:
                 if self._blocked(rid, t):
@@ -423,6 +423,31 @@ class Docking:
             if t is None or not (r.charging or self._at_end(rid, t)):
                 return False
         return True
+
+
+def _clear_docks(docking: Docking) -> None:
+    """A robot charged to ``recharge_to`` and without work that stands on a dock a robot waits
+    by (at its spot) holds it until it wins work, while the waiting robot runs down; and it does
+    not step aside (the waiting one's path stops short of it). It is sent to a waiting spot by
+    that dock, out of the market until it is there."""
+    job = docking.job
+    for k in range(len(docking.docks)):
+        rid = docking.holder(k)
+        if rid is None or rid in docking.trips or job.queue(rid):
+            continue
+        r = job.robots[rid]
+        waited = any(
+            t.dock == k and t.waiting and docking._at_end(other, t)
+            for other, t in docking.trips.items()
+        )
+        if not waited or r.charge < docking.spec.recharge_to:
+            continue
+        r.docking = "waiting"
+        if docking._go(rid, k, True, False):
+            docking.trips[rid].clearing = True
+            docking.journal.event("dock", rid, f"{WAIT_PREFIX}{k}", "charged: clears the dock")
+        else:
+            r.docking = ""
 
 
 def waiting_spots(

@@ -508,13 +508,14 @@ def test_of_two_robots_falling_due_in_one_tick_by_one_dock_the_second_waits_on_a
     assert tasks == ["dock-1", "wait-1"], tasks
 
 
-def test_a_charged_robot_without_work_on_the_dock_lets_a_waiting_robot_on(
+def test_a_charged_robot_without_work_on_the_dock_is_sent_off_it_for_a_waiting_robot(
     corridor: World,
 ) -> None:
     """robot-2 has charged on the right room's dock and won no work: it holds the dock, so
-    robot-0, sent to charge, waits by it; but it would stand there until it won work, so once
-    robot-0 stands at its waiting spot robot-2 no longer holds the dock and robot-0 goes on
-    (robot-2, without work, steps aside from it). Below ``recharge_to`` it still holds it."""
+    robot-0, sent to charge, waits by it; but it would stand there until it won work (and it
+    does not step aside: robot-0's path stops short of it). So once robot-0 stands at its
+    waiting spot, robot-2 is sent to another spot and robot-0 onto the dock; robot-2 is back in
+    the market once at its spot. Below ``recharge_to`` it stays and charges."""
     f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
     spec = BatterySpec(enabled=True, capacity_s=120.0)
     f.docking.spec = f.market.battery = spec
@@ -527,15 +528,19 @@ def test_a_charged_robot_without_work_on_the_dock_lets_a_waiting_robot_on(
     (wait,) = f.plans("robot-0")
     assert wait.task == "wait-1"
     f.docking.tick(False)
-    assert f.plans("robot-0") == [wait]  # on its way to the spot: robot-2 may still drive off
+    assert f.plans("robot-0") == [wait] and not f.plans("robot-2")  # not at its spot yet
     f.status("robot-0", 0.28, False, wait, done=True)
     f.job.robots["robot-2"].charge = 0.85
     f.docking.tick(False)
-    assert f.plans("robot-0") == [wait]
+    assert f.plans("robot-0") == [wait] and not f.plans("robot-2")
     f.job.robots["robot-2"].charge = 0.92
-    assert f.docking.holder(1) is None
-    f.docking.tick(False)
+    assert f.docking.tick(False) == []
+    (off,) = f.plans("robot-2")
+    assert off.task == "wait-1" and "robot-2" not in f.job.market()
+    assert not np.allclose(off.waypoints[-1], wait.waypoints[-1])
     assert f.plans("robot-0")[-1].task == "dock-1"
+    f.status("robot-2", 0.92, False, off, done=True)
+    assert f.docking.tick(False) == ["robot-2"] and "robot-2" in f.job.market()
 
 
 def test_a_robot_that_stops_charging_off_its_dock_docks_again(
