@@ -17,6 +17,11 @@ trip at the sweeping drain and the wait behind the robots ahead of it at that do
 charging from its charge to ``recharge_to``) at the idle drain — the reserve of Open-RMF's
 battery-aware planner, with the dock's queue counted as a ``wait`` task before the charge.
 
+Robots at work that fall due together compete for the docks: :func:`go_home_points` counts
+their go-home points together (list scheduling in the order they fall due, each counting the
+earlier ones still at a dock when it falls due), and :func:`pick_dock` sends a robot to the dock
+its charge covers that it is on soonest, trip and wait counted.
+
 :func:`makespan_with_charging` is the job's makespan with the charges in it: each robot works
 down to ``recharge_threshold`` plus its trip to the dock, drives there, queues for the first
 free dock (first come, first served), charges to ``recharge_to``, drives back and works on,
@@ -205,6 +210,123 @@ def _next_event(
     if left <= reach:
         return (t + left + trip_s, i, 0.0, charge - work_charge(spec, left) - home)
     return (t + reach + trip_s, i, left - reach, max(charge - work_charge(spec, reach) - home, 0.0))
+
+
+def pick_dock(
+    spec: BatterySpec, charge: float, trips_s: Sequence[float], ahead: Sequence[Sequence[float]]
+) -> int | None:
+    """The dock (index into ``trips_s``, the travel to each dock, inf where there is none) a
+    robot with ``charge`` goes to charge at, ``ahead`` at each the charges of the robots before
+    it there: of the docks its charge covers (:func:`go_home_below`), the one it is on soonest
+    (trip + wait); when it covers none, the one that needs least charge. So a robot waits by
+    the near dock behind another's charge when that costs less than crossing to a free one, and
+    crosses when it is sooner and its charge covers the trip. None with no dock in reach."""
+    options = [
+        (go_home_below(spec, trip, ahead[k]), trip + queue_wait_s(spec, ahead[k]), k)
+        for k, trip in enumerate(trips_s)
+        if math.isfinite(trip)
+    ]
+    covered = [o for o in options if o[0] <= charge]
+    if covered:
+        return min(covered, key=lambda o: (o[1], o[0]))[2]
+    return min(options, default=(0.0, 0.0, None))[2]
+
+
+@dataclass(frozen=True)
+class GoHome:
+    """A robot at work as the go-home rule sees it: its ``charge`` and its ``trips_s`` (s) to
+    each dock (inf where it has none)."""
+
+    charge: float
+    trips_s: tuple[float, ...]
+
+
+def go_home_points(
+    spec: BatterySpec, robots: Sequence[GoHome], ahead: Sequence[Sequence[float]]
+) -> list[tuple[int, int | None, float]]:
+    """Per robot of ``robots`` (at work, sharing the docks), in the order they fall due: its
+    index, the dock it charges at when it falls due and its go-home point, the charge below
+    which it goes now; ``ahead``: per dock, the charges of the robots already bound for it.
+
+    A go-home point counted for the dock each robot would take alone breaks when robots fall
+    due together: the one that loses the dock is sent on to wait or to the far dock on a reserve
+    counted for a free near one. So the robots are list-scheduled (Graham 1969) in the order
+    they fall due (their margin over their own cheapest dock as the docks stand): each counts,
+    at every dock, the earlier robots that will still be there when it falls due (on their way,
+    waiting or charging, each arriving with ``recharge_threshold`` and charging to
+    ``recharge_to``), and its go-home point is the least :func:`go_home_below` over the docks
+    with them counted: the near dock behind them, or a far one with its trip there. Falling
+    due is timed at the sweeping drain, and a robot's own go-home point, which the robots
+    counted can only raise, is found again until it stops changing. Counting the earlier robots
+    can make a later one fall due first; so a second pass schedules them in the order the first
+    pass's points put them, and each robot keeps the higher of its two points: robots falling
+    due together count each other. Robots sent in the order of their margins over these points
+    find the docks as their points counted them. With batteries off, or no dock in reach,
+    (None, 0)."""
+    if not spec.enabled:
+        return [(i, None, 0.0) for i in range(len(robots))]
+    none: list[list[float]] = [[] for _ in ahead]
+    alone = [_cheapest(spec, r.trips_s, ahead, none)[0] for r in robots]
+    first = _schedule(
+        spec, robots, ahead, sorted(range(len(robots)), key=lambda i: robots[i].charge - alone[i])
+    )
+    second = _schedule(
+        spec, robots, ahead, sorted(first, key=lambda i: robots[i].charge - first[i][1])
+    )
+    final = {i: max(first[i], second[i], key=lambda kp: kp[1]) for i in first}
+    order = sorted(final, key=lambda i: robots[i].charge - final[i][1])
+    return [(i, *final[i]) for i in order]
+
+
+def _cheapest(
+    spec: BatterySpec,
+    trips_s: Sequence[float],
+    ahead: Sequence[Sequence[float]],
+    extra: Sequence[Sequence[float]],
+) -> tuple[float, int | None]:
+    """The least :func:`go_home_below` over the docks in reach, with ``ahead`` and ``extra``
+    at each, and that dock."""
+    return min(
+        (
+            (go_home_below(spec, trip, [*ahead[k], *extra[k]]), k)
+            for k, trip in enumerate(trips_s)
+            if math.isfinite(trip)
+        ),
+        default=(0.0, None),
+    )
+
+
+def _schedule(
+    spec: BatterySpec,
+    robots: Sequence[GoHome],
+    ahead: Sequence[Sequence[float]],
+    order: Sequence[int],
+) -> dict[int, tuple[int | None, float]]:
+    """One pass of :func:`go_home_points`: the robots in ``order``, each counting the earlier
+    ones still at a dock when it falls due; per robot its dock and go-home point."""
+    fill_s = (spec.recharge_to - spec.recharge_threshold) * spec.capacity_s / spec.charge_rate
+    none: list[list[float]] = [[] for _ in ahead]
+    out: dict[int, tuple[int | None, float]] = {}
+    leaves: list[tuple[int, float]] = []  # (dock, when it is off it, s from now) of those before
+    for i in order:
+        trips = robots[i].trips_s
+        point, k = _cheapest(spec, trips, ahead, none)
+        extra: list[list[float]] = none
+        for _ in range(len(robots) + 1):
+            due_s = max(robots[i].charge - point, 0.0) * spec.capacity_s
+            extra = [
+                [spec.recharge_threshold for kj, off in leaves if kj == kk and off > due_s]
+                for kk in range(len(ahead))
+            ]
+            again, k = _cheapest(spec, trips, ahead, extra)
+            if again == point:
+                break
+            point = again
+        out[i] = (k, point)
+        if k is not None:
+            wait_s = queue_wait_s(spec, [*ahead[k], *extra[k]])
+            leaves.append((k, due_s + trips[k] + wait_s + fill_s))
+    return out
 
 
 @dataclass(frozen=True)

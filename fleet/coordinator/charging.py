@@ -5,17 +5,19 @@ that can do none of the open work on its charge, is sent to charge: the work it 
 back (the unswept remainder of the task it drives and its unstarted tasks go back to the market,
 as a lost robot's do, none of them counted as tried by it), and it gets a plan to a dock, driven
 like any plan: the transit (A* on the floor plan) to a point in front of the dock, then straight
-onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: the nearest
-dock no robot holds is taken; when every one is held the robot waits at a waiting spot by the
-nearest (free floor near it, clear of its approach), in the order the robots came, and goes on
-once the dock is free. A robot that makes no progress on its trip for the stall time gets it
+onto it, so it arrives facing the dock as the dock needs. A dock holds one robot: a robot going
+to charge takes the dock its charge covers that it is on soonest, its trip and its wait behind the
+robots ahead there counted (``planners.battery.pick_dock``); when that dock is held it waits at a
+waiting spot by it (free floor near it, clear of its approach), in the order the robots came, and
+goes on once the dock is free. At the job's end a robot parks at the nearest dock no robot holds,
+else waits by the nearest. A robot that makes no progress on its trip for the stall time gets it
 planned again from where it stands, then another dock or waiting spot
-(:meth:`Docking.stalled`). A dock with a body on it or on the line onto it (a lost robot's, or one
-whose battery ran out) is not used; a robot with no dock left works until it runs out. The
-charge below which a robot is sent counts its trip and the queue
-ahead of it at that dock (:meth:`Docking.go_home_below`). On the dock it charges until
-``recharge_to`` and is back in the market. At the end of the job every robot is sent home the
-same way, and the job is finished once each is on a dock or at its waiting spot.
+(:meth:`Docking.stalled`). A dock with a body on it or on the line onto it (a lost robot's, or
+one whose battery ran out) is not used; a robot with no dock left works until it runs out. The
+charge below which a robot is sent counts its trip and the queue ahead of it at that dock, the
+robots at work that fall due with or before it included (:meth:`Docking.go_home_below`). On the
+dock it charges until ``recharge_to`` and is back in the market. At the end of the job every
+robot is sent home, and the job is finished once each is on a dock or at its waiting spot.
 
 What the coordinator knows of a battery is what the robot's status says (its charge, whether a
 dock charges it), and nothing from the simulator.
@@ -26,18 +28,19 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from fleet.coordinator import go_home
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import EMPTY, LOST
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
-from planners.battery import BatterySpec, DockUser, go_home_below
+from planners.battery import BatterySpec, DockUser, pick_dock
 from planners.grid import clearance
 from planners.polyline import without_straight_vertices
 
@@ -68,7 +71,8 @@ class Trip:
     """A robot's way home: to ``dock`` (its index) or, ``waiting``, to a spot by it; ``plan``
     the plan sent; ``parking``: the job is over; ``tries`` of docking so far, ``stalls``: how
     often it has stood still on its way, ``sent_wall`` when the plan last went out (wall s),
-    ``ended`` when it was first seen at the plan's end (sim s)."""
+    ``ended`` when it was first seen at the plan's end (sim s); ``clearing``: a charged robot
+    sent off the dock to a spot, back in the market once there."""
 
     dock: int
     waiting: bool
@@ -78,6 +82,7 @@ class Trip:
     stalls: int = 0
     sent_wall: float = 0.0
     ended: float | None = None
+    clearing: bool = False
 
 
 class Docking:
@@ -135,7 +140,7 @@ class Docking:
         dock = self.docks[k]
         return not self.planner.near_bodies(np.vstack([_approach(dock), dock[:2]]))
 
-    def _trip_s(self, k: int, xy: tuple[float, float]) -> float:
+    def trip_to(self, k: int, xy: tuple[float, float]) -> float:
         """Travel time on the floor plan from ``xy`` to dock ``k`` (inf where there is no way):
         the dock in the next room may be nearer as the crow flies than this room's."""
         return float(self.travel(np.array(self.docks[k][:2]), np.array([xy]))[0])
@@ -146,22 +151,7 @@ class Docking:
             for k in range(len(self.docks))
             if self.usable(k) and (not free_only or self.holder(k) is None)
         ]
-        return min(ks, key=lambda k: self._trip_s(k, xy), default=None)
-
-    def nearest_first(self, rids: list[str]) -> list[str]:
-        """``rids`` in the order to send them home so that each free dock goes to the robot
-        nearest it (greedy matching over robot–dock pairs by travel time, the nearest pair
-        first), then the robots left over (they wait) in the given order. Sent one by one in id
-        order, the first robot would take the dock nearest it even when another robot stands
-        by that dock, and the other would cross the floor to the far one."""
-        free = [k for k in range(len(self.docks)) if self.free(k)]
-        first = nearest_pairs_first(
-            (self._trip_s(k, xy), rid, k)
-            for rid in rids
-            for k in free
-            if (xy := self.job.robots[rid].xy) is not None
-        )
-        return first + [rid for rid in rids if rid not in first]
+        return min(ks, key=lambda k: self.trip_to(k, xy), default=None)
 
     def ahead(self, k: int) -> list[float]:
         """The charges of the robots ahead of a newcomer at dock ``k``: on their way to it,
@@ -172,27 +162,23 @@ class Docking:
         ]
 
     def go_home_below(self, rid: str) -> float:
-        """The charge below which ``rid`` goes to charge now: the threshold plus its trip to the
-        dock it would be sent to (the nearest free one, else the nearest) and the wait behind
-        the robots ahead of it there (``planners.battery.go_home_below``)."""
-        r = self.job.robots[rid]
-        k = None if r.xy is None else self._nearest(r.xy, free_only=True)
-        if k is None and r.xy is not None:
-            k = self._nearest(r.xy, free_only=False)
-        if k is None or r.xy is None:
-            return 0.0  # no dock it can charge on: it works until it runs out
-        return go_home_below(self.spec, self._trip_s(k, r.xy), self.ahead(k))
+        """The charge below which ``rid`` goes to charge now (0: no dock it can charge on; it
+        works until it runs out): the threshold plus its trip to the dock it would take and its
+        wait there behind the robots ahead of it, those at work that fall due with or before it
+        included (:func:`fleet.coordinator.go_home.points`)."""
+        found = go_home.points(self).get(rid)
+        return found[1] if found is not None else go_home.alone(self, rid)[1]
 
     def dock_user(self, rid: str) -> tuple[int, DockUser] | None:
-        """The dock ``rid`` would charge at (the nearest it can use) and what the stagger rule
-        needs of it (``planners.battery.charge_early``): its charge, its trip there and its
-        seconds of work, at the sweeping drain, until it falls to its go-home point."""
+        """The dock ``rid`` would charge at and what the stagger rule needs of it
+        (``planners.battery.charge_early``): its charge, its trip there and its seconds of
+        work, at the sweeping drain, until it falls to its go-home point with the docks as they
+        stand (the stagger rule orders the robots at work at a dock itself)."""
+        k, below = go_home.alone(self, rid)
         r = self.job.robots[rid]
-        k = None if r.xy is None else self._nearest(r.xy, free_only=False)
         if k is None or r.xy is None:
             return None
-        trip_s = self._trip_s(k, r.xy)
-        below = go_home_below(self.spec, trip_s, self.ahead(k))
+        trip_s = self.trip_to(k, r.xy)
         return k, DockUser(r.charge, trip_s, (r.charge - below) * self.spec.capacity_s)
 
     def free(self, k: int) -> bool:
@@ -215,15 +201,22 @@ class Docking:
     # ---- trips ------------------------------------------------------------------------------
 
     def send(self, rid: str, why: str, parking: bool) -> bool:
-        """Send ``rid`` (with no work) home: to the nearest free dock, else to wait by the
-        nearest; False when there is no way there."""
+        """Send ``rid`` (with no work) home; False when there is no way there. To charge: to
+        the dock its charge covers that it is on soonest, counting the robots ahead there
+        (``planners.battery.pick_dock``), to wait by it when it is held. To park at the job's
+        end: to the nearest free dock, else to wait by the nearest."""
         r = self.job.robots[rid]
         if r.xy is None or not self.docks:
             return False
-        k = self._nearest(r.xy, free_only=True)
-        waiting = k is None
-        if k is None:
-            k = self._nearest(r.xy, free_only=False)
+        if parking:
+            k = self._nearest(r.xy, free_only=True)
+            waiting = k is None
+            if k is None:
+                k = self._nearest(r.xy, free_only=False)
+        else:
+            ahead = [self.ahead(k) for k in range(len(self.docks))]
+            k = pick_dock(self.spec, r.charge, go_home.trips_s(self, r.xy), ahead)
+            waiting = k is not None and self.holder(k) is not None
         if k is None:
             return False
         r.docking = "waiting" if waiting else "docking"
@@ -294,16 +287,26 @@ class Docking:
         if r.charging and on_its_dock and r.docking == "docking":
             r.docking = "charging"
             self.journal.event("charging", rid, self.trips[rid].plan.task, f"at {msg.charge:.2f}")
+        elif t and r.docking == "charging" and not r.charging and r.charge < self.spec.recharge_to:
+            # it stopped off the dock (pushed, or it only passed within the dock's tolerance):
+            # docking again, as a robot at the end of its plan that does not charge
+            r.docking = "docking"
+            self.journal.event("dock", rid, t.plan.task, f"off the dock at {r.charge:.2f}")
 
     def tick(self, job_over: bool) -> list[str]:
         """Move the trips on: robots charged back to work (returned), waiting robots onto
         freed docks, a missed docking tried again, lost plans sent again."""
         back = []
         now = self.journal.clock
+        _clear_docks(self)
         for rid, t in list(self.trips.items()):
             r = self.job.robots[rid]
-            if r.liveness == LOST:
+            if r.liveness == LOST or (t.clearing and self._at_end(rid, t)):
                 self._drop(rid)
+                back += [rid] if t.clearing else []
+                continue
+            if t.clearing:
+                self._resend(rid)
                 continue
             if not self.usable(t.dock) and not r.charging:
                 if self._blocked(rid, t):
@@ -347,7 +350,7 @@ class Docking:
             if k != t.dock and self.usable(k) and self.holder(k) is None
         ]
         if others:
-            k = min(others, key=lambda k: self._trip_s(k, r.xy))
+            k = min(others, key=lambda k: self.trip_to(k, r.xy))
             r.docking = "docking"
             sent = self._go(rid, k, False, t.parking, 1, stalls)
             where = f"to dock {k}"
@@ -422,6 +425,31 @@ class Docking:
         return True
 
 
+def _clear_docks(docking: Docking) -> None:
+    """A robot charged to ``recharge_to`` and without work that stands on a dock a robot waits
+    by (at its spot) holds it until it wins work, while the waiting robot runs down; and it does
+    not step aside (the waiting one's path stops short of it). It is sent to a waiting spot by
+    that dock, out of the market until it is there."""
+    job = docking.job
+    for k in range(len(docking.docks)):
+        rid = docking.holder(k)
+        if rid is None or rid in docking.trips or job.queue(rid):
+            continue
+        r = job.robots[rid]
+        waited = any(
+            t.dock == k and t.waiting and docking._at_end(other, t)
+            for other, t in docking.trips.items()
+        )
+        if not waited or r.charge < docking.spec.recharge_to:
+            continue
+        r.docking = "waiting"
+        if docking._go(rid, k, True, False):
+            docking.trips[rid].clearing = True
+            docking.journal.event("dock", rid, f"{WAIT_PREFIX}{k}", "charged: clears the dock")
+        else:
+            r.docking = ""
+
+
 def waiting_spots(
     planner: TaskPlanner, dock: Pose, docks: Sequence[Pose], n: int = 8
 ) -> list[tuple[float, float]]:
@@ -445,19 +473,6 @@ def waiting_spots(
             if len(out) == n:
                 break
     return out
-
-
-def nearest_pairs_first(pairs: Iterable[tuple[float, str, int]]) -> list[str]:
-    """Greedy matching of robots to docks over ``pairs`` (travel time, robot, dock): the
-    nearest pair first, then the nearest of the robots and docks left; the robots matched, in
-    that order."""
-    first: list[str] = []
-    taken: set[int] = set()
-    for _, rid, k in sorted(pairs):
-        if rid not in first and k not in taken:
-            first.append(rid)
-            taken.add(k)
-    return first
 
 
 def _approach(dock: Pose, ahead: float = APPROACH_M) -> np.ndarray:

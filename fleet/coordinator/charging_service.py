@@ -32,6 +32,7 @@ from collections.abc import Callable
 import numpy as np
 
 from fleet.bus import Bus
+from fleet.coordinator import go_home
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.charging import Docking, Pose
 from fleet.coordinator.job import ASSIGNED, EMPTY, LOST, OPEN, Job, TaskRecord
@@ -252,12 +253,8 @@ class ChargingCoordinator(Coordinator):
         assert isinstance(market, ChargingMarket)
         if self.docking.tick(self.job.finished):
             market.need_auction = True
-        home = {
-            rid: (why, parking)
-            for rid, why, parking in going_home(self.job, self.docking.go_home_below)
-        }
-        for rid in self.docking.nearest_first(list(home)):
-            market.send_home(rid, *home[rid])
+        for rid, why, parking in homeward(self.job, self.docking):
+            market.send_home(rid, why, parking)
         for rid, why in charging_early(self.job, self.docking):
             market.send_home(rid, why)
         market.check_flat()
@@ -279,6 +276,24 @@ def going_home(job: Job, below: Callable[[str], float]) -> list[tuple[str, str, 
         elif r.in_market and r.charge >= 0 and r.charge < (need := below(rid)):
             out.append((rid, f"charge {r.charge:.3f} below {need:.3f}", False))
     return out
+
+
+def homeward(job: Job, docking: Docking) -> list[tuple[str, str, bool]]:
+    """:func:`going_home` in the order to send them: at the job's end so that each free dock
+    goes to the robot nearest it (``go_home.nearest_first``); before it in the order they
+    fall due, the order their go-home points were counted in (``go_home.points``),
+    so each robot finds the docks as its go-home point counted them."""
+    points = go_home.points(docking)
+
+    def below(rid: str) -> float:
+        return points[rid][1] if rid in points else docking.go_home_below(rid)
+
+    home = {rid: (why, parking) for rid, why, parking in going_home(job, below)}
+    if job.finished:
+        order = go_home.nearest_first(docking, list(home))
+    else:
+        order = [rid for rid in points if rid in home] + [r for r in home if r not in points]
+    return [(rid, *home[rid]) for rid in order]
 
 
 def charging_early(job: Job, docking: Docking) -> list[tuple[str, str]]:

@@ -19,8 +19,14 @@ from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M, Docking
-from fleet.coordinator.charging_service import ChargingMarket, charging_early, going_home
+from fleet.coordinator.charging_service import (
+    ChargingMarket,
+    charging_early,
+    going_home,
+    homeward,
+)
 from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.go_home import nearest_first
 from fleet.coordinator.job import DONE, EMPTY, OPEN, STRANDED, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
@@ -41,7 +47,7 @@ from fleet.protocol import (
 from fleet.report.summary import job_report
 from fleet.world import World, load_world
 from planners.auction import Task
-from planners.battery import BatterySpec, makespan_with_charging
+from planners.battery import BatterySpec, go_home_below, makespan_with_charging
 from planners.coverage.params import CoverageParams
 
 KEYS = Keys("test")
@@ -172,6 +178,7 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     assert f.job.robots["robot-0"].docking == "charging"
     assert f.docking.tick(False) == [] and len(f.plans("robot-1")) == 1  # still taken
     f.status("robot-0", 0.95, True, to_dock, done=True)
+    f.job.award("t00", "robot-0", False)  # it has work: it drives off the dock to it
     assert f.docking.tick(False) == ["robot-0"]
     assert "robot-0" in f.job.market()
     assert len(f.plans("robot-1")) == 1  # robot-0 still stands on the dock
@@ -227,9 +234,10 @@ def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_d
     it): 0.08 on a 100 s charge. At a charge between the two it stays at work alone and goes
     behind the queue."""
     f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
-    alone = f.docking.go_home_below("robot-2")
+    alone = go_home_below(SPEC, f.docking.trip_to(0, f.job.robots["robot-2"].xy), [])
     assert SPEC.recharge_threshold < alone < SPEC.recharge_threshold + 0.2  # the trip
     f.job.robots["robot-2"].charge = alone + 0.04
+    assert f.docking.go_home_below("robot-2") == pytest.approx(alone)  # the others far from due
     assert going_home(f.job, f.docking.go_home_below) == []
     for rid in ("robot-0", "robot-1"):
         f.job.robots[rid].charge = 0.1
@@ -392,7 +400,7 @@ def test_at_the_end_of_the_job_each_dock_goes_to_the_robot_nearest_it(corridor: 
     for rec in f.job.tasks.values():
         rec.state = DONE
     home = {rid: (why, p) for rid, why, p in going_home(f.job, f.docking.go_home_below)}
-    for rid in f.docking.nearest_first(list(home)):
+    for rid in nearest_first(f.docking, list(home)):
         f.market.send_home(rid, *home[rid])
     tasks = {rid: f.plans(rid)[-1].task for rid in where}
     assert tasks == {"robot-0": "wait-1", "robot-1": "dock-1", "robot-2": "dock-0"}, tasks
@@ -424,7 +432,7 @@ def test_a_robot_passing_over_another_dock_on_its_way_is_not_charging_on_its_own
     f.job.robots["robot-0"].xy = (1.0, 0.6)
     f.market.send_home("robot-0", "charge low", False)  # it takes the left dock
     f.job.robots["robot-1"].xy = (1.2, 2.2)
-    f.market.send_home("robot-1", "charge low", False)
+    f.market.send_home("robot-1", "the job is done", True)  # to the free dock
     (trip,) = f.plans("robot-1")
     assert trip.task == "dock-1"
     f.job.robots["robot-1"].xy = (0.5, 1.5)  # over the left dock
@@ -465,3 +473,92 @@ def test_of_two_robots_falling_due_together_the_first_is_sent_to_the_free_dock_e
     assert charging_early(f.job, f.docking) == []
     f.job.add_tasks(tuple(_task(i) for i in range(4, 8)))  # unless much work is still on sale
     assert [rid for rid, _ in charging_early(f.job, f.docking)] == ["robot-1"]
+
+
+def test_of_two_robots_falling_due_in_one_tick_by_one_dock_the_second_waits_on_a_reserve_for_it(
+    corridor: World,
+) -> None:
+    """The corridor world at capacity 120 s: robot-1 and robot-2, both in the right room, fall
+    due in the same tick, the right room's dock near both. One takes it; the other waits by it
+    (behind a charge of about 21 s at the idle drain) rather than cross the corridor to the left
+    one (a trip of some 25 s at the sweeping drain), and the charge each is sent on covers the
+    reserve for where it is actually sent: its trip there and the robot ahead of it."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    spec = BatterySpec(enabled=True, capacity_s=120.0)
+    f.docking.spec = f.market.battery = spec
+    where = {"robot-0": (1.2, 2.2), "robot-1": (6.2, 0.6), "robot-2": (6.0, 2.5)}
+    for rid, xy in where.items():
+        r = f.job.robot(rid)
+        r.ready, r.xy, r.charge = True, xy, 0.9
+    for _ in range(3):  # each a step below its go-home point, counting the other's charge
+        for rid in ("robot-1", "robot-2"):
+            f.job.robots[rid].charge = f.docking.go_home_below(rid) - 0.001
+    home = homeward(f.job, f.docking)
+    assert sorted(rid for rid, _, _ in home) == ["robot-1", "robot-2"]
+    ahead: dict[int, list[float]] = {}
+    for rid, why, parking in home:
+        f.market.send_home(rid, why, parking)
+        trip = f.plans(rid)[-1]
+        k = int(trip.task.split("-")[1])
+        r = f.job.robots[rid]
+        reserve = go_home_below(spec, f.docking.trip_to(k, r.xy), ahead.get(k, []))
+        assert r.charge > reserve - 0.002, (rid, trip.task, r.charge, reserve)  # fell due by 0.001
+        ahead.setdefault(k, []).append(r.charge)
+    tasks = sorted(f.plans(rid)[-1].task for rid in ("robot-1", "robot-2"))
+    assert tasks == ["dock-1", "wait-1"], tasks
+
+
+def test_a_charged_robot_without_work_on_the_dock_is_sent_off_it_for_a_waiting_robot(
+    corridor: World,
+) -> None:
+    """robot-2 has charged on the right room's dock and won no work: it holds the dock, so
+    robot-0, sent to charge, waits by it; but it would stand there until it won work (and it
+    does not step aside: robot-0's path stops short of it). So once robot-0 stands at its
+    waiting spot, robot-2 is sent to another spot and robot-0 onto the dock; robot-2 is back in
+    the market once at its spot. Below ``recharge_to`` it stays and charges."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
+    spec = BatterySpec(enabled=True, capacity_s=120.0)
+    f.docking.spec = f.market.battery = spec
+    on_dock = (corridor.docks[1][0] - 0.04, corridor.docks[1][1])
+    for rid, xy, charge in (("robot-0", (6.2, 0.6), 0.3), ("robot-2", on_dock, 0.92)):
+        r = f.job.robot(rid)
+        r.ready, r.xy, r.charge, r.charging = True, xy, charge, rid == "robot-2"
+    assert f.docking.holder(1) == "robot-2"
+    f.market.send_home("robot-0", "charge low", False)
+    (wait,) = f.plans("robot-0")
+    assert wait.task == "wait-1"
+    f.docking.tick(False)
+    assert f.plans("robot-0") == [wait] and not f.plans("robot-2")  # not at its spot yet
+    f.status("robot-0", 0.28, False, wait, done=True)
+    f.job.robots["robot-2"].charge = 0.85
+    f.docking.tick(False)
+    assert f.plans("robot-0") == [wait] and not f.plans("robot-2")
+    f.job.robots["robot-2"].charge = 0.92
+    assert f.docking.tick(False) == []
+    (off,) = f.plans("robot-2")
+    assert off.task == "wait-1" and "robot-2" not in f.job.market()
+    assert not np.allclose(off.waypoints[-1], wait.waypoints[-1])
+    assert f.plans("robot-0")[-1].task == "dock-1"
+    f.status("robot-2", 0.92, False, off, done=True)
+    assert f.docking.tick(False) == ["robot-2"] and "robot-2" in f.job.market()
+
+
+def test_a_robot_that_stops_charging_off_its_dock_docks_again(
+    planner: TaskPlanner, world: World
+) -> None:
+    """robot-0 charged on arriving at the dock, then stopped charging below ``recharge_to``
+    (it stood just off the dock's tolerance): it is docking again and, after the grace,
+    drives onto the dock again instead of standing there until it runs out."""
+    f = Fleet(planner, world, ["robot-0"])
+    f.job.robots["robot-0"].charge = 0.15
+    f.market.send_home("robot-0", "low", False)
+    (trip,) = f.plans("robot-0")
+    f.status("robot-0", 0.15, True, trip, done=True)
+    assert f.job.robots["robot-0"].docking == "charging"
+    f.status("robot-0", 0.3, False, trip, done=True)
+    assert f.job.robots["robot-0"].docking == "docking"
+    f.docking.tick(False)
+    f.journal.clock = 10.0
+    f.docking.tick(False)
+    (_, again) = f.plans("robot-0")
+    assert again.task == "dock-0" and again.plan_id != trip.plan_id

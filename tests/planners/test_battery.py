@@ -16,15 +16,18 @@ from fleet.params import default_config_path, load_fleet_config
 from planners.battery import (
     BatterySpec,
     DockUser,
+    GoHome,
     can_take,
     charge_early,
     charge_per_s,
     docking_heading,
     drain_per_s,
     go_home_below,
+    go_home_points,
     latest_leave_s,
     makespan_with_charging,
     on_dock,
+    pick_dock,
     queue_wait_s,
     work_charge,
 )
@@ -205,3 +208,69 @@ def test_the_config_names_the_battery_field_it_refuses(tmp_path: Path) -> None:
 
 def test_batteries_are_off_by_default() -> None:
     assert not load_fleet_config().robot.battery.enabled
+
+
+CORRIDOR = BatterySpec(enabled=True, capacity_s=120.0)
+
+
+def test_pick_dock_waits_by_the_near_dock_when_that_is_sooner_than_crossing() -> None:
+    """Near dock 5 s away with a robot ahead charging from 0.25 (about 20 s), far dock 40 s
+    away and free: the near one is on soonest; with two robots ahead (about 40 s) the far one
+    is, if the charge covers the trip; with a charge covering neither, the one needing least."""
+    one, two = [0.25], [0.25, 0.25]
+    assert pick_dock(CORRIDOR, 0.8, (5.0, 40.0), [one, []]) == 0
+    assert pick_dock(CORRIDOR, 0.8, (5.0, 40.0), [[*two, 0.25], []]) == 1
+    need_far = go_home_below(CORRIDOR, 40.0, [])
+    need_near = go_home_below(CORRIDOR, 5.0, [*two, 0.25])
+    assert need_near < need_far  # waiting costs less charge than the trip across
+    assert pick_dock(CORRIDOR, (need_near + need_far) / 2, (5.0, 40.0), [[*two, 0.25], []]) == 0
+    assert pick_dock(CORRIDOR, 0.1, (5.0, math.inf), [[], []]) == 0
+    assert pick_dock(CORRIDOR, 0.8, (math.inf, math.inf), [[], []]) is None
+
+
+def test_two_robots_falling_due_together_by_one_dock_count_each_other() -> None:
+    """Robots 0 and 1, 5 s and 8 s from dock 0 (dock 1 40 s off), fall due together: each
+    point holds the wait behind the other charging from the threshold at dock 0 (less than the
+    trip across), whichever the docks take first; robot 0, the nearer to its point, goes first.
+    A robot due long after the other has charged and left counts no one."""
+    spec = CORRIDOR
+    alone0 = go_home_below(spec, 5.0, [])
+    alone1 = go_home_below(spec, 8.0, [])
+    robots = [GoHome(alone0 - 0.001, (5.0, 40.0)), GoHome(alone1, (8.0, 40.0))]
+    out = go_home_points(spec, robots, [[], []])
+    assert [i for i, _, _ in out] == [0, 1]
+    behind0 = go_home_below(spec, 5.0, [spec.recharge_threshold])
+    behind1 = go_home_below(spec, 8.0, [spec.recharge_threshold])
+    assert behind1 < go_home_below(spec, 40.0, [])
+    assert out[0][1:] == (0, pytest.approx(behind0))
+    assert out[1][1:] == (0, pytest.approx(behind1))
+    late = GoHome(0.95, (8.0, 40.0))  # 0.7 of a charge (84 s) from due: robot 0 is long gone
+    out = go_home_points(spec, [robots[0], late], [[], []])
+    assert out[0][1:] == (0, pytest.approx(alone0))
+    assert out[1][1:] == (0, pytest.approx(alone1))
+    off = BatterySpec(enabled=False)
+    assert go_home_points(off, robots, [[], []]) == [(0, None, 0.0), (1, None, 0.0)]
+
+
+def test_a_robot_that_counting_the_other_makes_due_first_is_counted_by_it() -> None:
+    """Robot 0 is 0.02 above its point alone, robot 1 0.03 above: counting robot 0 ahead of
+    it (0.035 at the idle drain) puts robot 1 below its point before robot 0 reaches its
+    point alone, so robot 0's point must count robot 1 too (one pass in the order they fall due
+    alone would leave robot 0 on its point alone): they count each other."""
+    spec = CORRIDOR
+    alone0 = go_home_below(spec, 5.0, [])
+    alone1 = go_home_below(spec, 8.0, [])
+    robots = [GoHome(alone0 + 0.02, (5.0, 40.0)), GoHome(alone1 + 0.03, (8.0, 40.0))]
+    out = dict((i, (k, p)) for i, k, p in go_home_points(spec, robots, [[], []]))
+    assert out[1] == (0, pytest.approx(go_home_below(spec, 8.0, [spec.recharge_threshold])))
+    assert out[0] == (0, pytest.approx(go_home_below(spec, 5.0, [spec.recharge_threshold])))
+
+
+def test_a_robot_whose_near_dock_is_held_long_counts_the_trip_across() -> None:
+    """Two robots already bound for dock 0 and one falling due before it there: waiting would
+    cost more charge (0.155 over the threshold and its 6 s trip) than the 10 s trip to dock 1,
+    so its point is the trip across."""
+    spec = CORRIDOR
+    robots = [GoHome(0.3, (5.0, 40.0)), GoHome(0.5, (6.0, 10.0))]
+    out = go_home_points(spec, robots, [[0.2, 0.2], []])
+    assert out[1][1:] == (1, pytest.approx(go_home_below(spec, 10.0, [])))
