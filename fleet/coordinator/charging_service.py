@@ -286,7 +286,7 @@ def homeward(job: Job, docking: Docking) -> list[tuple[str, str, bool]]:
     points = go_home.points(docking)
 
     def below(rid: str) -> float:
-        return points[rid][1] if rid in points else docking.go_home_below(rid)
+        return points[rid][1] if rid in points else go_home.alone(docking, rid)[1]
 
     home = {rid: (why, parking) for rid, why, parking in going_home(job, below)}
     if job.finished:
