@@ -14,8 +14,9 @@ joined). What SLAM's own error explains is left out:
   or more from every cell the robots saw occupied at all;
 - a robot's body (a peer the scan's cut-out missed): occupied cells within ``robot_clear_m`` of
   a robot's centre;
-- specks and slivers: a blob whose extent (the longer side of its bounding box) is under
-  ``min_size_m``;
+- specks and slivers: an added blob whose extent (the longer side of its bounding box) is
+  under ``min_size_m``, a freed one whose shorter side is (the stored map's wall cells that a
+  face only halves are seen free along it);
 - floor the stored map never knew (corners exploring did not reach): a freed blob counts only if
   it holds a cell the stored map marks occupied.
 
@@ -129,7 +130,16 @@ def find_changes(
         for blob in _blobs(freed)
         if stored_occupied[blob].any()
     ]
-    return tuple(ch for ch in out if ch.size_m >= params.min_size_m)
+    return tuple(ch for ch in out if _big_enough(ch, params.min_size_m))
+
+
+def _big_enough(change: MapChange, min_size_m: float) -> bool:
+    """An added blob's longer side, a freed blob's shorter side at least ``min_size_m``: the
+    faces of furniture moved in are thin, the floor it leaves is not (a freed sliver is a stored
+    wall cell that a face only halves)."""
+    x0, y0, x1, y1 = change.bounds
+    sides = (x1 - x0, y1 - y0)
+    return (max(sides) if change.kind == ADDED else min(sides)) >= min_size_m - 1e-9
 
 
 def _blobs(mask: np.ndarray) -> list[np.ndarray]:

@@ -123,6 +123,21 @@ def test_specks_and_cells_never_seen_are_no_change() -> None:
     assert find_changes(seen, stored, PARAMS) == ()
 
 
+def test_a_stored_face_seen_free_along_its_length_is_no_obstacle_taken_away() -> None:
+    # a table as an explored map has it: faces occupied, its inside unknown; the robots see
+    # its south face's cells free (the true face halves them) and its other faces occupied
+    stored = room_stored()
+    stored.occupied[26:38, 40:56] = True
+    seen = room_seen()
+    seen.log_odds[26:38, 40:56] = 0.0
+    seen.log_odds[26, 40:56] = L_FREE
+    seen.log_odds[27:38, 40] = seen.log_odds[27:38, 55] = seen.log_odds[37, 40:56] = L_OCC
+    assert find_changes(seen, stored, PARAMS) == ()
+    # the whole table seen free: it was taken away
+    seen.log_odds[26:38, 40:56] = L_FREE
+    assert [c.kind for c in find_changes(seen, stored, PARAMS)] == [REMOVED]
+
+
 def test_floor_exploring_did_not_reach_is_no_obstacle_taken_away() -> None:
     # the stored map left a corner unknown; the robots now see it free
     stored = room_stored()
