@@ -12,8 +12,8 @@ joined). What SLAM's own error explains is left out:
 - walls a cell or two off the stored map's: an occupied cell counts only ``wall_margin_m`` or
   more from the stored map's obstacles and unknown cells, and a free cell only ``wall_margin_m``
   or more from every cell the robots saw occupied at all;
-- a robot's body (a peer the scan's cut-out missed): occupied cells within ``robot_clear_m`` of
-  a robot's centre;
+- a robot's body (a peer the scan's cut-out missed): an occupied blob whose cells all lie
+  within ``robot_clear_m`` of a robot's centre (a face a robot stands beside reaches beyond);
 - specks and slivers: an added blob whose extent (the longer side of its bounding box) is
   under ``min_size_m``, a freed one whose shorter side is (the stored map's wall cells that a
   face only halves are seen free along it);
@@ -120,12 +120,17 @@ def find_changes(
     room = np.where(inside, clearance(stored)[r, c], 0.0)
     stored_occupied = inside & stored.occupied[r, c]
     added = (seen.log_odds >= level) & (room >= params.wall_margin_m)
+    body = np.zeros(seen.shape, dtype=bool)
     for p in np.asarray(robots_xy if robots_xy is not None else (), float).reshape(-1, 2):
-        added &= np.hypot(xy[..., 0] - p[0], xy[..., 1] - p[1]) > params.robot_clear_m
+        body |= np.hypot(xy[..., 0] - p[0], xy[..., 1] - p[1]) <= params.robot_clear_m
     seen_walls = ndimage.distance_transform_edt(seen.log_odds <= 0) * seen.resolution
     freed = (seen.log_odds <= -level) & inside & ~stored.free[r, c]
     freed &= seen_walls >= params.wall_margin_m
-    out = [MapChange(ADDED, xy[blob], seen.resolution) for blob in _blobs(added)] + [
+    out = [
+        MapChange(ADDED, xy[blob], seen.resolution)
+        for blob in _blobs(added)
+        if not body[blob].all()
+    ] + [
         MapChange(REMOVED, xy[blob], seen.resolution)
         for blob in _blobs(freed)
         if stored_occupied[blob].any()

@@ -112,6 +112,13 @@ def test_a_peer_seen_in_one_scan_is_no_change() -> None:
     assert [c.kind for c in find_changes(seen, room_stored(), PARAMS)] == [ADDED]
 
 
+def test_a_face_seen_beside_a_robot_is_a_change() -> None:
+    seen = room_seen()
+    seen.log_odds[40, 20:30] = L_OCC  # a face 0.5 m long, y 2.0–2.05
+    robot = np.array([[1.25, 2.25]])  # 0.2 m north of its middle
+    assert [c.kind for c in find_changes(seen, room_stored(), PARAMS, robot)] == [ADDED]
+
+
 def test_specks_and_cells_never_seen_are_no_change() -> None:
     seen = room_seen()
     seen.log_odds[20:22, 20:22] = L_OCC  # a 10 cm speck
