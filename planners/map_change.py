@@ -21,12 +21,14 @@ joined). What SLAM's own error explains is left out:
   it holds a cell the stored map marks occupied.
 
 An added blob is what the scans saw of the furniture: its faces towards the robots, not its
-inside; :func:`obstacle_cells` fills what the faces enclose.
+inside; :func:`obstacle_cells` takes the box they span, joined with what was found of the same
+piece before.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -156,17 +158,30 @@ def _blobs(mask: np.ndarray) -> list[np.ndarray]:
     return [b for i in range(1, n + 1) if (b := mask & (labels == i)).any()]
 
 
-def obstacle_cells(change: MapChange) -> np.ndarray:
-    """An added blob's cells and those its faces enclose (holes filled), (K, 2) world centres
-    on the blob's own lattice."""
+def obstacle_cells(
+    change: MapChange, earlier: Sequence[np.ndarray] = (), join_m: float = 0.0
+) -> tuple[np.ndarray, list[int]]:
+    """An added blob as an obstacle: every cell of the box its cells span, joined with the
+    obstacles of ``earlier`` changes ((K, 2) world centres each) that come within ``join_m`` of
+    it; (the box's cell centres on the blob's own lattice, the indices of ``earlier`` joined).
+
+    Scans see furniture's faces towards the robots, not its inside nor its far faces: two faces
+    seen at a corner span the whole of a box, one face only itself, and a face seen later from
+    another side (a change of its own: it lies ``wall_margin_m`` or more from what was put on
+    the map before) spans the whole piece once joined with it. Nothing passes between pieces
+    ``join_m`` apart, so filling the gap between them costs no floor a robot reaches."""
+    cells = np.asarray(change.cells, float).reshape(-1, 2)
+    joined = []
+    for i, other in enumerate(earlier):
+        gaps = np.hypot(*(cells[:, None, :] - np.asarray(other)[None, :, :]).transpose(2, 0, 1))
+        if gaps.min() <= join_m + 1e-9:
+            joined.append(i)
+    every = np.vstack([cells, *(np.asarray(earlier[i]) for i in joined)])
     res = change.cell_size
-    lo = change.cells.min(axis=0)
-    ij = np.rint((change.cells - lo) / res).astype(int)
-    mask = np.zeros((ij[:, 1].max() + 1, ij[:, 0].max() + 1), bool)
-    mask[ij[:, 1], ij[:, 0]] = True
-    filled = ndimage.binary_fill_holes(mask)
-    rows, cols = np.nonzero(filled)
-    return lo + np.stack([cols, rows], axis=-1) * res
+    lo = every.min(axis=0)
+    n = np.rint((every.max(axis=0) - lo) / res).astype(int) + 1
+    cols, rows = np.meshgrid(np.arange(n[0]), np.arange(n[1]))
+    return lo + np.stack([cols.ravel(), rows.ravel()], axis=-1) * res, joined
 
 
 def with_cells(grid: GridMap, cells: np.ndarray, cell_size: float, occupied: bool) -> GridMap:

@@ -9,8 +9,9 @@ occupied on its floor, or free on its obstacles, away from its walls and from th
 change found:
 
 - is told in a ``map changed`` event: what, where and how big, in world metres;
-- goes onto the planning map (new furniture occupied: its faces seen and what they enclose;
-  furniture taken away free) and onto the stored map later looks compare with, so a change is
+- goes onto the planning map (new furniture occupied: the box its faces seen span, joined with
+  what was found of it before, ``planners.map_change.obstacle_cells``; furniture taken away
+  free) and onto the stored map later looks compare with, so a change is
   told once (more of the same piece, seen later from another side, is a change of its own);
 - for new furniture: every open or assigned task whose path runs through it is taken back from
   its owner (what the owner swept of it stays swept: its remainder is what is taken back), cut
@@ -63,6 +64,8 @@ class MapChanges:
         self.stored = stored
         self.params = params
         self.found: list[MapChange] = []
+        # the furniture moved in so far, each piece the cells of its box (world centres)
+        self.obstacles: list[np.ndarray] = []
 
     def look(
         self, maps: Mapping[str, LogOddsMap], limits: tuple[float, float]
@@ -84,15 +87,19 @@ class MapChanges:
         """Put ``change`` on the stored map and the planning map, tell it, and re-plan the
         tasks new furniture lies in the way of."""
         added = change.kind == ADDED
-        cells = obstacle_cells(change) if added else change.cells
-        size = change.cell_size
+        cells, size = change.cells, change.cell_size
+        if added:
+            join_m = self.params.wall_margin_m + size
+            cells, joined = obstacle_cells(change, self.obstacles, join_m)
+            self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
+            self.obstacles.append(cells)
         self.stored = with_cells(self.stored, cells, size, added)
         self.found.append(change)
         c = self.coordinator
         with c.lock:
             planner = c.planner
             planner.change_floor(with_cells(planner.grid, cells, size, added))
-            c.journal.event(MAP_CHANGED, "", "", change.describe())
+            c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
             if not added:
                 return
             # a cell's corner lies this far from its centre
@@ -111,3 +118,11 @@ class MapChanges:
             c.market.awards.send()
             c.market.need_auction = True
             c.market.wake.set()
+
+
+def _planned(cells: np.ndarray, size: float, added: bool) -> str:
+    """What goes on the planning map, in words: the box of new furniture."""
+    if not added:
+        return ""
+    (x0, y0), (x1, y1) = cells.min(axis=0) - size / 2, cells.max(axis=0) + size / 2
+    return f"; planned round as x {x0:.2f}–{x1:.2f}, y {y0:.2f}–{y1:.2f}"

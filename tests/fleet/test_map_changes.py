@@ -141,6 +141,9 @@ def test_the_robots_maps_show_the_change_once(stand: Stand) -> None:
     # robot-0's SLAM map, 5 cm: the floor as the stored map has it, and the chest's faces
     world = load_world(resolve_world("small"), CFG.robot.radius).grid(RES)
     lo = np.where(world.occupied, L_OCC, L_FREE).astype(np.float32)
+    # what lies behind the faces seen is not seen
+    inside = world.world_to_cell(chest_faces("swne"))
+    lo[inside[:, 0].min() : inside[:, 0].max() + 1, inside[:, 1].min() : inside[:, 1].max() + 1] = 0
     chest = world.world_to_cell(chest_faces("sw"))
     lo[chest[:, 0], chest[:, 1]] = L_OCC
     seen = {"robot-0": LogOddsMap(lo, RES, world.origin)}
@@ -151,4 +154,9 @@ def test_the_robots_maps_show_the_change_once(stand: Stand) -> None:
     x0, y0, x1, y1 = found[0].bounds
     assert np.allclose((x0, y0, x1, y1), CHEST, atol=0.03), found[0].describe()
     assert changes.look(seen, limits) == () and len(stand.events(MAP_CHANGED)) == 1
+    # the two faces seen span the chest: all of it is planned round, its far corner too
+    g = stand.planner.grid
+    rc = g.world_to_cell(np.array([[1.3, 2.2], [1.53, 2.38]]))
+    assert g.occupied[rc[:, 0], rc[:, 1]].all()
+    assert "planned round as x 1.05–1.55, y 2.00–2.40" in stand.events(MAP_CHANGED)[0].detail
     assert isinstance(changes.stored, GridMap) and changes.stored is not stored

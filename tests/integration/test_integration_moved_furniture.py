@@ -24,8 +24,8 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 WORLDS = Path(__file__).resolve().parents[2] / "configs" / "worlds"
 # the chest of small_moved.yaml, (xmin, ymin, xmax, ymax)
 CHEST = (1.05, 2.0, 1.55, 2.4)
-# how far a change's cells may lie outside the chest: a wall cell of 5 cm halved by its face
-NEAR_M = 0.05
+# how far a change's cells may lie outside the chest: a cell and a half of the robots' 5 cm maps
+NEAR_M = 0.075
 WHERE = re.compile(r"x (-?[\d.]+)–(-?[\d.]+), y (-?[\d.]+)–(-?[\d.]+)")
 
 

@@ -160,8 +160,8 @@ def test_floor_exploring_did_not_reach_is_no_obstacle_taken_away() -> None:
 def test_an_outline_is_filled_and_cells_are_written_on_a_finer_grid() -> None:
     ring = [(x, y) for x in range(5) for y in range(4) if x in (0, 4) or y in (0, 3)]
     cells = np.array(ring, float) * RES + np.array([1.025, 1.025])
-    filled = obstacle_cells(MapChange(ADDED, cells, RES))
-    assert len(filled) == 20 and len(cells) == 14
+    filled, joined = obstacle_cells(MapChange(ADDED, cells, RES))
+    assert len(filled) == 20 and len(cells) == 14 and joined == []
     fine = GridMap(np.zeros((120, 160), bool), np.ones((120, 160), bool), 0.025, (0.0, 0.0))
     out = with_cells(fine, filled, RES, occupied=True)
     assert out.occupied.sum() == 80 and not (out.occupied & out.unknown).any()
@@ -184,3 +184,18 @@ def test_an_outline_is_filled_and_cells_are_written_on_a_finer_grid() -> None:
 def test_bad_parameters_are_refused_naming_the_field(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         find_changes(room_seen(), room_stored(), MapChangeParams(**{field: value}))
+
+
+def test_two_faces_span_their_box_and_a_face_seen_later_joins_it() -> None:
+    south = np.array([(1.025 + 0.05 * i, 2.025) for i in range(10)])  # x 1.0–1.5, y 2.0–2.05
+    west = np.array([(1.025, 2.075 + 0.05 * j) for j in range(7)])  # up to y 2.4
+    box_, _ = obstacle_cells(MapChange(ADDED, np.vstack([south, west]), RES))
+    assert len(box_) == 10 * 8
+    # the east face seen later, 0.15 m from the south face put on the map before: one piece
+    first, _ = obstacle_cells(MapChange(ADDED, south, RES))
+    east = np.array([(1.475, 2.225 + 0.05 * j) for j in range(4)])
+    whole, joined = obstacle_cells(MapChange(ADDED, east, RES), [first], join_m=0.2)
+    assert joined == [0] and len(whole) == 10 * 8
+    # a face farther off than join_m is a piece of its own
+    alone, joined = obstacle_cells(MapChange(ADDED, east, RES), [first], join_m=0.1)
+    assert joined == [] and len(alone) == 4
