@@ -10,9 +10,10 @@ change found:
 
 - is told in a ``map changed`` event: what, where and how big, in world metres;
 - goes onto the planning map (new furniture occupied: the box its faces seen span, joined with
-  what was found of it before, ``planners.map_change.obstacle_cells``; furniture taken away
-  free) and onto the stored map later looks compare with, so a change is
-  told once (more of the same piece, seen later from another side, is a change of its own);
+  what was found before less than a robot's width and clearance from it,
+  ``planners.map_change.obstacle_cells``; furniture taken away free) and onto the stored map
+  later looks compare with, so a change is told once (more of the same piece, seen later from
+  another side, is a change of its own, and makes the piece whole);
 - for new furniture: every open or assigned task whose path runs through it is taken back from
   its owner (what the owner swept of it stays swept: its remainder is what is taken back), cut
   where it runs into the furniture and joined round it where a transit gets round
@@ -89,7 +90,8 @@ class MapChanges:
         added = change.kind == ADDED
         cells, size = change.cells, change.cell_size
         if added:
-            join_m = self.params.wall_margin_m + size
+            # pieces closer than a robot's width with its clearance: none passes between them
+            join_m = 2 * self.coordinator.planner.centre_clearance
             cells, joined = obstacle_cells(change, self.obstacles, join_m)
             self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
             self.obstacles.append(cells)

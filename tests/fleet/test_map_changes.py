@@ -160,3 +160,15 @@ def test_the_robots_maps_show_the_change_once(stand: Stand) -> None:
     assert g.occupied[rc[:, 0], rc[:, 1]].all()
     assert "planned round as x 1.05–1.55, y 2.00–2.40" in stand.events(MAP_CHANGED)[0].detail
     assert isinstance(changes.stored, GridMap) and changes.stored is not stored
+
+
+def test_the_far_face_seen_later_makes_the_piece_whole(stand: Stand) -> None:
+    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
+    changes.take(MapChange(ADDED, chest_faces("s"), RES))
+    g = stand.planner.grid
+    middle = g.world_to_cell(np.array([1.3, 2.2]))
+    assert not g.occupied[middle[0], middle[1]]
+    changes.take(MapChange(ADDED, chest_faces("n"), RES))
+    g = stand.planner.grid
+    assert g.occupied[middle[0], middle[1]] and len(changes.obstacles) == 1
+    assert "planned round as x 1.05–1.55, y 2.00–2.40" in stand.events(MAP_CHANGED)[1].detail
