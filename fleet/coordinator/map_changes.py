@@ -64,7 +64,6 @@ class MapChanges:
         self.coordinator = coordinator
         self.stored = stored
         self.params = params
-        self.found: list[MapChange] = []
         # the furniture moved in so far, each piece the cells of its box (world centres)
         self.obstacles: list[np.ndarray] = []
 
@@ -96,7 +95,6 @@ class MapChanges:
             self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
             self.obstacles.append(cells)
         self.stored = with_cells(self.stored, cells, size, added)
-        self.found.append(change)
         c = self.coordinator
         with c.lock:
             planner = c.planner
