@@ -174,6 +174,11 @@ class CoordinatorParams:
     explore_match_m: float = 0.5
     explore_step_m: float = 0.05
     map_check_every_s: float = 2.0
+    map_changes: bool = True
+    map_change_confidence: float = 0.85
+    map_change_min_size_m: float = 0.2
+    map_change_wall_margin_m: float = 0.15
+    map_change_robot_clear_m: float = 0.25
 
     def validate(self) -> None:
         if self.first_regions not in FIRST_REGIONS:
@@ -197,6 +202,13 @@ class CoordinatorParams:
             "max_detour_m",
         )
         require_non_negative(self, "body_margin")
+        if not 0.5 < self.map_change_confidence < 1.0:
+            raise ValueError(
+                f"map_change_confidence must be within (0.5, 1), got {self.map_change_confidence}"
+            )
+        require_positive(
+            self, "map_change_min_size_m", "map_change_wall_margin_m", "map_change_robot_clear_m"
+        )
 
 
 # Fields of other sections that copied the robot's numbers, and the robot: field each became.

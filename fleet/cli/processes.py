@@ -229,7 +229,8 @@ def coordinator(
             help="Plan on this stored ROS map (map.yaml, as `fleet explore` writes it, in the "
             "world's frame) instead of the world's floor plan; the dock and starts stay the "
             "world's. When most robots' own maps do not match it (another building), the "
-            "coordinator stops with a message naming the file and exit status 5.",
+            "coordinator stops with a message naming the file and exit status 5; once they "
+            "match, furniture they show moved in since is put on it and planned round.",
         ),
     ] = None,
 ) -> None:

@@ -108,7 +108,8 @@ def up(
             "--map",
             help="Plan the cleaning on this stored ROS map (map.yaml, as `fleet explore` writes "
             "it, in the world's frame) instead of the world file; the simulator still runs the "
-            "world, whose dock and start poses the robots start from.",
+            "world, whose dock and start poses the robots start from. Furniture the robots find "
+            "moved in since the map was made is put on it and planned round (`map changed`).",
         ),
     ] = None,
     explore_first: Annotated[
@@ -134,9 +135,11 @@ def up(
     naming the map file and report.json's status `wrong-map`; the exit status is 5.
 
     With `--map MAP.yaml` the coordinator plans on a stored map (the one `fleet explore`
-    wrote) instead of the world file; with `--explore` the fleet first explores the world,
-    then cleans on the map it made, starting again from the dock (the simulator is started
-    afresh for the cleaning, so the floor driven while exploring does not count as cleaned).
+    wrote) instead of the world file, and puts on it the furniture the robots' own maps show
+    moved in since (a `map changed` event each; the lanes through it are planned round it);
+    with `--explore` the fleet first explores the world, then cleans on the map it made,
+    starting again from the dock (the simulator is started afresh for the cleaning, so the
+    floor driven while exploring does not count as cleaned).
 
     Examples: `fleet up --robots 3` (the home, until Ctrl-C);
     `fleet up --robots 2 --world small --headless --until-done --timeout 300`;

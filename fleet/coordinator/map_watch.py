@@ -9,7 +9,9 @@ each robot's map not yet judged is matched against the stored map
 or more, which the market's lock should not wait for). Once more than half of the fleet's
 robots agree with the map the watch ends, saying so in a ``map checked`` event; once more than
 half differ, it tells why in a ``wrong map`` event that names the map file and stops the
-coordinator, whose process then exits with :data:`fleet.cli.common.WRONG_MAP_EXIT`.
+coordinator, whose process then exits with :data:`fleet.cli.common.WRONG_MAP_EXIT`. A map
+accepted is watched on, with ``coordinator.map_changes``, for furniture moved since it was made
+(:mod:`fleet.coordinator.map_changes`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 
 from fleet.bus import Bus
 from fleet.coordinator.exploring import RobotMaps, fetch_whole_maps, logit
+from fleet.coordinator.map_changes import MapChanges, map_change_params
 from fleet.coordinator.service import Coordinator
 from fleet.params import FleetConfig
 from fleet.protocol import MapPatches
@@ -72,6 +75,14 @@ class MapWatch:
         # why the map was refused (None while it is not)
         self.refusal: str | None = None
         self._lock = threading.Lock()
+        self._looked_at = -float("inf")
+        # after the check: the furniture moved since the map was made (coordinator.map_changes)
+        params = cfg.coordinator
+        self.changes = (
+            MapChanges(coordinator, stored, map_change_params(params))
+            if params.map_changes
+            else None
+        )
         self._thread = threading.Thread(target=self._run, name="map-watch", daemon=True)
         bus.subscribe(bus.keys.all_robots("map"), MapPatches, self._on_map)
 
@@ -88,21 +99,31 @@ class MapWatch:
             self.maps.hear(rid, msg)
 
     def _run(self) -> None:
-        checked_at = -float("inf")
+        if self._check_map() and self.changes is not None:
+            self._watch_changes(self.changes)
+
+    def _due(self) -> bool:
+        """Wait until ``every_s`` sim seconds have passed since the last look (False once the
+        coordinator stops); fetch the whole maps of robots whose patches had a gap."""
         stop = self.coordinator.stop
         while not stop.wait(POLL_S):
             clock = self.coordinator.journal.clock
-            if clock - checked_at < self.every_s:
-                continue
-            checked_at = clock
-            fetch_whole_maps(self.bus, self.maps, self._lock)
+            if clock - self._looked_at >= self.every_s:
+                self._looked_at = clock
+                fetch_whole_maps(self.bus, self.maps, self._lock)
+                return True
+        return False
+
+    def _check_map(self) -> bool:
+        """Check the map until the fleet's verdict; whether it was accepted."""
+        while self._due():
             verdict = self.check()
             if verdict == AGREES:
                 self._tell(
                     "map checked",
                     f"{self.source}: the robots' maps agree with it: {self._summary()}",
                 )
-                return
+                return True
             if verdict == DIFFERS:
                 self.refusal = (
                     f"{self.source}: the robots' scans do not match this stored map (another "
@@ -111,8 +132,18 @@ class MapWatch:
                 )
                 self._tell("wrong map", self.refusal)
                 log.error("%s", self.refusal)
-                stop.set()
-                return
+                self.coordinator.stop.set()
+                return False
+        return False
+
+    def _watch_changes(self, changes: MapChanges) -> None:
+        """Compare the robots' maps with the stored map as changed so far, until the
+        coordinator stops (:mod:`fleet.coordinator.map_changes`)."""
+        while self._due():
+            with self._lock:
+                maps = self.maps.log_odds(self.limits)
+            for change in changes.look(maps, self.limits):
+                log.info("map changed: %s", change.describe())
 
     def check(self) -> str:
         """Judge each robot's map not yet judged; the fleet's verdict

@@ -307,48 +307,7 @@ class Market:
         on), and replace it by what a robot can drive round the bodies and what they block."""
         planner = self.dispatcher.planner
         planner.set_bodies(body_centres(self.bodies))
-        near = [
-            rec.task.id
-            for rec in self.job.tasks.values()
-            if rec.state in (OPEN, ASSIGNED) and planner.near_bodies(rec.task.path)
-        ]
-        taken: list[str] = []  # what was taken back (saved: open, replaced or done) and opened
-        for tid in near:
-            rec = self.job.tasks[tid]
-            if rec.state != ASSIGNED or rec.owner is None:
-                continue
-            gone = [r.task.id for r in self.job.queue(rec.owner) if r.position >= rec.position]
-            for later in gone:
-                self.journal.event("withdrawn", rec.owner, later, f"near {body}'s body")
-            taken += gone + self.job.take_back(tid)
-        self.dispatcher.cut(taken)
-        opened = [t for t in dict.fromkeys([*near, *taken]) if self.job.tasks[t].state == OPEN]
-        for tid in opened:
-            rec = self.job.tasks[tid]
-            if not planner.near_bodies(rec.task.path):
-                continue
-            way = planner.reroute(rec.task.path)
-            if not way.changed:
-                continue
-            # a stretch a robot cannot drive whose floor some robot still sweeps from beside
-            # it is no loss; the rest is floor the body puts out of reach
-            lost = [(p, a) for p in way.dropped if (a := planner.blocked_m2(p)) > 0]
-            parts, blocked = self.job.replace(tid, way.paths, lost, body)
-            area = sum(self.job.tasks[t].task.area_m2 for t in blocked)
-            self.journal.event(
-                "rerouted",
-                body,
-                tid,
-                f"round the body: {len(parts)} part(s) {' '.join(parts)}, {area:.2f} m² blocked",
-            )
-            self.journal.save_tasks(tid, *parts, *blocked)
-            if (lost_at := self.lost_at.pop(tid, None)) is not None:
-                self.lost_at.update(dict.fromkeys(parts, lost_at))
-            if tid in self.region_sale:
-                at = self.region_sale.index(tid)
-                self.region_sale[at : at + 1] = parts
-        self.journal.save_tasks(*taken)
-        self.version += 1
+        plan_around(self, planner.near_bodies, body, f"near {body}'s body", "round the body")
 
     # ---- progress ---------------------------------------------------------------------------
 
@@ -429,6 +388,58 @@ class Market:
         self.awards.send()
         self.need_auction = True
         self.wake.set()
+
+
+def plan_around(
+    market: Market, near: Callable[[np.ndarray], bool], cause: str, withdrawn: str, rerouted: str
+) -> None:
+    """Take back every task whose path is ``near`` what the planner now plans round (a
+    body, new furniture; its owner's queue from there on), and replace it by what a robot
+    can drive round that and the floor it puts out of reach (``blocked`` by ``cause``).
+    ``withdrawn`` and ``rerouted`` say why in the events. Called with the market's lock held."""
+    planner = market.dispatcher.planner
+    near_ids = [
+        rec.task.id
+        for rec in market.job.tasks.values()
+        if rec.state in (OPEN, ASSIGNED) and near(rec.task.path)
+    ]
+    taken: list[str] = []  # what was taken back (saved: open, replaced or done) and opened
+    for tid in near_ids:
+        rec = market.job.tasks[tid]
+        if rec.state != ASSIGNED or rec.owner is None:
+            continue
+        gone = [r.task.id for r in market.job.queue(rec.owner) if r.position >= rec.position]
+        for later in gone:
+            market.journal.event("withdrawn", rec.owner, later, withdrawn)
+        taken += gone + market.job.take_back(tid)
+    market.dispatcher.cut(taken)
+    opened = [t for t in dict.fromkeys([*near_ids, *taken]) if market.job.tasks[t].state == OPEN]
+    for tid in opened:
+        rec = market.job.tasks[tid]
+        if not near(rec.task.path):
+            continue
+        way = planner.reroute(rec.task.path)
+        if not way.changed:
+            continue
+        # a stretch a robot cannot drive whose floor some robot still sweeps from beside
+        # it is no loss; the rest is floor put out of reach
+        lost = [(p, a) for p in way.dropped if (a := planner.blocked_m2(p)) > 0]
+        parts, blocked = market.job.replace(tid, way.paths, lost, cause)
+        area = sum(market.job.tasks[t].task.area_m2 for t in blocked)
+        market.journal.event(
+            "rerouted",
+            cause,
+            tid,
+            f"{rerouted}: {len(parts)} part(s) {' '.join(parts)}, {area:.2f} m² blocked",
+        )
+        market.journal.save_tasks(tid, *parts, *blocked)
+        if (lost_at := market.lost_at.pop(tid, None)) is not None:
+            market.lost_at.update(dict.fromkeys(parts, lost_at))
+        if tid in market.region_sale:
+            at = market.region_sale.index(tid)
+            market.region_sale[at : at + 1] = parts
+    market.journal.save_tasks(*taken)
+    market.version += 1
 
 
 def body_centres(bodies: Mapping[str, tuple[float, float]]) -> np.ndarray:

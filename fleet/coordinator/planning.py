@@ -268,12 +268,26 @@ class TaskPlanner:
 
     def near_bodies(self, path: np.ndarray) -> bool:
         """Whether a robot centre driving ``path`` comes near enough a body to touch it."""
-        if not len(self.bodies):
+        return self.near(path, self.bodies, self.body_radius)
+
+    def near(self, path: np.ndarray, centres: np.ndarray, radius: float) -> bool:
+        """Whether a robot centre driving ``path`` comes within its clearance (and a cell) of
+        one of the discs of ``radius`` at ``centres`` ((K, 2) world metres)."""
+        centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+        if not len(centres):
             return False
-        reach = self.body_radius + self.centre_clearance + self.grid.resolution
+        reach = radius + self.centre_clearance + self.grid.resolution
         pts = densify(np.asarray(path, dtype=float), self.grid.resolution)
-        gaps = np.hypot(*(pts[:, None, :] - self.bodies[None, :, :]).transpose(2, 0, 1))
+        gaps = np.hypot(*(pts[:, None, :] - centres[None, :, :]).transpose(2, 0, 1))
         return bool(gaps.min() < reach)
+
+    def change_floor(self, grid: GridMap) -> None:
+        """Plan on ``grid`` from now on: the floor plan with furniture moved since it was made
+        (:mod:`fleet.coordinator.map_changes`), robot centres on the cells clear of it that a
+        robot reaches from the dock. The floor the brush reaches is the new one's, so a stretch
+        of a task that runs through new furniture puts no floor out of reach."""
+        centres = clearance(grid) >= self.centre_clearance
+        self.use_floor(grid, reachable(centres, grid.world_to_cell(np.array([self.dock]))))
 
     def reroute(self, path: np.ndarray) -> Rerouted:
         """``path`` repaired round the bodies (:func:`planners.bodies.reroute`): the runs a

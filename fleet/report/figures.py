@@ -57,7 +57,7 @@ EVENT_MARKERS = {
     "withdrawn": ("P", "work withdrawn"),
     "done": ("|", "task done"),
 }
-FLEET_EVENTS = ("resumed", "finished")
+FLEET_EVENTS = ("resumed", "finished", "map changed")
 # events drawn above the others when they fall on one spot
 EVENT_ZORDER = {"lost": 6, "rejoined": 5, "joined": 5}
 # a robot's id label is stacked above those of robots that ended within this distance

@@ -198,3 +198,22 @@ def test_the_first_allocations_regions_are_tour_or_compact(tmp_path: Path) -> No
     assert compact.coordinator.first_regions == "compact"
     with pytest.raises(ValueError, match="first_regions must be one of tour, compact"):
         dataclasses.replace(load_fleet_config().coordinator, first_regions="voronoi").validate()  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "says"),
+    [
+        ("map_change_confidence", 0.5, "must be within (0.5, 1)"),
+        ("map_change_confidence", 1.0, "must be within (0.5, 1)"),
+        ("map_change_min_size_m", 0.0, "must be > 0"),
+        ("map_change_wall_margin_m", -0.1, "must be > 0"),
+        ("map_change_robot_clear_m", 0.0, "must be > 0"),
+        ("map_changes", "yes", "expected"),
+    ],
+)
+def test_what_counts_as_furniture_moved_is_checked_naming_the_field(
+    tmp_path: Path, field: str, value: object, says: str
+) -> None:
+    path = _with(tmp_path / "fleet.yaml", "coordinator", field, value)
+    msg = _config_error(path)
+    assert "coordinator" in msg and field in msg and says in msg, msg
