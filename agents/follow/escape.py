@@ -143,6 +143,7 @@ def make_way(state: FollowState, now: Situation, params: FollowParams) -> Follow
         escape_m=distance,
         escape_heading=travel if forward else math.remainder(travel + math.pi, 2 * math.pi),
         escape_sign=1 if forward else -1,
+        making_way=True,
     )
 
 
@@ -163,6 +164,7 @@ def start_escape(
         escape_m=distance,
         escape_heading=travel if forward else math.remainder(travel + math.pi, 2 * math.pi),
         escape_sign=1 if forward else -1,
+        making_way=False,
     )
 
 

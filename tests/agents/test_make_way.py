@@ -79,7 +79,7 @@ def test_make_way_starts_a_move_in_the_cheaper_sense_and_out_of_the_way() -> Non
         Situation((0.7, 0.0, math.pi / 2), (0.0, 0.0), NONE, tube),
         PARAMS,
     )
-    assert state.escape_m > 0 and state.blocked_s == 0.0
+    assert state.escape_m > 0 and state.blocked_s == 0.0 and state.making_way
     assert abs(math.remainder(state.escape_heading - math.pi / 2, 2 * math.pi)) < 0.2
     end = np.array([0.7, 0.0]) + state.escape_sign * state.escape_m * np.array(
         [math.cos(state.escape_heading), math.sin(state.escape_heading)]
