@@ -6,8 +6,7 @@ short way straight along it (:func:`escape_heading`, :func:`start_escape`,
 :func:`escape_step`). One that is stopped in the way of a peer it gives way to, where that peer
 cannot pass it, instead moves out of the peer's way with the same kind of move
 (:func:`in_their_way`, :func:`way_out`, :func:`make_way`). A robot without work stands still
-unless a peer's intent comes at it, and then steps aside with the same move
-(:func:`keep_clear`).
+unless it is in a peer's way, and then moves out of it the same way (:func:`keep_clear`).
 """
 
 from __future__ import annotations
@@ -199,16 +198,13 @@ def escape_step(
 def keep_clear(
     state: FollowState, now: Situation, params: FollowParams
 ) -> tuple[FollowState, DWAResult]:
-    """The step of a robot without work: stand still, unless a peer's intent (``now.peers``)
-    comes within ``ESCAPE_MARGIN_M`` of its body — then step aside with the escape move, to the
-    side that ends clearest. A robot that has finished its path would otherwise stand on someone
-    else's."""
+    """The step of a robot without work: stand still, unless it is in the way of a peer
+    (:func:`in_their_way`: a peer's intent in ``now.peers`` comes within ``IN_THE_WAY_M`` of its
+    body) — then move out of it (:func:`make_way`). A robot that has finished its path would
+    otherwise stand on someone else's."""
     robot, dt = params.robot, params.dt
-    xy = np.asarray(now.pose[:2], dtype=float)
-    if state.escape_m <= 0 and len(now.peers):
-        d = np.hypot(*(now.peers - xy).T)
-        if d.min() < 2 * robot.radius + ESCAPE_MARGIN_M:
-            state = start_escape(state, now, None, params)
+    if state.escape_m <= 0 and in_their_way(now, robot.radius):
+        state = make_way(state, now, params)
     if state.escape_m > 0:
         stepped = escape_step(state, now, params)
         if stepped is not None:
