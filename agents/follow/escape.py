@@ -98,8 +98,9 @@ def way_out(
     A move is worth the clearance its end keeps from the discs the ``peers`` will cover (counted
     up to ``WAY_MARGIN_M`` beyond the body) less ``WAY_COST_PER_M`` for each metre of it, so a
     short step aside beats a long retreat that ends a little clearer; no point of it may come
-    nearer the obstacles than min(robot_radius + ``ESCAPE_MARGIN_M``, the gap now), and its end
-    must be out of the way (``IN_THE_WAY_M``). In a passage one robot wide that is back out of
+    nearer the obstacles than min(robot_radius + ``ESCAPE_MARGIN_M``, the gap now), nor nearer
+    those discs than min(robot_radius, the gap now) (as :func:`escape_step` keeps it), and its
+    end must be out of the way (``IN_THE_WAY_M``). In a passage one robot wide that is back out of
     it, the way the peer is heading.
 
     This is the push of Push and Swap (Luna and Bekris 2011): the robot in the way of one of
@@ -115,8 +116,10 @@ def way_out(
         g.reshape(len(phi), len(steps))
         for g in gaps(points.reshape(-1, 2), obstacles, peers, robot_radius)
     )
-    wall_now = gaps(xy[None, :], obstacles, np.zeros((0, 2)), robot_radius)[0][0]
-    clear = np.minimum.accumulate(walls, axis=1) >= min(robot_radius + ESCAPE_MARGIN_M, wall_now)
+    wall_now, robot_now = (g[0] for g in gaps(xy[None, :], obstacles, peers, robot_radius))
+    clear = (
+        np.minimum.accumulate(walls, axis=1) >= min(robot_radius + ESCAPE_MARGIN_M, wall_now)
+    ) & (np.minimum.accumulate(robots, axis=1) >= min(robot_radius, robot_now))
     value = np.where(clear, np.minimum(robots, robot_radius + WAY_MARGIN_M), -np.inf)
     value = value - WAY_COST_PER_M * steps[None, :]
     if not np.isfinite(value).any():
