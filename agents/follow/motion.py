@@ -193,7 +193,8 @@ def follow_step(
     (:func:`watchdog`) counts toward giving the waypoint up, and after ``escape_after_s``
     under DWA the escape move begins (boxed in, or caught in a minimum of its costs, see
     :func:`agents.follow.escape.escape_heading`) — or, for a robot standing in the way of a peer
-    it gives way to, the move out of that peer's way (:func:`agents.follow.escape.make_way`).
+    it gives way to, after ``make_way_after_s`` the move out of that peer's way
+    (:func:`agents.follow.escape.make_way`).
     Turning in place toward the path holds the watchdog's clock (only coming closer resets it,
     so a robot that turns, drives off and turns back again is still given up on), and so do the
     escape move and the move out of the way.
@@ -226,11 +227,11 @@ def follow_step(
         progressed = dist < state.best_dist - PROGRESS_M
         blocked = 0.0 if progressed else state.blocked_s + params.dt
         state = replace(state, blocked_s=blocked)
-        if blocked >= agent.escape_after_s:
-            if in_their_way(now, params.robot.radius):
+        if in_their_way(now, params.robot.radius):
+            if blocked >= agent.make_way_after_s:
                 state = make_way(state, now, params)
-            else:
-                state = start_escape(state, now, aim, params)
+        elif blocked >= agent.escape_after_s:
+            state = start_escape(state, now, aim, params)
         if progressed:
             return replace(state, stalled_s=0.0, yielded_s=0.0, best_dist=dist), result
     return watchdog(state, now, params), result
