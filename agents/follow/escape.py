@@ -137,7 +137,16 @@ def make_way(state: FollowState, now: Situation, params: FollowParams) -> Follow
     move = way_out(now.pose, now.obstacles, now.peers, params.robot.radius)
     if move is None:
         return start_escape(state, now, None, params)
-    return _begin(state, now.pose, *move, making_way=True)
+    travel, distance = move
+    forward = abs(math.remainder(travel - now.pose[2], 2 * math.pi)) <= math.pi / 2
+    return replace(
+        state,
+        blocked_s=0.0,
+        escape_m=distance,
+        escape_heading=travel if forward else math.remainder(travel + math.pi, 2 * math.pi),
+        escape_sign=1 if forward else -1,
+        making_way=True,
+    )
 
 
 def start_escape(
@@ -150,22 +159,14 @@ def start_escape(
     travel = escape_heading(now.pose, aim, now.obstacles, now.peers, params.robot.radius, distance)
     if travel is None:
         return state
-    return _begin(state, now.pose, travel, distance, making_way=False)
-
-
-def _begin(
-    state: FollowState, pose: Pose, travel: float, distance: float, making_way: bool
-) -> FollowState:
-    """A straight move of ``distance`` in the direction ``travel``, driven forward or in
-    reverse, whichever needs the smaller turn from ``pose`` first."""
-    forward = abs(math.remainder(travel - pose[2], 2 * math.pi)) <= math.pi / 2
+    forward = abs(math.remainder(travel - now.pose[2], 2 * math.pi)) <= math.pi / 2
     return replace(
         state,
         blocked_s=0.0,
         escape_m=distance,
         escape_heading=travel if forward else math.remainder(travel + math.pi, 2 * math.pi),
         escape_sign=1 if forward else -1,
-        making_way=making_way,
+        making_way=False,
     )
 
 
