@@ -310,12 +310,6 @@ def _follow(
             f"({pose[0]:.3f}, {pose[1]:.3f}, {pose[2]:.2f})"
         )
         notes += ((logging.WARNING, text),)
-    if follow.making_way and follow.escape_m > 0 and not (before.making_way and before.escape_m):
-        sense = "forward" if follow.escape_sign > 0 else "in reverse"
-        at = f"({pose[0]:.2f}, {pose[1]:.2f})"
-        notes += (
-            (logging.INFO, f"makes way for a peer: {follow.escape_m:.2f} m {sense} from {at}"),
-        )
     kind = step_kind(before, follow, drive.sweep_from)
     if result is None:
         return Command(0.0, 0.0, "done", kind, follow, notes)

@@ -27,8 +27,6 @@ class FollowState:
     escape_m: float = 0.0
     escape_heading: float = 0.0
     escape_sign: int = 1
-    # the move under way (escape_m > 0) is out of a peer's way, not out of a dead end
-    making_way: bool = False
     skipped: int = 0
     yielded_s: float = 0.0
     edge_side: int = 0
