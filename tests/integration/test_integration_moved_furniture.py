@@ -48,7 +48,11 @@ def test_a_chest_moved_in_is_found_and_planned_round(tmp_path: Path) -> None:
         timeout_s=200.0,
         options=("--map", str(map_yaml)),
     )
-    report = fleet.finish(240.0)
+    try:
+        report = fleet.finish(240.0)
+    finally:
+        fleet.cleanup()
+    assert fleet.left == [], f"processes left behind: {fleet.left}"
     assert fleet.proc.returncode == 0 and report is not None, fleet.output
     assert report["status"] == "done", fleet.output
     assert len(fleet.events("map checked")) == 1 and not fleet.events("wrong map"), fleet.output
