@@ -33,7 +33,7 @@ from agents.follow.motion import follow_step, predict
 from agents.follow.state import FollowParams, FollowState, Situation
 from agents.market import Won, swept_pieces
 from agents.passage import Holding, Waits, hold
-from agents.peers import cut_out, own_intent, progress, to_avoid
+from agents.peers import cut_out, held_for, own_intent, progress, to_avoid
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
 from fleet.params import FleetConfig
@@ -239,8 +239,11 @@ def _command(
         # on its dock: stepping aside for a peer would take it off the charger
         return state, Command(0.0, 0.0, "done", "idle", follow)
     if follow is None or follow.done:
-        peers = to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, everyone=True)
-        now = Situation(pose, heard.velocity, obstacles, peers)
+        peers, held = (
+            to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, True, held_for=s)
+            for s in (0.0, agent.make_way_held_s)
+        )
+        now = Situation(pose, heard.velocity, obstacles, peers, held)
         idle, result = keep_clear(state.idle, now, params.follow)
         mode = "done" if drive.plan_id >= 0 else "waiting"
         return replace(state, idle=idle), Command(result.v, result.w, mode, "idle", follow)
@@ -289,17 +292,21 @@ def _follow(
     before = drive.follow
     assert before is not None
     ordered = frozenset(drive.waits.peer) if before.index <= drive.sweep_from else frozenset()
-    peers = to_avoid(
-        params.robot_id,
-        heard.peers,
-        heard.scan.stamp,
-        agent.stale_after_s,
-        everyone=False,
-        skip=ordered,
+    peers, held = (
+        to_avoid(
+            params.robot_id,
+            heard.peers,
+            heard.scan.stamp,
+            agent.stale_after_s,
+            everyone=False,
+            skip=ordered,
+            held_for=least,
+        )
+        for least in (0.0, agent.make_way_held_s)
     )
     predicted = predict(pose, state.command, heard.latency_s)
     follow, result = follow_step(
-        before, Situation(predicted, heard.velocity, obstacles, peers), params.follow
+        before, Situation(predicted, heard.velocity, obstacles, peers, held), params.follow
     )
     if follow.skipped > before.skipped:
         at = before.waypoints[before.index]
@@ -310,6 +317,12 @@ def _follow(
             f"({pose[0]:.3f}, {pose[1]:.3f}, {pose[2]:.2f})"
         )
         notes += ((logging.WARNING, text),)
+    if follow.making_way and follow.escape_m > 0 and not (before.making_way and before.escape_m):
+        sense = "forward" if follow.escape_sign > 0 else "in reverse"
+        at = f"({pose[0]:.2f}, {pose[1]:.2f})"
+        notes += (
+            (logging.INFO, f"makes way for a peer: {follow.escape_m:.2f} m {sense} from {at}"),
+        )
     kind = step_kind(before, follow, drive.sweep_from)
     if result is None:
         return Command(0.0, 0.0, "done", kind, follow, notes)
@@ -340,7 +353,13 @@ def _outputs(
     points = own_intent(
         stamp, pose, state.command, on_its_way, params.follow.robot, agent.intent_horizon_s
     )
-    intent = Intent(stamp, points, drive.plan_id, follow.index if follow is not None else -1)
+    intent = Intent(
+        stamp,
+        points,
+        drive.plan_id,
+        follow.index if follow is not None else -1,
+        held_for(on_its_way),
+    )
     status = None
     if stamp - state.last_status >= 1.0 / agent.status_hz or command.mode == "done":
         state = replace(state, last_status=stamp)

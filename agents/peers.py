@@ -79,6 +79,15 @@ def path_intent(
     return np.column_stack([stamp + t, np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
 
 
+def held_for(follow: FollowState | None) -> float:
+    """How long a robot on its way along a path has come no closer to its next waypoint: the
+    watchdog's clock with the time it waited for peers (turns and escape moves hold it), 0
+    without a path under way. What its intent says (``Intent.held_s``)."""
+    if follow is None or follow.done:
+        return 0.0
+    return follow.stalled_s + follow.yielded_s
+
+
 def own_intent(
     stamp: float,
     pose: tuple[float, float, float],
@@ -128,15 +137,17 @@ def to_avoid(
     max_age_s: float,
     everyone: bool,
     skip: frozenset[str] = frozenset(),
+    held_for: float = 0.0,
 ) -> np.ndarray:
     """The centres of the discs (see :func:`intent_centres`) that the peers robot ``me`` keeps
     clear of will cover: those it gives way to (:func:`gives_way`), or all of them with
-    ``everyone`` (a robot without work); none of those in ``skip``."""
+    ``everyone`` (a robot without work); none of those in ``skip``; with ``held_for``, only
+    those that say they have been held up at least that long (``Intent.held_s``)."""
     return intent_centres(
         [
             i.points
             for rid, i in intents.items()
-            if rid not in skip and (everyone or gives_way(me, rid))
+            if rid not in skip and (everyone or gives_way(me, rid)) and i.held_s >= held_for
         ],
         now,
         max_age_s,

@@ -3,8 +3,11 @@
 A robot that makes no progress under DWA for ``agent.escape_after_s`` — boxed in, or caught in
 a minimum of DWA's costs — turns in place onto the free direction nearest its path and drives a
 short way straight along it (:func:`escape_heading`, :func:`start_escape`,
-:func:`escape_step`). A robot without work stands still unless a peer's intent comes at it,
-and then steps aside with the same move (:func:`keep_clear`).
+:func:`escape_step`). One that is stopped in the way of a peer it gives way to while that peer
+says it is held up (it cannot pass the body) instead moves out of the peer's way with the same
+kind of move (:func:`in_their_way`, :func:`way_out`, :func:`make_way`). A robot without work
+stands still unless a peer's intent comes at it, and then steps aside, or is in the way of a
+peer held up, and then moves out of it the same way (:func:`keep_clear`).
 """
 
 from __future__ import annotations
@@ -21,6 +24,15 @@ from planners.dwa import DWAResult
 ESCAPE_HEADINGS = 36
 ESCAPE_MARGIN_M = 0.02
 ESCAPE_HEADING_TOLERANCE = 0.05
+# a robot this near the discs the peers it gives way to will cover is in their way (a peer
+# cannot pass a body nearer its path than its own width and DWA's margins, as in a doorway),
+# and making way ends this far (more: no dithering on the border) outside them
+IN_THE_WAY_M = 0.12
+WAY_MARGIN_M = 0.15
+MAKE_WAY_MAX_M = 0.6
+MAKE_WAY_STEP_M = 0.05
+# metres of clearance a metre of the move must buy: a short step aside before a long retreat
+WAY_COST_PER_M = 0.3
 
 
 def escape_heading(
@@ -69,6 +81,68 @@ def escape_heading(
     return float(phi[free][np.argmin(off[free])])
 
 
+def in_their_way(now: Situation, robot_radius: float) -> bool:
+    """Whether the robot's body comes within ``IN_THE_WAY_M`` of a disc that a peer it gives way
+    to, and which says it is held up, will cover (``now.held``). A peer that drives on is not
+    held: it passes by, or DWA takes it round the body, and a move aside would only drive the
+    brush over swept floor."""
+    if not len(now.held):
+        return False
+    d = np.hypot(*(now.held - np.asarray(now.pose[:2])).T)
+    return bool(d.min() < 2 * robot_radius + IN_THE_WAY_M)
+
+
+def way_out(
+    pose: Pose, obstacles: np.ndarray, peers: np.ndarray, robot_radius: float
+) -> tuple[float, float] | None:
+    """(direction, distance) of the straight move, at most ``MAKE_WAY_MAX_M``, that best takes a
+    robot standing in its peers' way out of it, or None when none does.
+
+    A move is worth the clearance its end keeps from the discs the ``peers`` will cover (counted
+    up to ``WAY_MARGIN_M`` beyond the body) less ``WAY_COST_PER_M`` for each metre of it, so a
+    short step aside beats a long retreat that ends a little clearer; no point of it may come
+    nearer the obstacles than min(robot_radius + ``ESCAPE_MARGIN_M``, the gap now), nor nearer
+    those discs than min(robot_radius, the gap now) (as :func:`escape_step` keeps it), and its
+    end must be out of the way (``IN_THE_WAY_M``). In a passage one robot wide that is back out of
+    it, the way the peer is heading.
+
+    This is the push of Push and Swap (Luna and Bekris 2011): the robot in the way of one of
+    higher priority moves to a place off that robot's path, instead of standing on it while the
+    other cannot pass its body. The peer's body itself is in the scan, so no move goes through
+    it."""
+    xy = np.asarray(pose[:2], dtype=float)
+    phi = np.linspace(-math.pi, math.pi, ESCAPE_HEADINGS, endpoint=False)
+    steps = np.arange(MAKE_WAY_STEP_M, MAKE_WAY_MAX_M + 1e-9, MAKE_WAY_STEP_M)
+    dirs = np.column_stack([np.cos(phi), np.sin(phi)])
+    points = xy[None, None, :] + steps[None, :, None] * dirs[:, None, :]
+    walls, robots = (
+        g.reshape(len(phi), len(steps))
+        for g in gaps(points.reshape(-1, 2), obstacles, peers, robot_radius)
+    )
+    wall_now, robot_now = (g[0] for g in gaps(xy[None, :], obstacles, peers, robot_radius))
+    clear = (
+        np.minimum.accumulate(walls, axis=1) >= min(robot_radius + ESCAPE_MARGIN_M, wall_now)
+    ) & (np.minimum.accumulate(robots, axis=1) >= min(robot_radius, robot_now))
+    value = np.where(clear, np.minimum(robots, robot_radius + WAY_MARGIN_M), -np.inf)
+    value = value - WAY_COST_PER_M * steps[None, :]
+    if not np.isfinite(value).any():
+        return None
+    best_h, best_d = np.unravel_index(np.argmax(value), value.shape)
+    if robots[best_h, best_d] < robot_radius + IN_THE_WAY_M:
+        return None
+    return float(phi[best_h]), float(steps[best_d])
+
+
+def make_way(state: FollowState, now: Situation, params: FollowParams) -> FollowState:
+    """Begin the move out of the peers' way (:func:`way_out`), forward or in reverse, whichever
+    needs the smaller turn first; where there is none, the escape move to the side that ends
+    clearest (:func:`start_escape` without an aim)."""
+    move = way_out(now.pose, now.obstacles, now.peers, params.robot.radius)
+    if move is None:
+        return start_escape(state, now, None, params)
+    return _begin(state, now.pose, *move, making_way=True)
+
+
 def start_escape(
     state: FollowState, now: Situation, aim: np.ndarray | None, params: FollowParams
 ) -> FollowState:
@@ -79,13 +153,22 @@ def start_escape(
     travel = escape_heading(now.pose, aim, now.obstacles, now.peers, params.robot.radius, distance)
     if travel is None:
         return state
-    forward = abs(math.remainder(travel - now.pose[2], 2 * math.pi)) <= math.pi / 2
+    return _begin(state, now.pose, travel, distance, making_way=False)
+
+
+def _begin(
+    state: FollowState, pose: Pose, travel: float, distance: float, making_way: bool
+) -> FollowState:
+    """A straight move of ``distance`` in the direction ``travel``, driven forward or in
+    reverse, whichever needs the smaller turn from ``pose`` first."""
+    forward = abs(math.remainder(travel - pose[2], 2 * math.pi)) <= math.pi / 2
     return replace(
         state,
         blocked_s=0.0,
         escape_m=distance,
         escape_heading=travel if forward else math.remainder(travel + math.pi, 2 * math.pi),
         escape_sign=1 if forward else -1,
+        making_way=making_way,
     )
 
 
@@ -120,14 +203,16 @@ def escape_step(
 def keep_clear(
     state: FollowState, now: Situation, params: FollowParams
 ) -> tuple[FollowState, DWAResult]:
-    """The step of a robot without work: stand still, unless a peer's intent (``now.peers``)
-    comes within ``ESCAPE_MARGIN_M`` of its body — then step aside with the escape move, to the
-    side that ends clearest. A robot that has finished its path would otherwise stand on someone
-    else's."""
+    """The step of a robot without work: stand still, unless it is in the way of a peer held up
+    (:func:`in_their_way`) — then move out of it (:func:`make_way`) — or a peer's intent
+    (``now.peers``) comes within ``ESCAPE_MARGIN_M`` of its body — then step aside with the
+    escape move, to the side that ends clearest. A robot that has finished its path would
+    otherwise stand on someone else's."""
     robot, dt = params.robot, params.dt
-    xy = np.asarray(now.pose[:2], dtype=float)
-    if state.escape_m <= 0 and len(now.peers):
-        d = np.hypot(*(now.peers - xy).T)
+    if state.escape_m <= 0 and in_their_way(now, robot.radius):
+        state = make_way(state, now, params)
+    elif state.escape_m <= 0 and len(now.peers):
+        d = np.hypot(*(now.peers - np.asarray(now.pose[:2])).T)
         if d.min() < 2 * robot.radius + ESCAPE_MARGIN_M:
             state = start_escape(state, now, None, params)
     if state.escape_m > 0:

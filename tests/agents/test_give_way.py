@@ -1,7 +1,7 @@
 """Two robots driven at each other, each by the agents' own control step (SLAM, DWA, giving
 way by the other's intent), in the simulator, without processes: they must pass without
 touching, and without giving up a waypoint. The same drives with give-way switched off end in
-contact (crossing) or stuck face to face (head-on), so the scenes do test it.
+contact (crossing) or stuck face to face (head-on, narrow), so the scenes do test it.
 """
 
 from __future__ import annotations
@@ -34,9 +34,20 @@ walls: [[0, 0, 7, 0], [7, 0, 7, 1.4], [7, 1.4, 0, 1.4], [0, 1.4, 0, 0]]
 dock: [0.5, 0.7, 0.0]
 starts: [[0.5, 0.7, 0.0]]
 """
-# Each scene: the world, and per robot its start and its waypoints. Crossing: paths at right
+# A 3 m square room with a table 0.8 × 0.6 m whose top edge leaves 0.65 m to the wall: a
+# passage one robot wide (the corridor world's right room).
+NARROW = """name: narrow
+wall_thickness: 0.1
+walls: [[0, 0, 3, 0], [3, 0, 3, 3], [3, 3, 0, 3], [0, 3, 0, 0]]
+furniture:
+  - {name: table, type: box, center: [1.5, 2.0], size: [0.8, 0.6]}
+dock: [0.5, 0.5, 0.0]
+starts: [[0.5, 0.5, 0.0]]
+"""  # Each scene: the world, and per robot its start and its waypoints. Crossing: paths at right
 # angles that reach the room's centre at the same time. Head-on: both along the corridor's
-# middle line, towards each other.
+# middle line, towards each other. Narrow: robot-0 through the passage above the table and
+# down past its corner, robot-1 into the passage from the other end; robot-1 must back out of
+# it (a robot that only stops where it stands is in robot-0's way at the table's corner).
 SCENES = {
     "crossing": (
         ROOM,
@@ -52,8 +63,15 @@ SCENES = {
             "robot-1": ((6.4, 0.7, math.pi), [(3.5, 0.7), (0.6, 0.7)]),
         },
     ),
+    "narrow": (
+        NARROW,
+        {
+            "robot-0": ((0.8, 2.65, 0.0), [(1.86, 2.55), (2.14, 2.31), (2.2, 1.0)]),
+            "robot-1": ((2.3, 2.55, math.pi), [(1.6, 2.55), (0.9, 2.25), (0.5, 2.25)]),
+        },
+    ),
 }
-SIM_SECONDS = 40.0
+SIM_SECONDS = 60.0
 
 
 class LoopbackBus:
