@@ -33,7 +33,7 @@ from agents.follow.motion import follow_step, predict
 from agents.follow.state import FollowParams, FollowState, Situation
 from agents.market import Won, swept_pieces
 from agents.passage import Holding, Waits, hold
-from agents.peers import cut_out, held_for, own_intent, progress, to_avoid
+from agents.peers import HOLDING_UP_M, cut_out, held_for, own_intent, progress, to_avoid
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
 from fleet.params import FleetConfig
@@ -240,8 +240,8 @@ def _command(
         return state, Command(0.0, 0.0, "done", "idle", follow)
     if follow is None or follow.done:
         peers, held = (
-            to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, True, held_for=s)
-            for s in (0.0, agent.make_way_held_s)
+            to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, True, held_near=h)
+            for h in (None, _held_near(pose, params))
         )
         now = Situation(pose, heard.velocity, obstacles, peers, held)
         idle, result = keep_clear(state.idle, now, params.follow)
@@ -277,6 +277,13 @@ def _lost(
     return state, Command(0.0, 0.0, "unlocalized", "other", follow, notes)
 
 
+def _held_near(pose: Pose, params: ControlParams) -> tuple[np.ndarray, float, float]:
+    """Which peers a robot at ``pose`` may be holding up (see :func:`agents.peers.to_avoid`):
+    held ``agent.make_way_held_s`` or longer, their bodies within ``HOLDING_UP_M`` of its."""
+    reach = 2 * params.follow.robot.radius + HOLDING_UP_M
+    return np.array(pose[:2]), params.follow.agent.make_way_held_s, reach
+
+
 def _follow(
     heard: Heard,
     state: ControlState,
@@ -300,9 +307,9 @@ def _follow(
             agent.stale_after_s,
             everyone=False,
             skip=ordered,
-            held_for=least,
+            held_near=h,
         )
-        for least in (0.0, agent.make_way_held_s)
+        for h in (None, _held_near(pose, params))
     )
     predicted = predict(pose, state.command, heard.latency_s)
     follow, result = follow_step(

@@ -21,6 +21,7 @@ the order of passage waits on (:mod:`agents.passage`).
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
@@ -40,6 +41,9 @@ RIM_POINTS = 24
 PEER_MASK_MARGIN_M = 0.05
 # an intent announces at most this many waypoints of the path ahead
 INTENT_WAYPOINTS = 30
+# a peer held up with its body this near a robot's (m) may be held up by that robot's body:
+# DWA stops a robot short of a body ahead by its margins and its braking from a crawl
+HOLDING_UP_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -80,12 +84,13 @@ def path_intent(
 
 
 def held_for(follow: FollowState | None) -> float:
-    """How long a robot on its way along a path has come no closer to its next waypoint: the
-    watchdog's clock with the time it waited for peers (turns and escape moves hold it), 0
-    without a path under way. What its intent says (``Intent.held_s``)."""
+    """How long a robot on its way along a path has come no closer to its next waypoint with no
+    peer it gives way to in the way: the watchdog's clock (turns and escape moves hold it), 0
+    without a path under way. What its intent says (``Intent.held_s``): held up by something in
+    its scan, a wall or the body of a robot that gives way to it, not waiting for a peer."""
     if follow is None or follow.done:
         return 0.0
-    return follow.stalled_s + follow.yielded_s
+    return follow.stalled_s
 
 
 def own_intent(
@@ -137,21 +142,32 @@ def to_avoid(
     max_age_s: float,
     everyone: bool,
     skip: frozenset[str] = frozenset(),
-    held_for: float = 0.0,
+    held_near: tuple[np.ndarray, float, float] | None = None,
 ) -> np.ndarray:
     """The centres of the discs (see :func:`intent_centres`) that the peers robot ``me`` keeps
     clear of will cover: those it gives way to (:func:`gives_way`), or all of them with
-    ``everyone`` (a robot without work); none of those in ``skip``; with ``held_for``, only
-    those that say they have been held up at least that long (``Intent.held_s``)."""
+    ``everyone`` (a robot without work); none of those in ``skip``. With ``held_near`` (xy,
+    held_s, reach), only those that say they have been held up at least held_s
+    (``Intent.held_s``) and stood within reach of xy when they said it: the peers a robot at xy
+    may be holding up with its body."""
     return intent_centres(
         [
             i.points
             for rid, i in intents.items()
-            if rid not in skip and (everyone or gives_way(me, rid)) and i.held_s >= held_for
+            if rid not in skip
+            and (everyone or gives_way(me, rid))
+            and (held_near is None or _holding_up(i, *held_near))
         ],
         now,
         max_age_s,
     )
+
+
+def _holding_up(intent: Intent, xy: np.ndarray, held_s: float, reach: float) -> bool:
+    """Whether ``intent`` says its robot has been held up ``held_s`` or longer, standing within
+    ``reach`` of ``xy``."""
+    pts = intent.points
+    return intent.held_s >= held_s and len(pts) > 0 and math.dist(pts[0, 1:], xy) <= reach
 
 
 def rim_points(centres: np.ndarray, robot_radius: float) -> np.ndarray:

@@ -122,17 +122,22 @@ def test_a_robot_at_work_makes_way_only_for_a_peer_that_says_it_is_held_up() -> 
 
 def test_a_robot_announces_how_long_it_has_come_no_closer_to_its_waypoint() -> None:
     follow = FollowState(np.array([[0.0, 0.0], [1.0, 0.0]]), index=1, stalled_s=1.2, yielded_s=0.8)
-    assert held_for(follow) == pytest.approx(2.0)
+    # waiting for a peer is not being held up by one that gives way
+    assert held_for(follow) == pytest.approx(1.2)
     assert held_for(None) == 0.0
     assert held_for(FollowState(np.array([[0.0, 0.0]]), index=1)) == 0.0  # done
 
 
-def test_only_peers_held_up_long_enough_count_as_held() -> None:
+def test_only_peers_held_up_long_enough_near_the_robot_count_as_held() -> None:
     points = path_intent(np.array([0.0, 0.0]), np.array([[1.0, 0.0]]), 0.3, 10.0, 2.0)
+    up = np.array([0.0, 0.0, 1.0])
     intents = {
         "robot-0": Intent(10.0, points, 1, 1, held_s=1.5),
-        "robot-1": Intent(10.0, points + np.array([0.0, 0.0, 2.0]), 1, 1, held_s=0.4),
+        "robot-1": Intent(10.0, points + 0.9 * up, 1, 1, held_s=0.4),
+        "robot-2": Intent(10.0, points + 2.5 * up, 1, 1, held_s=5.0),
     }
-    held = to_avoid("robot-2", intents, 10.0, 0.5, everyone=False, held_for=1.0)
+    # robot-3 at (0, 0.5): robot-0 and robot-1 are within reach (0.64 m), robot-2 is not
+    near = (np.array([0.0, 0.5]), 1.0, 2 * R + 0.3)
+    held = to_avoid("robot-3", intents, 10.0, 0.5, everyone=False, held_near=near)
     assert np.allclose(held, points[:, 1:])
-    assert len(to_avoid("robot-2", intents, 10.0, 0.5, everyone=False)) == 2 * len(points)
+    assert len(to_avoid("robot-3", intents, 10.0, 0.5, everyone=False)) == 3 * len(points)
