@@ -33,7 +33,15 @@ from agents.follow.motion import follow_step, predict
 from agents.follow.state import FollowParams, FollowState, Situation
 from agents.market import Won, swept_pieces
 from agents.passage import Holding, Waits, hold
-from agents.peers import HOLDING_UP_M, cut_out, held_for, own_intent, progress, to_avoid
+from agents.peers import (
+    HOLDING_UP_M,
+    cut_out,
+    held_for,
+    own_intent,
+    peer_discs,
+    progress,
+    to_avoid,
+)
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
 from fleet.params import FleetConfig
@@ -243,7 +251,7 @@ def _command(
             to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, True, held_near=h)
             for h in (None, _held_near(pose, params))
         )
-        now = Situation(pose, heard.velocity, obstacles, peers, held)
+        now = Situation(pose, heard.velocity, obstacles, peers, held, _others(heard, params))
         idle, result = keep_clear(state.idle, now, params.follow)
         mode = "done" if drive.plan_id >= 0 else "waiting"
         return replace(state, idle=idle), Command(result.v, result.w, mode, "idle", follow)
@@ -275,6 +283,14 @@ def _lost(
         text = f"cannot find itself in its saved map ({located.reason}); it stays out of the market"
         notes = ((logging.ERROR, text),)
     return state, Command(0.0, 0.0, "unlocalized", "other", follow, notes)
+
+
+def _others(heard: Heard, params: ControlParams) -> np.ndarray:
+    """Where the peers stood when they sent their latest fresh intents."""
+    robot = params.follow.robot
+    intents = [i.points for i in heard.peers.values()]
+    stale = params.follow.agent.stale_after_s
+    return peer_discs(intents, heard.scan.stamp, stale, robot.radius, robot.max_vel_x)[0]
 
 
 def _held_near(pose: Pose, params: ControlParams) -> tuple[np.ndarray, float, float]:
@@ -312,9 +328,8 @@ def _follow(
         for h in (None, _held_near(pose, params))
     )
     predicted = predict(pose, state.command, heard.latency_s)
-    follow, result = follow_step(
-        before, Situation(predicted, heard.velocity, obstacles, peers, held), params.follow
-    )
+    now = Situation(predicted, heard.velocity, obstacles, peers, held, _others(heard, params))
+    follow, result = follow_step(before, now, params.follow)
     if follow.skipped > before.skipped:
         at = before.waypoints[before.index]
         short = float(np.hypot(pose[0] - at[0], pose[1] - at[1]))

@@ -16,6 +16,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from scipy import ndimage
 
 from agents.follow.primitives import gaps, held, kept_clear, rotate_in_place
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
@@ -33,6 +34,12 @@ MAKE_WAY_MAX_M = 0.6
 MAKE_WAY_STEP_M = 0.05
 # metres of clearance a metre of the move must buy: a short step aside before a long retreat
 WAY_COST_PER_M = 0.3
+# scan points this far beyond a peer's body are the peer (its latest intent says where it stood)
+PEER_BODY_MARGIN_M = 0.1
+# how far round the robot, on what grid, it looks for a way for the peer past its body
+WAY_WINDOW_M = 1.0
+WAY_GRID_M = 0.04
+WAY_SNAP_M = 0.1
 
 
 def escape_heading(
@@ -82,14 +89,63 @@ def escape_heading(
 
 
 def in_their_way(now: Situation, robot_radius: float) -> bool:
-    """Whether the robot's body comes within ``IN_THE_WAY_M`` of a disc that a peer it gives way
-    to, and which says it is held up, will cover (``now.held``). A peer that drives on is not
-    held: it passes by, or DWA takes it round the body, and a move aside would only drive the
+    """Whether the robot stands where a peer it gives way to cannot get past it: its body
+    comes within ``IN_THE_WAY_M`` of a disc that a peer which says it is held up will cover
+    (``now.held``), where that peer cannot get round it (:func:`blocks_the_way`). A peer that
+    drives on is not held: it passes by, or DWA takes it round the body. Where there is room,
+    the peer's escape move or DWA takes it round too, and a move aside would only drive the
     brush over swept floor."""
     if not len(now.held):
         return False
     d = np.hypot(*(now.held - np.asarray(now.pose[:2])).T)
-    return bool(d.min() < 2 * robot_radius + IN_THE_WAY_M)
+    if d.min() >= 2 * robot_radius + IN_THE_WAY_M:
+        return False
+    near = np.hypot(*(now.obstacles[:, None, :] - now.others[None, :, :]).transpose(2, 0, 1))
+    walls = now.obstacles[~(near < robot_radius + PEER_BODY_MARGIN_M).any(axis=1)]
+    return blocks_the_way(now.pose, walls, now.held, robot_radius)
+
+
+def blocks_the_way(pose: Pose, walls: np.ndarray, tube: np.ndarray, robot_radius: float) -> bool:
+    """Whether a robot at ``pose`` stops a peer from getting along ``tube`` (the discs its
+    intent will cover, in time order, the first where it stands): on a grid of
+    ``WAY_GRID_M`` cells over the ``WAY_WINDOW_M`` round the robot, the cells a peer's centre
+    can take (clear of the ``walls`` by a radius and the margin, of the robot by a diameter and
+    the margin) hold no way from where the peer stands to the farthest disc of the tube on the
+    grid. In a passage one robot wide they do not; in a room the peer goes round."""
+    xy = np.asarray(pose[:2], dtype=float)
+    n = round(2 * WAY_WINDOW_M / WAY_GRID_M)
+    corner = xy - WAY_WINDOW_M
+    occupied = np.zeros((n, n), dtype=bool)
+    cells = np.floor((walls - corner) / WAY_GRID_M).astype(int)
+    inside = ((cells >= 0) & (cells < n)).all(axis=1)
+    occupied[cells[inside, 1], cells[inside, 0]] = True
+    centres = corner + WAY_GRID_M * (np.indices((n, n))[::-1].transpose(1, 2, 0) + 0.5)
+    clear = ndimage.distance_transform_edt(~occupied) * WAY_GRID_M
+    free = (clear > robot_radius + ESCAPE_MARGIN_M) & (
+        np.hypot(*(centres - xy).transpose(2, 0, 1)) > 2 * robot_radius + ESCAPE_MARGIN_M
+    )
+    at = np.floor((tube - corner) / WAY_GRID_M).astype(int)
+    on = ((at >= 0) & (at < n)).all(axis=1)
+    if not on[0] or on.sum() < 2:
+        return False
+    labels, _ = ndimage.label(free)
+    start = _component_near(labels, at[0], round(WAY_SNAP_M / WAY_GRID_M))
+    end = at[np.flatnonzero(on)[-1]]
+    return start > 0 and labels[end[1], end[0]] != start
+
+
+def _component_near(labels: np.ndarray, cell: np.ndarray, reach: int) -> int:
+    """The label of the free cell nearest ``cell`` (col, row) within ``reach`` cells, 0 if none:
+    a peer's own cell may read as too near a wall on a grid this coarse."""
+    rows, cols = labels.shape
+    r0, r1 = max(cell[1] - reach, 0), min(cell[1] + reach + 1, rows)
+    c0, c1 = max(cell[0] - reach, 0), min(cell[0] + reach + 1, cols)
+    window = labels[r0:r1, c0:c1]
+    if not window.any():
+        return 0
+    rr, cc = np.nonzero(window)
+    k = np.argmin(np.hypot(rr + r0 - cell[1], cc + c0 - cell[0]))
+    return int(window[rr[k], cc[k]])
 
 
 def way_out(

@@ -7,12 +7,14 @@ It does so only for a peer that says it is held up (``Intent.held_s``).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from agents.follow.escape import (
     IN_THE_WAY_M,
+    blocks_the_way,
     in_their_way,
     make_way,
     way_out,
@@ -141,3 +143,25 @@ def test_only_peers_held_up_long_enough_near_the_robot_count_as_held() -> None:
     held = to_avoid("robot-3", intents, 10.0, 0.5, everyone=False, held_near=near)
     assert np.allclose(held, points[:, 1:])
     assert len(to_avoid("robot-3", intents, 10.0, 0.5, everyone=False)) == 3 * len(points)
+
+
+def test_a_peer_is_blocked_in_a_passage_one_robot_wide_and_goes_round_in_a_room() -> None:
+    # the peer comes along y = 0 from x = -0.6 toward x = 1.0; the robot stands at the origin
+    tube = _line(-0.6, 1.0, 0.0, 17)
+    passage = np.vstack([_line(-1.5, 1.5, 0.325, 300), _line(-1.5, 1.5, -0.325, 300)])
+    assert blocks_the_way((0.0, 0.0, 0.0), passage, tube, R)
+    assert not blocks_the_way((0.0, 0.0, 0.0), NONE, tube, R)
+    # a passage wide enough for both: the peer passes beside the robot standing at one wall
+    wide = np.vstack([_line(-1.5, 1.5, 0.6, 300), _line(-1.5, 1.5, -0.6, 300)])
+    assert not blocks_the_way((0.0, 0.38, 0.0), wide, tube + np.array([0.0, -0.2]), R)
+    # in the open, a robot standing where the peer's path ends is in its way all the same
+    assert blocks_the_way((0.9, 0.0, 0.0), NONE, _line(0.0, 1.0, 0.0, 11), R)
+
+
+def test_in_a_room_a_held_peer_is_left_to_go_round() -> None:
+    tube = _line(-0.6, 1.0, 0.0, 17)
+    passage = np.vstack([_line(-1.5, 1.5, 0.325, 300), _line(-1.5, 1.5, -0.325, 300)])
+    peer_at = tube[:1]
+    narrow = Situation((0.0, 0.0, 0.0), (0.0, 0.0), passage, tube, tube, peer_at)
+    assert in_their_way(narrow, R)
+    assert not in_their_way(replace(narrow, obstacles=NONE), R)
