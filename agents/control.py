@@ -5,7 +5,7 @@
 - *pose*: the scan, with the returns off the peers cut out (:func:`agents.peers.cut_out`), goes
   to the pose source (:mod:`agents.pose_source`: the robot's own SLAM, or odometry);
 - *obstacles*: the scan's points (:func:`scan_points`) and the discs the peers it gives way to
-  will cover, by their intents (:func:`agents.peers.to_avoid`);
+  will cover, by their intents (:func:`agents.peers.kept_clear_of`);
 - *command*: stop while the odometry is stale or the robot does not know where it is; without
   a path to follow, keep clear of everyone (:func:`agents.follow.escape.keep_clear`); hold for
   the peers its plan's order of passage waits for (:func:`agents.passage.hold`); else follow the
@@ -37,10 +37,12 @@ from agents.peers import (
     HOLDING_UP_M,
     cut_out,
     held_for,
+    held_up_near,
+    intent_centres,
+    kept_clear_of,
     own_intent,
     peer_discs,
     progress,
-    to_avoid,
 )
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
@@ -247,11 +249,8 @@ def _command(
         # on its dock: stepping aside for a peer would take it off the charger
         return state, Command(0.0, 0.0, "done", "idle", follow)
     if follow is None or follow.done:
-        peers, held = (
-            to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, True, held_near=h)
-            for h in (None, _held_near(pose, params))
-        )
-        now = Situation(pose, heard.velocity, obstacles, peers, held, _others(heard, params))
+        kept = kept_clear_of(params.robot_id, heard.peers, everyone=True)
+        now = Situation(pose, heard.velocity, obstacles, *_around(kept, heard, params, pose))
         idle, result = keep_clear(state.idle, now, params.follow)
         mode = "done" if drive.plan_id >= 0 else "waiting"
         return replace(state, idle=idle), Command(result.v, result.w, mode, "idle", follow)
@@ -285,19 +284,20 @@ def _lost(
     return state, Command(0.0, 0.0, "unlocalized", "other", follow, notes)
 
 
-def _others(heard: Heard, params: ControlParams) -> np.ndarray:
-    """Where the peers stood when they sent their latest fresh intents."""
-    robot = params.follow.robot
-    intents = [i.points for i in heard.peers.values()]
-    stale = params.follow.agent.stale_after_s
-    return peer_discs(intents, heard.scan.stamp, stale, robot.radius, robot.max_vel_x)[0]
-
-
-def _held_near(pose: Pose, params: ControlParams) -> tuple[np.ndarray, float, float]:
-    """Which peers a robot at ``pose`` may be holding up (see :func:`agents.peers.to_avoid`):
-    held ``agent.make_way_held_s`` or longer, their bodies within ``HOLDING_UP_M`` of its."""
-    reach = 2 * params.follow.robot.radius + HOLDING_UP_M
-    return np.array(pose[:2]), params.follow.agent.make_way_held_s, reach
+def _around(
+    kept: Mapping[str, Intent], heard: Heard, params: ControlParams, pose: Pose
+) -> tuple[np.ndarray, tuple[np.ndarray, ...], np.ndarray]:
+    """What a step sees of the peers (:class:`Situation`): the discs of those it keeps clear of
+    (``kept``), of those among them it may be holding up (held ``agent.make_way_held_s`` or
+    longer, their bodies within ``HOLDING_UP_M`` of its), and where every peer stood."""
+    robot, agent, stamp = params.follow.robot, params.follow.agent, heard.scan.stamp
+    stale = agent.stale_after_s
+    discs = intent_centres([i.points for i in kept.values()], stamp, stale)
+    reach = 2 * robot.radius + HOLDING_UP_M
+    held = held_up_near(kept, stamp, stale, np.array(pose[:2]), agent.make_way_held_s, reach)
+    everyone = [i.points for i in heard.peers.values()]
+    others = peer_discs(everyone, stamp, stale, robot.radius, robot.max_vel_x)[0]
+    return discs, held, others
 
 
 def _follow(
@@ -315,20 +315,9 @@ def _follow(
     before = drive.follow
     assert before is not None
     ordered = frozenset(drive.waits.peer) if before.index <= drive.sweep_from else frozenset()
-    peers, held = (
-        to_avoid(
-            params.robot_id,
-            heard.peers,
-            heard.scan.stamp,
-            agent.stale_after_s,
-            everyone=False,
-            skip=ordered,
-            held_near=h,
-        )
-        for h in (None, _held_near(pose, params))
-    )
+    kept = kept_clear_of(params.robot_id, heard.peers, everyone=False, skip=ordered)
     predicted = predict(pose, state.command, heard.latency_s)
-    now = Situation(predicted, heard.velocity, obstacles, peers, held, _others(heard, params))
+    now = Situation(predicted, heard.velocity, obstacles, *_around(kept, heard, params, pose))
     follow, result = follow_step(before, now, params.follow)
     if follow.skipped > before.skipped:
         at = before.waypoints[before.index]

@@ -135,39 +135,35 @@ def intent_centres(intents: Iterable[np.ndarray], now: float, max_age_s: float) 
     return np.vstack(centres) if centres else np.zeros((0, 2))
 
 
-def to_avoid(
-    me: str,
+def kept_clear_of(
+    me: str, intents: Mapping[str, Intent], everyone: bool, skip: frozenset[str] = frozenset()
+) -> dict[str, Intent]:
+    """The intents of the peers robot ``me`` keeps clear of: those it gives way to
+    (:func:`gives_way`), or all of them with ``everyone`` (a robot without work); none of those
+    in ``skip``. The discs they will cover (:func:`intent_centres`) are obstacles to it."""
+    return {
+        rid: i for rid, i in intents.items() if rid not in skip and (everyone or gives_way(me, rid))
+    }
+
+
+def held_up_near(
     intents: Mapping[str, Intent],
     now: float,
     max_age_s: float,
-    everyone: bool,
-    skip: frozenset[str] = frozenset(),
-    held_near: tuple[np.ndarray, float, float] | None = None,
-) -> np.ndarray:
-    """The centres of the discs (see :func:`intent_centres`) that the peers robot ``me`` keeps
-    clear of will cover: those it gives way to (:func:`gives_way`), or all of them with
-    ``everyone`` (a robot without work); none of those in ``skip``. With ``held_near`` (xy,
-    held_s, reach), only those that say they have been held up at least held_s
-    (``Intent.held_s``) and stood within reach of xy when they said it: the peers a robot at xy
-    may be holding up with its body."""
-    return intent_centres(
-        [
-            i.points
-            for rid, i in intents.items()
-            if rid not in skip
-            and (everyone or gives_way(me, rid))
-            and (held_near is None or _holding_up(i, *held_near))
-        ],
-        now,
-        max_age_s,
+    xy: np.ndarray,
+    held_s: float,
+    reach: float,
+) -> tuple[np.ndarray, ...]:
+    """Of ``intents`` (those of the peers a robot keeps clear of), those that say it has been
+    held up ``held_s`` or longer (``Intent.held_s``) standing within ``reach`` of ``xy``: the
+    peers a robot at xy may be holding up with its body. One array of disc centres per peer,
+    in time order, the first where it stands (see :func:`intent_centres`)."""
+    tubes = (
+        intent_centres([i.points], now, max_age_s)
+        for i in intents.values()
+        if i.held_s >= held_s and len(i.points) and math.dist(i.points[0, 1:], xy) <= reach
     )
-
-
-def _holding_up(intent: Intent, xy: np.ndarray, held_s: float, reach: float) -> bool:
-    """Whether ``intent`` says its robot has been held up ``held_s`` or longer, standing within
-    ``reach`` of ``xy``."""
-    pts = intent.points
-    return intent.held_s >= held_s and len(pts) > 0 and math.dist(pts[0, 1:], xy) <= reach
+    return tuple(t for t in tubes if len(t))
 
 
 def rim_points(centres: np.ndarray, robot_radius: float) -> np.ndarray:

@@ -3,11 +3,11 @@
 A robot that makes no progress under DWA for ``agent.escape_after_s`` — boxed in, or caught in
 a minimum of DWA's costs — turns in place onto the free direction nearest its path and drives a
 short way straight along it (:func:`escape_heading`, :func:`start_escape`,
-:func:`escape_step`). One that is stopped in the way of a peer it gives way to while that peer
-says it is held up (it cannot pass the body) instead moves out of the peer's way with the same
-kind of move (:func:`in_their_way`, :func:`way_out`, :func:`make_way`). A robot without work
-stands still unless a peer's intent comes at it, and then steps aside, or is in the way of a
-peer held up, and then moves out of it the same way (:func:`keep_clear`).
+:func:`escape_step`). One that is stopped where a peer it gives way to is held up and cannot
+get past its body instead moves out of that peer's way with the same kind of move
+(:func:`in_their_way`, :func:`blocks_the_way`, :func:`way_out`, :func:`make_way`). A robot
+without work stands still unless a peer's intent comes at it, and then steps aside, or it
+blocks a held peer, and then moves out of its way the same way (:func:`keep_clear`).
 """
 
 from __future__ import annotations
@@ -90,19 +90,18 @@ def escape_heading(
 
 def in_their_way(now: Situation, robot_radius: float) -> bool:
     """Whether the robot stands where a peer it gives way to cannot get past it: its body
-    comes within ``IN_THE_WAY_M`` of a disc that a peer which says it is held up will cover
-    (``now.held``), where that peer cannot get round it (:func:`blocks_the_way`). A peer that
+    comes within ``IN_THE_WAY_M`` of the discs that a peer which says it is held up will cover
+    (one of ``now.held``), and that peer cannot get round it (:func:`blocks_the_way`). A peer that
     drives on is not held: it passes by, or DWA takes it round the body. Where there is room,
     the peer's escape move or DWA takes it round too, and a move aside would only drive the
     brush over swept floor."""
-    if not len(now.held):
-        return False
-    d = np.hypot(*(now.held - np.asarray(now.pose[:2])).T)
-    if d.min() >= 2 * robot_radius + IN_THE_WAY_M:
+    xy = np.asarray(now.pose[:2])
+    tubes = [t for t in now.held if np.hypot(*(t - xy).T).min() < 2 * robot_radius + IN_THE_WAY_M]
+    if not tubes:
         return False
     near = np.hypot(*(now.obstacles[:, None, :] - now.others[None, :, :]).transpose(2, 0, 1))
     walls = now.obstacles[~(near < robot_radius + PEER_BODY_MARGIN_M).any(axis=1)]
-    return blocks_the_way(now.pose, walls, now.held, robot_radius)
+    return any(blocks_the_way(now.pose, walls, t, robot_radius) for t in tubes)
 
 
 def blocks_the_way(pose: Pose, walls: np.ndarray, tube: np.ndarray, robot_radius: float) -> bool:

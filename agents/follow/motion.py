@@ -230,7 +230,7 @@ def follow_step(
         if in_their_way(now, params.robot.radius):
             if blocked >= agent.make_way_after_s:
                 state = make_way(state, now, params)
-        elif blocked >= agent.escape_after_s:
+        elif blocked >= agent.escape_after_s and not now.held:
             state = start_escape(state, now, aim, params)
         if progressed:
             return replace(state, stalled_s=0.0, yielded_s=0.0, best_dist=dist), result

@@ -44,15 +44,15 @@ class FollowState:
 class Situation:
     """What one step sees: the robot's ``pose`` and ``velocity`` (v, ω), the world-frame
     obstacle points of its scan, ``peers``, the centres of the discs the robots it gives way to
-    will cover (:func:`agents.peers.intent_centres`), ``held``, those of the peers among them
-    that say they are held up near it (:func:`agents.peers.to_avoid`), and ``others``, where
+    will cover (:func:`agents.peers.intent_centres`), ``held``, those of each peer among them
+    that says it is held up near it (:func:`agents.peers.held_up_near`), and ``others``, where
     every peer stands (:func:`agents.peers.peer_discs`)."""
 
     pose: Pose
     velocity: tuple[float, float]
     obstacles: np.ndarray
     peers: np.ndarray
-    held: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    held: tuple[np.ndarray, ...] = ()
     others: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 

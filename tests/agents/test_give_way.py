@@ -154,7 +154,7 @@ def test_two_robots_driven_at_each_other_pass_without_contact(
 def test_without_giving_way_the_same_drives_collide(
     scene: str, tmp_path: Path, cfg: FleetConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(control, "to_avoid", lambda *_args, **_kw: np.zeros((0, 2)))
+    monkeypatch.setattr(control, "kept_clear_of", lambda *_args, **_kw: {})
     contacts, skipped, _ = _drive(scene, tmp_path, cfg)
     # crossing, they collide; head-on, each stops before the other (it sees it in its scans)
     # and gives up the waypoint the other stands on

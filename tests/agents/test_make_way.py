@@ -21,7 +21,7 @@ from agents.follow.escape import (
 )
 from agents.follow.motion import follow_step
 from agents.follow.state import FollowParams, FollowState, Situation
-from agents.peers import held_for, path_intent, to_avoid
+from agents.peers import held_for, held_up_near, path_intent
 from fleet.params import load_fleet_config
 from fleet.protocol import Intent
 
@@ -48,7 +48,7 @@ def test_in_the_open_a_robot_on_a_peers_path_steps_aside_rather_than_back() -> N
     # the peer at the origin heads +x; its intent covers a metre; the robot stands on it at 0.7
     tube = _line(0.0, 1.0, 0.0, 11)
     pose = (0.7, 0.0, math.pi)
-    assert in_their_way(Situation(pose, (0.0, 0.0), NONE, tube, tube), R)
+    assert in_their_way(Situation(pose, (0.0, 0.0), NONE, tube, (tube,)), R)
     # a peer that drives on is not held up: nobody is in its way
     assert not in_their_way(Situation(pose, (0.0, 0.0), NONE, tube), R)
     move = way_out(pose, NONE, tube, R)
@@ -85,7 +85,7 @@ def test_make_way_starts_a_move_in_the_cheaper_sense_and_out_of_the_way() -> Non
     # facing across the path (+y): the move aside is driven forward or in reverse, never turned
     state = make_way(
         FollowState(np.array([[0.7, 0.0], [-1.0, 0.0]]), index=1, blocked_s=1.0),
-        Situation((0.7, 0.0, math.pi / 2), (0.0, 0.0), NONE, tube, tube),
+        Situation((0.7, 0.0, math.pi / 2), (0.0, 0.0), NONE, tube, (tube,)),
         PARAMS,
     )
     assert state.escape_m > 0 and state.blocked_s == 0.0 and state.making_way
@@ -104,7 +104,7 @@ def test_at_the_blind_end_of_a_passage_no_move_gets_out_of_the_way() -> None:
     assert way_out((0.55, 0.0, math.pi), walls, _line(-0.4, 0.3, 0.0, 8), R) is None
 
 
-def _steps(held: np.ndarray, seconds: float) -> FollowState:
+def _steps(held: tuple[np.ndarray, ...], seconds: float) -> FollowState:
     """A robot at work on the path of a peer coming along +x, facing its own next waypoint
     beyond the peer, stepped ``seconds`` by the follower with the peer ``held`` up or not."""
     tube = _line(0.0, 1.0, 0.0, 11)
@@ -117,9 +117,9 @@ def _steps(held: np.ndarray, seconds: float) -> FollowState:
 
 def test_a_robot_at_work_makes_way_only_for_a_peer_that_says_it_is_held_up() -> None:
     seconds = CFG.agent.make_way_after_s + 2 * PARAMS.dt
-    assert _steps(_line(0.0, 1.0, 0.0, 11), seconds).making_way
+    assert _steps((_line(0.0, 1.0, 0.0, 11),), seconds).making_way
     # the same peer driving on: the robot waits for it (its body is in the scan, not here)
-    assert not _steps(NONE, seconds).making_way
+    assert not _steps((), seconds).making_way
 
 
 def test_a_robot_announces_how_long_it_has_come_no_closer_to_its_waypoint() -> None:
@@ -139,10 +139,8 @@ def test_only_peers_held_up_long_enough_near_the_robot_count_as_held() -> None:
         "robot-2": Intent(10.0, points + 2.5 * up, 1, 1, held_s=5.0),
     }
     # robot-3 at (0, 0.5): robot-0 and robot-1 are within reach (0.64 m), robot-2 is not
-    near = (np.array([0.0, 0.5]), 1.0, 2 * R + 0.3)
-    held = to_avoid("robot-3", intents, 10.0, 0.5, everyone=False, held_near=near)
-    assert np.allclose(held, points[:, 1:])
-    assert len(to_avoid("robot-3", intents, 10.0, 0.5, everyone=False)) == 3 * len(points)
+    held = held_up_near(intents, 10.0, 0.5, np.array([0.0, 0.5]), 1.0, 2 * R + 0.3)
+    assert len(held) == 1 and np.allclose(held[0], points[:, 1:])
 
 
 def test_a_peer_is_blocked_in_a_passage_one_robot_wide_and_goes_round_in_a_room() -> None:
@@ -162,6 +160,6 @@ def test_in_a_room_a_held_peer_is_left_to_go_round() -> None:
     tube = _line(-0.6, 1.0, 0.0, 17)
     passage = np.vstack([_line(-1.5, 1.5, 0.325, 300), _line(-1.5, 1.5, -0.325, 300)])
     peer_at = tube[:1]
-    narrow = Situation((0.0, 0.0, 0.0), (0.0, 0.0), passage, tube, tube, peer_at)
+    narrow = Situation((0.0, 0.0, 0.0), (0.0, 0.0), passage, tube, (tube,), peer_at)
     assert in_their_way(narrow, R)
     assert not in_their_way(replace(narrow, obstacles=NONE), R)
