@@ -194,7 +194,8 @@ def follow_step(
     under DWA the escape move begins (boxed in, or caught in a minimum of its costs, see
     :func:`agents.follow.escape.escape_heading`) — or, for a robot standing in the way of a peer
     it gives way to, after ``make_way_after_s`` the move out of that peer's way
-    (:func:`agents.follow.escape.make_way`).
+    (:func:`agents.follow.escape.make_way`). A robot near a peer that says it is held up
+    (``now.held``) does not escape toward its path: that took it back into the peer's way.
     Turning in place toward the path holds the watchdog's clock (only coming closer resets it,
     so a robot that turns, drives off and turns back again is still given up on), and so do the
     escape move and the move out of the way.

@@ -163,3 +163,17 @@ def test_in_a_room_a_held_peer_is_left_to_go_round() -> None:
     narrow = Situation((0.0, 0.0, 0.0), (0.0, 0.0), passage, tube, (tube,), peer_at)
     assert in_their_way(narrow, R)
     assert not in_their_way(replace(narrow, obstacles=NONE), R)
+
+
+def test_a_robot_that_made_way_does_not_escape_back_into_a_held_peers_way() -> None:
+    # out of the way beside the peer's path (0.5 m off it), its own path runs through it: DWA
+    # stops it short of the peer's discs, and the escape toward its path would take it back in
+    tube = _line(0.0, 1.0, 0.0, 11)
+    state = FollowState(np.array([[0.5, 0.5], [0.5, -1.0]]), index=1)
+    seconds = CFG.agent.escape_after_s + 2 * PARAMS.dt
+    for held in ((tube,), ()):
+        now = Situation((0.5, 0.5, -math.pi / 2), (0.0, 0.0), NONE, tube, held)
+        after = state
+        for _ in range(round(seconds / PARAMS.dt)):
+            after, _ = follow_step(after, now, PARAMS)
+        assert (after.escape_m > 0) is (not held)
