@@ -289,12 +289,17 @@ def _around(
 ) -> tuple[np.ndarray, tuple[np.ndarray, ...], np.ndarray]:
     """What a step sees of the peers (:class:`Situation`): the discs of those it keeps clear of
     (``kept``), of those among them it may be holding up (held ``agent.make_way_held_s`` or
-    longer, their bodies within ``HOLDING_UP_M`` of its), and where every peer stood."""
+    longer, their bodies within ``HOLDING_UP_M`` of its; none unless ``agent.make_way``), and
+    where every peer stood."""
     robot, agent, stamp = params.follow.robot, params.follow.agent, heard.scan.stamp
     stale = agent.stale_after_s
     discs = intent_centres([i.points for i in kept.values()], stamp, stale)
     reach = 2 * robot.radius + HOLDING_UP_M
-    held = held_up_near(kept, stamp, stale, np.array(pose[:2]), agent.make_way_held_s, reach)
+    held = (
+        held_up_near(kept, stamp, stale, np.array(pose[:2]), agent.make_way_held_s, reach)
+        if agent.make_way
+        else ()
+    )
     everyone = [i.points for i in heard.peers.values()]
     others = peer_discs(everyone, stamp, stale, robot.radius, robot.max_vel_x)[0]
     return discs, held, others

@@ -105,6 +105,7 @@ class AgentParams:
     align_exit: float = 0.1
     align_lookahead: float = 0.3
     escape_after_s: float = 1.0
+    make_way: bool = False
     make_way_after_s: float = 0.5
     make_way_held_s: float = 1.0
     escape_distance: float = 0.15

@@ -24,7 +24,7 @@ from typing import Annotated, Any, ClassVar, TypeVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)

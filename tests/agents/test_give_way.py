@@ -1,12 +1,15 @@
 """Two robots driven at each other, each by the agents' own control step (SLAM, DWA, giving
 way by the other's intent), in the simulator, without processes: they must pass without
 touching, and without giving up a waypoint. The same drives with give-way switched off end in
-contact (crossing) or stuck face to face (head-on, narrow), so the scenes do test it.
+contact (crossing) or stuck face to face (head-on, narrow), so the scenes do test it. The
+narrow scene is driven with moving out of the way on (``agent.make_way``); with it off, as by
+default, the two robots hold each other there and do not finish.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -138,9 +141,20 @@ def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool
     return contacts, skipped, done()
 
 
+# scenes driven with agent.make_way on
+MAKING_WAY = frozenset({"narrow"})
+
+
 @pytest.fixture(scope="module")
-def cfg() -> FleetConfig:
+def default_cfg() -> FleetConfig:
     return load_fleet_config()
+
+
+@pytest.fixture
+def cfg(request: pytest.FixtureRequest, default_cfg: FleetConfig) -> FleetConfig:
+    if request.node.callspec.params.get("scene") in MAKING_WAY:
+        return replace(default_cfg, agent=replace(default_cfg.agent, make_way=True))
+    return default_cfg
 
 
 @pytest.mark.parametrize("scene", sorted(SCENES))
@@ -148,6 +162,14 @@ def test_two_robots_driven_at_each_other_pass_without_contact(
     scene: str, tmp_path: Path, cfg: FleetConfig
 ) -> None:
     assert _drive(scene, tmp_path, cfg) == (0, 0, True)
+
+
+def test_without_making_way_two_robots_hold_each_other_in_a_passage_one_robot_wide(
+    tmp_path: Path, default_cfg: FleetConfig
+) -> None:
+    assert not default_cfg.agent.make_way
+    contacts, skipped, done = _drive("narrow", tmp_path, default_cfg)
+    assert contacts == 0 and skipped > 0 and not done
 
 
 @pytest.mark.parametrize("scene", sorted(SCENES))
