@@ -5,7 +5,7 @@
 - *pose*: the scan, with the returns off the peers cut out (:func:`agents.peers.cut_out`), goes
   to the pose source (:mod:`agents.pose_source`: the robot's own SLAM, or odometry);
 - *obstacles*: the scan's points (:func:`scan_points`) and the discs the peers it gives way to
-  will cover, by their intents (:func:`agents.peers.kept_clear_of`);
+  will cover, by their intents (:func:`agents.peers.to_avoid`);
 - *command*: stop while the odometry is stale or the robot does not know where it is; without
   a path to follow, keep clear of everyone (:func:`agents.follow.escape.keep_clear`); hold for
   the peers its plan's order of passage waits for (:func:`agents.passage.hold`); else follow the
@@ -33,17 +33,7 @@ from agents.follow.motion import follow_step, predict
 from agents.follow.state import FollowParams, FollowState, Situation
 from agents.market import Won, swept_pieces
 from agents.passage import Holding, Waits, hold
-from agents.peers import (
-    HOLDING_UP_M,
-    cut_out,
-    held_for,
-    held_up_near,
-    intent_centres,
-    kept_clear_of,
-    own_intent,
-    peer_discs,
-    progress,
-)
+from agents.peers import cut_out, own_intent, progress, to_avoid
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
 from fleet.params import FleetConfig
@@ -249,8 +239,8 @@ def _command(
         # on its dock: stepping aside for a peer would take it off the charger
         return state, Command(0.0, 0.0, "done", "idle", follow)
     if follow is None or follow.done:
-        kept = kept_clear_of(params.robot_id, heard.peers, everyone=True)
-        now = Situation(pose, heard.velocity, obstacles, *_around(kept, heard, params, pose))
+        peers = to_avoid(params.robot_id, heard.peers, stamp, agent.stale_after_s, everyone=True)
+        now = Situation(pose, heard.velocity, obstacles, peers)
         idle, result = keep_clear(state.idle, now, params.follow)
         mode = "done" if drive.plan_id >= 0 else "waiting"
         return replace(state, idle=idle), Command(result.v, result.w, mode, "idle", follow)
@@ -284,27 +274,6 @@ def _lost(
     return state, Command(0.0, 0.0, "unlocalized", "other", follow, notes)
 
 
-def _around(
-    kept: Mapping[str, Intent], heard: Heard, params: ControlParams, pose: Pose
-) -> tuple[np.ndarray, tuple[np.ndarray, ...], np.ndarray]:
-    """What a step sees of the peers (:class:`Situation`): the discs of those it keeps clear of
-    (``kept``), of those among them it may be holding up (held ``agent.make_way_held_s`` or
-    longer, their bodies within ``HOLDING_UP_M`` of its; none unless ``agent.make_way``), and
-    where every peer stood."""
-    robot, agent, stamp = params.follow.robot, params.follow.agent, heard.scan.stamp
-    stale = agent.stale_after_s
-    discs = intent_centres([i.points for i in kept.values()], stamp, stale)
-    reach = 2 * robot.radius + HOLDING_UP_M
-    held = (
-        held_up_near(kept, stamp, stale, np.array(pose[:2]), agent.make_way_held_s, reach)
-        if agent.make_way
-        else ()
-    )
-    everyone = [i.points for i in heard.peers.values()]
-    others = peer_discs(everyone, stamp, stale, robot.radius, robot.max_vel_x)[0]
-    return discs, held, others
-
-
 def _follow(
     heard: Heard,
     state: ControlState,
@@ -320,10 +289,18 @@ def _follow(
     before = drive.follow
     assert before is not None
     ordered = frozenset(drive.waits.peer) if before.index <= drive.sweep_from else frozenset()
-    kept = kept_clear_of(params.robot_id, heard.peers, everyone=False, skip=ordered)
+    peers = to_avoid(
+        params.robot_id,
+        heard.peers,
+        heard.scan.stamp,
+        agent.stale_after_s,
+        everyone=False,
+        skip=ordered,
+    )
     predicted = predict(pose, state.command, heard.latency_s)
-    now = Situation(predicted, heard.velocity, obstacles, *_around(kept, heard, params, pose))
-    follow, result = follow_step(before, now, params.follow)
+    follow, result = follow_step(
+        before, Situation(predicted, heard.velocity, obstacles, peers), params.follow
+    )
     if follow.skipped > before.skipped:
         at = before.waypoints[before.index]
         short = float(np.hypot(pose[0] - at[0], pose[1] - at[1]))
@@ -333,12 +310,6 @@ def _follow(
             f"({pose[0]:.3f}, {pose[1]:.3f}, {pose[2]:.2f})"
         )
         notes += ((logging.WARNING, text),)
-    if follow.making_way and follow.escape_m > 0 and not (before.making_way and before.escape_m):
-        sense = "forward" if follow.escape_sign > 0 else "in reverse"
-        at = f"({pose[0]:.2f}, {pose[1]:.2f})"
-        notes += (
-            (logging.INFO, f"makes way for a peer: {follow.escape_m:.2f} m {sense} from {at}"),
-        )
     kind = step_kind(before, follow, drive.sweep_from)
     if result is None:
         return Command(0.0, 0.0, "done", kind, follow, notes)
@@ -369,13 +340,7 @@ def _outputs(
     points = own_intent(
         stamp, pose, state.command, on_its_way, params.follow.robot, agent.intent_horizon_s
     )
-    intent = Intent(
-        stamp,
-        points,
-        drive.plan_id,
-        follow.index if follow is not None else -1,
-        held_for(on_its_way),
-    )
+    intent = Intent(stamp, points, drive.plan_id, follow.index if follow is not None else -1)
     status = None
     if stamp - state.last_status >= 1.0 / agent.status_hz or command.mode == "done":
         state = replace(state, last_status=stamp)

@@ -21,7 +21,6 @@ the order of passage waits on (:mod:`agents.passage`).
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
@@ -41,9 +40,6 @@ RIM_POINTS = 24
 PEER_MASK_MARGIN_M = 0.05
 # an intent announces at most this many waypoints of the path ahead
 INTENT_WAYPOINTS = 30
-# a peer held up with its body this near a robot's (m) may be held up by that robot's body:
-# DWA stops a robot short of a body ahead by its margins and its braking from a crawl
-HOLDING_UP_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -81,16 +77,6 @@ def path_intent(
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
     s = np.minimum(speed * t, cum[-1])
     return np.column_stack([stamp + t, np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
-
-
-def held_for(follow: FollowState | None) -> float:
-    """How long a robot on its way along a path has come no closer to its next waypoint with no
-    peer it gives way to in the way: the watchdog's clock (turns and escape moves hold it), 0
-    without a path under way. What its intent says (``Intent.held_s``): held up by something in
-    its scan, a wall or the body of a robot that gives way to it, not waiting for a peer."""
-    if follow is None or follow.done:
-        return 0.0
-    return follow.stalled_s
 
 
 def own_intent(
@@ -135,35 +121,26 @@ def intent_centres(intents: Iterable[np.ndarray], now: float, max_age_s: float) 
     return np.vstack(centres) if centres else np.zeros((0, 2))
 
 
-def kept_clear_of(
-    me: str, intents: Mapping[str, Intent], everyone: bool, skip: frozenset[str] = frozenset()
-) -> dict[str, Intent]:
-    """The intents of the peers robot ``me`` keeps clear of: those it gives way to
-    (:func:`gives_way`), or all of them with ``everyone`` (a robot without work); none of those
-    in ``skip``. The discs they will cover (:func:`intent_centres`) are obstacles to it."""
-    return {
-        rid: i for rid, i in intents.items() if rid not in skip and (everyone or gives_way(me, rid))
-    }
-
-
-def held_up_near(
+def to_avoid(
+    me: str,
     intents: Mapping[str, Intent],
     now: float,
     max_age_s: float,
-    xy: np.ndarray,
-    held_s: float,
-    reach: float,
-) -> tuple[np.ndarray, ...]:
-    """Of ``intents`` (those of the peers a robot keeps clear of), those that say it has been
-    held up ``held_s`` or longer (``Intent.held_s``) standing within ``reach`` of ``xy``: the
-    peers a robot at xy may be holding up with its body. One array of disc centres per peer,
-    in time order, the first where it stands (see :func:`intent_centres`)."""
-    tubes = (
-        intent_centres([i.points], now, max_age_s)
-        for i in intents.values()
-        if i.held_s >= held_s and len(i.points) and math.dist(i.points[0, 1:], xy) <= reach
+    everyone: bool,
+    skip: frozenset[str] = frozenset(),
+) -> np.ndarray:
+    """The centres of the discs (see :func:`intent_centres`) that the peers robot ``me`` keeps
+    clear of will cover: those it gives way to (:func:`gives_way`), or all of them with
+    ``everyone`` (a robot without work); none of those in ``skip``."""
+    return intent_centres(
+        [
+            i.points
+            for rid, i in intents.items()
+            if rid not in skip and (everyone or gives_way(me, rid))
+        ],
+        now,
+        max_age_s,
     )
-    return tuple(t for t in tubes if len(t))
 
 
 def rim_points(centres: np.ndarray, robot_radius: float) -> np.ndarray:

@@ -180,16 +180,12 @@ class Receivers:
             return track.hear(float(t), (float(x), float(y)))
 
     def _intent_shape(self, msg: Intent) -> str:
-        """Why an intent is none a robot can announce ("" if it can be): points outside its
-        horizon, back in time or faster than a robot drives, or held up longer than the sim
-        clock has run."""
-        step = self.bounds.clock_step_s
-        if not 0.0 <= msg.held_s <= max(msg.stamp, 0.0) + step:
-            return f"it says it has been held up {msg.held_s:.3f} s at {msg.stamp:.3f} s"
+        """Why the points of an intent are none a robot can announce ("" if they can be)."""
         pts = msg.points
         if not len(pts):
             return ""
         t = pts[:, 0]
+        step = self.bounds.clock_step_s
         if t[0] < msg.stamp - step or t[-1] > msg.stamp + self.horizon_s + step:
             return (
                 f"its points run {t[0]:.3f}-{t[-1]:.3f} s, not within the "

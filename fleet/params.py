@@ -105,9 +105,6 @@ class AgentParams:
     align_exit: float = 0.1
     align_lookahead: float = 0.3
     escape_after_s: float = 1.0
-    make_way: bool = False
-    make_way_after_s: float = 0.5
-    make_way_held_s: float = 1.0
     escape_distance: float = 0.15
     escape_speed: float = 0.1
     intent_horizon_s: float = 2.0
@@ -145,8 +142,6 @@ class AgentParams:
             "swept_within",
             "align_exit",
             "escape_after_s",
-            "make_way_after_s",
-            "make_way_held_s",
             "escape_distance",
             "escape_speed",
         )

@@ -24,7 +24,7 @@ from typing import Annotated, Any, ClassVar, TypeVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 4
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
@@ -268,16 +268,13 @@ class TruthPose(Message):
 class Intent(Message):
     """The next seconds of planned trajectory: rows of (t, x, y) with absolute sim times; and
     how far the robot is along its plan: ``waypoint`` is the index of the waypoint it heads for
-    in plan ``plan_id`` (the plan's length once it is done, -1 without a plan); ``held_s`` is how
-    long it has come no closer to that waypoint (0 unless it is on its way along a path), so a
-    robot standing in its way knows it is held up."""
+    in plan ``plan_id`` (the plan's length once it is done, -1 without a plan)."""
 
     TYPE: ClassVar[str] = "intent"
     stamp: float
     points: Annotated[np.ndarray, Arr("<f8", (3,))]
     plan_id: int = -1
     waypoint: int = -1
-    held_s: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,7 +26,7 @@ from dataclasses import replace
 import numpy as np
 
 from agents.follow.edge import edge_step
-from agents.follow.escape import ESCAPE_MARGIN_M, escape_step, in_their_way, make_way, start_escape
+from agents.follow.escape import ESCAPE_MARGIN_M, escape_step, start_escape
 from agents.follow.primitives import gaps, held, rotate_in_place
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
 from agents.peers import rim_points
@@ -192,13 +192,9 @@ def follow_step(
     (:func:`drive`: the edge pass or DWA). Without progress, the watchdog
     (:func:`watchdog`) counts toward giving the waypoint up, and after ``escape_after_s``
     under DWA the escape move begins (boxed in, or caught in a minimum of its costs, see
-    :func:`agents.follow.escape.escape_heading`) — or, for a robot standing in the way of a peer
-    it gives way to, after ``make_way_after_s`` the move out of that peer's way
-    (:func:`agents.follow.escape.make_way`). A robot near a peer that says it is held up
-    (``now.held``) does not escape toward its path: that took it back into the peer's way.
-    Turning in place toward the path holds the watchdog's clock (only coming closer resets it,
-    so a robot that turns, drives off and turns back again is still given up on), and so do the
-    escape move and the move out of the way.
+    :func:`agents.follow.escape.escape_heading`). Turning in place toward the path holds the
+    watchdog's clock (only coming closer resets it, so a robot that turns, drives off and turns
+    back again is still given up on), and so does the escape move.
     """
     agent = params.agent
     xy = np.array(now.pose[:2])
@@ -228,10 +224,7 @@ def follow_step(
         progressed = dist < state.best_dist - PROGRESS_M
         blocked = 0.0 if progressed else state.blocked_s + params.dt
         state = replace(state, blocked_s=blocked)
-        if in_their_way(now, params.robot.radius):
-            if blocked >= agent.make_way_after_s:
-                state = make_way(state, now, params)
-        elif blocked >= agent.escape_after_s and not now.held:
+        if blocked >= agent.escape_after_s:
             state = start_escape(state, now, aim, params)
         if progressed:
             return replace(state, stalled_s=0.0, yielded_s=0.0, best_dist=dist), result

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,8 +27,6 @@ class FollowState:
     escape_m: float = 0.0
     escape_heading: float = 0.0
     escape_sign: int = 1
-    # the move under way (escape_m > 0) is out of a peer's way, not out of a dead end
-    making_way: bool = False
     skipped: int = 0
     yielded_s: float = 0.0
     edge_side: int = 0
@@ -43,17 +41,13 @@ class FollowState:
 @dataclass(frozen=True, eq=False)
 class Situation:
     """What one step sees: the robot's ``pose`` and ``velocity`` (v, ω), the world-frame
-    obstacle points of its scan, ``peers``, the centres of the discs the robots it gives way to
-    will cover (:func:`agents.peers.intent_centres`), ``held``, those of each peer among them
-    that says it is held up near it (:func:`agents.peers.held_up_near`), and ``others``, where
-    every peer stands (:func:`agents.peers.peer_discs`)."""
+    obstacle points of its scan, and ``peers``, the centres of the discs the robots it gives
+    way to will cover (:func:`agents.peers.intent_centres`)."""
 
     pose: Pose
     velocity: tuple[float, float]
     obstacles: np.ndarray
     peers: np.ndarray
-    held: tuple[np.ndarray, ...] = ()
-    others: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass(frozen=True)

@@ -213,8 +213,7 @@ def _stall(peers: np.ndarray, obstacles: np.ndarray, agent: AgentParams) -> floa
 def test_waiting_for_a_peer_in_the_way_holds_the_give_up_clock_up_to_a_cap() -> None:
     across = np.array([[0.5, y] for y in np.linspace(-1.0, 1.0, 21)])
     none = np.zeros((0, 2))
-    # no escape move and no move out of the way: the watchdog alone
-    still = replace(AGENT, escape_after_s=100.0, make_way_after_s=100.0)
+    still = replace(AGENT, escape_after_s=100.0)  # no escape move: the watchdog alone
     no_wait = replace(still, give_way_max_s=0.0)
     # a wall across the lane: given up after give_up_after_s without progress, wait or not
     walled = _stall(none, across, still)

@@ -1,15 +1,12 @@
 """Two robots driven at each other, each by the agents' own control step (SLAM, DWA, giving
 way by the other's intent), in the simulator, without processes: they must pass without
 touching, and without giving up a waypoint. The same drives with give-way switched off end in
-contact (crossing) or stuck face to face (head-on, narrow), so the scenes do test it. The
-narrow scene is driven with moving out of the way on (``agent.make_way``); with it off, as by
-default, the two robots hold each other there and do not finish.
+contact (crossing) or stuck face to face (head-on), so the scenes do test it.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -37,20 +34,9 @@ walls: [[0, 0, 7, 0], [7, 0, 7, 1.4], [7, 1.4, 0, 1.4], [0, 1.4, 0, 0]]
 dock: [0.5, 0.7, 0.0]
 starts: [[0.5, 0.7, 0.0]]
 """
-# A 3 m square room with a table 0.8 × 0.6 m whose top edge leaves 0.65 m to the wall: a
-# passage one robot wide (the corridor world's right room).
-NARROW = """name: narrow
-wall_thickness: 0.1
-walls: [[0, 0, 3, 0], [3, 0, 3, 3], [3, 3, 0, 3], [0, 3, 0, 0]]
-furniture:
-  - {name: table, type: box, center: [1.5, 2.0], size: [0.8, 0.6]}
-dock: [0.5, 0.5, 0.0]
-starts: [[0.5, 0.5, 0.0]]
-"""  # Each scene: the world, and per robot its start and its waypoints. Crossing: paths at right
+# Each scene: the world, and per robot its start and its waypoints. Crossing: paths at right
 # angles that reach the room's centre at the same time. Head-on: both along the corridor's
-# middle line, towards each other. Narrow: robot-0 through the passage above the table and
-# down past its corner, robot-1 into the passage from the other end; robot-1 must back out of
-# it (a robot that only stops where it stands is in robot-0's way at the table's corner).
+# middle line, towards each other.
 SCENES = {
     "crossing": (
         ROOM,
@@ -66,15 +52,8 @@ SCENES = {
             "robot-1": ((6.4, 0.7, math.pi), [(3.5, 0.7), (0.6, 0.7)]),
         },
     ),
-    "narrow": (
-        NARROW,
-        {
-            "robot-0": ((0.8, 2.65, 0.0), [(1.86, 2.55), (2.14, 2.31), (2.2, 1.0)]),
-            "robot-1": ((2.3, 2.55, math.pi), [(1.6, 2.55), (0.9, 2.25), (0.5, 2.25)]),
-        },
-    ),
 }
-SIM_SECONDS = 60.0
+SIM_SECONDS = 40.0
 
 
 class LoopbackBus:
@@ -141,20 +120,9 @@ def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool
     return contacts, skipped, done()
 
 
-# scenes driven with agent.make_way on
-MAKING_WAY = frozenset({"narrow"})
-
-
 @pytest.fixture(scope="module")
-def default_cfg() -> FleetConfig:
+def cfg() -> FleetConfig:
     return load_fleet_config()
-
-
-@pytest.fixture
-def cfg(request: pytest.FixtureRequest, default_cfg: FleetConfig) -> FleetConfig:
-    if request.node.callspec.params.get("scene") in MAKING_WAY:
-        return replace(default_cfg, agent=replace(default_cfg.agent, make_way=True))
-    return default_cfg
 
 
 @pytest.mark.parametrize("scene", sorted(SCENES))
@@ -164,19 +132,11 @@ def test_two_robots_driven_at_each_other_pass_without_contact(
     assert _drive(scene, tmp_path, cfg) == (0, 0, True)
 
 
-def test_without_making_way_two_robots_hold_each_other_in_a_passage_one_robot_wide(
-    tmp_path: Path, default_cfg: FleetConfig
-) -> None:
-    assert not default_cfg.agent.make_way
-    contacts, skipped, done = _drive("narrow", tmp_path, default_cfg)
-    assert contacts == 0 and skipped > 0 and not done
-
-
 @pytest.mark.parametrize("scene", sorted(SCENES))
 def test_without_giving_way_the_same_drives_collide(
     scene: str, tmp_path: Path, cfg: FleetConfig, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(control, "kept_clear_of", lambda *_args, **_kw: {})
+    monkeypatch.setattr(control, "to_avoid", lambda *_args, **_kw: np.zeros((0, 2)))
     contacts, skipped, _ = _drive(scene, tmp_path, cfg)
     # crossing, they collide; head-on, each stops before the other (it sees it in its scans)
     # and gives up the waypoint the other stands on

@@ -21,8 +21,6 @@ def test_each_step_is_put_in_the_kind_the_follower_was_in() -> None:
     assert step_kind(at, dataclasses.replace(at, aligning=True), 1) == "turn"
     assert step_kind(at, dataclasses.replace(at, escape_m=0.1, aligning=True), 1) == "escape"
     assert step_kind(at, dataclasses.replace(at, yielded_s=0.1), 1) == "yield"
-    # moving out of a peer's way is giving way, not escaping a dead end
-    assert step_kind(at, dataclasses.replace(at, escape_m=0.1, making_way=True), 1) == "yield"
     assert step_kind(None, None, 0) == "idle"
     assert step_kind(at, FollowState(PATH, index=4), 1) == "idle"  # the plan just ended
 
