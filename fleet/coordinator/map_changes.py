@@ -17,14 +17,17 @@ change found:
 - for new furniture: every open or assigned task whose path runs through it is taken back from
   its owner (what the owner swept of it stays swept: its remainder is what is taken back), cut
   where it runs into the furniture and joined round it where a transit gets round
-  (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again.
-
-Floor that furniture taken away leaves free is on the planning map from then on (transits may
-cross it), but no task sweeps it: the tour was cut before.
+  (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again;
+- for furniture taken away: the floor the brush reaches now and did not reach before (under
+  it, and the band round it that robot centres kept clear of), less what a task of the job
+  sweeps already (the same change found again by a restarted coordinator), is swept by one
+  new task, "m01", "m02", ... (lanes over the patch, then fill-in passes:
+  ``TaskPlanner.task_over``), told in an ``added`` event and sold.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 
@@ -33,7 +36,9 @@ import numpy as np
 from fleet.coordinator.market import plan_around
 from fleet.coordinator.service import Coordinator
 from fleet.params import CoordinatorParams
-from planners.grid import GridMap
+from planners.bodies import Rerouted
+from planners.coverage.metrics import swath
+from planners.grid import GridMap, clearance
 from planners.map_change import (
     ADDED,
     MapChange,
@@ -45,6 +50,9 @@ from planners.map_change import (
 from planners.map_merge import LogOddsMap, Transform2D, merge_maps
 
 MAP_CHANGED = "map changed"
+ADDED_TASK = "added"
+# the tasks that sweep floor furniture taken away has freed: "m01", "m02", ...
+FREED_PREFIX = "m"
 
 
 def map_change_params(params: CoordinatorParams) -> MapChangeParams:
@@ -63,6 +71,7 @@ class MapChanges:
     def __init__(self, coordinator: Coordinator, stored: GridMap, params: MapChangeParams) -> None:
         self.coordinator = coordinator
         self.stored = stored
+        self._stored_clearance = clearance(stored)
         self.params = params
         # the furniture moved in so far, each piece the cells of its box (world centres)
         self.obstacles: list[np.ndarray] = []
@@ -78,7 +87,9 @@ class MapChanges:
         c = self.coordinator
         with c.lock:
             robots = [r.xy for r in c.job.robots.values() if r.xy is not None]
-        found = find_changes(fused, self.stored, self.params, np.array(robots, float))
+        found = find_changes(
+            fused, self.stored, self.params, np.array(robots, float), self._stored_clearance
+        )
         for change in found:
             self.take(change)
         return found
@@ -95,29 +106,73 @@ class MapChanges:
             self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
             self.obstacles.append(cells)
         self.stored = with_cells(self.stored, cells, size, added)
+        self._stored_clearance = clearance(self.stored)
         c = self.coordinator
         with c.lock:
             planner = c.planner
+            before = planner.brushable
             planner.change_floor(with_cells(planner.grid, cells, size, added))
             c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
-            if not added:
+            if added:
+                self._plan_round(cells, size)
+            elif not self._sweep(planner.brushable & ~before):
                 return
-            # a cell's corner lies this far from its centre
-            radius = size / math.sqrt(2)
-
-            def through(path: np.ndarray) -> bool:
-                return planner.near(path, cells, radius) and planner.reroute(path).changed
-
-            plan_around(
-                c.market,
-                through,
-                "",
-                "runs through furniture the stored map does not have",
-                "round furniture the stored map does not have",
-            )
             c.market.awards.send()
             c.market.need_auction = True
             c.market.wake.set()
+
+    def _plan_round(self, cells: np.ndarray, size: float) -> None:
+        """Re-plan the tasks whose paths run through new furniture at ``cells`` (squares of
+        ``size``); each path is rerouted once, the answer kept for ``plan_around``."""
+        planner = self.coordinator.planner
+        # a cell's corner lies this far from its centre
+        radius = size / math.sqrt(2)
+        ways: dict[bytes, Rerouted] = {}
+
+        def reroute(path: np.ndarray) -> Rerouted:
+            key = path.tobytes()
+            if key not in ways:
+                ways[key] = planner.reroute(path)
+            return ways[key]
+
+        def through(path: np.ndarray) -> bool:
+            return planner.near(path, cells, radius) and reroute(path).changed
+
+        plan_around(
+            self.coordinator.market,
+            through,
+            "",
+            "runs through furniture the stored map does not have",
+            "round furniture the stored map does not have",
+            reroute,
+        )
+
+    def _sweep(self, freed: np.ndarray) -> bool:
+        """Add and save a task that sweeps the cells ``freed`` (on the planning grid) that no
+        task of the job sweeps yet; whether there was one."""
+        c = self.coordinator
+        planner, job = c.planner, c.job
+        half = planner.robot.cleaning_width / 2
+        if freed.any():
+            cells = planner.grid.cell_to_world(np.argwhere(freed))
+            lo, hi = cells.min(axis=0) - half, cells.max(axis=0) + half
+            for rec in job.tasks.values():
+                path = rec.task.path
+                if (path.min(axis=0) <= hi).all() and (path.max(axis=0) >= lo).all():
+                    freed &= ~swath(planner.grid, path, half)[0]
+        task = planner.task_over(freed, _fresh_id(job.tasks))
+        if task is None:
+            return False
+        job.add_tasks((task,))
+        c.journal.event(
+            "added",
+            "",
+            task.id,
+            f"sweeps {task.area_m2:.2f} m² of floor furniture taken away freed",
+        )
+        c.journal.save_tasks(task.id)
+        c.market.version += 1
+        return True
 
 
 def _planned(cells: np.ndarray, size: float, added: bool) -> str:
@@ -126,3 +181,10 @@ def _planned(cells: np.ndarray, size: float, added: bool) -> str:
         return ""
     (x0, y0), (x1, y1) = cells.min(axis=0) - size / 2, cells.max(axis=0) + size / 2
     return f"; planned round as x {x0:.2f}–{x1:.2f}, y {y0:.2f}–{y1:.2f}"
+
+
+def _fresh_id(taken: Mapping[str, object]) -> str:
+    """The first task id "m01", "m02", ... that none of ``taken`` (nor a remainder of one)
+    has."""
+    bases = {tid.partition(".")[0] for tid in taken}
+    return next(t for k in itertools.count(1) if (t := f"{FREED_PREFIX}{k:02d}") not in bases)

@@ -25,9 +25,11 @@ from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import FleetEvent, Keys, Message, Plan
 from fleet.world import load_world
 from planners.auction import Task
+from planners.bodies import Rerouted
+from planners.coverage.metrics import swath
 from planners.coverage.params import CoverageParams
-from planners.grid import GridMap
-from planners.map_change import ADDED, MapChange, MapChangeParams
+from planners.grid import GridMap, clearance
+from planners.map_change import ADDED, REMOVED, MapChange, MapChangeParams
 from planners.map_merge import LogOddsMap
 from planners.polyline import densify
 
@@ -172,3 +174,73 @@ def test_the_far_face_seen_later_makes_the_piece_whole(stand: Stand) -> None:
     g = stand.planner.grid
     assert g.occupied[middle[0], middle[1]] and len(changes.obstacles) == 1
     assert "planned round as x 1.05–1.55, y 2.00–2.40" in stand.events(MAP_CHANGED)[1].detail
+
+
+# the small world's table, (xmin, ymin, xmax, ymax): taken away in the tests below
+TABLE = (2.0, 1.3, 2.8, 1.9)
+
+
+def table_cells(grid: GridMap) -> np.ndarray:
+    """Cell centres of ``grid``'s obstacle cells that make the table (its rasterized footprint
+    reaches a cell beyond the table's edges): the floor robots see free once it is gone."""
+    x0, y0, x1, y1 = TABLE
+    xy = grid.cell_to_world(np.argwhere(grid.occupied))
+    near = (xy[:, 0] > x0 - 0.05) & (xy[:, 0] < x1 + 0.05)
+    return xy[near & (xy[:, 1] > y0 - 0.05) & (xy[:, 1] < y1 + 0.05)]
+
+
+def _swept(stand: Stand, tids: list[str]) -> np.ndarray:
+    g = stand.planner.grid
+    out = np.zeros(g.shape, dtype=bool)
+    for tid in tids:
+        out |= swath(g, stand.job.tasks[tid].task.path, CFG.robot.cleaning_width / 2)[0]
+    return out
+
+
+def test_floor_a_table_taken_away_frees_is_swept_by_a_new_task(stand: Stand) -> None:
+    before, stored = stand.planner.brushable.copy(), stand.stored
+    changes = MapChanges(stand, stored, MapChangeParams())  # type: ignore[arg-type]
+    changes.take(MapChange(REMOVED, table_cells(stored), stored.resolution))
+    g = stand.planner.grid
+    middle = g.world_to_cell(np.array([2.4, 1.6]))
+    assert g.free[middle[0], middle[1]]
+    new = [tid for tid in stand.job.tasks if tid.startswith("m")]
+    assert new == ["m01"] and stand.job.tasks["m01"].state == OPEN, new
+    assert [e.task for e in stand.events("added")] == new
+    # the new task sweeps all of the floor the brush did not reach with the table there
+    freed = stand.planner.brushable & ~before
+    assert freed.sum() * g.resolution**2 > 0.48  # the table's 0.8 × 0.6 m and the band round it
+    assert not (freed & ~_swept(stand, new)).any()
+    area = sum(stand.job.tasks[t].task.area_m2 for t in new)
+    assert area == pytest.approx(freed.sum() * g.resolution**2, rel=0.01)
+    # robot centres keep their clearance from what is still there: walls and the other lanes
+    clear = clearance(g) >= ROBOT.radius + CFG.coordinator.wall_clearance - 1e-9
+    for tid in new:
+        rc = g.world_to_cell(densify(stand.job.tasks[tid].task.path, g.resolution))
+        assert clear[rc[:, 0], rc[:, 1]].all(), tid
+        assert stand.job.tasks[tid].task.time_s > 0
+    assert stand.market.need_auction
+    # the same change found again by a restarted coordinator (planning on the stored map as it
+    # was, with the job's tasks) adds nothing: tasks of the job sweep that floor already
+    stand.planner.change_floor(stored)
+    again = MapChanges(stand, stored, MapChangeParams())  # type: ignore[arg-type]
+    again.take(MapChange(REMOVED, table_cells(stored), stored.resolution))
+    assert [tid for tid in stand.job.tasks if tid.startswith("m")] == new
+
+
+def test_a_lane_through_new_furniture_is_rerouted_once(stand: Stand) -> None:
+    calls: list[int] = []
+    planner = stand.planner
+    reroute = planner.reroute
+
+    def counted(path: np.ndarray) -> Rerouted:
+        calls.append(1)
+        return reroute(path)
+
+    planner.reroute = counted  # type: ignore[method-assign]
+    MapChanges(stand, stand.stored, MapChangeParams()).take(  # type: ignore[arg-type]
+        MapChange(ADDED, chest_faces("swne"), RES)
+    )
+    # t00 runs through the chest, t01 lies clear of it; t00's remainder too is rerouted
+    assert stand.job.tasks["t00"].state == REPLACED
+    assert len(calls) == 2, len(calls)
