@@ -11,6 +11,7 @@ from fleet.report.exploration import (
     free_iou,
     mapped_free_on,
     path_lengths,
+    plan_floor_lost,
     true_floor,
     walls_within,
 )
@@ -75,3 +76,30 @@ def test_walls_within_5_cm_count_a_wall_a_cell_off_and_not_two():
     assert 0.3 < share < 0.7
     nothing = GridMap(np.zeros_like(half), truth.unknown, 0.05, truth.origin)
     assert walls_within(nothing, truth, floor) == 0.0
+
+
+def test_the_floor_a_plan_on_the_map_loses_is_told_by_cause():
+    world = load_world(SMALL)
+    truth = world.grid(0.025)
+    dock = (0.6, 0.85)
+
+    def lost(mapped: GridMap) -> dict[str, float]:
+        return plan_floor_lost(mapped, world, dock, 0.185, 0.15)
+
+    exact = lost(truth)
+    assert exact["lost_m2"] == 0.0 and 8.0 < exact["brushable_m2"] < 11.0
+    # the south wall drawn 5 cm onto the floor: a strip of floor lost to it, nothing else
+    rows = truth.world_to_cell(np.array([[2.0, 0.06], [2.0, 0.09]]))[:, 0]
+    thick = truth.occupied.copy()
+    thick[rows[0] : rows[1] + 1, :] |= truth.free[rows[0] : rows[1] + 1, :]
+    walls = lost(GridMap(thick, truth.unknown, truth.resolution, truth.origin))
+    assert 0.1 < walls["lost_m2"] == walls["walls_on_floor_m2"] == walls["both_m2"]
+    assert walls["unknown_on_floor_m2"] == 0.0
+    # the north-east corner's floor left unknown: lost to unknown, not to walls
+    xy = truth.cell_to_world(np.argwhere(truth.free))
+    corner = np.zeros(truth.shape, dtype=bool)
+    rc = np.argwhere(truth.free)[(xy[:, 0] > 3.7) & (xy[:, 1] > 2.7)]
+    corner[rc[:, 0], rc[:, 1]] = True
+    unknown = lost(GridMap(truth.occupied, corner, truth.resolution, truth.origin))
+    assert 0.0 < unknown["lost_m2"] == unknown["unknown_on_floor_m2"]
+    assert unknown["walls_on_floor_m2"] == 0.0
