@@ -33,6 +33,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from fleet.coordinator.job import FREED_PREFIX
 from fleet.coordinator.market import plan_around
 from fleet.coordinator.service import Coordinator
 from fleet.params import CoordinatorParams
@@ -51,8 +52,6 @@ from planners.map_merge import LogOddsMap, Transform2D, merge_maps
 
 MAP_CHANGED = "map changed"
 ADDED_TASK = "added"
-# the tasks that sweep floor furniture taken away has freed: "m01", "m02", ...
-FREED_PREFIX = "m"
 
 
 def map_change_params(params: CoordinatorParams) -> MapChangeParams:
