@@ -148,9 +148,12 @@ class MapChanges:
 
     def _sweep(self, freed: np.ndarray) -> bool:
         """Add and save a task that sweeps the cells ``freed`` (on the planning grid) that no
-        task of the job sweeps yet; whether there was one."""
+        task of the job sweeps yet; whether there was one. Before the tour is cut there is no
+        need: it is planned on the changed floor."""
         c = self.coordinator
         planner, job = c.planner, c.job
+        if not job.tasks:
+            return False
         half = planner.robot.cleaning_width / 2
         if freed.any():
             cells = planner.grid.cell_to_world(np.argwhere(freed))
