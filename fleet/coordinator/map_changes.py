@@ -33,6 +33,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from fleet.coordinator.job import FREED_PREFIX
 from fleet.coordinator.market import plan_around
 from fleet.coordinator.service import Coordinator
 from fleet.params import CoordinatorParams
@@ -51,8 +52,6 @@ from planners.map_merge import LogOddsMap, Transform2D, merge_maps
 
 MAP_CHANGED = "map changed"
 ADDED_TASK = "added"
-# the tasks that sweep floor furniture taken away has freed: "m01", "m02", ...
-FREED_PREFIX = "m"
 
 
 def map_change_params(params: CoordinatorParams) -> MapChangeParams:
@@ -149,9 +148,12 @@ class MapChanges:
 
     def _sweep(self, freed: np.ndarray) -> bool:
         """Add and save a task that sweeps the cells ``freed`` (on the planning grid) that no
-        task of the job sweeps yet; whether there was one."""
+        task of the job sweeps yet; whether there was one. Before the tour is cut there is no
+        need: it is planned on the changed floor."""
         c = self.coordinator
         planner, job = c.planner, c.job
+        if not job.tasks:
+            return False
         half = planner.robot.cleaning_width / 2
         if freed.any():
             cells = planner.grid.cell_to_world(np.argwhere(freed))

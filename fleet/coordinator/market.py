@@ -50,7 +50,7 @@ import numpy as np
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import ASSIGNED, LOST, OPEN, Job
+from fleet.coordinator.job import ASSIGNED, FREED_PREFIX, LOST, OPEN, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import chain_pieces, piece_count
@@ -505,5 +505,7 @@ def region_lots(
 
 
 def _tour_key(task_id: str) -> tuple[int, ...]:
-    """Where a task lies along the tour: "t07" → (7,), its remainder "t07.1" → (7, 1)."""
-    return tuple(int(part) for part in task_id.lstrip("t").split("."))
+    """Where a task lies along the tour: "t07" → (0, 7), its remainder "t07.1" → (0, 7, 1); a
+    task added after the tour was cut (freed floor: "m01") after all of it, (1, 1)."""
+    off_tour = int(task_id.startswith(FREED_PREFIX))
+    return (off_tour, *(int(part) for part in task_id.lstrip("t" + FREED_PREFIX).split(".")))

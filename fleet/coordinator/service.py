@@ -423,14 +423,22 @@ class Coordinator:
         )
 
     def _plan_tasks(self) -> None:
+        """Cut the tour into the job's tasks. The lock is not held while the tour is planned (a
+        second or more on a large floor); a map change taken meanwhile has the tour planned
+        again, so the tasks are those of the floor as it is."""
         t0 = time.perf_counter()
-        tasks = self.planner.tasks()
+        while True:
+            floor = self.planner.grid
+            tasks = self.planner.tasks()
+            with self.lock:
+                if self.planner.grid is floor:
+                    self.job.add_tasks(tasks)
+                    self.journal.save_tasks(*self.job.tasks)
+                    self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
+                    self.journal.event("planned", "", "", f"{len(tasks)} tasks")
+                    break
+            log.info("the floor plan changed while the tour was planned: planned again")
         log.info("planned %d tasks in %.2f s", len(tasks), time.perf_counter() - t0)
-        with self.lock:
-            self.job.add_tasks(tasks)
-            self.journal.save_tasks(*self.job.tasks)
-            self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
-            self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
         state = fleet_state(self.job, self.journal.clock, self.phase, self._dropped())

@@ -4,7 +4,8 @@ The patch's cells are swept by parallel lanes along the longer side of its bound
 the boustrophedon sweeps one cell of a decomposition (Choset, "Coverage of known spaces: the
 boustrophedon cellular decomposition", Autonomous Robots 9, 2000): as few lines as cover the
 patch's width at most ``spacing`` apart, spread evenly over it; on each line the runs of
-robot-centre cells whose swath touches the patch; the runs driven in turn, each line in the
+robot-centre cells whose swath touches the patch, from where the patch's floor within the
+brush's reach of the line begins to where it ends; the runs driven in turn, each line in the
 opposite direction to the one before, joined by transits. What the lanes miss (a line the
 robot centre cannot take by a wall, a ragged edge) is left to the tour's fill-in passes
 (:func:`planners.coverage.fill_in.fill_in_tasks`), taken from where the lanes run and driven
@@ -45,9 +46,18 @@ def patch_lanes(
     if n == 1 or hi - lo <= 2 * edge:
         centres = np.array([(lo + hi) / 2])
     lines = np.unique(np.clip(np.floor(centres / grid.resolution), 0, f.shape[0] - 1).astype(int))
+    # a line's runs end where the patch's floor in its band (the rows its brush reaches) ends:
+    # the brush's half width beyond that would sweep only floor the tour swept already
+    band = int(half_width / grid.resolution)
     out = []
     for k, r in enumerate(lines):
-        runs = _runs(touch[r])
+        cols = np.flatnonzero(f[max(r - band, 0) : r + band + 1].any(axis=0))
+        if not len(cols):
+            continue
+        line = touch[r].copy()
+        line[: cols[0]] = False
+        line[cols[-1] + 1 :] = False
+        runs = _runs(line)
         if k % 2:
             runs = [(b, a) for a, b in runs[::-1]]
         for a, b in runs:

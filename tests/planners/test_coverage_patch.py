@@ -61,6 +61,9 @@ def test_a_patch_is_swept_by_lanes_along_its_longer_side() -> None:
     assert np.diff(ys).max() <= SPACING + 1e-9
     # boustrophedon: each line driven the other way from the one before
     assert lanes[0][1][0] > lanes[0][0][0] and lanes[1][1][0] < lanes[1][0][0]
+    # no lane runs on past the patch's ends: the brush reaches them from within
+    xs = np.concatenate([lane[:, 0] for lane in lanes])
+    assert xs.min() > 1.5 and xs.max() < 2.7
     path, _ = _check_sweep(g, floor, reach)
     # the lanes and the transits between them, nothing more
     assert len(path) == 6
