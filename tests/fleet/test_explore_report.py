@@ -7,8 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fleet.coordinator.store import JobStore
 from fleet.report.exploration import (
     free_iou,
+    growth,
     mapped_free_on,
     path_lengths,
     true_floor,
@@ -75,3 +77,22 @@ def test_walls_within_5_cm_count_a_wall_a_cell_off_and_not_two():
     assert 0.3 < share < 0.7
     nothing = GridMap(np.zeros_like(half), truth.unknown, 0.05, truth.origin)
     assert walls_within(nothing, truth, floor) == 0.0
+
+
+def test_the_growth_lists_each_update_that_changed_the_merged_map(tmp_path: Path):
+    store = JobStore(tmp_path / "coordinator.sqlite")
+    details = [
+        (1.9, "known 0.0 m², 0 frontiers, 0 new, 0 gone; goals: none"),
+        (4.0, "known 13.4 m², 10 frontiers, 10 new, 0 gone; goals: robot-0 → f001 (2.8, 0.8)"),
+        (6.0, "known 13.4 m², 10 frontiers, 0 new, 0 gone; goals: robot-0 → f001 (2.8, 0.8)"),
+        (8.1, "known 17.3 m², 11 frontiers, 6 new, 4 gone; goals: none"),
+    ]
+    for sim, detail in details:
+        store.add_event(0.0, sim, "explored", "", "", detail)
+    store.add_event(0.0, 9.0, "awarded", "robot-0", "f002", "f002: 3.1 s")
+    store.close()
+    assert growth(tmp_path / "coordinator.sqlite") == [
+        [1.9, 0.0, 0],
+        [4.0, 13.4, 10],
+        [8.1, 17.3, 11],
+    ]
