@@ -476,7 +476,7 @@ def _exploration(
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
         recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s, run_dir)
         watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s, recorder.watch)
-        feed = BusFeed(bus, watcher, fetch=False)
+        feed = BusFeed(bus, watcher, fetch=not headless)
         typer.echo(f"fleet: {robots} robots exploring {w.name} at {speed}× — {run_dir}/", err=True)
         status = _watch(watcher, feed, launcher, calls, stop, True, timeout, headless, t0)
         feed.pump()
@@ -511,13 +511,15 @@ def _explore_report(
 ) -> dict[str, Any]:
     """explore.json: how the exploration ended and what it took, and the merged map scored
     against the world's true floor (the truth read here only, after the run): free-space IoU,
-    ``walls_within``, the share of the true walls with a mapped wall within 5 cm, and
+    ``walls_within``, the share of the true walls with a mapped wall within 5 cm,
     ``plan_floor``, the floor a cleaning plan on the map loses against one on the world file,
-    by cause (``fleet.report.exploration.plan_floor_lost``)."""
+    by cause (``fleet.report.exploration.plan_floor_lost``), and ``growth``, the merged map as
+    it grew ([sim s, known m², frontiers] per update)."""
     from fleet.coordinator.exploring import MAP_YAML
     from fleet.report.exploration import (
         free_iou,
         frontier_counts,
+        growth,
         path_lengths,
         plan_floor_lost,
         true_floor,
@@ -534,6 +536,7 @@ def _explore_report(
         "wall_s": round(wall_s, 1),
         "path_length_m": path_lengths(tracks),
         "frontiers": frontier_counts(run_dir / "coordinator.sqlite"),
+        "growth": growth(run_dir / "coordinator.sqlite"),
         "known_m2": round(float((mapped.free | mapped.occupied).sum()) * mapped.resolution**2, 2),
         "true_floor_m2": round(float(floor.sum()) * truth.resolution**2, 2),
         "free_iou": round(free_iou(mapped, truth, floor), 4),

@@ -12,6 +12,7 @@ within ``WALL_TOLERANCE_M`` of its centre.
 
 from __future__ import annotations
 
+import re
 import sqlite3
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -153,3 +154,28 @@ def frontier_counts(state: Path) -> dict[str, int]:
     finally:
         db.close()
     return {"assigned": int(assigned), **{str(s): int(n) for s, n in states}}
+
+
+# an `explored` event's detail begins "known 41.5 m², 5 frontiers, ..."
+EXPLORED = re.compile(r"known ([\d.]+) m², (\d+) frontiers")
+
+
+def growth(state: Path) -> list[list[float]]:
+    """From the coordinator's SQLite ``state`` (read-only), the merged map as it grew: one
+    [sim s, known m², frontiers] per update that changed either (its ``explored`` events)."""
+    db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
+    try:
+        rows = db.execute(
+            "SELECT sim, detail FROM events WHERE kind = 'explored' ORDER BY seq"
+        ).fetchall()
+    finally:
+        db.close()
+    out: list[list[float]] = []
+    for sim, detail in rows:
+        m = EXPLORED.match(detail)
+        if m is None:
+            continue
+        point = [round(float(sim), 1), float(m.group(1)), int(m.group(2))]
+        if not out or point[1:] != out[-1][1:]:
+            out.append(point)
+    return out

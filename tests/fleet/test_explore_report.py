@@ -7,8 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fleet.coordinator.store import JobStore
 from fleet.report.exploration import (
     free_iou,
+    growth,
     mapped_free_on,
     path_lengths,
     plan_floor_lost,
@@ -103,3 +105,22 @@ def test_the_floor_a_plan_on_the_map_loses_is_told_by_cause():
     unknown = lost(GridMap(truth.occupied, corner, truth.resolution, truth.origin))
     assert 0.0 < unknown["lost_m2"] == unknown["unknown_on_floor_m2"]
     assert unknown["walls_on_floor_m2"] == 0.0
+
+
+def test_the_growth_lists_each_update_that_changed_the_merged_map(tmp_path: Path):
+    store = JobStore(tmp_path / "coordinator.sqlite")
+    details = [
+        (1.9, "known 0.0 m², 0 frontiers, 0 new, 0 gone; goals: none"),
+        (4.0, "known 13.4 m², 10 frontiers, 10 new, 0 gone; goals: robot-0 → f001 (2.8, 0.8)"),
+        (6.0, "known 13.4 m², 10 frontiers, 0 new, 0 gone; goals: robot-0 → f001 (2.8, 0.8)"),
+        (8.1, "known 17.3 m², 11 frontiers, 6 new, 4 gone; goals: none"),
+    ]
+    for sim, detail in details:
+        store.add_event(0.0, sim, "explored", "", "", detail)
+    store.add_event(0.0, 9.0, "awarded", "robot-0", "f002", "f002: 3.1 s")
+    store.close()
+    assert growth(tmp_path / "coordinator.sqlite") == [
+        [1.9, 0.0, 0],
+        [4.0, 13.4, 10],
+        [8.1, 17.3, 11],
+    ]
