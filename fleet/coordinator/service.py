@@ -39,6 +39,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer
@@ -75,6 +77,7 @@ from fleet.protocol import (
     Request,
     RobotStatus,
 )
+from planners.auction import Task
 
 log = logging.getLogger("coordinator")
 
@@ -423,22 +426,13 @@ class Coordinator:
         )
 
     def _plan_tasks(self) -> None:
-        """Cut the tour into the job's tasks. The lock is not held while the tour is planned (a
-        second or more on a large floor); a map change taken meanwhile has the tour planned
-        again, so the tasks are those of the floor as it is."""
-        t0 = time.perf_counter()
-        while True:
-            floor = self.planner.grid
-            tasks = self.planner.tasks()
-            with self.lock:
-                if self.planner.grid is floor:
-                    self.job.add_tasks(tasks)
-                    self.journal.save_tasks(*self.job.tasks)
-                    self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
-                    self.journal.event("planned", "", "", f"{len(tasks)} tasks")
-                    break
-            log.info("the floor plan changed while the tour was planned: planned again")
-        log.info("planned %d tasks in %.2f s", len(tasks), time.perf_counter() - t0)
+        plan_settled(self.planner, self.lock, self._take_tasks)
+
+    def _take_tasks(self, tasks: tuple[Task, ...]) -> None:
+        self.job.add_tasks(tasks)
+        self.journal.save_tasks(*self.job.tasks)
+        self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
+        self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
         state = fleet_state(self.job, self.journal.clock, self.phase, self._dropped())
@@ -484,3 +478,23 @@ def gathered(ready: int, expected: int, waited: float, grace_s: float) -> bool:
             log.warning("only %d of %d robots are ready; starting with them", ready, expected)
         return True
     return False
+
+
+def plan_settled(
+    planner: TaskPlanner, lock: AbstractContextManager, take: Callable[[tuple[Task, ...]], None]
+) -> tuple[Task, ...]:
+    """The tour cut into tasks, handed to ``take`` with ``lock`` held. The lock is not held
+    while the tour is planned (a second or more on a large floor); a map change taken
+    meanwhile (``fleet.coordinator.map_changes``) has it planned again, so the tasks are those
+    of the floor as it is."""
+    t0 = time.perf_counter()
+    while True:
+        floor = planner.grid
+        tasks = planner.tasks()
+        with lock:
+            if planner.grid is floor:
+                take(tasks)
+                break
+        log.info("the floor plan changed while the tour was planned: planned again")
+    log.info("planned %d tasks in %.2f s", len(tasks), time.perf_counter() - t0)
+    return tasks
