@@ -4,13 +4,11 @@ frontier each robot heads for."""
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Iterator
-
 import numpy as np
 import pytest
+from waits import wait_until
 
-from fleet.bus import Bus, open_router
+from fleet.bus import Bus
 from fleet.dashboard.model import EXPLORING, BusFeed, FleetWatcher
 from fleet.dashboard.view import DIRTY, GOAL, WALL, plain, render_map
 from fleet.floor_map import pack_grid
@@ -92,41 +90,22 @@ def test_before_any_map_only_a_cleaning_fleets_view_draws_the_true_floor() -> No
     assert min(line.find("→") for line in exploring if "→" in line) > 10
 
 
-@pytest.fixture
-def router() -> Iterator[str]:
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    session = open_router([endpoint])
-    try:
-        yield endpoint
-    finally:
-        session.close()
-
-
-def _until(feed: BusFeed, done: Callable[[], bool], timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        feed.pump()
-        if done():
-            return True
-        time.sleep(0.02)
-    return False
-
-
 @pytest.mark.timeout(60)
 def test_over_a_live_bus_the_view_fetches_the_merged_map_again_while_exploring(
-    router: str,
+    router_endpoint: str,
 ) -> None:
     served = [pack_grid(_room(known_up_to_x=1.0))]
+    fleet = f"t{free_port()}"
     with (
-        Bus("dashboard", "view", [router]) as view_bus,
-        Bus("coordinator", "c", [router]) as coord,
+        Bus("dashboard", "view", [router_endpoint], fleet) as view_bus,
+        Bus("coordinator", "c", [router_endpoint], fleet) as coord,
     ):
         coord.serve(coord.keys.explored_map(), Request, lambda _r: served[-1])
         w = FleetWatcher()
         feed = BusFeed(view_bus, w, fetch=False)
         try:
             coord.publish(coord.keys.coord_state(), FleetState(1.0, EXPLORING, ["robot-0"], []))
-            assert _until(feed, lambda: w.phase == EXPLORING), "no fleet state heard"
+            assert wait_until(lambda: feed.pump() >= 0 and w.phase == EXPLORING), "no state heard"
             feed.fetch_once()
             assert w.floor is not None and w.floor.unknown[1:59, 30:79].all()
             served.append(pack_grid(_room(known_up_to_x=3.0)))
