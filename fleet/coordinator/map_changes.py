@@ -79,7 +79,7 @@ class MapChanges:
         self, maps: Mapping[str, LogOddsMap], limits: tuple[float, float]
     ) -> tuple[MapChange, ...]:
         """Compare the robots' ``maps`` (log-odds clamped to ``limits``) with the map as
-        changed so far, and take each change found (:meth:`take`); the changes."""
+        changed so far, and take each change found (:meth:`take`); the changes taken."""
         if not maps:
             return ()
         fused = merge_maps(list(maps.values()), [Transform2D.identity()] * len(maps), limits)
@@ -89,36 +89,37 @@ class MapChanges:
         found = find_changes(
             fused, self.stored, self.params, np.array(robots, float), self._stored_clearance
         )
-        for change in found:
-            self.take(change)
-        return found
+        return tuple(change for change in found if self.take(change))
 
-    def take(self, change: MapChange) -> None:
+    def take(self, change: MapChange) -> bool:
         """Put ``change`` on the stored map and the planning map, tell it, and re-plan the
-        tasks new furniture lies in the way of."""
-        added = change.kind == ADDED
-        cells, size = change.cells, change.cell_size
-        if added:
-            # pieces closer than a robot's width with its clearance: none passes between them
-            join_m = 2 * self.coordinator.planner.centre_clearance
-            cells, joined = obstacle_cells(change, self.obstacles, join_m)
-            self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
-            self.obstacles.append(cells)
-        self.stored = with_cells(self.stored, cells, size, added)
-        self._stored_clearance = clearance(self.stored)
+        tasks new furniture lies in the way of, or sweep the floor it frees; whether it was
+        taken: not while the tour is being planned (the next look finds it again)."""
         c = self.coordinator
         with c.lock:
             planner = c.planner
+            if planner.planning:
+                return False
+            added = change.kind == ADDED
+            cells, size = change.cells, change.cell_size
+            if added:
+                # pieces closer than a robot's width with its clearance: none passes between
+                cells, joined = obstacle_cells(change, self.obstacles, 2 * planner.centre_clearance)
+                self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
+                self.obstacles.append(cells)
+            self.stored = with_cells(self.stored, cells, size, added)
+            self._stored_clearance = clearance(self.stored)
             before = planner.brushable
             planner.change_floor(with_cells(planner.grid, cells, size, added))
             c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
             if added:
                 self._plan_round(cells, size)
             elif not self._sweep(planner.brushable & ~before):
-                return
+                return True
             c.market.awards.send()
             c.market.need_auction = True
             c.market.wake.set()
+        return True
 
     def _plan_round(self, cells: np.ndarray, size: float) -> None:
         """Re-plan the tasks whose paths run through new furniture at ``cells`` (squares of

@@ -139,6 +139,8 @@ class TaskPlanner:
         self.bodies = np.zeros((0, 2))
         # travel is priced at the speed the robots' bids assume
         self.transit_speed = cfg.agent.transit_speed
+        # the tour is being planned (the coordinator's lock not held): the floor stays as it is
+        self.planning = False
 
     def use_floor(self, grid: GridMap, centres: np.ndarray) -> None:
         """Plan on ``grid`` from now on, robot centres on the cells ``centres`` (those a robot

@@ -13,7 +13,6 @@ import pytest
 from map_pieces import L_FREE, L_OCC, RES
 from robots import ROBOT
 
-from fleet.bus import Bus
 from fleet.config import resolve_world
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
@@ -22,18 +21,16 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.map_changes import MAP_CHANGED, MapChanges
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
-from fleet.coordinator.service import Coordinator
+from fleet.coordinator.service import plan_settled
 from fleet.params import CoordinatorParams, load_fleet_config
-from fleet.plausible import Bounds
 from fleet.protocol import FleetEvent, Keys, Message, Plan
-from fleet.supervisor.launcher import free_port
 from fleet.world import load_world
 from planners.auction import Task
 from planners.bodies import Rerouted
 from planners.coverage.metrics import swath
 from planners.coverage.params import CoverageParams
 from planners.grid import GridMap, clearance
-from planners.map_change import ADDED, REMOVED, MapChange, MapChangeParams, with_cells
+from planners.map_change import ADDED, REMOVED, MapChange, MapChangeParams
 from planners.map_merge import LogOddsMap
 from planners.polyline import densify
 
@@ -266,30 +263,24 @@ def test_before_the_tour_is_cut_freed_floor_is_left_to_the_tour() -> None:
     assert swept[middle[0], middle[1]]
 
 
-class ChangingPlanner(TaskPlanner):
-    """A planner whose floor changes (a map change taken) while its first tour is planned."""
+def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
+    stand = Stand()
+    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
+    table = MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution)
+    planner, plan = stand.planner, stand.planner.tasks
+    floor = planner.grid
+    taken = []
 
-    planned = 0
+    def plan_and_look() -> tuple[Task, ...]:
+        tour = plan()
+        # the map watch's thread finds the table gone while the tour is planned
+        taken.append(changes.take(table))
+        return tour
 
-    def tasks(self) -> tuple[Task, ...]:
-        self.planned += 1
-        out = super().tasks()
-        if self.planned == 1:
-            cells = table_cells(self.grid)
-            self.change_floor(with_cells(self.grid, cells, self.grid.resolution, False))
-        return out
-
-
-@pytest.mark.timeout(60)
-def test_a_tour_planned_while_the_floor_changed_is_planned_again(router_endpoint: str) -> None:
-    planner = ChangingPlanner(load_world(resolve_world("small"), CFG.robot.radius), CFG)
-    with Bus("coordinator", "coordinator", [router_endpoint], f"t{free_port()}") as bus:
-        coord = Coordinator(bus, planner, 1, CFG.coordinator, None, bounds=Bounds.of(CFG))
-        coord._plan_tasks()
-    assert planner.planned == 2
-    g = planner.grid
-    middle = g.world_to_cell(np.array([2.4, 1.6]))
-    swept = np.zeros(g.shape, dtype=bool)
-    for rec in coord.job.tasks.values():
-        swept |= swath(g, rec.task.path, CFG.robot.cleaning_width / 2)[0]
-    assert swept[middle[0], middle[1]], "the tasks are the first tour's, planned round the table"
+    planner.tasks = plan_and_look  # type: ignore[method-assign]
+    plan_settled(planner, stand.lock, stand.job.add_tasks)
+    assert taken == [False] and planner.grid is floor and not planner.planning
+    assert not stand.events(MAP_CHANGED) and stand.job.tasks
+    # the next look, the tour cut: the change is taken and its floor gets a task of its own
+    assert changes.take(table)
+    assert [e.task for e in stand.events("added")] == ["m01"]
