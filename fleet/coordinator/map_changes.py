@@ -167,12 +167,8 @@ class MapChanges:
         if task is None:
             return False
         job.add_tasks((task,))
-        c.journal.event(
-            "added",
-            "",
-            task.id,
-            f"sweeps {task.area_m2:.2f} m² of floor furniture taken away freed",
-        )
+        what = f"sweeps {task.area_m2:.2f} m² of floor that furniture taken away freed"
+        c.journal.event(ADDED_TASK, "", task.id, what)
         c.journal.save_tasks(task.id)
         c.market.version += 1
         return True

@@ -426,7 +426,7 @@ class Coordinator:
         )
 
     def _plan_tasks(self) -> None:
-        plan_settled(self.planner, self.lock, self._take_tasks)
+        plan_tour(self.planner, self.lock, self._take_tasks)
 
     def _take_tasks(self, tasks: tuple[Task, ...]) -> None:
         self.job.add_tasks(tasks)
@@ -480,7 +480,7 @@ def gathered(ready: int, expected: int, waited: float, grace_s: float) -> bool:
     return False
 
 
-def plan_settled(
+def plan_tour(
     planner: TaskPlanner, lock: AbstractContextManager, take: Callable[[tuple[Task, ...]], None]
 ) -> tuple[Task, ...]:
     """The tour cut into tasks, handed to ``take`` with ``lock`` held. The lock is not held

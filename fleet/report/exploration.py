@@ -7,7 +7,9 @@ by cell on the truth's grid (each true cell looks up the merged cell holding its
 outside the merged map is not free): free-space IoU = |mapped ∩ true| / |mapped ∪ true|. The
 walls: the true wall cells are the world's occupied cells 8-adjacent to that floor (the faces a
 robot's lidar can see); a true wall cell is found when a mapped occupied cell's centre lies
-within ``WALL_TOLERANCE_M`` of its centre.
+within ``WALL_TOLERANCE_M`` of its centre. What a cleaning plan on the map loses against one on
+the world file, by cause (:func:`plan_floor_lost`), and how the map grew over the run, from the
+coordinator's ``explored`` events (:func:`growth`).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.map_changes import MAP_CHANGED, MapChanges
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
-from fleet.coordinator.service import plan_settled
+from fleet.coordinator.service import plan_tour
 from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import FleetEvent, Keys, Message, Plan
 from fleet.world import load_world
@@ -278,7 +278,7 @@ def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
         return tour
 
     planner.tasks = plan_and_look  # type: ignore[method-assign]
-    plan_settled(planner, stand.lock, stand.job.add_tasks)
+    plan_tour(planner, stand.lock, stand.job.add_tasks)
     assert taken == [False] and planner.grid is floor and not planner.planning
     assert not stand.events(MAP_CHANGED) and stand.job.tasks
     # the next look, the tour cut: the change is taken and its floor gets a task of its own
