@@ -19,10 +19,13 @@ change found:
   where it runs into the furniture and joined round it where a transit gets round
   (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again;
 - for furniture taken away: the floor the brush reaches now and did not reach before (under
-  it, and the band round it that robot centres kept clear of), less what a task of the job
+  it, and the band round it that robot centres kept clear of) waits until no more of it has
+  been found for ``SETTLE_S`` (the robots see a piece's floor free a part at a time, seconds
+  apart: each part a task of its own was a trip of its own), then, less what a task of the job
   sweeps already (the same change found again by a restarted coordinator), is swept by one
   new task, "m01", "m02", ... (lanes over the patch, then fill-in passes:
-  ``TaskPlanner.task_over``), told in an ``added`` event and sold.
+  ``TaskPlanner.task_over``), told in an ``added`` event and sold; under ``MIN_TASK_M2`` of
+  it is not worth a trip.
 """
 
 from __future__ import annotations
@@ -52,6 +55,10 @@ from planners.map_merge import LogOddsMap, Transform2D, merge_maps
 
 MAP_CHANGED = "map changed"
 ADDED_TASK = "added"
+# freed floor is swept once none has been found for this long (sim s; the map is looked at
+# every coordinator.map_check_every_s), and only when a task would sweep this much of it (m²)
+SETTLE_S = 10.0
+MIN_TASK_M2 = 0.05
 
 
 def map_change_params(params: CoordinatorParams) -> MapChangeParams:
@@ -74,6 +81,9 @@ class MapChanges:
         self.params = params
         # the furniture moved in so far, each piece the cells of its box (world centres)
         self.obstacles: list[np.ndarray] = []
+        # floor freed that no task sweeps yet (on the planning grid), and when it last grew
+        self.freed: np.ndarray | None = None
+        self.freed_at = 0.0
 
     def look(
         self, maps: Mapping[str, LogOddsMap], limits: tuple[float, float]
@@ -89,7 +99,24 @@ class MapChanges:
         found = find_changes(
             fused, self.stored, self.params, np.array(robots, float), self._stored_clearance
         )
-        return tuple(change for change in found if self.take(change))
+        taken = tuple(change for change in found if self.take(change))
+        self.sweep_settled()
+        return taken
+
+    def sweep_settled(self) -> bool:
+        """Sell a task for the floor freed so far once none more has been found for
+        ``SETTLE_S``; whether it did."""
+        c = self.coordinator
+        with c.lock:
+            if self.freed is None or c.journal.clock - self.freed_at < SETTLE_S:
+                return False
+            freed, self.freed = self.freed, None
+            if not self._sweep(freed):
+                return False
+            c.market.awards.send()
+            c.market.need_auction = True
+            c.market.wake.set()
+        return True
 
     def take(self, change: MapChange) -> bool:
         """Put ``change`` on the stored map and the planning map, tell it, and re-plan the
@@ -112,10 +139,14 @@ class MapChanges:
             before = planner.brushable
             planner.change_floor(with_cells(planner.grid, cells, size, added))
             c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
-            if added:
-                self._plan_round(cells, size)
-            elif not self._sweep(planner.brushable & ~before):
+            if not added:
+                # the tour not yet cut is planned on the changed floor, and sweeps it
+                if c.job.tasks:
+                    gained = planner.brushable & ~before
+                    self.freed = gained if self.freed is None else self.freed | gained
+                    self.freed_at = c.journal.clock
                 return True
+            self._plan_round(cells, size)
             c.market.awards.send()
             c.market.need_auction = True
             c.market.wake.set()
@@ -149,12 +180,9 @@ class MapChanges:
 
     def _sweep(self, freed: np.ndarray) -> bool:
         """Add and save a task that sweeps the cells ``freed`` (on the planning grid) that no
-        task of the job sweeps yet; whether there was one. Before the tour is cut there is no
-        need: it is planned on the changed floor."""
+        task of the job sweeps yet, when it sweeps at least ``MIN_TASK_M2``; whether it did."""
         c = self.coordinator
         planner, job = c.planner, c.job
-        if not job.tasks:
-            return False
         half = planner.robot.cleaning_width / 2
         if freed.any():
             cells = planner.grid.cell_to_world(np.argwhere(freed))
@@ -164,7 +192,7 @@ class MapChanges:
                 if (path.min(axis=0) <= hi).all() and (path.max(axis=0) >= lo).all():
                     freed &= ~swath(planner.grid, path, half)[0]
         task = planner.task_over(freed, _fresh_id(job.tasks))
-        if task is None:
+        if task is None or task.area_m2 < MIN_TASK_M2:
             return False
         job.add_tasks((task,))
         what = f"sweeps {task.area_m2:.2f} m² of floor that furniture taken away freed"

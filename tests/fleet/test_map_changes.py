@@ -18,7 +18,7 @@ from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import ASSIGNED, BLOCKED, OPEN, REPLACED, Job
 from fleet.coordinator.journal import Journal
-from fleet.coordinator.map_changes import MAP_CHANGED, MapChanges
+from fleet.coordinator.map_changes import MAP_CHANGED, SETTLE_S, MapChanges
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import plan_tour
@@ -201,10 +201,20 @@ def _swept(stand: Stand, tids: list[str]) -> np.ndarray:
 def test_floor_a_table_taken_away_frees_is_swept_by_a_new_task(stand: Stand) -> None:
     before, stored = stand.planner.brushable.copy(), stand.stored
     changes = MapChanges(stand, stored, MapChangeParams())  # type: ignore[arg-type]
-    changes.take(MapChange(REMOVED, table_cells(stored), stored.resolution))
+    # the robots see the table's floor free a half at a time, 4 s apart
+    cells = table_cells(stored)
+    west = cells[:, 0] < 2.4
+    changes.take(MapChange(REMOVED, cells[west], stored.resolution))
+    stand.journal.clock += 4.0
+    changes.take(MapChange(REMOVED, cells[~west], stored.resolution))
     g = stand.planner.grid
     middle = g.world_to_cell(np.array([2.4, 1.6]))
     assert g.free[middle[0], middle[1]]
+    # no task until no more of it has been found for SETTLE_S: then one for both halves
+    stand.journal.clock += SETTLE_S - 0.5
+    assert not changes.sweep_settled() and not stand.events("added")
+    stand.journal.clock += 0.5
+    assert changes.sweep_settled()
     new = [tid for tid in stand.job.tasks if tid.startswith("m")]
     assert new == ["m01"] and stand.job.tasks["m01"].state == OPEN, new
     assert [e.task for e in stand.events("added")] == new
@@ -226,6 +236,8 @@ def test_floor_a_table_taken_away_frees_is_swept_by_a_new_task(stand: Stand) -> 
     stand.planner.change_floor(stored)
     again = MapChanges(stand, stored, MapChangeParams())  # type: ignore[arg-type]
     again.take(MapChange(REMOVED, table_cells(stored), stored.resolution))
+    stand.journal.clock += SETTLE_S
+    assert not again.sweep_settled()
     assert [tid for tid in stand.job.tasks if tid.startswith("m")] == new
 
 
@@ -254,7 +266,8 @@ def test_before_the_tour_is_cut_freed_floor_is_left_to_the_tour() -> None:
     g = stand.planner.grid
     middle = g.world_to_cell(np.array([2.4, 1.6]))
     assert g.free[middle[0], middle[1]] and not stand.job.tasks
-    assert not stand.events("added")
+    stand.journal.clock += SETTLE_S
+    assert not changes.sweep_settled() and not stand.events("added")
     # the tour planned now sweeps where the table stood
     tour = stand.planner.tasks()
     swept = np.zeros(g.shape, dtype=bool)
@@ -283,4 +296,16 @@ def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
     assert not stand.events(MAP_CHANGED) and stand.job.tasks
     # the next look, the tour cut: the change is taken and its floor gets a task of its own
     assert changes.take(table)
+    stand.journal.clock += SETTLE_S
+    assert changes.sweep_settled()
     assert [e.task for e in stand.events("added")] == ["m01"]
+
+
+def test_freed_floor_too_small_for_a_trip_gets_no_task(stand: Stand) -> None:
+    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
+    # a sliver of the table's west face seen free (what the map drew a cell too thick)
+    cells = table_cells(stand.stored)
+    sliver = cells[cells[:, 0] < cells[:, 0].min() + 0.01]
+    assert changes.take(MapChange(REMOVED, sliver, stand.stored.resolution))
+    stand.journal.clock += SETTLE_S
+    assert not changes.sweep_settled() and not stand.events("added")
