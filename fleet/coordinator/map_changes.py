@@ -18,14 +18,16 @@ change found:
   its owner (what the owner swept of it stays swept: its remainder is what is taken back), cut
   where it runs into the furniture and joined round it where a transit gets round
   (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again;
-- for furniture taken away: the floor the brush reaches now and did not reach before (under
-  it, and the band round it that robot centres kept clear of) waits until no more of it has
-  been found for ``SETTLE_S`` (the robots see a piece's floor free a part at a time, seconds
-  apart: each part a task of its own was a trip of its own), then, less what a task of the job
-  sweeps already (the same change found again by a restarted coordinator), is swept by one
-  new task, "m01", "m02", ... (lanes over the patch, then fill-in passes:
-  ``TaskPlanner.task_over``), told in an ``added`` event and sold; under ``MIN_TASK_M2`` of
-  it is not worth a trip.
+- for furniture taken away, with ``coordinator.sweep_freed_floor`` (off by default: on home it
+  cost more time than the floor it gained, BENCHMARKS.md): the floor the brush reaches now and
+  did not reach before (under it, and the band round it that robot centres kept clear of) waits
+  until no more of it has been found for ``SETTLE_S`` (the robots see a piece's floor free a
+  part at a time, seconds apart: each part a task of its own was a trip of its own), then,
+  less what a task of the job sweeps already (the same change found again by a restarted
+  coordinator), is swept by one new task, "m01", "m02", ... (lanes over the patch, then
+  fill-in passes: ``TaskPlanner.task_over``), told in an ``added`` event and sold; under
+  ``MIN_TASK_M2`` of it is not worth a trip. Without the switch, the freed floor is on the
+  planning map (transits may cross it) and no task sweeps it.
 """
 
 from __future__ import annotations
@@ -74,8 +76,16 @@ def map_change_params(params: CoordinatorParams) -> MapChangeParams:
 class MapChanges:
     """The stored map as the robots have shown it changed, and what each change re-plans."""
 
-    def __init__(self, coordinator: Coordinator, stored: GridMap, params: MapChangeParams) -> None:
+    def __init__(
+        self,
+        coordinator: Coordinator,
+        stored: GridMap,
+        params: MapChangeParams,
+        sweep_freed: bool = False,
+    ) -> None:
         self.coordinator = coordinator
+        # floor furniture taken away frees gets a task (coordinator.sweep_freed_floor)
+        self.sweep_freed = sweep_freed
         self.stored = stored
         self._stored_clearance = clearance(stored)
         self.params = params
@@ -141,7 +151,7 @@ class MapChanges:
             c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
             if not added:
                 # the tour not yet cut is planned on the changed floor, and sweeps it
-                if c.job.tasks:
+                if c.job.tasks and self.sweep_freed:
                     gained = planner.brushable & ~before
                     self.freed = gained if self.freed is None else self.freed | gained
                     self.freed_at = c.journal.clock

@@ -200,7 +200,7 @@ def _swept(stand: Stand, tids: list[str]) -> np.ndarray:
 
 def test_floor_a_table_taken_away_frees_is_swept_by_a_new_task(stand: Stand) -> None:
     before, stored = stand.planner.brushable.copy(), stand.stored
-    changes = MapChanges(stand, stored, MapChangeParams())  # type: ignore[arg-type]
+    changes = MapChanges(stand, stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
     # the robots see the table's floor free a half at a time, 4 s apart
     cells = table_cells(stored)
     west = cells[:, 0] < 2.4
@@ -234,7 +234,7 @@ def test_floor_a_table_taken_away_frees_is_swept_by_a_new_task(stand: Stand) -> 
     # the same change found again by a restarted coordinator (planning on the stored map as it
     # was, with the job's tasks) adds nothing: tasks of the job sweep that floor already
     stand.planner.change_floor(stored)
-    again = MapChanges(stand, stored, MapChangeParams())  # type: ignore[arg-type]
+    again = MapChanges(stand, stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
     again.take(MapChange(REMOVED, table_cells(stored), stored.resolution))
     stand.journal.clock += SETTLE_S
     assert not again.sweep_settled()
@@ -261,7 +261,7 @@ def test_a_lane_through_new_furniture_is_rerouted_once(stand: Stand) -> None:
 
 def test_before_the_tour_is_cut_freed_floor_is_left_to_the_tour() -> None:
     stand = Stand()
-    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
+    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
     changes.take(MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution))
     g = stand.planner.grid
     middle = g.world_to_cell(np.array([2.4, 1.6]))
@@ -278,7 +278,7 @@ def test_before_the_tour_is_cut_freed_floor_is_left_to_the_tour() -> None:
 
 def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
     stand = Stand()
-    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
+    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
     table = MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution)
     planner, plan = stand.planner, stand.planner.tasks
     floor = planner.grid
@@ -301,8 +301,18 @@ def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
     assert [e.task for e in stand.events("added")] == ["m01"]
 
 
-def test_freed_floor_too_small_for_a_trip_gets_no_task(stand: Stand) -> None:
+def test_without_the_switch_freed_floor_is_on_the_map_and_in_no_task(stand: Stand) -> None:
     changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
+    assert changes.take(MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution))
+    g = stand.planner.grid
+    middle = g.world_to_cell(np.array([2.4, 1.6]))
+    assert g.free[middle[0], middle[1]]
+    stand.journal.clock += SETTLE_S
+    assert not changes.sweep_settled() and not stand.events("added")
+
+
+def test_freed_floor_too_small_for_a_trip_gets_no_task(stand: Stand) -> None:
+    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
     # a sliver of the table's west face seen free (what the map drew a cell too thick)
     cells = table_cells(stand.stored)
     sliver = cells[cells[:, 0] < cells[:, 0].min() + 0.01]
