@@ -179,6 +179,7 @@ class CoordinatorParams:
     map_change_min_size_m: float = 0.2
     map_change_wall_margin_m: float = 0.15
     map_change_robot_clear_m: float = 0.25
+    sweep_freed_floor: bool = False
 
     def validate(self) -> None:
         if self.first_regions not in FIRST_REGIONS:

@@ -114,6 +114,9 @@ class Keys:
     def floor_map(self) -> str:
         return f"{self.root}/coord/map"
 
+    def explored_map(self) -> str:
+        return f"{self.root}/coord/explored"
+
     def docks(self) -> str:
         return f"{self.root}/coord/docks"
 

@@ -12,6 +12,15 @@ import numpy as np
 from scipy import ndimage
 
 
+def cell_centres(rc: np.ndarray, resolution: float, origin: tuple[float, float]) -> np.ndarray:
+    """(..., 2) (row, col) of a grid of ``resolution`` at ``origin`` → (..., 2) world
+    coordinates of the cell centres."""
+    rc = np.asarray(rc, dtype=float)
+    x = origin[0] + (rc[..., 1] + 0.5) * resolution
+    y = origin[1] + (rc[..., 0] + 0.5) * resolution
+    return np.stack([x, y], axis=-1)
+
+
 @dataclass(frozen=True, eq=False)
 class GridMap:
     """A 2D occupancy grid: boolean ``occupied`` and ``unknown`` arrays of shape (rows, cols)."""
@@ -38,10 +47,7 @@ class GridMap:
 
     def cell_to_world(self, rc: np.ndarray) -> np.ndarray:
         """(..., 2) (row, col) → (..., 2) world coordinates of the cell centres."""
-        rc = np.asarray(rc, dtype=float)
-        x = self.origin[0] + (rc[..., 1] + 0.5) * self.resolution
-        y = self.origin[1] + (rc[..., 0] + 0.5) * self.resolution
-        return np.stack([x, y], axis=-1)
+        return cell_centres(rc, self.resolution, self.origin)
 
     def in_bounds(self, rc: np.ndarray) -> np.ndarray:
         rc = np.asarray(rc)

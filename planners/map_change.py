@@ -106,20 +106,21 @@ def find_changes(
     stored: GridMap,
     params: MapChangeParams,
     robots_xy: np.ndarray | None = None,
+    stored_clearance: np.ndarray | None = None,
 ) -> tuple[MapChange, ...]:
     """The blobs where ``seen`` (the robots' fused map, in the stored map's frame) differs from
-    ``stored``, robots at ``robots_xy`` ((R, 2) world metres); added ones first."""
+    ``stored``, robots at ``robots_xy`` ((R, 2) world metres); added ones first.
+    ``stored_clearance`` is ``planners.grid.clearance(stored)`` when the caller keeps it (a
+    watch that looks again and again at one stored map)."""
     params.validate()
     level = math.log(params.confidence / (1.0 - params.confidence))
     rows, cols = seen.shape
-    rc = np.stack(np.mgrid[0:rows, 0:cols], axis=-1)
-    xy = GridMap(
-        np.zeros(seen.shape, bool), np.zeros(seen.shape, bool), seen.resolution, seen.origin
-    ).cell_to_world(rc)
+    xy = seen.cell_to_world(np.stack(np.mgrid[0:rows, 0:cols], axis=-1))
     at = stored.world_to_cell(xy)
     inside = stored.in_bounds(at)
     r, c = np.where(inside, at[..., 0], 0), np.where(inside, at[..., 1], 0)
-    room = np.where(inside, clearance(stored)[r, c], 0.0)
+    room_of = clearance(stored) if stored_clearance is None else stored_clearance
+    room = np.where(inside, room_of[r, c], 0.0)
     stored_occupied = inside & stored.occupied[r, c]
     added = (seen.log_odds >= level) & (room >= params.wall_margin_m)
     body = np.zeros(seen.shape, dtype=bool)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from planners.grid import GridMap
+from planners.grid import GridMap, cell_centres
 
 
 @dataclass(frozen=True)
@@ -90,6 +90,10 @@ class LogOddsMap:
 
     def probabilities(self) -> np.ndarray:
         return 1.0 / (1.0 + np.exp(-self.log_odds))
+
+    def cell_to_world(self, rc: np.ndarray) -> np.ndarray:
+        """(..., 2) (row, col) → (..., 2) world coordinates of the cell centres."""
+        return cell_centres(rc, self.resolution, self.origin)
 
     def to_gridmap(self, occupied_threshold: float, free_threshold: float) -> GridMap:
         """Occupied where p ≥ occupied_threshold, unknown where p is strictly between the two."""

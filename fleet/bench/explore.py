@@ -80,6 +80,7 @@ def exploration_figures(run_dir: Path) -> dict[str, Any]:
         "path_length_per_robot_m": lengths,
         "free_iou": report["free_iou"],
         "walls_within": report.get("walls_within"),
+        "plan_floor": report.get("plan_floor"),
         "run_dir": str(run_dir),
     }
 
@@ -221,6 +222,7 @@ def table_lines(result: dict[str, Any]) -> list[str]:
             f"5 cm {team.get('walls_within')}; coverage on the map {on_map.get('coverage')} "
             f"against {on_world.get('coverage')} on the world file "
             f"({s.get('coverage_gap_points')} points), contacts {on_map.get('contacts')}"
+            + _lost_words(team.get("plan_floor"))
         )
     v = result.get("verdict") or {}
     met = v.get("met") or {}
@@ -228,3 +230,14 @@ def table_lines(result: dict[str, Any]) -> list[str]:
         "targets met: " + ", ".join(f"{k} {'yes' if ok else 'NO'}" for k, ok in met.items())
     )
     return lines
+
+
+def _lost_words(lost: dict[str, float] | None) -> str:
+    """The floor a plan on the map loses, by cause, in words ("" for a run without it)."""
+    if not lost:
+        return ""
+    return (
+        f"; the map's plan loses {lost['lost_m2']} m² of {lost['brushable_m2']} m² brushable: "
+        f"{lost['walls_on_floor_m2']} m² to walls drawn onto the floor, "
+        f"{lost['unknown_on_floor_m2']} m² to floor left unknown"
+    )

@@ -476,7 +476,7 @@ def _exploration(
         bus.serve(bus.keys.ops("respawn"), OpsRequest, _respawner(launcher, calls))
         recorder = RunRecorder(bus, Bounds.of(cfg).clock_step_s, run_dir)
         watcher = FleetWatcher(DEFAULT_FLEET, cfg.coordinator.heartbeat_timeout_s, recorder.watch)
-        feed = BusFeed(bus, watcher, fetch=False)
+        feed = BusFeed(bus, watcher, fetch=not headless)
         typer.echo(f"fleet: {robots} robots exploring {w.name} at {speed}× — {run_dir}/", err=True)
         status = _watch(watcher, feed, launcher, calls, stop, True, timeout, headless, t0)
         feed.pump()
@@ -492,7 +492,8 @@ def _exploration(
     if not (run_dir / MAP_YAML).exists():
         _fail(f"no map was written (no robot reported its map); logs in {run_dir}/")
     tracks = read_tracks(run_dir / TRACKS_FILE)
-    report = _explore_report(run_dir, w, starts[0], status, sim_s, time.monotonic() - t0, tracks)
+    wall_s = time.monotonic() - t0
+    report = _explore_report(run_dir, cfg, w, starts[0], status, sim_s, wall_s, tracks)
     write_json(run_dir / EXPLORE_REPORT, report)
     write_map_png(run_dir / MAP_PGM, run_dir / MAP_PNG)
     return report
@@ -500,6 +501,7 @@ def _exploration(
 
 def _explore_report(
     run_dir: Path,
+    cfg: FleetConfig,
     world: World,
     start: tuple[float, float, float],
     status: str,
@@ -509,12 +511,17 @@ def _explore_report(
 ) -> dict[str, Any]:
     """explore.json: how the exploration ended and what it took, and the merged map scored
     against the world's true floor (the truth read here only, after the run): free-space IoU,
-    and ``walls_within``, the share of the true walls with a mapped wall within 5 cm."""
+    ``walls_within``, the share of the true walls with a mapped wall within 5 cm,
+    ``plan_floor``, the floor a cleaning plan on the map loses against one on the world file,
+    by cause (``fleet.report.exploration.plan_floor_lost``), and ``growth``, the merged map as
+    it grew ([sim s, known m², frontiers] per update)."""
     from fleet.coordinator.exploring import MAP_YAML
     from fleet.report.exploration import (
         free_iou,
         frontier_counts,
+        growth,
         path_lengths,
+        plan_floor_lost,
         true_floor,
         walls_within,
     )
@@ -529,10 +536,18 @@ def _explore_report(
         "wall_s": round(wall_s, 1),
         "path_length_m": path_lengths(tracks),
         "frontiers": frontier_counts(run_dir / "coordinator.sqlite"),
+        "growth": growth(run_dir / "coordinator.sqlite"),
         "known_m2": round(float((mapped.free | mapped.occupied).sum()) * mapped.resolution**2, 2),
         "true_floor_m2": round(float(floor.sum()) * truth.resolution**2, 2),
         "free_iou": round(free_iou(mapped, truth, floor), 4),
         "walls_within": round(walls_within(mapped, truth, floor), 4),
+        "plan_floor": plan_floor_lost(
+            mapped,
+            world,
+            (start[0], start[1]),
+            cfg.robot.radius + cfg.coordinator.wall_clearance,
+            cfg.robot.cleaning_width / 2,
+        ),
         "map": MAP_YAML,
     }
 

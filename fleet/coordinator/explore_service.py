@@ -2,7 +2,8 @@
 with the robots' merged maps in place of the floor plan (:mod:`fleet.coordinator.exploring`).
 
 What changes: no floor plan is served on ``coord/map`` (a robot prices travel on its own SLAM
-map, unknown cells counted as free); the robots' map patches are heard; every
+map, unknown cells counted as free), the merged map as it grows is served on
+``coord/explored`` instead (for the live view); the robots' map patches are heard; every
 ``coordinator.explore_every_s`` sim seconds the maps are merged and the frontier tasks
 updated, the update told as an ``explored`` event (known area, frontiers, each robot's goal);
 the market sells only to robots without work, so each holds one frontier at a time
@@ -21,9 +22,10 @@ from fleet.coordinator.exploring import Change, Explorer, fetch_whole_maps
 from fleet.coordinator.market import Market
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
+from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
 from fleet.plausible import Bounds
-from fleet.protocol import MapPatches
+from fleet.protocol import MapPatches, Request
 from planners import auction
 
 
@@ -63,12 +65,22 @@ class ExploringCoordinator(Coordinator):
         self.explorer = explorer
         self.explored_at = -float("inf")
         self._fetching: threading.Thread | None = None
+        # the merged map of the last update, packed for coord/explored
+        self._explored: MapPatches | None = None
         super().__init__(bus, explorer.planner, expected, params, store, None, bounds=bounds)
         self.market.explorer = explorer  # type: ignore[attr-defined]
         bus.subscribe(self.keys.all_robots("map"), MapPatches, self._on_map)
 
     def _serve_floor(self) -> None:
-        """No floor plan: the robots price travel on their own maps."""
+        """No floor plan: the robots price travel on their own maps. The merged map of the
+        last update is served on ``coord/explored`` (an error reply before the first)."""
+        self.bus.serve(self.keys.explored_map(), Request, self._on_explored_query)
+
+    def _on_explored_query(self, _req: Request) -> MapPatches:
+        explored = self._explored
+        if explored is None:
+            raise LookupError("no robot has sent its map yet")
+        return explored
 
     def _plan_tasks(self) -> None:
         with self.lock:
@@ -100,6 +112,7 @@ class ExploringCoordinator(Coordinator):
 
     def _take(self, change: Change) -> None:
         """Save and tell what an update changed; withdraw the tasks gone from their robots."""
+        self._explored = pack_grid(change.grid, self.journal.clock)
         self.journal.save_tasks(*(t.id for t in change.added))
         for tid, owner in change.gone:
             self.journal.event("withdrawn", owner or "", tid, "its frontier vanished")

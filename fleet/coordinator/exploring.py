@@ -133,12 +133,13 @@ class MapPlanner(TaskPlanner):
 @dataclass(frozen=True)
 class Change:
     """What an update did: the tasks it made, and those it took off as gone (with the robot
-    that held each, or None)."""
+    that held each, or None); the merged map it made."""
 
     added: tuple[Task, ...]
     gone: tuple[tuple[str, str | None], ...]
     frontiers: int
     known_m2: float
+    grid: GridMap
 
 
 class Explorer:
@@ -195,7 +196,7 @@ class Explorer:
         known = float((grid.free | grid.occupied).sum()) * grid.resolution**2
         if self.out_dir is not None:
             write_ros_map(self.out_dir, grid)
-        return Change(tuple(added), tuple(gone), len(frontiers), known)
+        return Change(tuple(added), tuple(gone), len(frontiers), known, grid)
 
     def _merge(self, maps: Mapping[str, LogOddsMap], job: Job) -> tuple[GridMap, np.ndarray]:
         """The merged grid, and the robots' positions in its frame."""

@@ -17,23 +17,34 @@ change found:
 - for new furniture: every open or assigned task whose path runs through it is taken back from
   its owner (what the owner swept of it stays swept: its remainder is what is taken back), cut
   where it runs into the furniture and joined round it where a transit gets round
-  (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again.
-
-Floor that furniture taken away leaves free is on the planning map from then on (transits may
-cross it), but no task sweeps it: the tour was cut before.
+  (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again;
+- for furniture taken away, with ``coordinator.sweep_freed_floor`` (off by default: on home it
+  cost more time than the floor it gained, BENCHMARKS.md): the floor the brush reaches now and
+  did not reach before (under it, and the band round it that robot centres kept clear of) waits
+  until no more of it has been found for ``SETTLE_S`` (the robots see a piece's floor free a
+  part at a time, seconds apart: each part a task of its own was a trip of its own), then,
+  less what a task of the job sweeps already (the same change found again by a restarted
+  coordinator), is swept by one new task, "m01", "m02", ... (lanes over the patch, then
+  fill-in passes: ``TaskPlanner.task_over``), told in an ``added`` event and sold; under
+  ``MIN_TASK_M2`` of it is not worth a trip. Without the switch, the freed floor is on the
+  planning map (transits may cross it) and no task sweeps it.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 
 import numpy as np
 
+from fleet.coordinator.job import FREED_PREFIX
 from fleet.coordinator.market import plan_around
 from fleet.coordinator.service import Coordinator
 from fleet.params import CoordinatorParams
-from planners.grid import GridMap
+from planners.bodies import Rerouted
+from planners.coverage.metrics import swath
+from planners.grid import GridMap, clearance
 from planners.map_change import (
     ADDED,
     MapChange,
@@ -45,6 +56,11 @@ from planners.map_change import (
 from planners.map_merge import LogOddsMap, Transform2D, merge_maps
 
 MAP_CHANGED = "map changed"
+ADDED_TASK = "added"
+# freed floor is swept once none has been found for this long (sim s; the map is looked at
+# every coordinator.map_check_every_s), and only when a task would sweep this much of it (m²)
+SETTLE_S = 10.0
+MIN_TASK_M2 = 0.05
 
 
 def map_change_params(params: CoordinatorParams) -> MapChangeParams:
@@ -60,64 +76,140 @@ def map_change_params(params: CoordinatorParams) -> MapChangeParams:
 class MapChanges:
     """The stored map as the robots have shown it changed, and what each change re-plans."""
 
-    def __init__(self, coordinator: Coordinator, stored: GridMap, params: MapChangeParams) -> None:
+    def __init__(
+        self,
+        coordinator: Coordinator,
+        stored: GridMap,
+        params: MapChangeParams,
+        sweep_freed: bool = False,
+    ) -> None:
         self.coordinator = coordinator
+        # floor furniture taken away frees gets a task (coordinator.sweep_freed_floor)
+        self.sweep_freed = sweep_freed
         self.stored = stored
+        self._stored_clearance = clearance(stored)
         self.params = params
         # the furniture moved in so far, each piece the cells of its box (world centres)
         self.obstacles: list[np.ndarray] = []
+        # floor freed that no task sweeps yet (on the planning grid), and when it last grew
+        self.freed: np.ndarray | None = None
+        self.freed_at = 0.0
 
     def look(
         self, maps: Mapping[str, LogOddsMap], limits: tuple[float, float]
     ) -> tuple[MapChange, ...]:
         """Compare the robots' ``maps`` (log-odds clamped to ``limits``) with the map as
-        changed so far, and take each change found (:meth:`take`); the changes."""
+        changed so far, and take each change found (:meth:`take`); the changes taken."""
         if not maps:
             return ()
         fused = merge_maps(list(maps.values()), [Transform2D.identity()] * len(maps), limits)
         c = self.coordinator
         with c.lock:
             robots = [r.xy for r in c.job.robots.values() if r.xy is not None]
-        found = find_changes(fused, self.stored, self.params, np.array(robots, float))
-        for change in found:
-            self.take(change)
-        return found
+        found = find_changes(
+            fused, self.stored, self.params, np.array(robots, float), self._stored_clearance
+        )
+        taken = tuple(change for change in found if self.take(change))
+        self.sweep_settled()
+        return taken
 
-    def take(self, change: MapChange) -> None:
-        """Put ``change`` on the stored map and the planning map, tell it, and re-plan the
-        tasks new furniture lies in the way of."""
-        added = change.kind == ADDED
-        cells, size = change.cells, change.cell_size
-        if added:
-            # pieces closer than a robot's width with its clearance: none passes between them
-            join_m = 2 * self.coordinator.planner.centre_clearance
-            cells, joined = obstacle_cells(change, self.obstacles, join_m)
-            self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
-            self.obstacles.append(cells)
-        self.stored = with_cells(self.stored, cells, size, added)
+    def sweep_settled(self) -> bool:
+        """Sell a task for the floor freed so far once none more has been found for
+        ``SETTLE_S``; whether it did."""
         c = self.coordinator
         with c.lock:
-            planner = c.planner
-            planner.change_floor(with_cells(planner.grid, cells, size, added))
-            c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
-            if not added:
-                return
-            # a cell's corner lies this far from its centre
-            radius = size / math.sqrt(2)
-
-            def through(path: np.ndarray) -> bool:
-                return planner.near(path, cells, radius) and planner.reroute(path).changed
-
-            plan_around(
-                c.market,
-                through,
-                "",
-                "runs through furniture the stored map does not have",
-                "round furniture the stored map does not have",
-            )
+            if self.freed is None or c.journal.clock - self.freed_at < SETTLE_S:
+                return False
+            freed, self.freed = self.freed, None
+            if not self._sweep(freed):
+                return False
             c.market.awards.send()
             c.market.need_auction = True
             c.market.wake.set()
+        return True
+
+    def take(self, change: MapChange) -> bool:
+        """Put ``change`` on the stored map and the planning map, tell it, and re-plan the
+        tasks new furniture lies in the way of, or sweep the floor it frees; whether it was
+        taken: not while the tour is being planned (the next look finds it again)."""
+        c = self.coordinator
+        with c.lock:
+            planner = c.planner
+            if planner.planning:
+                return False
+            added = change.kind == ADDED
+            cells, size = change.cells, change.cell_size
+            if added:
+                # pieces closer than a robot's width with its clearance: none passes between
+                cells, joined = obstacle_cells(change, self.obstacles, 2 * planner.centre_clearance)
+                self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
+                self.obstacles.append(cells)
+            self.stored = with_cells(self.stored, cells, size, added)
+            self._stored_clearance = clearance(self.stored)
+            before = planner.brushable
+            planner.change_floor(with_cells(planner.grid, cells, size, added))
+            c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
+            if not added:
+                # the tour not yet cut is planned on the changed floor, and sweeps it
+                if c.job.tasks and self.sweep_freed:
+                    gained = planner.brushable & ~before
+                    self.freed = gained if self.freed is None else self.freed | gained
+                    self.freed_at = c.journal.clock
+                return True
+            self._plan_round(cells, size)
+            c.market.awards.send()
+            c.market.need_auction = True
+            c.market.wake.set()
+        return True
+
+    def _plan_round(self, cells: np.ndarray, size: float) -> None:
+        """Re-plan the tasks whose paths run through new furniture at ``cells`` (squares of
+        ``size``); each path is rerouted once, the answer kept for ``plan_around``."""
+        planner = self.coordinator.planner
+        # a cell's corner lies this far from its centre
+        radius = size / math.sqrt(2)
+        ways: dict[bytes, Rerouted] = {}
+
+        def reroute(path: np.ndarray) -> Rerouted:
+            key = path.tobytes()
+            if key not in ways:
+                ways[key] = planner.reroute(path)
+            return ways[key]
+
+        def through(path: np.ndarray) -> bool:
+            return planner.near(path, cells, radius) and reroute(path).changed
+
+        plan_around(
+            self.coordinator.market,
+            through,
+            "",
+            "runs through furniture the stored map does not have",
+            "round furniture the stored map does not have",
+            reroute,
+        )
+
+    def _sweep(self, freed: np.ndarray) -> bool:
+        """Add and save a task that sweeps the cells ``freed`` (on the planning grid) that no
+        task of the job sweeps yet, when it sweeps at least ``MIN_TASK_M2``; whether it did."""
+        c = self.coordinator
+        planner, job = c.planner, c.job
+        half = planner.robot.cleaning_width / 2
+        if freed.any():
+            cells = planner.grid.cell_to_world(np.argwhere(freed))
+            lo, hi = cells.min(axis=0) - half, cells.max(axis=0) + half
+            for rec in job.tasks.values():
+                path = rec.task.path
+                if (path.min(axis=0) <= hi).all() and (path.max(axis=0) >= lo).all():
+                    freed &= ~swath(planner.grid, path, half)[0]
+        task = planner.task_over(freed, _fresh_id(job.tasks))
+        if task is None or task.area_m2 < MIN_TASK_M2:
+            return False
+        job.add_tasks((task,))
+        what = f"sweeps {task.area_m2:.2f} m² of floor that furniture taken away freed"
+        c.journal.event(ADDED_TASK, "", task.id, what)
+        c.journal.save_tasks(task.id)
+        c.market.version += 1
+        return True
 
 
 def _planned(cells: np.ndarray, size: float, added: bool) -> str:
@@ -126,3 +218,10 @@ def _planned(cells: np.ndarray, size: float, added: bool) -> str:
         return ""
     (x0, y0), (x1, y1) = cells.min(axis=0) - size / 2, cells.max(axis=0) + size / 2
     return f"; planned round as x {x0:.2f}–{x1:.2f}, y {y0:.2f}–{y1:.2f}"
+
+
+def _fresh_id(taken: Mapping[str, object]) -> str:
+    """The first task id "m01", "m02", ... that none of ``taken`` (nor a remainder of one)
+    has."""
+    bases = {tid.partition(".")[0] for tid in taken}
+    return next(t for k in itertools.count(1) if (t := f"{FREED_PREFIX}{k:02d}") not in bases)

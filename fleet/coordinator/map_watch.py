@@ -79,7 +79,7 @@ class MapWatch:
         # after the check: the furniture moved since the map was made (coordinator.map_changes)
         params = cfg.coordinator
         self.changes = (
-            MapChanges(coordinator, stored, map_change_params(params))
+            MapChanges(coordinator, stored, map_change_params(params), params.sweep_freed_floor)
             if params.map_changes
             else None
         )

@@ -50,12 +50,13 @@ import numpy as np
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import ASSIGNED, LOST, OPEN, Job
+from fleet.coordinator.job import ASSIGNED, FREED_PREFIX, LOST, OPEN, Job
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import chain_pieces, piece_count
 from fleet.protocol import Plan, RobotStatus
 from planners import auction
+from planners.bodies import Rerouted
 
 log = logging.getLogger("coordinator")
 # called with the market's lock held
@@ -391,13 +392,20 @@ class Market:
 
 
 def plan_around(
-    market: Market, near: Callable[[np.ndarray], bool], cause: str, withdrawn: str, rerouted: str
+    market: Market,
+    near: Callable[[np.ndarray], bool],
+    cause: str,
+    withdrawn: str,
+    rerouted: str,
+    reroute: Callable[[np.ndarray], Rerouted] | None = None,
 ) -> None:
     """Take back every task whose path is ``near`` what the planner now plans round (a
     body, new furniture; its owner's queue from there on), and replace it by what a robot
     can drive round that and the floor it puts out of reach (``blocked`` by ``cause``).
-    ``withdrawn`` and ``rerouted`` say why in the events. Called with the market's lock held."""
+    ``withdrawn`` and ``rerouted`` say why in the events; ``reroute`` is the planner's, or
+    the caller's when it has rerouted paths already. Called with the market's lock held."""
     planner = market.dispatcher.planner
+    reroute = reroute or planner.reroute
     near_ids = [
         rec.task.id
         for rec in market.job.tasks.values()
@@ -418,7 +426,7 @@ def plan_around(
         rec = market.job.tasks[tid]
         if not near(rec.task.path):
             continue
-        way = planner.reroute(rec.task.path)
+        way = reroute(rec.task.path)
         if not way.changed:
             continue
         # a stretch a robot cannot drive whose floor some robot still sweeps from beside
@@ -497,5 +505,7 @@ def region_lots(
 
 
 def _tour_key(task_id: str) -> tuple[int, ...]:
-    """Where a task lies along the tour: "t07" → (7,), its remainder "t07.1" → (7, 1)."""
-    return tuple(int(part) for part in task_id.lstrip("t").split("."))
+    """Where a task lies along the tour: "t07" → (0, 7), its remainder "t07.1" → (0, 7, 1); a
+    task added after the tour was cut (freed floor: "m01") after all of it, (1, 1)."""
+    off_tour = int(task_id.startswith(FREED_PREFIX))
+    return (off_tour, *(int(part) for part in task_id.lstrip("t" + FREED_PREFIX).split(".")))

@@ -30,9 +30,11 @@ import numpy as np
 from fleet.params import FleetConfig
 from fleet.world import World
 from planners.auction import Lot, Task, TravelGrid, compact_regions, region_lot, split_tour
+from planners.auction.tasks import task_time
 from planners.bodies import Rerouted, reroute, with_bodies
 from planners.coverage import CoverageParams, CoveragePlan, plan_coverage
 from planners.coverage.metrics import swath
+from planners.coverage.patch import patch_sweep
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, clearance, dilate, reachable
 from planners.polyline import densify, without_straight_vertices
@@ -137,6 +139,8 @@ class TaskPlanner:
         self.bodies = np.zeros((0, 2))
         # travel is priced at the speed the robots' bids assume
         self.transit_speed = cfg.agent.transit_speed
+        # the tour is being planned (the coordinator's lock not held): the floor stays as it is
+        self.planning = False
 
     def use_floor(self, grid: GridMap, centres: np.ndarray) -> None:
         """Plan on ``grid`` from now on, robot centres on the cells ``centres`` (those a robot
@@ -179,6 +183,25 @@ class TaskPlanner:
             self.target_s,
         )
         return tasks
+
+    def task_over(self, floor: np.ndarray, task_id: str) -> Task | None:
+        """The task ``task_id`` that sweeps the cells ``floor`` (on :attr:`grid`) the brush
+        reaches (``planners.coverage.patch.patch_sweep``: lanes over the patch, then fill-in
+        passes up to ``coverage.fill_in_target``), priced as the tour's tasks are
+        (``planners.auction.tasks.task_time``); None when the brush reaches none of it."""
+        sweep = patch_sweep(
+            self.grid,
+            floor & self.brushable,
+            self.reachable,
+            self.robot.cleaning_width / 2,
+            self.params.lane_spacing(self.robot),
+            self.transit,
+            self.params.fill_in_target,
+        )
+        if sweep is None:
+            return None
+        path, area = sweep
+        return Task(task_id, path, area, task_time(path, self.params, self.robot), ())
 
     def travel(self) -> TravelGrid:
         """Travel times on the floor plan as the robots' bids price them: obstacles grown by the

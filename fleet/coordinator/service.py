@@ -39,6 +39,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer
@@ -75,6 +77,7 @@ from fleet.protocol import (
     Request,
     RobotStatus,
 )
+from planners.auction import Task
 
 log = logging.getLogger("coordinator")
 
@@ -423,14 +426,13 @@ class Coordinator:
         )
 
     def _plan_tasks(self) -> None:
-        t0 = time.perf_counter()
-        tasks = self.planner.tasks()
-        log.info("planned %d tasks in %.2f s", len(tasks), time.perf_counter() - t0)
-        with self.lock:
-            self.job.add_tasks(tasks)
-            self.journal.save_tasks(*self.job.tasks)
-            self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
-            self.journal.event("planned", "", "", f"{len(tasks)} tasks")
+        plan_tour(self.planner, self.lock, self._take_tasks)
+
+    def _take_tasks(self, tasks: tuple[Task, ...]) -> None:
+        self.job.add_tasks(tasks)
+        self.journal.save_tasks(*self.job.tasks)
+        self.journal.set_meta(expected_robots=self.expected, **self.planner.meta)
+        self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
         state = fleet_state(self.job, self.journal.clock, self.phase, self._dropped())
@@ -476,3 +478,24 @@ def gathered(ready: int, expected: int, waited: float, grace_s: float) -> bool:
             log.warning("only %d of %d robots are ready; starting with them", ready, expected)
         return True
     return False
+
+
+def plan_tour(
+    planner: TaskPlanner, lock: AbstractContextManager, take: Callable[[tuple[Task, ...]], None]
+) -> tuple[Task, ...]:
+    """The tour cut into tasks, handed to ``take`` with ``lock`` held. The lock is not held
+    while the tour is planned (a second or more on a large floor), so ``planner.planning`` says
+    so meanwhile: a map change found then (``fleet.coordinator.map_changes``) waits, and is
+    taken once the tasks are the job's (re-planning for it held a home run up by 50 s)."""
+    t0 = time.perf_counter()
+    with lock:
+        planner.planning = True
+    try:
+        tasks = planner.tasks()
+        with lock:
+            take(tasks)
+    finally:
+        with lock:
+            planner.planning = False
+    log.info("planned %d tasks in %.2f s", len(tasks), time.perf_counter() - t0)
+    return tasks

@@ -63,6 +63,8 @@ EVENTS_KEPT = 200
 QUIET_EVENTS = ("awarded", "done", "auction")
 # the coordinator's phases of a finished job: incomplete names work no robot could reach
 FINISHED_PHASES = ("done", "incomplete")
+# the phase of a fleet mapping an unknown home (`fleet explore`)
+EXPLORING = "exploring"
 # wall seconds over which message rates are averaged
 RATE_WINDOW_S = 2.0
 # sim seconds over which a robot's speed is averaged
@@ -92,6 +94,7 @@ class RobotView:
     heartbeat_wall: float | None = None
     alive: bool | None = None
     gave_up: int = 0
+    goal: tuple[float, float] | None = None
     recent: deque[tuple[float, float, float]] = field(default_factory=lambda: deque(maxlen=64))
 
 
@@ -110,7 +113,8 @@ class RobotRow:
     ``SILENT_AFTER_S``), lost (the coordinator says so or its liveliness token went) or
     unknown; ``restarts`` is None when no process table is known; ``gave_up`` counts the
     waypoints given up over all its plans since the view came; ``charge`` its battery's last
-    reading (None without batteries) and ``charging`` whether a dock charges it."""
+    reading (None without batteries) and ``charging`` whether a dock charges it; ``goal`` the
+    last waypoint of its plan (exploring: the frontier it heads for)."""
 
     rid: str
     liveness: str
@@ -125,6 +129,7 @@ class RobotRow:
     intent: np.ndarray | None
     charge: float | None = None
     charging: bool = False
+    goal: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -312,8 +317,12 @@ class FleetWatcher:
         with self.lock:
             self._robot(rid).heartbeat_wall = time.time()
 
-    def on_plan(self, _key: str, m: Plan) -> None:
+    def on_plan(self, key: str, m: Plan) -> None:
+        # coord/plan/<robot>
+        rid = str(key).rsplit("/", 1)[-1]
         with self.lock:
+            if rid and len(m.waypoints):
+                self._robot(rid).goal = (float(m.waypoints[-1][0]), float(m.waypoints[-1][1]))
             if self.started_at is None or m.stamp < self.started_at:
                 self.started_at = m.stamp
             if self.started_wall is None:
@@ -469,6 +478,7 @@ class FleetWatcher:
             intent=v.intent,
             charge=s.charge if s and s.charge >= 0 else None,
             charging=bool(s and s.charging),
+            goal=v.goal,
         )
 
     def _eta(self, now: float) -> float | None:
@@ -633,10 +643,16 @@ class BusFeed:
         return seen
 
     def fetch_once(self) -> None:
-        """Ask for the floor plan (until it came) and the cleaned area, once each."""
+        """Ask for the floor plan (until it came; while the fleet explores, the merged map as
+        it grows, every time) and the cleaned area, once each."""
         req = Request(f"dashboard-{self.bus.ident}")
         w = self.watcher
-        if w.floor is None:
+        if w.phase == EXPLORING:
+            with contextlib.suppress(TimeoutError, RuntimeError, DecodeError):
+                w.on_floor(
+                    self.bus.request(self.bus.keys.explored_map(), req, MapPatches, FETCH_TIMEOUT_S)
+                )
+        elif w.floor is None:
             with contextlib.suppress(TimeoutError, RuntimeError, DecodeError):
                 w.on_floor(
                     self.bus.request(self.bus.keys.floor_map(), req, MapPatches, FETCH_TIMEOUT_S)

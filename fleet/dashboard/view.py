@@ -13,6 +13,11 @@ tall as wide), so the floor keeps its proportions:
 * an arrow (``→ ↗ ↑ ↖ ← ↙ ↓ ↘``) for each robot's heading, its number beside it, both in its
   colour; ``x`` for a lost robot,
 * ``•`` the path each robot means to drive next (its published intent).
+
+While the fleet explores (phase ``exploring``), the floor plan is the robots' merged map as it
+grows: only what they have mapped is drawn (floor, walls, and the floor swept on the way), the
+unknown stays blank, and ``◎`` in a robot's colour marks the frontier it heads for (the end of
+its plan).
 """
 
 from __future__ import annotations
@@ -28,13 +33,13 @@ from rich.color import ColorSystem
 from rich.style import Style
 
 from fleet.colours import robot_colour
-from fleet.dashboard.model import FleetSnapshot, RobotRow, dropped_text
+from fleet.dashboard.model import EXPLORING, FleetSnapshot, RobotRow, dropped_text
 
 Line = list[tuple[str, str]]
 
 ARROWS = "→↗↑↖←↙↓↘"
 LOST_MARK = "x"
-WALL, DIRTY, CLEANED, PATH = "█", "·", "░", "•"
+WALL, DIRTY, CLEANED, PATH, GOAL = "█", "·", "░", "•", "◎"
 # a block of cells counts as cleaned when at least this share of its cleanable cells is
 CLEANED_SHARE = 0.5
 # rows the view gives to everything but the map, besides one per robot
@@ -97,7 +102,8 @@ class MapFrame:
 
 def map_bounds(snap: FleetSnapshot) -> tuple[float, float, float, float] | None:
     """(xmin, ymin, xmax, ymax) of what the map shows: the known cells of the floor plan,
-    else the cleanable area, else the robots; None when there is nothing to show yet."""
+    else the cleanable area (not while exploring: the robots have not mapped it), else the
+    robots; None when there is nothing to show yet."""
     if snap.floor is not None:
         g = snap.floor
         known = ~g.unknown
@@ -111,7 +117,7 @@ def map_bounds(snap: FleetSnapshot) -> tuple[float, float, float, float] | None:
                 g.origin[1] + (rows.max() + 1) * r,
             )
     c = snap.cleaned
-    if c is not None and c.cleanable.any():
+    if c is not None and c.cleanable.any() and snap.phase != EXPLORING:
         rows, cols = np.nonzero(c.cleanable.reshape(c.rows, c.cols))
         r = c.resolution
         return (
@@ -153,7 +159,8 @@ def _grid_blocks(
 
 
 def base_layer(snap: FleetSnapshot, frame: MapFrame) -> np.ndarray:
-    """The map's characters without robots: walls, floor cleaned or not, blank outside."""
+    """The map's characters without robots: walls, floor cleaned or not, blank outside (and,
+    while exploring, where the floor plan is unknown)."""
     n = frame.rows * frame.cols
     chars = np.full(n, " ", dtype="<U1")
     if snap.floor is not None:
@@ -168,7 +175,8 @@ def base_layer(snap: FleetSnapshot, frame: MapFrame) -> np.ndarray:
         visited = cleanable & c.swept()
         total = np.bincount(flat[cleanable], minlength=n)
         done = np.bincount(flat[visited], minlength=n)
-        chars[(total > 0) & (chars == " ")] = DIRTY
+        if snap.phase != EXPLORING:
+            chars[(total > 0) & (chars == " ")] = DIRTY
         chars[(total > 0) & (done >= CLEANED_SHARE * total)] = CLEANED
     if snap.floor is not None:
         g = snap.floor
@@ -215,7 +223,8 @@ def render_map(
 ) -> list[Line]:
     """The floor, its cleaned area, each robot's path ahead and each robot's marker, in at
     most ``width`` × ``height`` characters (see the module docstring)."""
-    layers = (snap.floor, snap.cleaned)
+    # what the base layer is drawn from (by identity: EXPLORING, not the snapshot's own string)
+    layers = (snap.floor, snap.cleaned, EXPLORING if snap.phase == EXPLORING else None)
     if snap.floor is None and snap.cleaned is None:
         bounds = map_bounds(snap)
     else:
@@ -233,6 +242,11 @@ def render_map(
         rows, cols, inside = frame.cells(np.asarray(robot.intent, dtype=float))
         chars[rows[inside], cols[inside]] = PATH
         styles[rows[inside], cols[inside]] = robot_colour(robot.rid)
+    if snap.phase == EXPLORING:
+        for robot in snap.robots:
+            at = None if robot.goal is None else frame.cell(*robot.goal)
+            if at is not None and robot.liveness != "lost":
+                chars[at], styles[at] = GOAL, f"bold {robot_colour(robot.rid)}"
     for i, robot in enumerate(snap.robots):
         _place_marker(chars, styles, frame, robot, i, robot.rid == selected)
     return _runs(chars, styles)

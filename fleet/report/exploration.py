@@ -7,11 +7,14 @@ by cell on the truth's grid (each true cell looks up the merged cell holding its
 outside the merged map is not free): free-space IoU = |mapped ∩ true| / |mapped ∪ true|. The
 walls: the true wall cells are the world's occupied cells 8-adjacent to that floor (the faces a
 robot's lidar can see); a true wall cell is found when a mapped occupied cell's centre lies
-within ``WALL_TOLERANCE_M`` of its centre.
+within ``WALL_TOLERANCE_M`` of its centre. What a cleaning plan on the map loses against one on
+the world file, by cause (:func:`plan_floor_lost`), and how the map grew over the run, from the
+coordinator's ``explored`` events (:func:`growth`).
 """
 
 from __future__ import annotations
 
+import re
 import sqlite3
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -22,7 +25,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from fleet.world import World
-from planners.grid import GridMap, reachable
+from planners.grid import GridMap, cleanable, clearance, reachable
 
 EXPLORE_REPORT = "explore.json"
 MAP_PNG = "map.png"
@@ -44,13 +47,63 @@ def true_floor(
 def mapped_free_on(mapped: GridMap, truth: GridMap) -> np.ndarray:
     """``mapped``'s free cells on ``truth``'s grid: each truth cell takes the mapped cell
     holding its centre (outside ``mapped``: not free)."""
+    return mapped_on(mapped, truth).free
+
+
+def mapped_on(mapped: GridMap, truth: GridMap) -> GridMap:
+    """``mapped`` on ``truth``'s grid: each truth cell takes the state of the mapped cell
+    holding its centre (outside ``mapped``: unknown)."""
     rows, cols = np.indices(truth.shape)
     centres = truth.cell_to_world(np.stack([rows.ravel(), cols.ravel()], axis=-1))
     rc = mapped.world_to_cell(centres)
     inside = mapped.in_bounds(rc)
-    free = np.zeros(len(rc), dtype=bool)
-    free[inside] = mapped.free[rc[inside, 0], rc[inside, 1]]
-    return free.reshape(truth.shape)
+    occupied = np.zeros(len(rc), dtype=bool)
+    occupied[inside] = mapped.occupied[rc[inside, 0], rc[inside, 1]]
+    unknown = ~inside
+    unknown[inside] = mapped.unknown[rc[inside, 0], rc[inside, 1]]
+    shape = truth.shape
+    return GridMap(occupied.reshape(shape), unknown.reshape(shape), truth.resolution, truth.origin)
+
+
+def plan_floor_lost(
+    mapped: GridMap,
+    world: World,
+    start: tuple[float, float],
+    centre_clearance: float,
+    half_width: float,
+    resolution: float = 0.025,
+) -> dict[str, float]:
+    """The floor a plan on ``mapped`` puts out of the brush's reach that a plan on the world
+    file reaches, by cause (m², on the truth's grid at ``resolution``, the coordinator's plan
+    resolution). The brush reaches the cells within ``half_width`` of a robot-centre cell:
+    ``centre_clearance`` from every occupied or unknown cell, 4-connected to ``start``
+    (``planners.grid.cleanable``). ``walls_on_floor_m2``: what clearing the mapped occupied
+    cells that lie on true floor would give back (walls and furniture drawn into the floor:
+    a map cell that a face crosses is occupied whole); ``unknown_on_floor_m2``: what clearing the
+    unknown cells on true floor would give back (corners no scan reached); ``both_m2`` what
+    clearing both gives back (more than the two summed where one cause hides the other)."""
+    truth = world.grid(resolution)
+    on = mapped_on(mapped, truth)
+    at = truth.world_to_cell(np.array([start], dtype=float))
+
+    def reached(occupied: np.ndarray, unknown: np.ndarray) -> np.ndarray:
+        g = GridMap(occupied, unknown, truth.resolution, truth.origin)
+        return cleanable(g, reachable(clearance(g) >= centre_clearance, at), half_width)
+
+    floor = truth.free
+    true_reach = reached(truth.occupied, truth.unknown)
+    lost = true_reach & ~reached(on.occupied, on.unknown)
+    walls = true_reach & ~reached(on.occupied & ~floor, on.unknown)
+    corners = true_reach & ~reached(on.occupied, on.unknown & ~floor)
+    both = true_reach & ~reached(on.occupied & ~floor, on.unknown & ~floor)
+    cell = truth.resolution**2
+    return {
+        "brushable_m2": round(float(true_reach.sum()) * cell, 3),
+        "lost_m2": round(float(lost.sum()) * cell, 3),
+        "walls_on_floor_m2": round(float(lost.sum() - walls.sum()) * cell, 3),
+        "unknown_on_floor_m2": round(float(lost.sum() - corners.sum()) * cell, 3),
+        "both_m2": round(float(lost.sum() - both.sum()) * cell, 3),
+    }
 
 
 def free_iou(mapped: GridMap, truth: GridMap, floor: np.ndarray) -> float:
@@ -103,3 +156,28 @@ def frontier_counts(state: Path) -> dict[str, int]:
     finally:
         db.close()
     return {"assigned": int(assigned), **{str(s): int(n) for s, n in states}}
+
+
+# an `explored` event's detail begins "known 41.5 m², 5 frontiers, ..."
+EXPLORED = re.compile(r"known ([\d.]+) m², (\d+) frontiers")
+
+
+def growth(state: Path) -> list[list[float]]:
+    """From the coordinator's SQLite ``state`` (read-only), the merged map as it grew: one
+    [sim s, known m², frontiers] per update that changed either (its ``explored`` events)."""
+    db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
+    try:
+        rows = db.execute(
+            "SELECT sim, detail FROM events WHERE kind = 'explored' ORDER BY seq"
+        ).fetchall()
+    finally:
+        db.close()
+    out: list[list[float]] = []
+    for sim, detail in rows:
+        m = EXPLORED.match(detail)
+        if m is None:
+            continue
+        point = [round(float(sim), 1), float(m.group(1)), int(m.group(2))]
+        if not out or point[1:] != out[-1][1:]:
+            out.append(point)
+    return out

@@ -14,7 +14,8 @@ each cell's entries in time order, and charges every entry but the first to:
   and what that stretch is in the coordinator's one-robot tour (its elements from the job's
   store, ``planners.tour_elements``): a lane, a turn inside a lane group, another pass (fill-in,
   strips), a hop between passes (by its length), the transit to the plan's first task, a
-  detour round a lost robot's body (a sweep that is not on the tour), or no plan at all. A
+  detour round a lost robot's body or a task added for freed floor (a sweep that is not on
+  the tour), or no plan at all. A
   position more than half a swath from its plan is *off the planned path*.
 
 The headline **cause** of a re-entry is the first of:
@@ -55,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from fleet.coordinator.job import FREED_PREFIX
 from fleet.protocol import TIME_KINDS
 from fleet.report.summary import (
     PLANS_FILE,
@@ -154,7 +156,7 @@ CAUSE_LABELS = {
     "hop_mid": f"hops {SHORT_HOP_M:g}-{LONG_HOP_M:g} m",
     "hop_short": f"hops <= {SHORT_HOP_M:g} m (U-turns)",
     "transit": "transits to a plan's first task",
-    "detour": "detours round a body",
+    "detour": "sweeps off the tour (round a body, freed floor)",
     "off_path": "off the planned path",
     "no_plan": "no plan",
     "turn_in_place": "turning in place",
@@ -320,6 +322,9 @@ def read_tour(path: Path) -> Tour:
         raise ReportError(f"{path}: meta tour_elements: {e}") from None
     order = []
     for tid, blob in rows:
+        if tid.startswith(FREED_PREFIX):
+            # added after the tour was cut (floor freed): swept off the tour, a detour
+            continue
         m = re.fullmatch(r"[A-Za-z]*(\d+)", tid)
         if m is None:
             raise ReportError(f"{path}: task {tid!r} has no parent and no tour index")

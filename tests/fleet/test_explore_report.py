@@ -7,10 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fleet.coordinator.store import JobStore
 from fleet.report.exploration import (
     free_iou,
+    growth,
     mapped_free_on,
     path_lengths,
+    plan_floor_lost,
     true_floor,
     walls_within,
 )
@@ -75,3 +78,49 @@ def test_walls_within_5_cm_count_a_wall_a_cell_off_and_not_two():
     assert 0.3 < share < 0.7
     nothing = GridMap(np.zeros_like(half), truth.unknown, 0.05, truth.origin)
     assert walls_within(nothing, truth, floor) == 0.0
+
+
+def test_the_floor_a_plan_on_the_map_loses_is_told_by_cause():
+    world = load_world(SMALL)
+    truth = world.grid(0.025)
+    dock = (0.6, 0.85)
+
+    def lost(mapped: GridMap) -> dict[str, float]:
+        return plan_floor_lost(mapped, world, dock, 0.185, 0.15)
+
+    exact = lost(truth)
+    assert exact["lost_m2"] == 0.0 and 8.0 < exact["brushable_m2"] < 11.0
+    # the south wall drawn 5 cm onto the floor: a strip of floor lost to it, nothing else
+    rows = truth.world_to_cell(np.array([[2.0, 0.06], [2.0, 0.09]]))[:, 0]
+    thick = truth.occupied.copy()
+    thick[rows[0] : rows[1] + 1, :] |= truth.free[rows[0] : rows[1] + 1, :]
+    walls = lost(GridMap(thick, truth.unknown, truth.resolution, truth.origin))
+    assert 0.1 < walls["lost_m2"] == walls["walls_on_floor_m2"] == walls["both_m2"]
+    assert walls["unknown_on_floor_m2"] == 0.0
+    # the north-east corner's floor left unknown: lost to unknown, not to walls
+    xy = truth.cell_to_world(np.argwhere(truth.free))
+    corner = np.zeros(truth.shape, dtype=bool)
+    rc = np.argwhere(truth.free)[(xy[:, 0] > 3.7) & (xy[:, 1] > 2.7)]
+    corner[rc[:, 0], rc[:, 1]] = True
+    unknown = lost(GridMap(truth.occupied, corner, truth.resolution, truth.origin))
+    assert 0.0 < unknown["lost_m2"] == unknown["unknown_on_floor_m2"]
+    assert unknown["walls_on_floor_m2"] == 0.0
+
+
+def test_the_growth_lists_each_update_that_changed_the_merged_map(tmp_path: Path):
+    store = JobStore(tmp_path / "coordinator.sqlite")
+    details = [
+        (1.9, "known 0.0 m², 0 frontiers, 0 new, 0 gone; goals: none"),
+        (4.0, "known 13.4 m², 10 frontiers, 10 new, 0 gone; goals: robot-0 → f001 (2.8, 0.8)"),
+        (6.0, "known 13.4 m², 10 frontiers, 0 new, 0 gone; goals: robot-0 → f001 (2.8, 0.8)"),
+        (8.1, "known 17.3 m², 11 frontiers, 6 new, 4 gone; goals: none"),
+    ]
+    for sim, detail in details:
+        store.add_event(0.0, sim, "explored", "", "", detail)
+    store.add_event(0.0, 9.0, "awarded", "robot-0", "f002", "f002: 3.1 s")
+    store.close()
+    assert growth(tmp_path / "coordinator.sqlite") == [
+        [1.9, 0.0, 0],
+        [4.0, 13.4, 10],
+        [8.1, 17.3, 11],
+    ]

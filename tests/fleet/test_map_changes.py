@@ -18,16 +18,19 @@ from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import ASSIGNED, BLOCKED, OPEN, REPLACED, Job
 from fleet.coordinator.journal import Journal
-from fleet.coordinator.map_changes import MAP_CHANGED, MapChanges
+from fleet.coordinator.map_changes import MAP_CHANGED, SETTLE_S, MapChanges
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
+from fleet.coordinator.service import plan_tour
 from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import FleetEvent, Keys, Message, Plan
 from fleet.world import load_world
 from planners.auction import Task
+from planners.bodies import Rerouted
+from planners.coverage.metrics import swath
 from planners.coverage.params import CoverageParams
-from planners.grid import GridMap
-from planners.map_change import ADDED, MapChange, MapChangeParams
+from planners.grid import GridMap, clearance
+from planners.map_change import ADDED, REMOVED, MapChange, MapChangeParams
 from planners.map_merge import LogOddsMap
 from planners.polyline import densify
 
@@ -172,3 +175,147 @@ def test_the_far_face_seen_later_makes_the_piece_whole(stand: Stand) -> None:
     g = stand.planner.grid
     assert g.occupied[middle[0], middle[1]] and len(changes.obstacles) == 1
     assert "planned round as x 1.05–1.55, y 2.00–2.40" in stand.events(MAP_CHANGED)[1].detail
+
+
+# the small world's table, (xmin, ymin, xmax, ymax): taken away in the tests below
+TABLE = (2.0, 1.3, 2.8, 1.9)
+
+
+def table_cells(grid: GridMap) -> np.ndarray:
+    """Cell centres of ``grid``'s obstacle cells that make the table (its rasterized footprint
+    reaches a cell beyond the table's edges): the floor robots see free once it is gone."""
+    x0, y0, x1, y1 = TABLE
+    xy = grid.cell_to_world(np.argwhere(grid.occupied))
+    near = (xy[:, 0] > x0 - 0.05) & (xy[:, 0] < x1 + 0.05)
+    return xy[near & (xy[:, 1] > y0 - 0.05) & (xy[:, 1] < y1 + 0.05)]
+
+
+def _swept(stand: Stand, tids: list[str]) -> np.ndarray:
+    g = stand.planner.grid
+    out = np.zeros(g.shape, dtype=bool)
+    for tid in tids:
+        out |= swath(g, stand.job.tasks[tid].task.path, CFG.robot.cleaning_width / 2)[0]
+    return out
+
+
+def test_floor_a_table_taken_away_frees_is_swept_by_a_new_task(stand: Stand) -> None:
+    before, stored = stand.planner.brushable.copy(), stand.stored
+    changes = MapChanges(stand, stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
+    # the robots see the table's floor free a half at a time, 4 s apart
+    cells = table_cells(stored)
+    west = cells[:, 0] < 2.4
+    changes.take(MapChange(REMOVED, cells[west], stored.resolution))
+    stand.journal.clock += 4.0
+    changes.take(MapChange(REMOVED, cells[~west], stored.resolution))
+    g = stand.planner.grid
+    middle = g.world_to_cell(np.array([2.4, 1.6]))
+    assert g.free[middle[0], middle[1]]
+    # no task until no more of it has been found for SETTLE_S: then one for both halves
+    stand.journal.clock += SETTLE_S - 0.5
+    assert not changes.sweep_settled() and not stand.events("added")
+    stand.journal.clock += 0.5
+    assert changes.sweep_settled()
+    new = [tid for tid in stand.job.tasks if tid.startswith("m")]
+    assert new == ["m01"] and stand.job.tasks["m01"].state == OPEN, new
+    assert [e.task for e in stand.events("added")] == new
+    # the new task sweeps all of the floor the brush did not reach with the table there
+    freed = stand.planner.brushable & ~before
+    assert freed.sum() * g.resolution**2 > 0.48  # the table's 0.8 × 0.6 m and the band round it
+    assert not (freed & ~_swept(stand, new)).any()
+    area = sum(stand.job.tasks[t].task.area_m2 for t in new)
+    assert area == pytest.approx(freed.sum() * g.resolution**2, rel=0.01)
+    # robot centres keep their clearance from what is still there: walls and the other lanes
+    clear = clearance(g) >= ROBOT.radius + CFG.coordinator.wall_clearance - 1e-9
+    for tid in new:
+        rc = g.world_to_cell(densify(stand.job.tasks[tid].task.path, g.resolution))
+        assert clear[rc[:, 0], rc[:, 1]].all(), tid
+        assert stand.job.tasks[tid].task.time_s > 0
+    assert stand.market.need_auction
+    # the same change found again by a restarted coordinator (planning on the stored map as it
+    # was, with the job's tasks) adds nothing: tasks of the job sweep that floor already
+    stand.planner.change_floor(stored)
+    again = MapChanges(stand, stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
+    again.take(MapChange(REMOVED, table_cells(stored), stored.resolution))
+    stand.journal.clock += SETTLE_S
+    assert not again.sweep_settled()
+    assert [tid for tid in stand.job.tasks if tid.startswith("m")] == new
+
+
+def test_a_lane_through_new_furniture_is_rerouted_once(stand: Stand) -> None:
+    calls: list[int] = []
+    planner = stand.planner
+    reroute = planner.reroute
+
+    def counted(path: np.ndarray) -> Rerouted:
+        calls.append(1)
+        return reroute(path)
+
+    planner.reroute = counted  # type: ignore[method-assign]
+    MapChanges(stand, stand.stored, MapChangeParams()).take(  # type: ignore[arg-type]
+        MapChange(ADDED, chest_faces("swne"), RES)
+    )
+    # t00 runs through the chest, t01 lies clear of it; t00's remainder too is rerouted
+    assert stand.job.tasks["t00"].state == REPLACED
+    assert len(calls) == 2, len(calls)
+
+
+def test_before_the_tour_is_cut_freed_floor_is_left_to_the_tour() -> None:
+    stand = Stand()
+    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
+    changes.take(MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution))
+    g = stand.planner.grid
+    middle = g.world_to_cell(np.array([2.4, 1.6]))
+    assert g.free[middle[0], middle[1]] and not stand.job.tasks
+    stand.journal.clock += SETTLE_S
+    assert not changes.sweep_settled() and not stand.events("added")
+    # the tour planned now sweeps where the table stood
+    tour = stand.planner.tasks()
+    swept = np.zeros(g.shape, dtype=bool)
+    for t in tour:
+        swept |= swath(g, t.path, CFG.robot.cleaning_width / 2)[0]
+    assert swept[middle[0], middle[1]]
+
+
+def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
+    stand = Stand()
+    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
+    table = MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution)
+    planner, plan = stand.planner, stand.planner.tasks
+    floor = planner.grid
+    taken = []
+
+    def plan_and_look() -> tuple[Task, ...]:
+        tour = plan()
+        # the map watch's thread finds the table gone while the tour is planned
+        taken.append(changes.take(table))
+        return tour
+
+    planner.tasks = plan_and_look  # type: ignore[method-assign]
+    plan_tour(planner, stand.lock, stand.job.add_tasks)
+    assert taken == [False] and planner.grid is floor and not planner.planning
+    assert not stand.events(MAP_CHANGED) and stand.job.tasks
+    # the next look, the tour cut: the change is taken and its floor gets a task of its own
+    assert changes.take(table)
+    stand.journal.clock += SETTLE_S
+    assert changes.sweep_settled()
+    assert [e.task for e in stand.events("added")] == ["m01"]
+
+
+def test_without_the_switch_freed_floor_is_on_the_map_and_in_no_task(stand: Stand) -> None:
+    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
+    assert changes.take(MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution))
+    g = stand.planner.grid
+    middle = g.world_to_cell(np.array([2.4, 1.6]))
+    assert g.free[middle[0], middle[1]]
+    stand.journal.clock += SETTLE_S
+    assert not changes.sweep_settled() and not stand.events("added")
+
+
+def test_freed_floor_too_small_for_a_trip_gets_no_task(stand: Stand) -> None:
+    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
+    # a sliver of the table's west face seen free (what the map drew a cell too thick)
+    cells = table_cells(stand.stored)
+    sliver = cells[cells[:, 0] < cells[:, 0].min() + 0.01]
+    assert changes.take(MapChange(REMOVED, sliver, stand.stored.resolution))
+    stand.journal.clock += SETTLE_S
+    assert not changes.sweep_settled() and not stand.events("added")

@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fleet.floor_map import unpack_grid
+from fleet.protocol import MapPatches, Request
 from fleet.supervisor.runner import RunningFleet
 from fleet.world import load_ros_map, load_world
 from planners.grid import GridMap
@@ -18,12 +20,32 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "small.yaml"
 
 
+def _known_cells(fleet: RunningFleet, seen: list[int]) -> bool:
+    """Ask the coordinator for the merged map (``coord/explored``, what the live view draws)
+    and note how many cells it knows when that grew; whether it has grown twice."""
+    bus = fleet.clock().bus
+    try:
+        grid = unpack_grid(bus.request(bus.keys.explored_map(), Request("test"), MapPatches, 1.0))
+    except (TimeoutError, RuntimeError):
+        return False
+    known = int((~grid.unknown).sum())
+    if not seen or known > seen[-1]:
+        seen.append(known)
+    return len(seen) >= 3
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
     run_dir = tmp_path_factory.mktemp("explore")
     fleet = RunningFleet(run_dir, str(WORLD), 2, timeout_s=150.0, command=("explore",))
-    fleet.finish(240.0)
+    served: list[int] = []
+    try:
+        fleet.wait(lambda: _known_cells(fleet, served), 60.0)
+        fleet.finish(240.0)
+    finally:
+        fleet.cleanup()
     return {
+        "served": served,
         "rc": fleet.proc.returncode,
         "output": fleet.output,
         "dir": run_dir,
@@ -55,6 +77,11 @@ def test_the_small_world_is_explored_to_the_end(run: dict) -> None:
     assert any(m > 0.5 for m in report["path_length_m"].values()), report
     kinds = {e["kind"] for e in run["events"]}
     assert {"explored", "awarded", "finished"} <= kinds, kinds
+
+
+def test_the_merged_map_is_served_as_it_grows(run: dict) -> None:
+    # the live view's map: three answers on coord/explored, each knowing more cells
+    assert len(run["served"]) >= 3, (run["served"], _explained(run))
 
 
 def test_the_stored_map_loads_and_matches_the_true_floor(run: dict) -> None:

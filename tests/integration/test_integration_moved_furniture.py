@@ -1,19 +1,24 @@
 """Furniture moved since the stored map was made, end to end: the fleet cleans the small world
 with a chest moved in (configs/worlds/small_moved.yaml) on a stored map of the small world as
-it was, over real processes and a real Zenoh router. The coordinator finds the chest on the
-robots' maps, says where in a `map changed` event, and re-plans the lanes that ran through it,
-so the job ends `done`. With `coordinator.map_changes: false` the same run ends `incomplete`
-(exit 4): the lanes through the chest are tried by every robot in vain (BENCHMARKS.md, SLAM,
-"Furniture moved since the map was made")."""
+it was, with a stool since taken away, over real processes and a real Zenoh router. The
+coordinator finds the chest on the robots' maps, says where in a `map changed` event, and
+re-plans the lanes that ran through it, so the job ends `done`; it finds the stool's floor
+free and, with `coordinator.sweep_freed_floor` on, has it swept by a task of its own. With
+`coordinator.map_changes: false` the same run ends `incomplete` (exit 4): the lanes through
+the chest are tried by every robot in vain (BENCHMARKS.md, SLAM, "Furniture moved since the
+map was made")."""
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
+import yaml
 
 from fleet.coordinator.exploring import write_ros_map
+from fleet.params import default_config_path
 from fleet.report.exploration import true_floor
 from fleet.supervisor.runner import RunningFleet
 from fleet.world import load_world
@@ -24,29 +29,55 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 WORLDS = Path(__file__).resolve().parents[2] / "configs" / "worlds"
 # the chest of small_moved.yaml, (xmin, ymin, xmax, ymax)
 CHEST = (1.05, 2.0, 1.55, 2.4)
-# how far a change's cells may lie outside the chest: a cell and a half of the robots' 5 cm maps
+# a stool on the stored map that the world no longer has
+STOOL = (3.0, 0.45, 3.4, 0.85)
+# how far a change's cells may lie outside the furniture: a cell and a half of the robots' 5 cm maps
 NEAR_M = 0.075
 WHERE = re.compile(r"x (-?[\d.]+)–(-?[\d.]+), y (-?[\d.]+)–(-?[\d.]+)")
 
 
 def stored_map_of_small(out: Path) -> Path:
     """The small world as it was, stored as `fleet explore` stores a map: its floor and walls
-    known at 5 cm, what lies beyond them unknown."""
+    known at 5 cm, what lies beyond them unknown, and the stool on its floor."""
     world = load_world(WORLDS / "small.yaml")
     truth, floor = true_floor(world, 0.05, world.starts[0][:2])
     walls = truth.occupied & ~floor
+    rc = np.argwhere(floor)
+    x, y = truth.cell_to_world(rc).T
+    stool = (x > STOOL[0]) & (x < STOOL[2]) & (y > STOOL[1]) & (y < STOOL[3])
+    walls[rc[stool, 0], rc[stool, 1]] = True
     write_ros_map(out, GridMap(walls, ~floor & ~walls, 0.05, truth.origin))
     return out / "map.yaml"
 
 
-def test_a_chest_moved_in_is_found_and_planned_round(tmp_path: Path) -> None:
+def _box(event: dict) -> tuple[float, float, float, float]:
+    found = WHERE.search(event["detail"])
+    assert found is not None, event
+    x0, x1, y0, y1 = (float(v) for v in found.groups())
+    return x0, y0, x1, y1
+
+
+def _within(box: tuple[float, float, float, float], of: tuple[float, ...]) -> bool:
+    x0, y0, x1, y1 = box
+    return (
+        x0 >= of[0] - NEAR_M
+        and x1 <= of[2] + NEAR_M
+        and y0 >= of[1] - NEAR_M
+        and y1 <= of[3] + NEAR_M
+    )
+
+
+def test_a_chest_moved_in_is_planned_round_and_a_stool_taken_away_swept(tmp_path: Path) -> None:
     map_yaml = stored_map_of_small(tmp_path / "map")
+    config = yaml.safe_load(default_config_path().read_text())
+    config["coordinator"]["sweep_freed_floor"] = True
+    (tmp_path / "fleet.yaml").write_text(yaml.safe_dump(config))
     fleet = RunningFleet(
         tmp_path / "run",
         str(WORLDS / "small_moved.yaml"),
         3,
         timeout_s=200.0,
-        options=("--map", str(map_yaml)),
+        options=("--map", str(map_yaml), "--config", str(tmp_path / "fleet.yaml")),
     )
     try:
         report = fleet.finish(240.0)
@@ -57,13 +88,16 @@ def test_a_chest_moved_in_is_found_and_planned_round(tmp_path: Path) -> None:
     assert report["status"] == "done", fleet.output
     assert len(fleet.events("map checked")) == 1 and not fleet.events("wrong map"), fleet.output
     changed = fleet.events("map changed")
-    assert changed, fleet.output
-    for event in changed:
-        found = WHERE.search(event["detail"])
-        assert found is not None, event
-        x0, x1, y0, y1 = (float(v) for v in found.groups())
-        assert x0 >= CHEST[0] - NEAR_M and x1 <= CHEST[2] + NEAR_M, event
-        assert y0 >= CHEST[1] - NEAR_M and y1 <= CHEST[3] + NEAR_M, event
+    added = [e for e in changed if e["detail"].startswith("an obstacle")]
+    freed = [e for e in changed if e["detail"].startswith("floor where")]
+    assert added and freed, fleet.output
+    assert all(_within(_box(e), CHEST) for e in added), added
+    assert all(_within(_box(e), STOOL) for e in freed), freed
+    # the stool's floor was swept by a task of its own, done with the job
+    new = [e["task"] for e in fleet.events("added")]
+    assert new, fleet.output
+    done = {e["task"].partition(".")[0] for e in fleet.events("done")}
+    assert set(new) <= done, (new, done)
     # the lanes through the chest were taken back and sold again round it
     assert fleet.events("rerouted"), fleet.output
     assert report["coverage"] >= 0.9, fleet.output
