@@ -24,7 +24,7 @@ from fleet.supervisor.runner import RunningFleet
 from fleet.world import load_world
 from planners.grid import GridMap
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
 
 WORLDS = Path(__file__).resolve().parents[2] / "configs" / "worlds"
 # the chest of small_moved.yaml, (xmin, ymin, xmax, ymax)
@@ -86,6 +86,9 @@ def test_a_chest_moved_in_is_planned_round_and_a_stool_taken_away_swept(tmp_path
     assert fleet.left == [], f"processes left behind: {fleet.left}"
     assert fleet.proc.returncode == 0 and report is not None, fleet.output
     assert report["status"] == "done", fleet.output
+    # planned on the stored map, not on the world file the simulator runs
+    assert report["plan"]["floor"] == str(map_yaml.resolve()), report["plan"]
+    assert report["floor_map"] == str(map_yaml)
     assert len(fleet.events("map checked")) == 1 and not fleet.events("wrong map"), fleet.output
     changed = fleet.events("map changed")
     added = [e for e in changed if e["detail"].startswith("an obstacle")]
