@@ -12,7 +12,7 @@ from slam_sim import drifting_odometry, home_segments, loop_route, scan
 from agents.slam.slam import Slam
 from fleet.slam_params import SlamParams
 
-LAPS = 6
+LAPS = 4
 
 
 @pytest.fixture(scope="module")

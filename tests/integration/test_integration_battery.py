@@ -15,7 +15,7 @@ from fleet_runs import FleetRun
 
 from fleet.params import default_config_path
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(900)]
 DOCK_AT_S = 15.0
 
 

@@ -21,7 +21,7 @@ from fleet.bench.kill_sweep import outside_body
 from fleet.cli.up import INCOMPLETE_EXIT
 from fleet.params import load_fleet_config
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(400)]
 KILL_AT_S = 10.8
 
 

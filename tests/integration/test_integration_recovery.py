@@ -24,7 +24,7 @@ from fleet.bench.recovery import events_after, to_reassign
 from fleet.bus import Bus
 from fleet.protocol import Award, Bid, Keys
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(400)]
 
 
 def _check_floor(run: FleetRun, report: dict) -> None:
