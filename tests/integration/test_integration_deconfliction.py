@@ -1,12 +1,12 @@
 """Transits planned in space and time on a running fleet: `fleet up --deconfliction
-prioritized` on corridor_lane (tests/data/worlds: corridor_wide's corridor, 3 m long and 0.6 m
-between the walls' faces, one robot wide with room for a lane inside it, between smaller rooms;
-two robots start in each room), real processes over a real router. The robots cross the
-corridor, the coordinator plans their transits together, every goal in the corridor is
-reached, and the floor is cleaned with no robot–robot contact. The corridor world (0.5 m, no
-lane inside) is run by `fleet bench deconfliction --fleet-seeds`, and corridors of every width
-by its `--family`: one fleet on a corridor world is what the suite's time allows, and this one
-holds every check the corridor world's test had."""
+prioritized` on corridor_wide (two rooms joined by a corridor 3 m long and 0.6 m between the
+walls' faces, one robot wide with room for a lane inside it; two robots start in each room),
+real processes over a real router. The robots cross the corridor, the coordinator plans their
+transits together, every goal in the corridor is reached, and the floor is cleaned with no
+robot–robot contact. The corridor world (0.5 m, no lane inside) is run by `fleet bench
+deconfliction --fleet-seeds`, and corridors of every width by its `--family`: one fleet on a
+corridor world is what the suite's time allows, and this one holds every check the corridor
+world's test had."""
 
 from __future__ import annotations
 
@@ -19,9 +19,9 @@ from fleet.supervisor.runner import RunningFleet
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(400)]
 
-WORLD = Path(__file__).resolve().parents[1] / "data" / "worlds" / "corridor_lane.yaml"
-# the corridor runs from x = 3.5 to x = 6.5 m
-LEFT_X, RIGHT_X = 3.5, 6.5
+WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "corridor_wide.yaml"
+# the corridor runs from x = 6 to x = 9 m
+LEFT_X, RIGHT_X = 6.0, 9.0
 
 
 def _crossings(tracks: Path) -> int:
