@@ -30,12 +30,31 @@ def report(
     in metres, a legend, the figures) and coverage.png and coverage.svg (coverage over sim
     time, the fleet's and each robot's, with joins, losses, reassignments and contacts marked).
 
+    A run dir of `fleet explore` (explore.json, no report.json): reads explore.json, map.yaml,
+    tracks.csv and coordinator.sqlite, and writes explore.png and explore.svg (the merged map,
+    each robot's track and the frontier goals it was sold, the known area and the frontiers over
+    sim time).
+
     Example: `fleet report runs/20250101-120000`. A missing or damaged file is named in the
     error (exit status 2).
     """
+    from fleet.report.exploration import EXPLORE_REPORT
+    from fleet.report.explore_figure import redraw_explore
     from fleet.report.figures import render_report
-    from fleet.report.summary import ReportError, load_run
+    from fleet.report.summary import REPORT_FILE, ReportError, load_run
 
+    if (run_dir / EXPLORE_REPORT).exists() and not (run_dir / REPORT_FILE).exists():
+        try:
+            explored, written = redraw_explore(run_dir)
+        except ReportError as e:
+            _fail(str(e))
+        typer.echo(
+            f"{explored['status']}: {explored['known_m2']:.1f} m² known in "
+            f"{explored['sim_s']:.0f} s sim, free-space IoU {explored['free_iou']:.3f}"
+        )
+        for path in written:
+            typer.echo(f"wrote {path}")
+        return
     try:
         data = load_run(run_dir)
     except ReportError as e:

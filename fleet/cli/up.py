@@ -353,7 +353,9 @@ def explore(
     update, so a run stopped early leaves the map so far) and map.png; explore.json (sim time
     to finish, path length per robot, frontiers assigned, and the merged map's free-space IoU
     against the true floor and the share of true walls with a mapped wall within 5 cm, scored
-    from the world file after the run); the processes' logs.
+    from the world file after the run); explore.png and explore.svg (the merged map with each
+    robot's track and the frontier goals it was sold, and the known area and the frontiers
+    over sim time); the processes' logs.
     The terminal shows each update as an `explored` event: known area, frontiers, each robot's
     goal. Exit status: 0 explored, 3 stopped by --timeout, 4 done with frontiers no robot could
     reach, 130 stopped by Ctrl-C or `fleet down` (the map so far is written), 1 a process
@@ -431,7 +433,7 @@ def _exploration(
     headless: bool,
 ) -> dict[str, Any]:
     """Explore ``w`` with ``robots`` robots into ``run_dir`` (the fleet's processes, their logs,
-    the merged map, map.png and explore.json); explore.json's content."""
+    the merged map, map.png, explore.json and its picture); explore.json's content."""
     from fleet.bus import Bus
     from fleet.config import resolve_world
     from fleet.coordinator.exploring import MAP_PGM, MAP_YAML
@@ -439,9 +441,11 @@ def _exploration(
     from fleet.plausible import Bounds
     from fleet.protocol import DEFAULT_FLEET, OpsRequest
     from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG, write_map_png
+    from fleet.report.explore_figure import render_explore
     from fleet.report.summary import TRACKS_FILE, RunRecorder, read_tracks, write_json
     from fleet.rundir import RunTable, cmdline, write_table
     from fleet.supervisor.launcher import Launcher, free_port
+    from fleet.world import load_ros_map
 
     try:
         starts = w.start_poses(robots, cfg.robot.radius)
@@ -496,6 +500,7 @@ def _exploration(
     report = _explore_report(run_dir, cfg, w, starts[0], status, sim_s, wall_s, tracks)
     write_json(run_dir / EXPLORE_REPORT, report)
     write_map_png(run_dir / MAP_PGM, run_dir / MAP_PNG)
+    render_explore(run_dir, load_ros_map(run_dir / MAP_YAML), tracks, report)
     return report
 
 
