@@ -366,6 +366,7 @@ def explore(
     """
     from fleet.coordinator.exploring import MAP_YAML
     from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG
+    from fleet.report.explore_figure import EXPLORE_FIGURE
 
     if not 1 <= robots <= MAX_ROBOTS:
         _fail(f"--robots must be between 1 and {MAX_ROBOTS}, got {robots}")
@@ -382,7 +383,7 @@ def explore(
         f"{status} after {report['sim_s']} s sim ({report['wall_s']} s wall): "
         f"free-space IoU {report['free_iou']:.3f}, {report['frontiers']['assigned']} frontiers "
         f"assigned, driven {lengths} — {run_dir / MAP_YAML}, {run_dir / MAP_PNG}, "
-        f"{run_dir / EXPLORE_REPORT}",
+        f"{run_dir / EXPLORE_REPORT}, {run_dir / EXPLORE_FIGURE}.png",
         err=True,
     )
     exits = {"done": 0, "incomplete": INCOMPLETE_EXIT, "timeout": TIMED_OUT_EXIT}

@@ -77,6 +77,10 @@ def test_the_small_world_is_explored_to_the_end(run: dict) -> None:
     assert any(m > 0.5 for m in report["path_length_m"].values()), report
     kinds = {e["kind"] for e in run["events"]}
     assert {"explored", "awarded", "finished"} <= kinds, kinds
+    # the picture of the run: each robot's track and frontier goals, and the growth
+    svg = (run["dir"] / "explore.svg").read_text()
+    assert all(f'id="{i}"' in svg for i in ("track-robot-0", "track-robot-1", "growth-known"))
+    assert (run["dir"] / "explore.png").stat().st_size > 0
 
 
 def test_the_merged_map_is_served_as_it_grows(run: dict) -> None:
