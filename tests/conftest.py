@@ -28,10 +28,11 @@ FLEETS = "fleets"
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Run as the README runs the suite (``-n 2``, with ``--dist loadgroup`` from pyproject):
-    the multi-process tests are one group, so one worker runs them one after another, the
-    slowest first, and never two fleets at once (a fleet at ``--speed 0`` takes both cores, and
-    two starve each other into runs no user would see); every other test module is a group of
-    its own (its module fixtures are made once), spread over the other worker."""
+    the multi-process tests are one group, so one worker runs them one after another, those
+    marked slow first, and never two fleets at once (a fleet at ``--speed 0`` takes both cores,
+    and two starve each other into runs no user would see); every other test module is a group
+    of its own (its module fixtures are made once), taken by whichever worker is free, so the
+    other worker runs nearly all of them while the fleets run."""
     for item in items:
         integration = item.get_closest_marker("integration") is not None
         group = FLEETS if integration else item.nodeid.split("::", 1)[0]
