@@ -39,8 +39,13 @@ class SlamParams:
 
     # Correlative scan matcher (Olson 2009), tracking
     match_sigma: float = 0.075  # Gaussian width of the likelihood field around occupied cells
+    # the search's half-widths: search_window_sigmas σ of the step's odometry error (the
+    # motion model below), at least search_window_min_xy/_theta, at most search_window_xy/_theta
     search_window_xy: float = 0.2
     search_window_theta: float = 0.2
+    search_window_sigmas: float = 4.0
+    search_window_min_xy: float = 0.1
+    search_window_min_theta: float = 0.1
     angular_step: float = 0.008  # ≈ resolution / typical range: a far point moves ≤ one cell
     coarse_factor: int = 4  # low-resolution level = max-pool over coarse_factor² cells
     translation_penalty: float = 20.0  # score penalty per m² away from the odometry prior ...
@@ -123,6 +128,9 @@ class SlamParams:
             "match_sigma",
             "search_window_xy",
             "search_window_theta",
+            "search_window_sigmas",
+            "search_window_min_xy",
+            "search_window_min_theta",
             "angular_step",
             "loop_search_radius",
             "loop_window_xy",

@@ -19,6 +19,19 @@ def step_sigmas(params: SlamParams, step: np.ndarray) -> tuple[float, float]:
     return sigma_xy, sigma_theta
 
 
+def tracking_window(params: SlamParams, step: np.ndarray) -> tuple[float, float]:
+    """Half-widths (m, rad) of the scan-to-submap search for one ``step``: Olson's window
+    (Olson 2009, §III) sized by the prior's uncertainty, ``search_window_sigmas`` standard
+    deviations of the step's odometry error (:func:`step_sigmas`), at least
+    ``search_window_min_xy``/``_theta`` (wheel slip against a wall or a peer is not in the
+    model) and at most ``search_window_xy``/``_theta``."""
+    sigma_xy, sigma_theta = step_sigmas(params, step)
+    k = params.search_window_sigmas
+    xy = min(params.search_window_xy, max(params.search_window_min_xy, k * sigma_xy))
+    theta = min(params.search_window_theta, max(params.search_window_min_theta, k * sigma_theta))
+    return xy, theta
+
+
 def prior_penalties(params: SlamParams, step: np.ndarray) -> tuple[float, float]:
     """Score penalties per m² and rad² for leaving the odometry prior of one ``step``.
 

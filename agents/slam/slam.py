@@ -25,7 +25,7 @@ import numpy as np
 from agents.slam.geometry import compose, relative, scan_to_points
 from agents.slam.loop_closure import LoopCloser
 from agents.slam.matcher import CorrelativeMatcher
-from agents.slam.motion import prior_penalties
+from agents.slam.motion import prior_penalties, tracking_window
 from agents.slam.occupancy import log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
@@ -141,12 +141,13 @@ class Slam:
         if points.shape[0] >= 3 and submap.grid.touched is not None:
             fld = self._submaps.field(submap)
             sm_pose = self._graph.poses[submap.graph_id]
+            window_xy, window_theta = tracking_window(p, step)
             result = self._matcher.match(
                 fld,
                 points,
                 relative(sm_pose, prior),
-                p.search_window_xy,
-                p.search_window_theta,
+                window_xy,
+                window_theta,
                 p.coarse_factor,
                 penalties=prior_penalties(p, step),
             )

@@ -1,6 +1,7 @@
-"""The SLAM's use of odometry uncertainty: the tracking prior weakens for long steps, the
-loop-closure window grows with the drift since the last closure, a far closure waits for a
-second one that agrees, and the pose graph solver handles a pose nothing constrains yet."""
+"""The SLAM's use of odometry uncertainty: the tracking prior weakens and the tracking window
+widens for long steps, the loop-closure window grows with the drift since the last closure, a
+far closure waits for a second one that agrees, and the pose graph solver handles a pose
+nothing constrains yet."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from agents.slam.loop_closure import Closure, LoopCloser
-from agents.slam.motion import prior_penalties
+from agents.slam.motion import prior_penalties, tracking_window
 from agents.slam.pose_graph import PoseGraph
 from fleet.slam_params import SlamParams
 
@@ -26,6 +27,30 @@ def test_prior_penalties_follow_the_motion_model():
     assert long[0] == pytest.approx(PARAMS.prior_weight / sigma_xy**2)
     assert long[1] == pytest.approx(PARAMS.prior_weight / sigma_theta**2)
     assert long[0] < short[0] and long[1] < short[1]
+
+
+def test_tracking_window_spans_the_steps_odometry_error_between_its_floor_and_cap():
+    # a 10 Hz step of a robot at 0.3 m/s: its error is millimetres, the window its floor
+    assert tracking_window(PARAMS, np.array([0.03, 0.0, 0.01])) == (
+        PARAMS.search_window_min_xy,
+        PARAMS.search_window_min_theta,
+    )
+    # a step of a log whose scans lie far apart: search_window_sigmas sigmas of its error
+    step = np.array([0.5, 0.3, 0.4])
+    sigma_xy = PARAMS.motion_xy_per_m * math.hypot(0.5, 0.3) + PARAMS.motion_xy_floor
+    sigma_theta = PARAMS.motion_theta_per_rad * 0.4 + PARAMS.motion_theta_per_m * math.hypot(
+        0.5, 0.3
+    )
+    xy, theta = tracking_window(PARAMS, step)
+    assert xy == pytest.approx(PARAMS.search_window_sigmas * sigma_xy)
+    assert theta == pytest.approx(PARAMS.search_window_sigmas * sigma_theta)
+    assert PARAMS.search_window_min_xy < xy < PARAMS.search_window_xy
+    assert PARAMS.search_window_min_theta < theta < PARAMS.search_window_theta
+    # a longer one: the caps
+    assert tracking_window(PARAMS, np.array([3.0, 0.0, 2.0])) == (
+        PARAMS.search_window_xy,
+        PARAMS.search_window_theta,
+    )
 
 
 def test_loop_window_grows_with_drift_up_to_its_cap_and_resets_on_a_closure():
