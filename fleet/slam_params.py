@@ -192,6 +192,14 @@ class SlamParams:
         )
         if self.search_window_theta > math.pi or self.loop_window_theta > math.pi:
             raise ValueError("angular search windows must be <= pi")
+        if (
+            self.search_window_min_xy > self.search_window_xy
+            or self.search_window_min_theta > self.search_window_theta
+        ):
+            raise ValueError(
+                "search_window_min_xy and search_window_min_theta must be <= search_window_xy "
+                "and search_window_theta (the tracking window's floor above its cap)"
+            )
         if not 0 < self.min_match_score < 1 or not 0 < self.loop_min_score < 1:
             raise ValueError("min_match_score and loop_min_score must be within (0, 1)")
         if self.reloc_window_theta > math.pi:

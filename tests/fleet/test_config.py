@@ -54,6 +54,13 @@ def test_a_misspelt_field_of_every_section_gets_a_did_you_mean_hint(
     assert f"did you mean {field!r}?" in msg, msg
 
 
+@pytest.mark.parametrize("field", ["search_window_min_xy", "search_window_min_theta"])
+def test_a_tracking_window_floor_above_its_cap_is_refused(tmp_path: Path, field: str) -> None:
+    path = _with(tmp_path / "fleet.yaml", "slam", field, 0.3)
+    msg = _config_error(path)
+    assert str(path) in msg and field in msg and "floor above its cap" in msg, msg
+
+
 def test_a_misspelt_section_gets_a_hint(tmp_path: Path) -> None:
     path = _write(tmp_path / "fleet.yaml", yaml.safe_dump({"wall_folow": {"speed": 0.1}}))
     msg = _config_error(path)
