@@ -37,7 +37,15 @@ import numpy as np
 from PIL import Image
 
 from fleet.bus import Bus
-from fleet.coordinator.job import ASSIGNED, GONE, OPEN, REPLACED, UNREACHABLE, Job
+from fleet.coordinator.job import (
+    ASSIGNED,
+    FRONTIER_PREFIX,
+    GONE,
+    OPEN,
+    REPLACED,
+    UNREACHABLE,
+    Job,
+)
 from fleet.coordinator.planning import TaskPlanner
 from fleet.floor_map import apply_patches
 from fleet.params import FleetConfig
@@ -185,7 +193,7 @@ class Explorer:
         added = []
         for f in new_frontiers(frontiers, taken, self.params.explore_match_m):
             self.seq += 1
-            task = goal_task(f"f{self.seq:03d}", f, self.params.explore_step_m)
+            task = goal_task(f"{FRONTIER_PREFIX}{self.seq:03d}", f, self.params.explore_step_m)
             job.add_tasks((task,))
             added.append(task)
         busy = any(rec.state in (OPEN, ASSIGNED) for rec in job.tasks.values())

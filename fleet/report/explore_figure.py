@@ -26,14 +26,13 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
 from fleet.colours import robot_colour
+from fleet.coordinator.job import FRONTIER_PREFIX
 from fleet.report.summary import ReportError
 from planners.grid import GridMap
 
 EXPLORE_FIGURE = "explore"
 DPI = 100
 FREE_GREY, WALL_GREY, UNKNOWN_GREY = 1.0, 0.0, 0.78
-# a frontier task's id starts with this (fleet.coordinator.exploring: "f001", ...)
-FRONTIER_PREFIX = "f"
 
 
 @dataclass(frozen=True)
