@@ -1,8 +1,9 @@
 """`fleet bench recovery --sweep N`: one robot killed at N moments spread over the job.
 
 A robot can die anywhere: beside the dock, in a doorway, in the pocket another robot works in.
-Each of N runs of ``fleet up --speed 0 --until-done`` SIGKILLs the victim's agent when the sim
-clock reaches ``k / (N + 1)`` of the no-failure run's makespan (k = 1 … N); with
+Each of N runs of ``fleet up --speed 0 --until-done`` SIGKILLs the victim's agent
+``k / (N + 1)`` of the no-failure run's makespan (k = 1 … N) after the job's first award (the
+makespan's own start); with
 ``respawn_after_s`` its agent is respawned that many sim seconds later. Its body stays where
 it stopped, so the floor under it cannot be cleaned: ``coverage_outside_body`` leaves the
 cleanable cells within the robot's radius (plus the track's 5 cm resolution) of its last true
@@ -72,7 +73,9 @@ def _one(
     clock = fleet.clock()
     killed_at = float("nan")
     try:
-        fleet.wait(lambda: clock.t >= at_s, 900.0, poll=0.01)
+        fleet.wait(lambda: fleet.first_award() is not None, 900.0, poll=0.1)
+        start = fleet.first_award() or 0.0
+        fleet.wait(lambda: clock.t >= start + at_s, 900.0, poll=0.01)
         killed_at = clock.t
         fleet.signal(victim, signal.SIGKILL)
         if respawn_after_s is not None:

@@ -138,6 +138,13 @@ class RunningFleet:
             if (kind is None or e["kind"] == kind) and (robot is None or e["robot"] == robot)
         ]
 
+    def first_award(self, robot: str | None = None) -> float | None:
+        """The sim time of the job's first award (to ``robot``, if named); None before it. A
+        moment of the job is counted from here, not from the sim clock's start: the clock runs
+        while the agents start, which takes longer on a busy machine."""
+        awards = self.events("awarded", robot)
+        return awards[0]["sim"] if awards else None
+
     def clock(self) -> SimClock:
         """The run's sim clock, heard from once the process table is written (the one clock
         of this run: closed by :meth:`cleanup`)."""
