@@ -16,7 +16,8 @@ from fleet_runs import FleetRun
 from fleet.params import default_config_path
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(900)]
-DOCK_AT_S = 15.0
+# robot-1 is sent home this long after its first award (sim s; 15 s into an idle run's sim)
+DOCK_AFTER_AWARD_S = 10.0
 
 
 def _config(path: Path) -> Path:
@@ -33,7 +34,9 @@ def test_robots_run_down_charge_and_the_job_still_finishes(tmp_path: Path) -> No
     run = FleetRun(tmp_path / "run", robots=2, timeout_s=600.0, options=("--config", str(config)))
     clock = run.clock()
     try:
-        run.wait_for(lambda: clock.t >= DOCK_AT_S, timeout=180, what=f"sim time {DOCK_AT_S} s")
+        run.wait_for(lambda: run.first_award("robot-1") is not None, 180, "robot-1's award")
+        at = (run.first_award("robot-1") or 0.0) + DOCK_AFTER_AWARD_S
+        run.wait_for(lambda: clock.t >= at, timeout=180, what=f"sim time {at:.1f} s")
         run.verb("dock", "robot-1")
         report = run.finish()
     finally:

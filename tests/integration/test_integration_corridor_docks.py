@@ -36,8 +36,8 @@ LEFT_X, RIGHT_X = 2.5, 5.5
 # robot-1 starts a metre in front of the right room's dock, facing it; robot-2 in the far corner
 STARTS = [[0.9, 1.5, 0.0], [6.6, 1.0, 0.0], [7.55, 2.6, math.pi]]
 RIGHT_DOCK = (7.55, 1.0)
-# robots are sent home once the first allocation has been made (sim s)
-SEND_AT_S = 12.0
+# robots are sent home this long after the first allocation (sim s; 12 s into an idle run's sim)
+SEND_AFTER_AWARD_S = 7.0
 
 
 def passages(tracks: Path) -> list[tuple[str, str, float, float]]:
@@ -124,7 +124,9 @@ def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Pa
     tracks = tmp_path / "run" / "tracks.csv"
     clock = run.clock()
     try:
-        run.wait_for(lambda: clock.t >= SEND_AT_S, timeout=180, what=f"sim time {SEND_AT_S} s")
+        run.wait_for(lambda: run.first_award() is not None, 180, "the first award")
+        at = (run.first_award() or 0.0) + SEND_AFTER_AWARD_S
+        run.wait_for(lambda: clock.t >= at, timeout=180, what=f"sim time {at:.1f} s")
         run.verb("dock", "robot-1")
         run.verb("dock", "robot-2")
         run.wait_for(lambda: run.events("charged", "robot-1"), timeout=180, what="robot-1 charged")
