@@ -20,6 +20,9 @@ class SlamParams:
     # Occupancy grid
     resolution: float = 0.05
     max_range: float = 8.0  # beams longer than this (or than the sensor's range_max) are skipped
+    # ... for their hits; the free space along a beam with no return is inserted this far (0:
+    # none; at most the range)
+    missing_ray_length: float = 3.0
     p_hit: float = 0.7
     p_miss: float = 0.4
     p_min: float = 0.12  # clamp, so a cell can change its mind after a few scans
@@ -157,7 +160,13 @@ class SlamParams:
             "reloc_distinct_xy",
             "reloc_distinct_theta",
         )
-        require_non_negative(self, "motion_xy_per_m", "motion_theta_per_rad", "motion_theta_per_m")
+        require_non_negative(
+            self,
+            "missing_ray_length",
+            "motion_xy_per_m",
+            "motion_theta_per_rad",
+            "motion_theta_per_m",
+        )
         if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < self.p_max < 1:
             raise ValueError("need 0 < p_min < p_miss < 0.5 < p_hit < p_max < 1")
         if not self.p_min < self.free_threshold < self.occupied_threshold < self.p_max:

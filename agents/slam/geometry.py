@@ -61,3 +61,21 @@ def scan_to_points(
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(r) & (r >= range_min) & (r < range_max)
     return np.stack([r[ok] * np.cos(angles[ok]), r[ok] * np.sin(angles[ok])], axis=-1)
+
+
+def missing_rays(
+    ranges: np.ndarray,
+    angle_min: float,
+    angle_increment: float,
+    range_max: float,
+    length: float,
+) -> np.ndarray:
+    """Ends (M, 2), in the sensor frame, of rays ``length`` long along the beams that saw
+    nothing within ``range_max`` (a reading of ``range_max`` or more, or +inf): the free space
+    such a beam crossed, with no hit at its end (Cartographer's ``missing_data_ray_length``,
+    Hess et al. 2016). Readings below the range, NaN and -inf (too near, invalid) give none."""
+    r = np.asarray(ranges, dtype=float)
+    angles = angle_min + angle_increment * np.arange(r.size)
+    with np.errstate(invalid="ignore"):
+        none = (r >= range_max) & (length > 0)
+    return length * np.stack([np.cos(angles[none]), np.sin(angles[none])], axis=-1)

@@ -51,15 +51,21 @@ class LogOddsGrid:
         row = (xy[..., 1] - self.origin[1]) / self.resolution
         return np.stack([row, col], axis=-1)
 
-    def insert(self, sensor_xy: np.ndarray, endpoints: np.ndarray) -> None:
-        """Integrate one scan: ``endpoints`` (N, 2) are beam returns, in this grid's frame."""
-        if endpoints.shape[0] == 0:
+    def insert(
+        self, sensor_xy: np.ndarray, endpoints: np.ndarray, misses: np.ndarray | None = None
+    ) -> None:
+        """Integrate one scan: ``endpoints`` (N, 2) are beam returns, ``misses`` (M, 2) the ends
+        of rays that met nothing (free all the way, no hit), in this grid's frame."""
+        misses = np.zeros((0, 2)) if misses is None else misses
+        if endpoints.shape[0] == 0 and misses.shape[0] == 0:
             return
         rows, cols = self.shape
-        delta = endpoints - sensor_xy
+        delta = np.concatenate([endpoints, misses]) - sensor_xy
         length = np.hypot(delta[:, 0], delta[:, 1])
         step = 0.75 * self.resolution
-        counts = np.ceil(np.maximum(length - self.resolution, 0.0) / step).astype(np.int64)
+        # a return's ray stops a cell short of its hit; a missing ray is free to its end
+        free = length - np.where(np.arange(length.size) < endpoints.shape[0], self.resolution, 0.0)
+        counts = np.ceil(np.maximum(free, 0.0) / step).astype(np.int64)
         beam = np.repeat(np.arange(counts.size), counts)
         first = np.repeat(np.cumsum(counts) - counts, counts)
         frac = (np.arange(beam.size) - first) * step / np.maximum(length[beam], 1e-9)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.slam.geometry import compose, relative, scan_to_points
+from agents.slam.geometry import compose, missing_rays, relative, scan_to_points
 from agents.slam.loop_closure import LoopCloser
 from agents.slam.matcher import CorrelativeMatcher
 from agents.slam.motion import prior_penalties, tracking_window
@@ -65,9 +65,10 @@ class Slam:
     """Online SLAM for one robot. Feed every scan to ``process``; read ``occupancy()`` for the map.
 
     ``range_min``/``range_max`` are the sensor's limits; returns outside [range_min, range_max)
-    (and beyond ``params.max_range``) are treated as "no return" and skipped entirely: no free
-    space is carved along them. With ``keep_trajectory`` every scan's pose is remembered relative
-    to its node, and ``trajectory()`` returns them all as corrected by the latest optimization.
+    (and beyond ``params.max_range``) are treated as "no return": no hit, and free space only
+    along the first ``params.missing_ray_length`` of a beam that saw nothing within the range.
+    With ``keep_trajectory`` every scan's pose is remembered relative to its node, and
+    ``trajectory()`` returns them all as corrected by the latest optimization.
     """
 
     def __init__(
@@ -126,11 +127,18 @@ class Slam:
         points = scan_to_points(
             scan_ranges, angle_min, angle_increment, self.range_min, self.range_max
         )
+        misses = missing_rays(
+            scan_ranges,
+            angle_min,
+            angle_increment,
+            self.range_max,
+            min(p.missing_ray_length, self.range_max),
+        )
         odom = np.asarray(odom_pose, dtype=float)
         self._scans += 1
         if self._last_odom is None:
             self._last_odom = odom
-            self._add_node(points, odom, t)
+            self._add_node(points, misses, odom, t)
             self._remember_pose()
             return SlamEstimate(self.pose, self._covariance.copy(), t, True, 1.0)
         step = relative(self._last_odom, odom)
@@ -162,7 +170,7 @@ class Slam:
             )
         self._pose = prior
         if self._is_new_node(odom, t):
-            self._add_node(points, odom, t)
+            self._add_node(points, misses, odom, t)
         self._remember_pose()
         return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
 
@@ -198,7 +206,7 @@ class Slam:
             or t - self._last_node_t >= p.node_max_interval
         )
 
-    def _add_node(self, points: np.ndarray, odom: np.ndarray, t: float) -> None:
+    def _add_node(self, points: np.ndarray, misses: np.ndarray, odom: np.ndarray, t: float) -> None:
         p = self.params
         pose = self._pose
         if not self._submaps.all:
@@ -210,7 +218,7 @@ class Slam:
                 self._last_node_id, node_id, step, p.odom_sigma_xy, p.odom_sigma_theta
             )
             self._loops.accumulate_drift(step)
-        finished = self._submaps.add_node(node_id, pose, points)
+        finished = self._submaps.add_node(node_id, pose, points, misses)
         self._last_node_id = node_id
         self._last_node_odom = odom
         self._last_node_t = t

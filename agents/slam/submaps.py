@@ -105,14 +105,19 @@ class Submaps:
         old.field_nodes = old.nodes
         return old
 
-    def add_node(self, node_id: int, pose: np.ndarray, points: np.ndarray) -> Submap | None:
-        """Insert the node's scan ``points`` (sensor frame) at ``pose`` into the active submaps,
-        each with its node-in-submap constraint, and start a new submap when the newest is half
-        full or the robot has left it. Returns the submap that finished, if any."""
+    def add_node(
+        self, node_id: int, pose: np.ndarray, points: np.ndarray, misses: np.ndarray
+    ) -> Submap | None:
+        """Insert the node's scan ``points`` and missing rays' ends ``misses`` (sensor frame) at
+        ``pose`` into the active submaps, each with its node-in-submap constraint, and start a
+        new submap when the newest is half full or the robot has left it. Returns the submap
+        that finished, if any."""
         p = self.params
         for s in self.active:
             local = relative(self._graph.poses[s.graph_id], pose)
-            s.grid.insert(local[:2], transform_points(local, points))
+            s.grid.insert(
+                local[:2], transform_points(local, points), transform_points(local, misses)
+            )
             s.nodes += 1
             self._graph.add_constraint(
                 s.graph_id, node_id, local, p.constraint_sigma_xy, p.constraint_sigma_theta

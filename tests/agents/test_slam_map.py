@@ -82,6 +82,38 @@ def test_ray_update_hits_misses_and_unknown():
     assert grid.touched == (50, 81, 10, 61)
 
 
+def test_a_missing_ray_is_free_to_its_end_and_hits_nothing():
+    p = SlamParams()
+    grid = LogOddsGrid((100, 100), (0.0, 0.0), 0.05, p.p_hit, p.p_miss, p.p_min, p.p_max)
+    grid.insert(np.array([0.52, 2.52]), np.zeros((0, 2)), np.array([[3.52, 2.52]]))
+    prob = grid.probabilities()
+    assert (prob[50, 11:70] < 0.5).all()  # free up to the ray's end (x=3.52, column 70)
+    assert (prob[50, 71:] == 0.5).all()  # beyond it: never observed
+    assert (prob > 0.5).sum() == 0
+
+
+def test_beams_with_no_return_map_free_space_as_far_as_the_missing_ray_length():
+    """A 6 m lidar in a hall 20 m long: looking down the hall, only the near side walls
+    return; the floor ahead is mapped free along the beams that saw nothing, out to
+    ``missing_ray_length``, and not at all without it."""
+    hall = np.array([(0.0, 0.0, 20.0, 0.0), (20.0, 0.0, 20.0, 3.0), (20.0, 3.0, 0.0, 3.0)])
+    hall = np.vstack([hall, (0.0, 3.0, 0.0, 0.0)]) + OFFSET
+    pose = np.array([2.0 + OFFSET, 1.5 + OFFSET, 0.0])
+    rng = np.random.default_rng(0)
+    ahead = pose[:2] + np.array([[3.0, 0.0], [4.5, 0.0], [5.5, 0.0]])
+    for length, free in ((4.0, [True, False, False]), (0.0, [False, False, False])):
+        slam = Slam(SlamParams(missing_ray_length=length), tuple(pose), 0.1, 6.0)
+        for t in np.arange(6) * 2.5:  # standing still: a node every node_max_interval
+            slam.process(*scan(hall, pose, rng=rng), tuple(pose), t)
+        m = slam.occupancy()
+        grid = m.to_gridmap(slam.params.occupied_threshold, slam.params.free_threshold)
+        rc = grid.world_to_cell(ahead)
+        inside = grid.in_bounds(rc)
+        assert (inside & grid.free[rc[:, 0] * inside, rc[:, 1] * inside]).tolist() == free
+        row, col = grid.world_to_cell(pose[None, :2])[0]
+        assert not grid.occupied[row - 2 : row + 3, col:].any()  # no hit down the hall
+
+
 def test_patch_tracker_sends_changed_tiles_only():
     lo = np.zeros((64, 96), dtype=np.float32)
     tracker = PatchTracker(tile=32, tolerance=5)
