@@ -49,22 +49,46 @@ def frontier_cells(grid: GridMap) -> np.ndarray:
     return grid.free & ndimage.binary_dilation(unknown, structure=EIGHT)[1:-1, 1:-1]
 
 
+def _safe(grid: GridMap, robot_radius: float) -> np.ndarray:
+    """Known-free cells whose centre keeps ``robot_radius`` from every occupied cell's edge."""
+    dist = ndimage.distance_transform_edt(~grid.occupied)
+    return grid.free & ((dist - 0.5) * grid.resolution >= robot_radius)
+
+
+def _starts(
+    grid: GridMap, safe: np.ndarray, robots: np.ndarray, robot_radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per robot ((N, 2) world x, y): whether a safe cell lies within its radius (a pose
+    estimate a little off), and the nearest safe cell ((N, 2) row, col; valid where it does)."""
+    robots = np.asarray(robots, dtype=float).reshape(-1, 2)
+    near = np.zeros((len(robots), 2), dtype=np.int64)
+    if not safe.any() or not len(robots):
+        return np.zeros(len(robots), dtype=bool), near
+    away, (near_r, near_c) = ndimage.distance_transform_edt(~safe, return_indices=True)
+    rc = grid.world_to_cell(robots)
+    inside = grid.in_bounds(rc)
+    r, c = np.where(inside, rc[:, 0], 0), np.where(inside, rc[:, 1], 0)
+    close = inside & (away[r, c] * grid.resolution <= robot_radius)
+    return close, np.stack([near_r[r, c], near_c[r, c]], axis=-1)
+
+
+def placed(grid: GridMap, robots: np.ndarray, robot_radius: float) -> np.ndarray:
+    """(N,) whether each robot ((N, 2) world x, y) stands on floor of ``grid`` a robot centre
+    can be on (within its radius of such a cell). A robot whose own surroundings are not yet
+    mapped free reaches no frontier, which does not mean none is left."""
+    return _starts(grid, _safe(grid, robot_radius), robots, robot_radius)[0]
+
+
 def centre_reachable(grid: GridMap, robots: np.ndarray, robot_radius: float) -> np.ndarray:
     """Known-free cells whose centre keeps ``robot_radius`` from every occupied cell's edge,
     4-connected through such cells to a robot ((N, 2) world x, y). A robot standing within its
     radius of such a cell (a pose estimate a little off) starts from the nearest one."""
-    dist = ndimage.distance_transform_edt(~grid.occupied)
-    safe = grid.free & ((dist - 0.5) * grid.resolution >= robot_radius)
-    robots = np.atleast_2d(np.asarray(robots, dtype=float))
-    if not safe.any() or robots.size == 0:
+    safe = _safe(grid, robot_radius)
+    close, near = _starts(grid, safe, robots, robot_radius)
+    if not close.any():
         return np.zeros_like(safe)
-    away, (near_r, near_c) = ndimage.distance_transform_edt(~safe, return_indices=True)
-    rc = grid.world_to_cell(robots)
-    rc = rc[grid.in_bounds(rc)]
-    close = away[rc[:, 0], rc[:, 1]] * grid.resolution <= robot_radius
-    starts = np.stack([near_r[rc[:, 0], rc[:, 1]], near_c[rc[:, 0], rc[:, 1]]], axis=-1)[close]
     labels, _ = ndimage.label(safe)
-    ids = np.unique(labels[starts[:, 0], starts[:, 1]])
+    ids = np.unique(labels[near[close, 0], near[close, 1]])
     return np.isin(labels, ids[ids > 0])
 
 

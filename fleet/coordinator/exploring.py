@@ -52,7 +52,7 @@ from fleet.params import FleetConfig
 from fleet.protocol import MapPatches, Request
 from planners.auction import Lot, Task, task_lot
 from planners.frontier_tasks import call_values, goal_task, new_frontiers, still_there
-from planners.frontiers import Frontier, centre_reachable, find_frontiers
+from planners.frontiers import Frontier, centre_reachable, find_frontiers, placed
 from planners.grid import GridMap
 from planners.map_match import MatchParams, refine_transforms
 from planners.map_merge import LogOddsMap, Transform2D, merge_maps
@@ -170,6 +170,8 @@ class Explorer:
         self.maps = RobotMaps()
         self.transforms: dict[str, Transform2D] = {}
         self.seq = 0
+        # the robots that have stood on the merged map's floor
+        self.placed: set[str] = set()
         # the last update found no new frontier while no task was open or assigned
         self.exhausted = False
 
@@ -197,10 +199,10 @@ class Explorer:
             job.add_tasks((task,))
             added.append(task)
         busy = any(rec.state in (OPEN, ASSIGNED) for rec in job.tasks.values())
-        # over only once every robot's map is in and shows floor: a map of a robot that has
-        # not scanned yet shows no frontier
-        everyone = set(job.market()) <= set(maps) and bool(grid.free.any())
-        self.exhausted = everyone and not busy
+        # over only once every robot's map is in and each robot stands on the merged map's
+        # floor: a robot that has not scanned yet, or whose surroundings are still unknown,
+        # reaches no frontier, and that is no proof that none is left
+        self.exhausted = self._everyone_placed(job, maps, grid) and not busy
         known = float((grid.free | grid.occupied).sum()) * grid.resolution**2
         if self.out_dir is not None:
             write_ros_map(self.out_dir, grid)
@@ -216,12 +218,29 @@ class Explorer:
         self.transforms = {rid: m.transform for rid, m in zip(ids, matches, strict=True)}
         merged = merge_maps(list(maps.values()), [m.transform for m in matches], self.limits)
         grid = merged.to_gridmap(*self.thresholds)
-        robots = [
-            self.transforms.get(rid, Transform2D.identity()).apply(np.array(r.xy))
-            for rid, r in sorted(job.robots.items())
-            if r.xy is not None
-        ]
-        return grid, np.array(robots, dtype=float).reshape(-1, 2)
+        known = [rid for rid, r in sorted(job.robots.items()) if r.xy is not None]
+        return grid, self._merged_xy(job, known)
+
+    def _merged_xy(self, job: Job, rids: list[str]) -> np.ndarray:
+        """(N, 2) the robots' positions in the merged map's frame."""
+        return np.array(
+            [
+                self.transforms.get(rid, Transform2D.identity()).apply(np.array(job.robots[rid].xy))
+                for rid in rids
+            ],
+            dtype=float,
+        ).reshape(-1, 2)
+
+    def _everyone_placed(self, job: Job, maps: Mapping[str, LogOddsMap], grid: GridMap) -> bool:
+        """Whether every robot in the market has sent its map and has stood on the merged
+        map's floor at some update (once placed, a robot wedged off it later holds nothing
+        up)."""
+        market = [rid for rid in job.market() if job.robots[rid].xy is not None]
+        new = [rid for rid in market if rid not in self.placed]
+        if new:
+            ok = placed(grid, self._merged_xy(job, new), self.clearance)
+            self.placed.update(rid for rid, yes in zip(new, ok, strict=True) if yes)
+        return set(job.market()) <= set(maps) & self.placed
 
     def _drop_vanished(
         self, job: Job, frontiers: list[Frontier], grid: GridMap

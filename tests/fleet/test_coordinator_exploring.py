@@ -136,6 +136,27 @@ def test_the_end_waits_for_every_robots_map():
     assert explorer.finished(job)
 
 
+def test_the_end_waits_until_each_robot_stands_on_mapped_floor():
+    explorer = Explorer(CFG, MapPlanner(CFG), None)
+    job = _job("robot-0")
+    # the first scans: the room known, the robot's own surroundings not yet (no frontier is
+    # reachable from it, and none counts as left)
+    first = room(door=True)
+    first[24:40, 24:40] = -1
+    explorer.maps.hear("robot-0", patches(first, 1))
+    change = explorer.update(job)
+    assert change.frontiers == 0 and not explorer.finished(job)
+    explorer.maps.hear("robot-0", patches(room(door=True), 2))
+    assert explorer.update(job).frontiers == 1 and not explorer.finished(job)
+    explorer.maps.hear("robot-0", patches(room(door=False), 3))
+    explorer.update(job)
+    assert explorer.finished(job)
+    # once placed, a robot wedged where the map shows no floor holds nothing up
+    job.robots["robot-0"].xy = (0.45, 0.45)
+    explorer.update(job)
+    assert explorer.finished(job)
+
+
 def test_a_call_is_worth_less_near_a_goal_another_robot_is_headed_to(tmp_path: Path):
     explorer = Explorer(CFG, MapPlanner(CFG), None)
     job = _job("robot-0", "robot-1")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from robots import ROBOT
 
-from planners.frontiers import discounted_utility, find_frontiers, information_gain
+from planners.frontiers import discounted_utility, find_frontiers, information_gain, placed
 from planners.grid import GridMap
 
 RES = 0.05
@@ -109,6 +109,17 @@ def test_the_frontier_facing_more_unknown_gains_more():
     big, small = frontiers  # sorted by gain
     assert big.goal[0] > 3.5 and small.goal[0] < 1.5
     assert big.information_gain > 5 * small.information_gain
+
+
+def test_a_robot_is_placed_only_on_floor_a_robot_centre_can_be_on():
+    occ, unk = room_in_the_unknown()
+    robots = np.array([[2.5, 2.5], [1.1, 2.5], [6.0, 6.0], [-1.0, 2.5]])
+    # the room's middle; beside the wall, within its radius of floor it fits on; in the
+    # unknown; off the grid
+    assert placed(grid(occ, unk), robots, ROBOT.radius).tolist() == [True, True, False, False]
+    unk[45:56, 45:56] = True  # the middle not yet seen
+    assert placed(grid(occ, unk), robots[:1], ROBOT.radius).tolist() == [False]
+    assert find_frontiers(grid(occ, unk), robots[:1], ROBOT.radius, RANGE) == ()
 
 
 def test_information_gain_of_an_open_disc_is_its_area_and_walls_block_it():
