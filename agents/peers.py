@@ -177,8 +177,9 @@ def without_peers(
     radii: np.ndarray,
 ) -> np.ndarray:
     """``ranges`` of a scan taken at ``pose`` with every return that ends inside one of the
-    discs (see :func:`peer_discs`) set to inf, "no return", which SLAM skips: neither a match
-    nor free space is taken from a beam that hit a robot."""
+    discs (see :func:`peer_discs`) set to NaN, an invalid reading, which SLAM skips: neither a
+    match nor free space is taken from a beam that hit a robot (inf, "no return", would clear
+    free space along it)."""
     r = np.array(ranges, dtype=float)
     if not len(centres):
         return r
@@ -188,7 +189,7 @@ def without_peers(
     inside = (np.hypot(*(ends[:, None, :] - centres[None, :, :]).transpose(2, 0, 1)) < radii).any(
         axis=1
     )
-    r[inside] = np.inf
+    r[inside] = np.nan
     return r
 
 

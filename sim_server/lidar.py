@@ -348,15 +348,17 @@ def add_noise(
     range_max: float,
     rng: np.random.Generator,
 ) -> np.ndarray:
-    """Gaussian range noise of std ``sigma``; readings outside [range_min, range_max] → ``inf``.
+    """Gaussian range noise of std ``sigma``; readings beyond ``range_max`` (no return) →
+    ``inf``, below ``range_min`` (too near to measure) → ``-inf``, as REP 117 has it: a beam
+    that saw nothing is evidence of free space, one too near is not.
 
     As a real scanner, the validity check applies to the measured (noisy) value: a true range
     just inside range_max may read beyond it and report no return. Nothing else is clipped.
     """
     ranges = np.asarray(ranges, dtype=np.float64)
     noisy = ranges + sigma * rng.standard_normal(ranges.shape)
-    valid = np.isfinite(noisy) & (noisy >= range_min) & (noisy <= range_max)
-    return np.where(valid, noisy, np.inf)
+    noisy = np.where(np.isfinite(noisy) & (noisy > range_max), np.inf, noisy)
+    return np.where(noisy < range_min, -np.inf, noisy)
 
 
 def _runs(edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

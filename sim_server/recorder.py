@@ -100,7 +100,9 @@ class CarmenRecorder:
             self._write_scan(scan, self._odom, truth()[rid])
 
     def _write_scan(self, scan: LaserScan, odom: Odometry, true_pose: Pose) -> None:
+        # CARMEN has no inf: no return is the range's maximum, too near is 0
         ranges = np.where(np.isfinite(scan.ranges), scan.ranges, scan.range_max)
+        ranges = np.where(scan.ranges == -np.inf, 0.0, ranges)
         pose = (odom.x, odom.y, odom.theta)
         x, y, theta = true_pose
         self._truth.write(f"{scan.stamp:.6f},{x:.6f},{y:.6f},{theta:.6f}\n")

@@ -246,14 +246,15 @@ def test_noise_has_the_configured_sigma_and_range_limits():
     assert abs(mid.std() / sigma - 1) < 0.01
     # One sigma inside range_max: about 15.9 % of readings fall beyond it and read inf.
     edge = add_noise(np.full(n, range_max - sigma), sigma, range_min, range_max, rng)
-    assert abs(np.isinf(edge).mean() - 0.1587) < 0.005
+    assert abs((edge == np.inf).mean() - 0.1587) < 0.005
     assert edge[np.isfinite(edge)].max() <= range_max
+    # too near reads -inf (REP 117), never inf: SLAM takes inf as free space along the beam
     low = add_noise(np.full(n, range_min + sigma), sigma, range_min, range_max, rng)
-    assert abs(np.isinf(low).mean() - 0.1587) < 0.005
+    assert abs((low == -np.inf).mean() - 0.1587) < 0.005
     assert low[np.isfinite(low)].min() >= range_min
-    assert np.all(np.isinf(add_noise(np.full(10, np.inf), sigma, range_min, range_max, rng)))
-    exact = add_noise(np.array([0.05, 1.0, 7.0]), 0.0, range_min, range_max, rng)
-    np.testing.assert_array_equal(exact, [np.inf, 1.0, np.inf])
+    assert np.all(add_noise(np.full(10, np.inf), sigma, range_min, range_max, rng) == np.inf)
+    exact = add_noise(np.array([0.0, 0.05, 1.0, 7.0]), 0.0, range_min, range_max, rng)
+    np.testing.assert_array_equal(exact, [-np.inf, -np.inf, 1.0, np.inf])
 
 
 def as_set(segments: np.ndarray) -> set[tuple[float, ...]]:
