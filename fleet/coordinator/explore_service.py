@@ -18,7 +18,7 @@ import threading
 from collections.abc import Callable
 
 from fleet.bus import Bus
-from fleet.coordinator.exploring import Change, Explorer, fetch_whole_maps
+from fleet.coordinator.exploring import Change, Explorer, Snapshot, fetch_whole_maps
 from fleet.coordinator.market import Market
 from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
@@ -65,6 +65,8 @@ class ExploringCoordinator(Coordinator):
         self.explorer = explorer
         self.explored_at = -float("inf")
         self._fetching: threading.Thread | None = None
+        # what the update due reads, taken under the lock for the loop's unlocked part
+        self._snapshot: Snapshot | None = None
         # the merged map of the last update, packed for coord/explored
         self._explored: MapPatches | None = None
         super().__init__(bus, explorer.planner, expected, params, store, None, bounds=bounds)
@@ -106,9 +108,16 @@ class ExploringCoordinator(Coordinator):
         if self.journal.clock - self.explored_at < self.params.explore_every_s:
             return
         self.explored_at = self.journal.clock
-        change = self.explorer.update(self.job)
-        if change is not None:
-            self._take(change)
+        self._snapshot = self.explorer.snapshot(self.job)
+
+    def _unlocked(self) -> None:
+        """The update due: the maps merged and the frontiers found without the lock, taken
+        into the job with it."""
+        snap, self._snapshot = self._snapshot, None
+        survey = None if snap is None else self.explorer.survey(snap)
+        if survey is not None:
+            with self.lock:
+                self._take(self.explorer.apply(self.job, survey))
 
     def _take(self, change: Change) -> None:
         """Save and tell what an update changed; withdraw the tasks gone from their robots."""

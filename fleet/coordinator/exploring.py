@@ -28,7 +28,7 @@ after every update.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
@@ -150,6 +150,29 @@ class Change:
     grid: GridMap
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """What an update reads of the robots' maps and the job: taken with the lock held, and
+    cheap (:meth:`RobotMaps.hear` replaces a robot's cells whole, never writes into them)."""
+
+    cells: dict[str, np.ndarray]
+    geometry: dict[str, tuple[float, tuple[float, float]]]
+    positions: dict[str, tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class Survey:
+    """The merged map, its frontiers, the floor robot centres reach on it and each robot's
+    position in its frame, and which robots' maps it holds: the costly part of an update,
+    made without the lock."""
+
+    grid: GridMap
+    frontiers: tuple[Frontier, ...]
+    reach: np.ndarray
+    positions: dict[str, np.ndarray]
+    mapped: frozenset[str]
+
+
 class Explorer:
     """The merged map, its frontiers, and the frontier tasks of the job."""
 
@@ -168,7 +191,6 @@ class Explorer:
         self.sensor_range = cfg.lidar.range_max
         self.clearance = planner.centre_clearance
         self.maps = RobotMaps()
-        self.transforms: dict[str, Transform2D] = {}
         self.seq = 0
         # the robots that have stood on the merged map's floor
         self.placed: set[str] = set()
@@ -176,24 +198,63 @@ class Explorer:
         self.exhausted = False
 
     def update(self, job: Job) -> Change | None:
-        """Merge the maps, extract the frontiers, add the new ones to ``job`` and drop the
-        tasks whose frontier vanished; None before any robot has sent its map."""
-        maps = self.maps.log_odds(self.limits)
+        """:meth:`snapshot`, :meth:`survey` and :meth:`apply` at once; None before any robot
+        has sent its map."""
+        survey = self.survey(self.snapshot(job))
+        return None if survey is None else self.apply(job, survey)
+
+    def snapshot(self, job: Job) -> Snapshot:
+        """The maps and the robots' positions as they are now (call with the lock held)."""
+        return Snapshot(
+            dict(self.maps.cells),
+            dict(self.maps.geometry),
+            {rid: r.xy for rid, r in sorted(job.robots.items()) if r.xy is not None},
+        )
+
+    def survey(self, snap: Snapshot) -> Survey | None:
+        """Merge the maps and extract the reachable frontiers (no lock needed: on a large home
+        this takes a second or more, and a coordinator deaf for that long would take its robots
+        for lost); writes the merged map. None before any robot has sent its map."""
+        maps = {
+            rid: LogOddsMap.from_ros(cells, *snap.geometry[rid], self.limits)
+            for rid, cells in sorted(snap.cells.items())
+        }
         if not maps:
             return None
-        grid, robots = self._merge(maps, job)
-        frontiers = [
+        ids = list(maps)
+        # the known start poses, every time: a wrong match then costs one update, never the
+        # prior of every later one
+        priors = [Transform2D.identity()] * len(ids)
+        matches = refine_transforms(list(maps.values()), priors, self.limits, self.match)
+        transforms = {rid: m.transform for rid, m in zip(ids, matches, strict=True)}
+        merged = merge_maps(list(maps.values()), [m.transform for m in matches], self.limits)
+        grid = merged.to_gridmap(*self.thresholds)
+        positions = {
+            rid: transforms.get(rid, Transform2D.identity()).apply(np.array(xy))
+            for rid, xy in snap.positions.items()
+        }
+        robots = np.array(list(positions.values()), dtype=float).reshape(-1, 2)
+        frontiers = tuple(
             f
             for f in find_frontiers(grid, robots, self.clearance, self.sensor_range)
             if f.information_gain >= self.params.explore_min_gain_m2
-        ]
-        self.planner.use_floor(grid, centre_reachable(grid, robots, self.clearance))
-        gone = self._drop_vanished(job, frontiers, grid)
+        )
+        reach = centre_reachable(grid, robots, self.clearance)
+        if self.out_dir is not None:
+            write_ros_map(self.out_dir, grid)
+        return Survey(grid, frontiers, reach, positions, frozenset(maps))
+
+    def apply(self, job: Job, survey: Survey) -> Change:
+        """Add the survey's new frontiers to ``job`` as tasks and drop the tasks whose frontier
+        vanished (call with the lock held)."""
+        grid = survey.grid
+        self.planner.use_floor(grid, survey.reach)
+        gone = self._drop_vanished(job, list(survey.frontiers), grid)
         taken = np.array(
             [rec.task.entry for rec in job.tasks.values() if rec.state not in (GONE, REPLACED)]
         ).reshape(-1, 2)
         added = []
-        for f in new_frontiers(frontiers, taken, self.params.explore_match_m):
+        for f in new_frontiers(list(survey.frontiers), taken, self.params.explore_match_m):
             self.seq += 1
             task = goal_task(f"{FRONTIER_PREFIX}{self.seq:03d}", f, self.params.explore_step_m)
             job.add_tasks((task,))
@@ -202,45 +263,21 @@ class Explorer:
         # over only once every robot's map is in and each robot stands on the merged map's
         # floor: a robot that has not scanned yet, or whose surroundings are still unknown,
         # reaches no frontier, and that is no proof that none is left
-        self.exhausted = self._everyone_placed(job, maps, grid) and not busy
+        self.exhausted = self._everyone_placed(job, survey) and not busy
         known = float((grid.free | grid.occupied).sum()) * grid.resolution**2
-        if self.out_dir is not None:
-            write_ros_map(self.out_dir, grid)
-        return Change(tuple(added), tuple(gone), len(frontiers), known, grid)
+        return Change(tuple(added), tuple(gone), len(survey.frontiers), known, grid)
 
-    def _merge(self, maps: Mapping[str, LogOddsMap], job: Job) -> tuple[GridMap, np.ndarray]:
-        """The merged grid, and the robots' positions in its frame."""
-        ids = list(maps)
-        # the known start poses, every time: a wrong match then costs one update, never the
-        # prior of every later one
-        priors = [Transform2D.identity()] * len(ids)
-        matches = refine_transforms(list(maps.values()), priors, self.limits, self.match)
-        self.transforms = {rid: m.transform for rid, m in zip(ids, matches, strict=True)}
-        merged = merge_maps(list(maps.values()), [m.transform for m in matches], self.limits)
-        grid = merged.to_gridmap(*self.thresholds)
-        known = [rid for rid, r in sorted(job.robots.items()) if r.xy is not None]
-        return grid, self._merged_xy(job, known)
-
-    def _merged_xy(self, job: Job, rids: list[str]) -> np.ndarray:
-        """(N, 2) the robots' positions in the merged map's frame."""
-        return np.array(
-            [
-                self.transforms.get(rid, Transform2D.identity()).apply(np.array(job.robots[rid].xy))
-                for rid in rids
-            ],
-            dtype=float,
-        ).reshape(-1, 2)
-
-    def _everyone_placed(self, job: Job, maps: Mapping[str, LogOddsMap], grid: GridMap) -> bool:
+    def _everyone_placed(self, job: Job, survey: Survey) -> bool:
         """Whether every robot in the market has sent its map and has stood on the merged
         map's floor at some update (once placed, a robot wedged off it later holds nothing
         up)."""
-        market = [rid for rid in job.market() if job.robots[rid].xy is not None]
-        new = [rid for rid in market if rid not in self.placed]
+        market = job.market()
+        new = [rid for rid in market if rid not in self.placed and rid in survey.positions]
         if new:
-            ok = placed(grid, self._merged_xy(job, new), self.clearance)
+            xy = np.array([survey.positions[rid] for rid in new])
+            ok = placed(survey.grid, xy, self.clearance)
             self.placed.update(rid for rid, yes in zip(new, ok, strict=True) if yes)
-        return set(job.market()) <= set(maps) & self.placed
+        return set(market) <= survey.mapped & self.placed
 
     def _drop_vanished(
         self, job: Job, frontiers: list[Frontier], grid: GridMap

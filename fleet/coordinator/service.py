@@ -356,6 +356,7 @@ class Coordinator:
                     self._tick()
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
+            self._unlocked()
             if loop and self.phase in FINISHED:
                 self.phase = next_job(self.market, self.planner, self.lock)
             elif self.phase != "gathering" and auction_due:
@@ -373,6 +374,10 @@ class Coordinator:
 
     def _tick(self) -> None:
         """What the job does each loop besides the market's own (with the lock held)."""
+
+    def _unlocked(self) -> None:
+        """What the job does each loop without the lock: work long enough to make the
+        coordinator deaf to its robots' heartbeats, its results taken in under the lock."""
 
     def _send_due(self) -> None:
         """Send the awards and plans due, and move the phase on."""
