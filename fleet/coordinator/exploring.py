@@ -17,7 +17,7 @@ copy of each; a gap in ``seq`` has the whole map fetched by query). Every
    stops and bids again), one no robot could reach included.
 
 Plans are A* on the merged map (:class:`MapPlanner`: robot centres on known floor clear of
-walls by the robot's radius and ``coordinator.wall_clearance``). The market sells a frontier's
+walls by the robot's radius). The market sells a frontier's
 task to one idle robot at a time; its call is worth the discounted information gain
 (``planners.frontier_tasks.call_values``), and each robot's bid takes that off its travel, which
 it prices on its own map. Exploring is over when no task is open or assigned and an update finds
@@ -129,6 +129,10 @@ class MapPlanner(TaskPlanner):
 
     def __init__(self, cfg: FleetConfig) -> None:
         self._configure(cfg)
+        # robot centres a radius off the merged map's faces, with no wall_clearance on top: a
+        # map draws each face up to a cell in front of the true one (a cell a face crosses is
+        # occupied whole), and one cell more would close a passage a robot fits through
+        self.centre_clearance = self.robot.radius
         self.use_floor(
             GridMap(np.zeros((1, 1), bool), np.ones((1, 1), bool), cfg.slam.resolution, (0, 0)),
             np.zeros((1, 1), dtype=bool),

@@ -157,6 +157,31 @@ def test_the_end_waits_until_each_robot_stands_on_mapped_floor():
     assert explorer.finished(job)
 
 
+def test_a_passage_a_robot_fits_through_stays_open_with_a_wall_cell_a_cell_off():
+    """Two rooms joined by a corridor 9 free cells wide (a 0.5 m corridor as a 5 cm map draws
+    it), one wall cell in it a cell off its wall: a robot fits through (0.175 m from the
+    corridor's centre line to the stray cell's edge, the robot's radius 0.17 m), so the far
+    room's open side is a frontier the robot can reach."""
+    cells = np.full((64, 128), -1, dtype=np.int8)
+    cells[8:56, 8:56] = 0
+    cells[8, 8:56] = cells[55, 8:56] = cells[8:56, 8] = 100
+    cells[8:56, 55] = 100
+    cells[28:37, 55:96] = 0
+    cells[27, 55:96] = cells[37, 55:96] = 100
+    cells[36, 70] = 100
+    cells[8:56, 95:120] = 0
+    cells[8, 95:120] = cells[55, 95:120] = 100
+    cells[8:56, 95] = 100
+    cells[28:37, 95] = 0
+    explorer = Explorer(CFG, MapPlanner(CFG), None)
+    job = _job("robot-0")
+    explorer.maps.hear("robot-0", patches(cells, 1))
+    change = explorer.update(job)
+    assert change.frontiers == 1, change.frontiers
+    (task,) = change.added
+    assert task.entry[0] > 95 * RES  # in the far room
+
+
 def test_a_call_is_worth_less_near_a_goal_another_robot_is_headed_to(tmp_path: Path):
     explorer = Explorer(CFG, MapPlanner(CFG), None)
     job = _job("robot-0", "robot-1")
