@@ -151,10 +151,7 @@ class Coordinator:
         )
         self.strangers = Strangers(STRANGER_GRACE_S, bus.drop_implausible)
         self.tracks: dict[str, PoseTrack] = {}
-        # the messages the coordinators before this one dropped on the bus in this job
-        before = meta.get("dropped")
-        before = before if isinstance(before, dict) else {}
-        self.dropped_before = (int(before.get("malformed", 0)), int(before.get("implausible", 0)))
+        self.dropped_before = dropped_before(meta)
         if resumed is not None:
             assert store is not None
             self._resume(store, resumed)
@@ -376,8 +373,7 @@ class Coordinator:
         """What the job does each loop besides the market's own (with the lock held)."""
 
     def _unlocked(self) -> None:
-        """What the job does each loop without the lock: work long enough to make the
-        coordinator deaf to its robots' heartbeats, its results taken in under the lock."""
+        """What the job does each loop without the lock (work heartbeats must not wait for)."""
 
     def _send_due(self) -> None:
         """Send the awards and plans due, and move the phase on."""
@@ -473,6 +469,14 @@ def _left_out(rec: TaskRecord) -> str:
     else:
         why = f"tried by {', '.join(sorted(rec.tried))}: every robot that could still work"
     return f"{rec.task.id} ({rec.task.area_m2:.2f} m² at ({x:.1f}, {y:.1f}), {why})"
+
+
+def dropped_before(meta: dict[str, object]) -> tuple[int, int]:
+    """(malformed, implausible): the messages the coordinators before this one dropped on the
+    bus in this job, from a resumed job's counters."""
+    before = meta.get("dropped")
+    before = before if isinstance(before, dict) else {}
+    return int(before.get("malformed", 0)), int(before.get("implausible", 0))
 
 
 def gathered(ready: int, expected: int, waited: float, grace_s: float) -> bool:
