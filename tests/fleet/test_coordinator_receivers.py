@@ -6,7 +6,6 @@ silent heartbeat gives its work back to the market."""
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +21,6 @@ from fleet.coordinator.store import JobStore
 from fleet.params import load_fleet_config
 from fleet.plausible import CONFIRMATIONS, Bounds
 from fleet.protocol import AwardAck, Clock, Heartbeat, PoseEstimate, RobotStatus
-from fleet.supervisor.launcher import free_port
 from fleet.supervisor.runner import read_events
 from fleet.world import load_world
 from planners.auction import Task
@@ -36,18 +34,6 @@ STEP = Bounds.of(CFG).clock_step_s
 @pytest.fixture(scope="module")
 def planner() -> TaskPlanner:
     return TaskPlanner(load_world(resolve_world("small"), CFG.robot.radius), CFG)
-
-
-@pytest.fixture
-def buses(router_endpoint: str) -> Iterator[tuple[Bus, Bus, Bus]]:
-    """The coordinator's, the simulator's and robot-0's agent's buses, on a fleet of their own."""
-    fleet = f"t{free_port()}"
-    with (
-        Bus("coordinator", "coordinator", connect=[router_endpoint], fleet=fleet) as coord,
-        Bus("sim", "sim", connect=[router_endpoint], fleet=fleet) as sim,
-        Bus("agent", "robot-0", connect=[router_endpoint], fleet=fleet) as agent,
-    ):
-        yield coord, sim, agent
 
 
 def _coordinator(

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
 
 import pytest
 from test_coordinator_exploring import patches, room
@@ -20,24 +19,11 @@ from fleet.coordinator.job import ALIVE
 from fleet.params import load_fleet_config
 from fleet.plausible import Bounds
 from fleet.protocol import Clock, Heartbeat, PoseEstimate
-from fleet.supervisor.launcher import free_port
 
 pytestmark = pytest.mark.timeout(60)
 
 CFG = load_fleet_config()
 SLOW_MERGE_S = 2.5 * CFG.coordinator.heartbeat_timeout_s
-
-
-@pytest.fixture
-def buses(router_endpoint: str) -> Iterator[tuple[Bus, Bus, Bus]]:
-    """The coordinator's, the simulator's and robot-0's agent's buses, on a fleet of their own."""
-    fleet = f"t{free_port()}"
-    with (
-        Bus("coordinator", "coordinator", connect=[router_endpoint], fleet=fleet) as coord,
-        Bus("sim", "sim", connect=[router_endpoint], fleet=fleet) as sim,
-        Bus("agent", "robot-0", connect=[router_endpoint], fleet=fleet) as agent,
-    ):
-        yield coord, sim, agent
 
 
 def _robot_and_clock(sim: Bus, agent: Bus, stop: threading.Event) -> None:
