@@ -96,7 +96,8 @@ class ExploringCoordinator(Coordinator):
             self.explorer.maps.hear(rid, msg)
 
     def _tick(self) -> None:
-        """Every ``explore_every_s`` sim seconds: merge the maps, update the frontier tasks."""
+        """Every ``explore_every_s`` sim seconds: take what the update reads (it runs in
+        :meth:`_unlocked`)."""
         if self.explorer.maps.missing and not (self._fetching and self._fetching.is_alive()):
             # on a thread of its own: the main loop holds the lock
             self._fetching = threading.Thread(

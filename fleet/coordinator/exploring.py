@@ -17,12 +17,12 @@ copy of each; a gap in ``seq`` has the whole map fetched by query). Every
    stops and bids again), one no robot could reach included.
 
 Plans are A* on the merged map (:class:`MapPlanner`: robot centres on known floor clear of
-walls by the robot's radius). The market sells a frontier's
-task to one idle robot at a time; its call is worth the discounted information gain
-(``planners.frontier_tasks.call_values``), and each robot's bid takes that off its travel, which
-it prices on its own map. Exploring is over when no task is open or assigned and an update finds
-no new frontier. The merged map is written as a ROS map_server pair (``map.yaml``, ``map.pgm``)
-after every update.
+walls by the robot's radius). The market sells a frontier's task to one idle robot at a time;
+its call is worth the discounted information gain (``planners.frontier_tasks.call_values``),
+and each robot's bid takes that off its travel, which it prices on its own map. Exploring is
+over when no task is open or assigned and an update, with every robot once placed on the merged
+map's floor, finds no new frontier. The merged map is written as a ROS map_server pair
+(``map.yaml``, ``map.pgm``) after every update.
 """
 
 from __future__ import annotations
