@@ -66,14 +66,27 @@ def still_there(
 
 
 def new_frontiers(
-    frontiers: Sequence[Frontier], taken: np.ndarray, match_m: float
+    frontiers: Sequence[Frontier],
+    taken: np.ndarray,
+    match_m: float,
+    gone: np.ndarray | None = None,
+    max_gone: int = 2,
 ) -> list[Frontier]:
     """The frontiers whose goal lies farther than ``match_m`` from each of ``taken`` ((M, 2)
-    world: the goals of tasks alive or reached)."""
+    world: the goals of tasks alive or reached) and within ``match_m`` of fewer than
+    ``max_gone`` of ``gone`` (the goals of tasks whose frontier vanished): a frontier that
+    vanishes as a robot nears it and comes back once it leaves (a corner seen from afar) is
+    sold ``max_gone`` times, not for ever."""
     if not frontiers:
         return []
     goals = np.array([f.goal for f in frontiers], dtype=float)
-    return [f for f, d in zip(frontiers, _nearest(goals, taken), strict=True) if d > match_m]
+    gone = np.zeros((0, 2)) if gone is None else np.asarray(gone, dtype=float).reshape(-1, 2)
+    near_gone = (np.linalg.norm(goals[:, None, :] - gone[None, :, :], axis=-1) <= match_m).sum(1)
+    return [
+        f
+        for f, d, n in zip(frontiers, _nearest(goals, taken), near_gone, strict=True)
+        if d > match_m and n < max_gone
+    ]
 
 
 def call_values(

@@ -257,8 +257,11 @@ class Explorer:
         taken = np.array(
             [rec.task.entry for rec in job.tasks.values() if rec.state not in (GONE, REPLACED)]
         ).reshape(-1, 2)
+        gone_at = np.array(
+            [rec.task.entry for rec in job.tasks.values() if rec.state == GONE]
+        ).reshape(-1, 2)
         added = []
-        for f in new_frontiers(list(survey.frontiers), taken, self.params.explore_match_m):
+        for f in new_frontiers(list(survey.frontiers), taken, self.params.explore_match_m, gone_at):
             self.seq += 1
             task = goal_task(f"{FRONTIER_PREFIX}{self.seq:03d}", f, self.params.explore_step_m)
             job.add_tasks((task,))

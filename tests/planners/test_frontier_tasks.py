@@ -49,6 +49,17 @@ def test_a_frontier_is_new_unless_its_goal_is_near_a_goal_sold_or_reached():
     assert new_frontiers([WALL, other], np.zeros((0, 2)), 0.5) == [WALL, other]
 
 
+def test_a_frontier_that_keeps_vanishing_is_sold_only_so_often():
+    none = np.zeros((0, 2))
+    once = np.array([[2.05, 1.6]])  # its task went once: the frontier vanished, then came back
+    assert new_frontiers([WALL], none, 0.5, once) == [WALL]
+    twice = np.array([[2.05, 1.6], [2.1, 1.5]])
+    assert new_frontiers([WALL], none, 0.5, twice) == []
+    assert new_frontiers([WALL], none, 0.5, twice, max_gone=3) == [WALL]
+    far = np.array([[4.0, 4.0], [4.1, 4.0]])  # elsewhere: no bearing on this one
+    assert new_frontiers([WALL], none, 0.5, far) == [WALL]
+
+
 def test_a_call_is_worth_its_gain_discounted_near_goals_robots_are_headed_to():
     goals = np.array([[0.0, 0.0], [4.0, 0.0]])
     gains = np.array([3.0, 3.0])
