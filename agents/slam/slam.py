@@ -127,18 +127,11 @@ class Slam:
         points = scan_to_points(
             scan_ranges, angle_min, angle_increment, self.range_min, self.range_max
         )
-        misses = missing_rays(
-            scan_ranges,
-            angle_min,
-            angle_increment,
-            self.range_max,
-            min(p.missing_ray_length, self.range_max),
-        )
         odom = np.asarray(odom_pose, dtype=float)
         self._scans += 1
         if self._last_odom is None:
             self._last_odom = odom
-            self._add_node(points, misses, odom, t)
+            self._add_node(points, self._misses(scan_ranges, angle_min, angle_increment), odom, t)
             self._remember_pose()
             return SlamEstimate(self.pose, self._covariance.copy(), t, True, 1.0)
         step = relative(self._last_odom, odom)
@@ -170,7 +163,7 @@ class Slam:
             )
         self._pose = prior
         if self._is_new_node(odom, t):
-            self._add_node(points, misses, odom, t)
+            self._add_node(points, self._misses(scan_ranges, angle_min, angle_increment), odom, t)
         self._remember_pose()
         return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
 
@@ -205,6 +198,11 @@ class Slam:
             or abs(moved[2]) >= p.node_min_rotation
             or t - self._last_node_t >= p.node_max_interval
         )
+
+    def _misses(self, ranges: np.ndarray, angle_min: float, angle_increment: float) -> np.ndarray:
+        """The ends of the scan's missing rays (only a node's scan is inserted into the map)."""
+        length = min(self.params.missing_ray_length, self.range_max)
+        return missing_rays(ranges, angle_min, angle_increment, self.range_max, length)
 
     def _add_node(self, points: np.ndarray, misses: np.ndarray, odom: np.ndarray, t: float) -> None:
         p = self.params
