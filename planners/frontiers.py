@@ -119,15 +119,22 @@ def information_gain(grid: GridMap, goals: np.ndarray, sensor_range: float) -> n
 
 
 def find_frontiers(
-    grid: GridMap, robots: np.ndarray, robot_radius: float, sensor_range: float
+    grid: GridMap,
+    robots: np.ndarray,
+    robot_radius: float,
+    sensor_range: float,
+    reach: np.ndarray | None = None,
 ) -> tuple[Frontier, ...]:
     """The frontiers of ``grid`` that a robot at one of ``robots`` ((N, 2) world x, y) can
-    reach, at least the robot's diameter long, largest information gain first."""
+    reach, at least the robot's diameter long, largest information gain first. ``reach``:
+    :func:`centre_reachable` of the same, when the caller has it already."""
     cells = frontier_cells(grid)
     labels, n = ndimage.label(cells, structure=EIGHT)
     if n == 0:
         return ()
-    reach = centre_reachable(grid, robots, robot_radius) & cells
+    if reach is None:
+        reach = centre_reachable(grid, robots, robot_radius)
+    reach = reach & cells
     rc = np.argwhere(cells)
     lab = labels[rc[:, 0], rc[:, 1]]
     counts = np.bincount(lab, minlength=n + 1)

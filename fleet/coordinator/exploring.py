@@ -238,12 +238,12 @@ class Explorer:
             for rid, xy in snap.positions.items()
         }
         robots = np.array(list(positions.values()), dtype=float).reshape(-1, 2)
+        reach = centre_reachable(grid, robots, self.clearance)
         frontiers = tuple(
             f
-            for f in find_frontiers(grid, robots, self.clearance, self.sensor_range)
+            for f in find_frontiers(grid, robots, self.clearance, self.sensor_range, reach)
             if f.information_gain >= self.params.explore_min_gain_m2
         )
-        reach = centre_reachable(grid, robots, self.clearance)
         if self.out_dir is not None:
             write_ros_map(self.out_dir, grid)
         return Survey(grid, frontiers, reach, positions, frozenset(maps))
