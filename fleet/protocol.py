@@ -120,6 +120,9 @@ class Keys:
     def docks(self) -> str:
         return f"{self.root}/coord/docks"
 
+    def placement(self, robot: str) -> str:
+        return f"{self.root}/coord/placement/{robot}"
+
     def ops(self, verb: str) -> str:
         return f"{self.root}/ops/{verb}"
 
@@ -135,22 +138,23 @@ class Keys:
     @staticmethod
     def robot_of(key: str) -> str:
         """The robot id in ``fleet/<f>/robot/<id>/<topic>``, ``.../coord/bid/<task>/<id>``,
-        ``.../coord/award/<id>`` or ``.../coord/ack/<id>``."""
+        ``.../coord/award/<id>``, ``.../coord/ack/<id>`` or ``.../coord/placement/<id>``."""
         parts = str(key).split("/")
         if len(parts) > 3 and parts[2] == "robot":
             return parts[3]
-        if len(parts) > 4 and parts[2] == "coord" and parts[3] in ("bid", "award", "ack"):
+        if len(parts) > 4 and parts[2] == "coord" and parts[3] in _ROBOT_FAMILIES:
             return parts[-1]
         return ""
 
 
-_ID_KEYS = ("plan", "award", "ack", "task", "bid")
+_ROBOT_FAMILIES = ("bid", "award", "ack", "placement")
+_ID_KEYS = ("plan", "award", "ack", "task", "bid", "placement")
 
 
 def key_class(key: str) -> str:
     """What kind of key ``key`` is, without its fleet and ids: ``fleet/<f>/robot/robot-3/truth``
-    → ``robot/*/truth``; an id after ``coord/plan/``, ``award/``, ``ack/``, ``task/`` or
-    ``bid/`` becomes ``*`` too."""
+    → ``robot/*/truth``; an id after ``coord/plan/``, ``award/``, ``ack/``, ``task/``,
+    ``bid/`` or ``placement/`` becomes ``*`` too."""
     parts = str(key).split("/")[2:]
     if len(parts) >= 3 and parts[0] == "robot":
         parts[1] = "*"
@@ -553,7 +557,9 @@ class Request(Message):
 @dataclass(frozen=True, eq=False)
 class SpawnRequest(Message):
     """Place robot ``robot`` at (x, y, theta); with ``rejoin`` a respawned agent takes over the
-    body its robot left in the world instead (the pose is then not used)."""
+    body its robot left in the world instead (the pose is then not used). With ``own_frame``
+    the robot's odometry starts at (0, 0, 0) where it is placed, as a robot's wheel odometry
+    starts wherever it is switched on; otherwise at the pose (a robot that knows its dock)."""
 
     TYPE: ClassVar[str] = "spawn"
     robot: str
@@ -561,6 +567,7 @@ class SpawnRequest(Message):
     y: float
     theta: float
     rejoin: bool = False
+    own_frame: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -619,7 +626,8 @@ class MapPatches(Message):
     (``patch_rows[i]``, ``patch_cols[i]``); ``data`` is the zlib stream of all blocks' cells,
     block after block, row-major. ``full`` means the receiver must drop its copy first (first
     message, or the map grew). ``seq`` counts messages so a receiver can notice a gap and ask
-    for the whole map.
+    for the whole map. ``own_frame`` means the map is in the robot's own frame, not yet the
+    fleet's: the robot started with no known pose and has not been placed (:class:`Placement`).
     """
 
     TYPE: ClassVar[str] = "map_patches"
@@ -635,6 +643,7 @@ class MapPatches(Message):
     patch_rows: Annotated[np.ndarray, Arr("<i4")]
     patch_cols: Annotated[np.ndarray, Arr("<i4")]
     data: Annotated[np.ndarray, Arr("|u1")]
+    own_frame: bool = False
 
     @classmethod
     def pack(
@@ -647,6 +656,7 @@ class MapPatches(Message):
         origin: tuple[float, float],
         tile: int,
         blocks: Sequence[tuple[int, int, np.ndarray]],
+        own_frame: bool = False,
     ) -> MapPatches:
         """Build a message from (row, col, tile × tile int8 block) triples."""
         cells = b"".join(np.ascontiguousarray(b, dtype=np.int8).tobytes() for _, _, b in blocks)
@@ -663,6 +673,7 @@ class MapPatches(Message):
             np.array([r for r, _, _ in blocks], dtype=np.int32),
             np.array([c for _, c, _ in blocks], dtype=np.int32),
             np.frombuffer(zlib.compress(cells, 6), dtype=np.uint8),
+            own_frame,
         )
 
     @functools.cached_property
@@ -678,6 +689,23 @@ class MapPatches(Message):
         if len(raw) != n or not inflater.eof:
             raise DecodeError(f"{self.TYPE}.data: expected {n} cells after decompression")
         return np.frombuffer(raw, dtype=np.int8).reshape(-1, self.tile, self.tile).copy()
+
+
+@dataclass(frozen=True, eq=False)
+class Placement(Message):
+    """Where a robot that started with no known pose stands in the fleet's frame
+    (``coord/placement/<robot>``): ``x``, ``y``, ``theta`` carry its own map frame into the
+    fleet's (a point p of its map lies at R(theta)·p + (x, y)), found by matching its map with
+    the merged one; ``score`` and ``overlap_m2`` are the match's (``planners.map_match``)."""
+
+    TYPE: ClassVar[str] = "placement"
+    stamp: float
+    robot: str
+    x: float
+    y: float
+    theta: float
+    score: float
+    overlap_m2: float
 
 
 MESSAGES: dict[str, type[Message]] = {
@@ -701,6 +729,7 @@ MESSAGES: dict[str, type[Message]] = {
         SpawnReply,
         CoverageImage,
         MapPatches,
+        Placement,
         Heartbeat,
         TaskCall,
         Bid,

@@ -174,8 +174,11 @@ class SimCore:
                 return f"({pose[0]:.2f}, {pose[1]:.2f}) overlaps robot {rid}"
         return ""
 
-    def add_robot(self, rid: str, pose: tuple[float, float, float]) -> tuple[float, float, float]:
-        """Place a robot; a robot that is already in the world stays where it is."""
+    def add_robot(
+        self, rid: str, pose: tuple[float, float, float], own_frame: bool = False
+    ) -> tuple[float, float, float]:
+        """Place a robot; a robot that is already in the world stays where it is. With
+        ``own_frame`` its odometry starts at (0, 0, 0), not at ``pose``."""
         if rid in self.robots:
             return self.physics.pose(rid)
         why = self.check_free(pose)
@@ -192,7 +195,7 @@ class SimCore:
         self._vel = np.vstack([self._vel, np.zeros((1, 2))])
         self._path = np.append(self._path, state.path_length_m)
         self._sampled_xy = np.vstack([self._sampled_xy, placed[:, :2]])
-        self._odom.add(pose)
+        self._odom.add(pose, (0.0, 0.0, 0.0) if own_frame else None)
         if self.batteries is not None:
             self.batteries.add(state.battery)
         self.cleaning.update([rid], placed)

@@ -137,13 +137,19 @@ class OdometryModel:
         self._true = cur
         return self._odom.copy()
 
-    def add(self, initial_pose: tuple[float, float, float]) -> None:
-        """Append a robot as the last row; its odometry starts at its true ``initial_pose``."""
+    def add(
+        self,
+        initial_pose: tuple[float, float, float],
+        odometry: tuple[float, float, float] | None = None,
+    ) -> None:
+        """Append a robot as the last row; its odometry starts at ``odometry`` (by default its
+        true ``initial_pose``)."""
         if self._true.ndim != 2:
             raise ValueError("OdometryModel.add: only a model of shape (N, 3) takes robots")
         row = np.array(initial_pose, dtype=np.float64).reshape(1, 3)
+        start = row if odometry is None else np.array(odometry, dtype=np.float64).reshape(1, 3)
         self._true = np.vstack([self._true, row])
-        self._odom = np.vstack([self._odom, row])
+        self._odom = np.vstack([self._odom, start])
 
     def remove(self, index: int) -> None:
         """Drop the robot in row ``index``; later rows move up by one."""

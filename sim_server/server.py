@@ -148,7 +148,7 @@ class SimServer:
                 log.info("a new agent took over robot %s where it stood", req.robot)
                 return SpawnReply(True, "", req.x, req.y, req.theta, self.core.t)
             try:
-                x, y, th = self.core.add_robot(req.robot, (req.x, req.y, req.theta))
+                x, y, th = self.core.add_robot(req.robot, (req.x, req.y, req.theta), req.own_frame)
             except ValueError as e:
                 return SpawnReply(False, str(e), req.x, req.y, req.theta, self.core.t)
             self.links[req.robot] = AgentLink(self.core.t, time.monotonic())

@@ -275,3 +275,27 @@ def test_tick_is_a_step_with_truth_and_summary_when_due(world: World, cfg: Fleet
     points = sim.robots["r0"].trajectory.points()
     assert last.turns[0] == count_turns(simplify(points, TURN_SIMPLIFY_TOL_M))
     assert last.path_length_m[0] == pytest.approx(path_length(points), abs=TRAJECTORY_SAMPLE_M)
+
+
+def test_a_robot_placed_in_its_own_frame_counts_odometry_from_zero(
+    world: World, cfg: FleetConfig
+) -> None:
+    """Its odometry starts at (0, 0, 0) where it stands and follows the body from there, so an
+    agent that is not told its start learns nothing of it from odometry; the other robot's
+    odometry still starts at its true pose."""
+    sim = SimCore(world, cfg)
+    sim.add_robot("known", (1.0, 1.0, 0.0))
+    sim.add_robot("lost", (1.0, 2.3, math.pi / 2), own_frame=True)
+    sim.set_cmd("lost", 0.2, 0.0)
+    odom: dict[str, tuple[float, ...]] = {}
+    for _ in range(round(2.0 / sim.dt)):
+        for rid, msg in sim.step().odometry:
+            odom[rid] = (msg.x, msg.y, msg.theta)
+    x, y, theta = odom["lost"]
+    true_x, true_y, _ = sim.truth()["lost"]
+    # facing +y in the world is facing +x in its own frame
+    assert x == pytest.approx(true_y - 2.3, abs=0.03)
+    assert y == pytest.approx(1.0 - true_x, abs=0.03)
+    assert theta == pytest.approx(0.0, abs=0.03)
+    assert x > 0.2
+    assert odom["known"][:2] == pytest.approx((1.0, 1.0), abs=0.01)
