@@ -41,9 +41,10 @@ import numpy as np
 from agents.control import ControlParams, ControlState, Drive, Heard, control
 from agents.map_keeper import MapKeeper
 from agents.market import MarketClient
+from agents.placing import UnplacedSlamPose
 from agents.pose_source import OdometryPose, PoseSource, RelocalizingSlamPose, SlamPose
 from agents.receivers import Receivers
-from agents.slam.persistence import SavedState, load_state
+from agents.slam.persistence import SavedState, load_state, state_path
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
@@ -59,6 +60,7 @@ from fleet.protocol import (
     LaserScan,
     MapPatches,
     Odometry,
+    Placement,
     Plan,
     Request,
     SpawnReply,
@@ -66,6 +68,7 @@ from fleet.protocol import (
     TaskCall,
     Twist,
 )
+from planners.grid import GridMap
 
 log = logging.getLogger("agent")
 
@@ -87,8 +90,17 @@ RESPAWN_MARGIN_THETA = 0.1
 class Agent:
     """One robot's process around its control step; see the module's docstring."""
 
-    def __init__(self, bus: Bus, rid: str, cfg: FleetConfig, state_dir: Path | None = None) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        rid: str,
+        cfg: FleetConfig,
+        state_dir: Path | None = None,
+        unknown_start: bool = False,
+    ) -> None:
         self.bus = bus
+        # started with no known pose: mapped in its own frame until the fleet places it
+        self.unknown_start = unknown_start
         self.state_dir = state_dir
         self.rid = rid
         self.cfg = cfg
@@ -120,6 +132,8 @@ class Agent:
         )
         self._calls: list[TaskCall] = []
         self._told_no_floor = False
+        # the sim time of the first heartbeat that told the coordinator it is ready
+        self._ready_from: float | None = None
         self._calls_ready = threading.Condition()
 
     def spawn(
@@ -131,34 +145,19 @@ class Agent:
 
         The subscriptions come first: the simulator sends the first scan right after placing
         the robot and then holds its clock until that scan is answered."""
-        saved = None
-        if respawn:
-            if self.state_dir is None:
-                raise ValueError("a respawn needs the state directory the robot saved to")
-            saved = load_state(self.state_dir)
-            start = saved.pose
+        saved = saved_state(self.state_dir, respawn, self.unknown_start)
+        start = saved.pose if saved is not None else start
         self._subscribe()
-        reply = request_spawn(self.bus, SpawnRequest(self.rid, *start, rejoin=respawn), timeout)
+        request = SpawnRequest(self.rid, *start, rejoin=respawn, own_frame=self.unknown_start)
+        reply = request_spawn(self.bus, request, timeout)
         if reply.stamp >= 0:
             self.rx.start(reply.stamp)
+        spawned = (reply.x, reply.y, reply.theta)
+        source = pose_source_for(self.cfg, saved, spawned, self.unknown_start)
         with self.lock:
-            self.control_state = ControlState(localized=saved is None)
-            self.pose_source = self._pose_source(saved, (reply.x, reply.y, reply.theta))
-        if saved is not None:
-            log.info(
-                "%s took over its body; finding itself in its saved map near (%.2f, %.2f, %.2f)",
-                self.rid,
-                *saved.pose,
-            )
-        else:
-            log.info(
-                "%s spawned at (%.2f, %.2f, %.2f), pose from %s",
-                self.rid,
-                reply.x,
-                reply.y,
-                reply.theta,
-                self.pose_source.name,
-            )
+            self.control_state = ControlState(localized=source.localized)
+            self.pose_source = source
+        log.info("%s %s", self.rid, how_spawned(saved, spawned, source))
 
     @property
     def clock(self) -> float:
@@ -178,23 +177,17 @@ class Agent:
         self.bus.subscribe(k.task("*"), TaskCall, self._on_call)
         self.bus.subscribe(k.award(self.rid), Award, self._on_award)
         self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
+        if self.unknown_start:
+            self.bus.subscribe(k.placement(self.rid), Placement, self._on_placement)
 
-    def _pose_source(
-        self, saved: SavedState | None, spawned: tuple[float, float, float]
-    ) -> PoseSource:
-        """The pose source; a respawned robot's first finds the robot in its saved map."""
-        if saved is None:
-            return self._make_pose_source(spawned)
-        lidar = self.cfg.lidar
-        return RelocalizingSlamPose(
-            self.cfg.slam, saved, lidar.range_min, lidar.range_max, near=respawn_window(self.cfg)
-        )
-
-    def _make_pose_source(self, start: tuple[float, float, float]) -> PoseSource:
-        if self.cfg.agent.pose_source == "odometry":
-            return OdometryPose(start)
-        lidar = self.cfg.lidar
-        return SlamPose(self.cfg.slam, start, lidar.range_min, lidar.range_max)
+    def _on_placement(self, _key: str, msg: Placement) -> None:
+        """The coordinator placed this robot's map on the fleet's: carry it into that frame."""
+        with self.lock:
+            source, pose = self.pose_source, None
+            if isinstance(source, UnplacedSlamPose) and msg.robot == self.rid:
+                pose = source.place(msg.x, msg.y, msg.theta)
+        if pose is not None:
+            log.info("%s placed on the fleet's map at (%.2f, %.2f, %.2f)", self.rid, *pose)
 
     def fetch_plan(self) -> None:
         """Late joiners ask the coordinator for their current plan instead of waiting for one."""
@@ -305,12 +298,16 @@ class Agent:
                 self.bus.handler_failed("coord/task/*")
 
     def _bid(self, calls: list[TaskCall]) -> None:
-        if not self.ready:
+        ready_from = self._ready_from
+        if not self.ready or ready_from is None:
             return
         if not self.market.has_floor:
             self._fetch_floor()
         latest = max(c.round for c in calls)
-        calls = [c for c in calls if c.round == latest]
+        # a round called before its heartbeat said ready would refuse it as not in the market
+        calls = [c for c in calls if c.round == latest and c.stamp >= ready_from]
+        if not calls:
+            return
         with self.lock:
             assert self.pose_source is not None
             self.market.use_map(self.maps.snapshot)
@@ -324,14 +321,12 @@ class Agent:
 
     def _fetch_floor(self) -> None:
         try:
-            msg = self.bus.request(self.keys.floor_map(), Request(self.rid), MapPatches, 1.0)
+            floor, docks = fetch_floor(self.bus, self.rid)
         except (TimeoutError, RuntimeError, ValueError) as e:
             if not self._told_no_floor:  # an exploring fleet's coordinator has none
                 log.warning("%s: no floor plan (%s); pricing on its own map", self.rid, e)
             self._told_no_floor = True
             return
-        floor = unpack_grid(msg)
-        docks = fetch_docks(self.bus, self.rid)
         with self.lock:
             self.market.use_floor(floor)
             self.market.docks = docks
@@ -342,10 +337,12 @@ class Agent:
         seq = 0
         while not self.stop.wait(period):
             seq += 1
+            ready, clock = self.ready, self.clock
             try:
-                self.bus.publish(
-                    self.keys.robot(self.rid, "heartbeat"), Heartbeat(self.clock, seq, self.ready)
-                )
+                beat = Heartbeat(clock, seq, ready)
+                self.bus.publish(self.keys.robot(self.rid, "heartbeat"), beat)
+                if not ready or self._ready_from is None:
+                    self._ready_from = clock if ready else None
             except Exception:
                 self.bus.handler_failed("heartbeat")
 
@@ -380,14 +377,17 @@ class Agent:
             )
             if out.follow is not heard.drive.follow:
                 self.drive = dataclasses.replace(self.drive, follow=out.follow)
+            own_frame = self.pose_source.own_frame
         for level, text in out.notes:
             log.log(level, "%s %s", self.rid, text)
         lag = min(max(self.clock - scan.stamp, 0.0), MAX_LATENCY_S)
         self.latency_s += LATENCY_GAIN * (lag - self.latency_s)
         k = self.keys
         self.bus.publish(k.robot(self.rid, "cmd_vel"), out.cmd_vel, control=True)
-        self.bus.publish(k.robot(self.rid, "pose"), out.pose)
-        self.bus.publish(k.robot(self.rid, "intent"), out.intent)
+        # a pose in the robot's own frame would stand it somewhere else on everyone's map
+        if not own_frame:
+            self.bus.publish(k.robot(self.rid, "pose"), out.pose)
+            self.bus.publish(k.robot(self.rid, "intent"), out.intent)
         if out.status is not None:
             self.bus.publish(k.robot(self.rid, "status"), out.status, control=True)
         return out.cmd_vel
@@ -451,6 +451,13 @@ def request_spawn(bus: Bus, req: SpawnRequest, timeout: float) -> SpawnReply:
     return reply
 
 
+def fetch_floor(bus: Bus, rid: str) -> tuple[GridMap, np.ndarray]:
+    """The coordinator's floor plan and its docks (TimeoutError, RuntimeError or ValueError
+    when it serves none: an exploring coordinator)."""
+    msg = bus.request(bus.keys.floor_map(), Request(rid), MapPatches, 1.0)
+    return unpack_grid(msg), fetch_docks(bus, rid)
+
+
 def fetch_docks(bus: Bus, rid: str) -> np.ndarray:
     """Where a robot stands on each dock (K, 2), as the coordinator serves them; none when it
     serves none (an exploring coordinator)."""
@@ -459,6 +466,55 @@ def fetch_docks(bus: Bus, rid: str) -> np.ndarray:
     except (TimeoutError, RuntimeError, ValueError):
         return np.zeros((0, 2))
     return np.asarray(msg.poses, dtype=float).reshape(-1, 3)[:, :2]
+
+
+def saved_state(state_dir: Path | None, respawn: bool, unknown_start: bool) -> SavedState | None:
+    """What a respawned robot reloads from ``state_dir``; None for a robot started afresh, or
+    for one started with no known pose that was never placed (it saved nothing, and waits to
+    be placed again)."""
+    if not respawn:
+        return None
+    if state_dir is None:
+        raise ValueError("a respawn needs the state directory the robot saved to")
+    if unknown_start and not state_path(state_dir).exists():
+        return None
+    return load_state(state_dir)
+
+
+def pose_source_for(
+    cfg: FleetConfig,
+    saved: SavedState | None,
+    spawned: tuple[float, float, float],
+    unknown_start: bool,
+) -> PoseSource:
+    """The pose source of a robot spawned at ``spawned``: a respawned robot's (``saved`` its
+    state) first finds the robot in its saved map, one with no known start maps in its own
+    frame until placed, others start at the spawn pose (SLAM, or odometry alone)."""
+    lidar = cfg.lidar
+    if saved is not None:
+        return RelocalizingSlamPose(
+            cfg.slam, saved, lidar.range_min, lidar.range_max, near=respawn_window(cfg)
+        )
+    if unknown_start:
+        return UnplacedSlamPose(cfg.slam, lidar.range_min, lidar.range_max)
+    if cfg.agent.pose_source == "odometry":
+        return OdometryPose(spawned)
+    return SlamPose(cfg.slam, spawned, lidar.range_min, lidar.range_max)
+
+
+def how_spawned(
+    saved: SavedState | None, spawned: tuple[float, float, float], source: PoseSource
+) -> str:
+    """The log line's words for how a robot came into the world, and where its pose comes
+    from."""
+    if saved is not None:
+        x, y, theta = saved.pose
+        at = f"({x:.2f}, {y:.2f}, {theta:.2f})"
+        return f"took over its body; finding itself in its saved map near {at}"
+    if source.own_frame:
+        return "spawned with no known pose, pose from slam in its own frame; waiting to be placed"
+    x, y, theta = spawned
+    return f"spawned at ({x:.2f}, {y:.2f}, {theta:.2f}), pose from {source.name}"
 
 
 def respawn_window(cfg: FleetConfig) -> tuple[float, float]:

@@ -207,14 +207,15 @@ def scan_points(
 
 
 def _moved(state: ControlState, located: Located) -> tuple[ControlState, tuple[Note, ...]]:
-    """The distance driven by the pose estimate, and whether the robot has just found itself."""
+    """The distance driven by the pose estimate, and whether the robot has just found itself
+    (in its saved map, or placed on the fleet's); the jump of the estimate then is no drive."""
     pose = located.pose
     notes: tuple[Note, ...] = ()
     if located.localized and not state.localized:
         at = f"({pose[0]:.2f}, {pose[1]:.2f}, {pose[2]:.2f})"
-        notes = ((logging.INFO, f"found itself at {at} in its saved map"),)
+        notes = ((logging.INFO, f"found itself at {at} on its map"),)
     distance = state.distance_m
-    if state.last_xy is not None:
+    if state.last_xy is not None and located.localized == state.localized:
         distance += float(np.hypot(pose[0] - state.last_xy[0], pose[1] - state.last_xy[1]))
     moved = replace(state, localized=located.localized, last_xy=pose[:2], distance_m=distance)
     return moved, notes

@@ -47,6 +47,12 @@ class PoseSource(Protocol):
         """Why it is not localized; "" once it is."""
         ...
 
+    @property
+    def own_frame(self) -> bool:
+        """Whether its pose and map are in the robot's own frame, not the fleet's (a robot
+        started with no known pose, not yet placed: ``agents.placing``)."""
+        ...
+
     def on_odometry(self, msg: Odometry) -> None: ...
 
     def on_scan(self, msg: LaserScan) -> None: ...
@@ -65,6 +71,7 @@ class OdometryPose:
     localized = True
     failed = False
     reason = ""
+    own_frame = False
 
     def __init__(self, start: Pose) -> None:
         self._pose = start
@@ -139,6 +146,7 @@ class SlamPose:
     localized = True
     failed = False
     reason = ""
+    own_frame = False
 
     def __init__(self, params: SlamParams, start: Pose, range_min: float, range_max: float) -> None:
         self._slam = Slam(params, start, range_min=range_min, range_max=range_max)
@@ -164,6 +172,11 @@ class SlamPose:
         self._at_scan = est.pose
         self._odom_at_scan = odom
         self._covariance = est.covariance.reshape(9)
+
+    @property
+    def at_scan(self) -> Pose:
+        """The estimate at the last scan's stamp (the start pose before any scan)."""
+        return self._at_scan
 
     def pose(self) -> Pose:
         if self._odom is None or self._odom_at_scan is None:
@@ -199,6 +212,7 @@ class RelocalizingSlamPose:
     """
 
     name = "slam"
+    own_frame = False
 
     def __init__(
         self,

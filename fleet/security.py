@@ -20,8 +20,8 @@ access-control list denies whatever it does not allow:
 * only ``sim`` publishes scans, odometry, truth and ``sim/**``, and answers on ``sim/**``;
 * only robot ``R`` publishes ``robot/R/{cmd_vel,pose,intent,status,map,heartbeat}``, its bids
   (``coord/bid/*/R``) and award acks (``coord/ack/R``), and answers for its map;
-* only ``coordinator`` publishes and answers task calls, plans, awards, its state, events and
-  the floor map (``coord/**``, but bids and acks);
+* only ``coordinator`` publishes and answers task calls, plans, awards, placements, its state,
+  events and the floor map (``coord/**``, but bids and acks);
 * only ``dashboard`` answers on ``ops/**``.
 
 ``configs/zenoh/router-secure.json5`` is ``router_config(Path("lab"), DEFAULT_ROBOTS)``: the
@@ -68,7 +68,7 @@ ROBOT_TOPICS = ("cmd_vel", "pose", "intent", "status", "map", "heartbeat")
 SENSOR_TOPICS = ("scan", "odom", "truth")
 # the coordinator's keys: single ones, and families with one key per task or robot
 COORD_KEYS = ("state", "events", "map")
-COORD_FAMILIES = ("task", "plan", "award")
+COORD_FAMILIES = ("task", "plan", "award", "placement")
 HEADER = (
     "// A secured fleet router: TLS, a user and password per process, and an access-control\n"
     "// list (fleet/security.py says who may do what). Written by `fleet certs`.\n"

@@ -228,7 +228,7 @@ def test_a_respawned_robot_stands_until_it_finds_itself() -> None:
     state, out = control(_heard(10.1, drive), state, _params(), Lost(START))
     assert out.notes == ()  # said once
     state, out = control(_heard(10.2, drive), state, _params(), OdometryPose(START))
-    assert out.notes[0] == (logging.INFO, "found itself at (1.00, 3.00, 0.00) in its saved map")
+    assert out.notes[0] == (logging.INFO, "found itself at (1.00, 3.00, 0.00) on its map")
     assert state.mode == "driving"
 
 

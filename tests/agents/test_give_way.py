@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from agents import control
-from agents.agent import Agent
+from agents.agent import Agent, pose_source_for
 from agents.control import Drive
 from agents.follow.state import FollowState
 from fleet.params import FleetConfig, load_fleet_config
@@ -89,7 +89,7 @@ def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool
     for rid, (start, waypoints) in robots.items():
         core.add_robot(rid, start)
         agent = Agent(LoopbackBus(keys, sent), rid, cfg)  # type: ignore[arg-type]
-        agent.pose_source = agent._make_pose_source(start)
+        agent.pose_source = pose_source_for(cfg, None, start, unknown_start=False)
         path = np.array([start[:2], *waypoints], dtype=float)
         agent.drive = Drive(plan_id=1, follow=FollowState(path))
         agents[rid] = agent
