@@ -6,14 +6,17 @@ map, unknown cells counted as free), the merged map as it grows is served on
 ``coord/explored`` instead (for the live view); the robots' map patches are heard; every
 ``coordinator.explore_every_s`` sim seconds the maps are merged and the frontier tasks
 updated, the update told as an ``explored`` event (known area, frontiers, each robot's goal);
-the market sells only to robots without work, so each holds one frontier at a time
-(Burgard et al. 2005 assign one target per robot), and sells the open frontier tasks, each
-worth its discounted information gain; the job is finished when the explorer finds no new
-frontier with no task open or assigned.
+a robot that started with no known pose sends its map in its own frame until that map is
+placed on the merged one, and is then sent the placement (``coord/placement/<robot>``; events
+``placed`` and ``unplaced``); the market sells only to robots without work, so each holds one
+frontier at a time (Burgard et al. 2005 assign one target per robot), and sells the open
+frontier tasks, each worth its discounted information gain; the job is finished when the
+explorer finds no new frontier with no task open or assigned.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable
 
@@ -25,8 +28,12 @@ from fleet.coordinator.store import JobStore
 from fleet.floor_map import pack_grid
 from fleet.params import CoordinatorParams
 from fleet.plausible import Bounds
-from fleet.protocol import MapPatches, Request
+from fleet.protocol import MapPatches, Placement, Request
 from planners import auction
+from planners.map_match import MapMatch
+
+# sim seconds between two ``unplaced`` events of one robot
+UNPLACED_EVERY_S = 10.0
 
 
 class ExploringMarket(Market):
@@ -69,6 +76,9 @@ class ExploringCoordinator(Coordinator):
         self._snapshot: Snapshot | None = None
         # the merged map of the last update, packed for coord/explored
         self._explored: MapPatches | None = None
+        # robots placed on the merged map (told once), and when each refusal was last told
+        self._placed: set[str] = set()
+        self._unplaced_told: dict[str, float] = {}
         super().__init__(bus, explorer.planner, expected, params, store, None, bounds=bounds)
         self.market.explorer = explorer  # type: ignore[attr-defined]
         bus.subscribe(self.keys.all_robots("map"), MapPatches, self._on_map)
@@ -146,6 +156,31 @@ class ExploringCoordinator(Coordinator):
             f"known {change.known_m2:.1f} m², {change.frontiers} frontiers, "
             f"{len(change.added)} new, {len(gone)} gone; goals: {goals or 'none'}",
         )
+        for rid, match in sorted(change.placements.items()):
+            self._place(rid, match)
+
+    def _place(self, rid: str, match: MapMatch) -> None:
+        """Send a confident placement to its robot (again at every update while the robot's
+        map stays in its own frame: the message may have been lost), told once as a
+        ``placed`` event; a refusal is told as an ``unplaced`` event, at most every
+        :data:`UNPLACED_EVERY_S` sim seconds."""
+        t = match.transform
+        clock = self.journal.clock
+        if match.confident:
+            msg = Placement(clock, rid, t.x, t.y, t.theta, match.score, match.overlap_m2)
+            self.bus.publish(self.keys.placement(rid), msg, control=True)
+            if rid not in self._placed:
+                self._placed.add(rid)
+                self.journal.event(
+                    "placed",
+                    rid,
+                    "",
+                    f"its map matched at ({t.x:.2f}, {t.y:.2f}, {math.degrees(t.theta):.1f}°), "
+                    f"score {match.score:.2f}, overlap {match.overlap_m2:.1f} m²",
+                )
+        elif clock - self._unplaced_told.get(rid, -math.inf) >= UNPLACED_EVERY_S:
+            self._unplaced_told[rid] = clock
+            self.journal.event("unplaced", rid, "", f"its map is not placed: {match.reason}")
 
     def _finished(self) -> bool:
         return self.explorer.finished(self.job)

@@ -30,7 +30,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 from contextlib import AbstractContextManager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,7 @@ from planners.auction import Lot, Task, task_lot
 from planners.frontier_tasks import call_values, goal_task, new_frontiers, still_there
 from planners.frontiers import Frontier, centre_reachable, find_frontiers, placed
 from planners.grid import GridMap
-from planners.map_match import MatchParams, refine_transforms
+from planners.map_match import MapMatch, MatchParams, place_map, refine_transforms
 from planners.map_merge import LogOddsMap, Transform2D, merge_maps
 
 log = logging.getLogger("coordinator")
@@ -77,12 +77,18 @@ class RobotMaps:
         self.seq: dict[str, int] = {}
         # robots whose whole map must be fetched: a gap in their patches' seq
         self.missing: set[str] = set()
+        # robots whose map is in their own frame: started with no known pose, not yet placed
+        self.own_frame: set[str] = set()
 
     def hear(self, rid: str, msg: MapPatches) -> None:
         """Write ``msg``'s tiles into ``rid``'s copy; a gap in ``seq`` (or patches before any
-        whole map) marks the robot's whole map as missing."""
-        if not msg.full and msg.seq != self.seq.get(rid, -2) + 1:
+        whole map, or patches in another frame than the copy's) marks the robot's whole map as
+        missing."""
+        switched = msg.own_frame != (rid in self.own_frame)
+        if not msg.full and (switched or msg.seq != self.seq.get(rid, -2) + 1):
             self.missing.add(rid)
+            if switched:
+                return
         try:
             cells = apply_patches(self.cells.get(rid), msg)
         except ValueError:
@@ -90,6 +96,10 @@ class RobotMaps:
         self.cells[rid] = cells
         self.geometry[rid] = (msg.resolution, (msg.origin_x, msg.origin_y))
         self.seq[rid] = msg.seq
+        if msg.own_frame:
+            self.own_frame.add(rid)
+        else:
+            self.own_frame.discard(rid)
         if msg.full:
             self.missing.discard(rid)
 
@@ -145,13 +155,15 @@ class MapPlanner(TaskPlanner):
 @dataclass(frozen=True)
 class Change:
     """What an update did: the tasks it made, and those it took off as gone (with the robot
-    that held each, or None); the merged map it made."""
+    that held each, or None); the merged map it made; where it placed each map still in its
+    robot's own frame (``placements``, confident or not)."""
 
     added: tuple[Task, ...]
     gone: tuple[tuple[str, str | None], ...]
     frontiers: int
     known_m2: float
     grid: GridMap
+    placements: dict[str, MapMatch] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -162,6 +174,7 @@ class Snapshot:
     cells: dict[str, np.ndarray]
     geometry: dict[str, tuple[float, tuple[float, float]]]
     positions: dict[str, tuple[float, float]]
+    own_frame: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -175,6 +188,7 @@ class Survey:
     reach: np.ndarray
     positions: dict[str, np.ndarray]
     mapped: frozenset[str]
+    placements: dict[str, MapMatch] = field(default_factory=dict)
 
 
 class Explorer:
@@ -213,16 +227,20 @@ class Explorer:
             dict(self.maps.cells),
             dict(self.maps.geometry),
             {rid: r.xy for rid, r in sorted(job.robots.items()) if r.xy is not None},
+            frozenset(self.maps.own_frame),
         )
 
     def survey(self, snap: Snapshot) -> Survey | None:
         """Merge the maps and extract the reachable frontiers (no lock needed: on a large home
         this takes a second or more, and a coordinator deaf for that long would take its robots
-        for lost); writes the merged map. None before any robot has sent its map."""
-        maps = {
+        for lost); writes the merged map, and places the maps of robots that started with no
+        known pose on it (:meth:`place`). None before any robot has sent a map in the fleet's
+        frame."""
+        every = {
             rid: LogOddsMap.from_ros(cells, *snap.geometry[rid], self.limits)
             for rid, cells in sorted(snap.cells.items())
         }
+        maps = {rid: m for rid, m in every.items() if rid not in snap.own_frame}
         if not maps:
             return None
         ids = list(maps)
@@ -246,7 +264,15 @@ class Explorer:
         )
         if self.out_dir is not None:
             write_ros_map(self.out_dir, grid)
-        return Survey(grid, frontiers, reach, positions, frozenset(maps))
+        unplaced = {rid: m for rid, m in every.items() if rid in snap.own_frame}
+        placements = {rid: self.place(m, grid) for rid, m in unplaced.items()}
+        return Survey(grid, frontiers, reach, positions, frozenset(maps), placements)
+
+    def place(self, own: LogOddsMap, merged: GridMap) -> MapMatch:
+        """Where a map in a robot's own frame lies on the merged map: a search over every
+        rotation and translation (``planners.map_match.place_map``), confident only when the
+        maps overlap enough and agree, with no near rival (Birk and Carpin 2006)."""
+        return place_map(own.to_gridmap(*self.thresholds), merged, self.match)
 
     def apply(self, job: Job, survey: Survey) -> Change:
         """Add the survey's new frontiers to ``job`` as tasks and drop the tasks whose frontier
@@ -272,7 +298,9 @@ class Explorer:
         # reaches no frontier, and that is no proof that none is left
         self.exhausted = self._everyone_placed(job, survey) and not busy
         known = float((grid.free | grid.occupied).sum()) * grid.resolution**2
-        return Change(tuple(added), tuple(gone), len(survey.frontiers), known, grid)
+        return Change(
+            tuple(added), tuple(gone), len(survey.frontiers), known, grid, survey.placements
+        )
 
     def _everyone_placed(self, job: Job, survey: Survey) -> bool:
         """Whether every robot in the market has sent its map and has stood on the merged
