@@ -154,6 +154,16 @@ def agent(
             "--state-dir and re-localize on the map before taking work.",
         ),
     ] = False,
+    unknown_start: Annotated[
+        bool,
+        typer.Option(
+            "--unknown-start",
+            help="The robot does not know where it starts (an exploring fleet's late joiner): "
+            "the start pose only places its body; its odometry and SLAM start at (0, 0, 0) of "
+            "its own frame, and it stands and takes no work until the coordinator has placed "
+            "its map on the fleet's merged map. Needs agent.pose_source slam.",
+        ),
+    ] = False,
 ) -> None:
     """Run one robot agent: SLAM on its own sensors, bids for tasks, drives them with DWA."""
     from agents.agent import Agent
@@ -177,8 +187,13 @@ def agent(
             pose = w.start_poses(start_index + 1, cfg.robot.radius)[start_index]
         except ValueError as e:
             _fail(f"--start-index {start_index}: {e}")
+    if unknown_start and cfg.agent.pose_source != "slam":
+        _fail(
+            "--unknown-start needs agent.pose_source slam: only a robot's own map can be "
+            f"placed on the fleet's (the config has {cfg.agent.pose_source!r})"
+        )
     bus = _bus("agent", robot_id, connect, fleet, zenoh_config)
-    a = Agent(bus, robot_id, cfg, state_dir)
+    a = Agent(bus, robot_id, cfg, state_dir, unknown_start=unknown_start)
     _stop_on_signals(a.stop)
     try:
         a.spawn(pose, respawn=respawn)  # type: ignore[arg-type]

@@ -343,6 +343,17 @@ def explore(
     ] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
     config: ConfigOpt = None,
+    unknown_start: Annotated[
+        int,
+        typer.Option(
+            "--unknown-start",
+            min=0,
+            help="How many of the robots (the last ones) do not know where they start: each "
+            "maps in a frame of its own and takes no work until the coordinator has placed its "
+            "map on the merged one (refused, with an `unplaced` event, while no match is "
+            "confident). explore.json's `placements` says when and how well.",
+        ),
+    ] = 0,
 ) -> None:
     """Explore an unknown home: the robots start with no map, the coordinator merges the maps
     they build (SLAM) and auctions the frontiers between known floor and the unknown (Burgard
@@ -362,7 +373,8 @@ def explore(
     failed.
 
     Examples: `fleet explore --robots 2 --world small --headless`;
-    `fleet explore --robots 3 --run-dir runs/home-map --timeout 900`.
+    `fleet explore --robots 3 --run-dir runs/home-map --timeout 900`;
+    `fleet explore --robots 3 --unknown-start 1` (robot-2 is placed by matching its map).
     """
     from fleet.coordinator.exploring import MAP_YAML
     from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG
@@ -374,9 +386,18 @@ def explore(
         _fail(f"--speed must be a finite number >= 0, got {speed}")
     if timeout is not None and timeout <= 0:
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    if unknown_start >= robots:
+        _fail(
+            f"--unknown-start {unknown_start}: at least one of the {robots} robots must know "
+            "where it starts, or no map would fix the fleet's frame"
+        )
     cfg, w = _load(config, world)
+    if unknown_start and cfg.agent.pose_source != "slam":
+        _fail("--unknown-start needs agent.pose_source slam: only a SLAM map can be placed")
     run_dir = run_dir or Path("runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
-    report = _exploration(cfg, w, world, robots, speed, seed, run_dir, config, timeout, headless)
+    report = _exploration(
+        cfg, w, world, robots, speed, seed, run_dir, config, timeout, headless, unknown_start
+    )
     status = report["status"]
     lengths = ", ".join(f"{rid} {m:.1f} m" for rid, m in report["path_length_m"].items())
     typer.echo(
@@ -432,16 +453,18 @@ def _exploration(
     config: Path | None,
     timeout: float | None,
     headless: bool,
+    unknown_start: int = 0,
 ) -> dict[str, Any]:
-    """Explore ``w`` with ``robots`` robots into ``run_dir`` (the fleet's processes, their logs,
-    the merged map, map.png, explore.json and its picture); explore.json's content."""
+    """Explore ``w`` with ``robots`` robots, the last ``unknown_start`` of them not told their
+    start, into ``run_dir`` (the fleet's processes, their logs, the merged map, map.png,
+    explore.json and its picture); explore.json's content."""
     from fleet.bus import Bus
     from fleet.config import resolve_world
     from fleet.coordinator.exploring import MAP_PGM, MAP_YAML
     from fleet.dashboard.model import BusFeed, FleetWatcher
     from fleet.plausible import Bounds
     from fleet.protocol import DEFAULT_FLEET, OpsRequest
-    from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG, write_map_png
+    from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG, placements, write_map_png
     from fleet.report.explore_figure import render_explore
     from fleet.report.summary import TRACKS_FILE, RunRecorder, read_tracks, write_json
     from fleet.rundir import RunTable, cmdline, write_table
@@ -473,8 +496,9 @@ def _exploration(
     _stop_on_signals(stop)
     status, bus, recorder, t0 = "interrupted", None, None, time.monotonic()
     try:
+        explore = ["--explore", str(run_dir)]
         _start_fleet(
-            launcher, port, common, world_path, speed, seed, starts, ["--explore", str(run_dir)]
+            launcher, port, common, world_path, speed, seed, starts, explore, unknown_start
         )
         bus = Bus("dashboard", "up", [endpoint])
         calls = MainThreadCalls()
@@ -499,6 +523,9 @@ def _exploration(
     tracks = read_tracks(run_dir / TRACKS_FILE)
     wall_s = time.monotonic() - t0
     report = _explore_report(run_dir, cfg, w, starts[0], status, sim_s, wall_s, tracks)
+    unknown = {f"robot-{i}": starts[i] for i in range(robots - unknown_start, robots)}
+    if unknown:
+        report["placements"] = placements(run_dir / "coordinator.sqlite", unknown)
     write_json(run_dir / EXPLORE_REPORT, report)
     write_map_png(run_dir / MAP_PGM, run_dir / MAP_PNG)
     render_explore(run_dir, load_ros_map(run_dir / MAP_YAML), tracks, report)
@@ -583,10 +610,12 @@ def _start_fleet(
     seed: int,
     starts: list[tuple[float, float, float]],
     coordinator: list[str],
+    unknown_start: int = 0,
 ) -> WorkWatch:
     """Start the router (and wait for its port), the simulator, the coordinator (its state in
-    the run dir, with the extra arguments ``coordinator``) and one agent per start pose; the
-    simulator's watch."""
+    the run dir, with the extra arguments ``coordinator``) and one agent per start pose, the
+    last ``unknown_start`` not told theirs (the coordinator waits only for the others: those
+    are ready once placed); the simulator's watch."""
     from fleet.supervisor.launcher import WorkWatch, wait_for_port
 
     run_dir = launcher.run_dir
@@ -599,11 +628,13 @@ def _start_fleet(
     sim_args = ["sim", "--world", world_path, "--speed", str(speed), "--seed", str(seed)]
     sim = WorkWatch(launcher.start("sim", [*sim_args, *common]))
     state = ["--state", str(run_dir / "coordinator.sqlite"), *coordinator]
-    robots = ["--robots", str(len(starts))]
+    robots = ["--robots", str(len(starts) - unknown_start)]
     launcher.start("coordinator", ["coordinator", *robots, "--world", world_path, *common, *state])
     for i, (x, y, th) in enumerate(starts):
         rid = f"robot-{i}"
         state = ["--state-dir", str(run_dir / rid)]
+        if i >= len(starts) - unknown_start:
+            state.append("--unknown-start")
         launcher.start(rid, ["agent", "--id", rid, "--start", f"{x},{y},{th}", *common, *state])
     return sim
 

@@ -53,6 +53,8 @@ EVENT_STYLES = {
     "gave up": "yellow",
     "joined": "green",
     "rejoined": "green",
+    "placed": "green",
+    "unplaced": "yellow",
     "reassigned": "cyan",
     "reopened": "cyan",
     "withdrawn": "cyan",

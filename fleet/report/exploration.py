@@ -14,10 +14,12 @@ coordinator's ``explored`` events (:func:`growth`).
 
 from __future__ import annotations
 
+import math
 import re
 import sqlite3
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -180,4 +182,48 @@ def growth(state: Path) -> list[list[float]]:
         point = [round(float(sim), 1), float(m.group(1)), int(m.group(2))]
         if not out or point[1:] != out[-1][1:]:
             out.append(point)
+    return out
+
+
+# a `placed` event's detail begins "its map matched at (1.23, -0.45, 90.0°)"
+PLACED = re.compile(r"its map matched at \((-?[\d.]+), (-?[\d.]+), (-?[\d.]+)°\)")
+
+
+def placements(
+    state: Path, starts: dict[str, tuple[float, float, float]]
+) -> dict[str, dict[str, Any]]:
+    """From the coordinator's SQLite ``state`` (read-only), how each robot of ``starts`` (those
+    that started with no known pose, each with its true start pose) was placed: the sim time
+    of its ``placed`` event (None if never), the placement's error against the truth (its own
+    frame's origin is where it started), and how many ``unplaced`` events came first."""
+    db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
+    try:
+        rows = db.execute(
+            "SELECT sim, kind, robot, detail FROM events WHERE kind IN ('placed', 'unplaced') "
+            "ORDER BY seq"
+        ).fetchall()
+    finally:
+        db.close()
+    out: dict[str, dict[str, Any]] = {
+        rid: {"placed_s": None, "error_m": None, "error_deg": None, "refused": 0}
+        for rid in sorted(starts)
+    }
+    for sim, kind, rid, detail in rows:
+        entry = out.get(rid)
+        if entry is None or entry["placed_s"] is not None:
+            continue
+        m = PLACED.match(detail)
+        if kind == "unplaced" or m is None:
+            entry["refused"] += kind == "unplaced"
+            continue
+        x, y, deg = (float(v) for v in m.groups())
+        sx, sy, sth = starts[rid]
+        turn = math.degrees(
+            math.atan2(math.sin(math.radians(deg) - sth), math.cos(math.radians(deg) - sth))
+        )
+        entry.update(
+            placed_s=round(float(sim), 1),
+            error_m=round(math.hypot(x - sx, y - sy), 3),
+            error_deg=round(abs(turn), 1),
+        )
     return out

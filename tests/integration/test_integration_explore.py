@@ -1,5 +1,6 @@
 """`fleet explore` end to end: two robots map the small world they were never shown, over real
-processes and a real Zenoh router on a free loopback port."""
+processes and a real Zenoh router on a free loopback port; the second is not told where it
+starts, and is placed by matching its map with the first's."""
 
 from __future__ import annotations
 
@@ -37,7 +38,8 @@ def _known_cells(fleet: RunningFleet, seen: list[int]) -> bool:
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> dict:
     run_dir = tmp_path_factory.mktemp("explore")
-    fleet = RunningFleet(run_dir, str(WORLD), 2, timeout_s=150.0, command=("explore",))
+    command = ("explore", "--unknown-start", "1")
+    fleet = RunningFleet(run_dir, str(WORLD), 2, timeout_s=150.0, command=command)
     served: list[int] = []
     try:
         fleet.wait(lambda: _known_cells(fleet, served), 60.0)
@@ -81,6 +83,18 @@ def test_the_small_world_is_explored_to_the_end(run: dict) -> None:
     svg = (run["dir"] / "explore.svg").read_text()
     assert all(f'id="{i}"' in svg for i in ("track-robot-0", "track-robot-1", "growth-known"))
     assert (run["dir"] / "explore.png").stat().st_size > 0
+
+
+def test_the_robot_with_an_unknown_start_is_placed_and_explores(run: dict) -> None:
+    """robot-1's own frame starts where it stands: the placement the coordinator found is its
+    true start pose, within a 5 cm cell and a degree; placed, it took frontiers and drove."""
+    report = json.loads((run["dir"] / "explore.json").read_text())
+    placed = report["placements"]["robot-1"]
+    assert placed["placed_s"] is not None, _explained(run)
+    assert placed["error_m"] <= 0.05 and placed["error_deg"] <= 1.0, placed
+    owners = {e["robot"] for e in run["events"] if e["kind"] == "awarded"}
+    assert "robot-1" in owners, _explained(run)
+    assert report["path_length_m"]["robot-1"] > 0.3, report
 
 
 def test_the_merged_map_is_served_as_it_grows(run: dict) -> None:
