@@ -132,8 +132,6 @@ class Agent:
         )
         self._calls: list[TaskCall] = []
         self._told_no_floor = False
-        # the sim time of the first heartbeat that told the coordinator it is ready
-        self._ready_from: float | None = None
         self._calls_ready = threading.Condition()
 
     def spawn(
@@ -298,14 +296,14 @@ class Agent:
                 self.bus.handler_failed("coord/task/*")
 
     def _bid(self, calls: list[TaskCall]) -> None:
-        ready_from = self._ready_from
-        if not self.ready or ready_from is None:
+        if not self.ready:
             return
         if not self.market.has_floor:
             self._fetch_floor()
         latest = max(c.round for c in calls)
-        # a round called before its heartbeat said ready would refuse it as not in the market
-        calls = [c for c in calls if c.round == latest and c.stamp >= ready_from]
+        # a round called before the coordinator heard it was ready (one just placed, or found
+        # in its saved map) would refuse its bids as from a robot not in the market
+        calls = [c for c in calls if c.round == latest and (not c.bidders or self.rid in c.bidders)]
         if not calls:
             return
         with self.lock:
@@ -337,12 +335,9 @@ class Agent:
         seq = 0
         while not self.stop.wait(period):
             seq += 1
-            ready, clock = self.ready, self.clock
             try:
-                beat = Heartbeat(clock, seq, ready)
+                beat = Heartbeat(self.clock, seq, self.ready)
                 self.bus.publish(self.keys.robot(self.rid, "heartbeat"), beat)
-                if not ready or self._ready_from is None:
-                    self._ready_from = clock if ready else None
             except Exception:
                 self.bus.handler_failed("heartbeat")
 

@@ -372,7 +372,9 @@ class TaskCall(Message):
     """An auction call for one task (``coord/task/<task>``) in auction round ``round``: its
     two ends, its estimated cleaning time and area, and what it is worth beyond its work in
     seconds a bid takes off (``gain_s``: an exploring fleet's frontier, its expected
-    information; 0 for cleaning). Agents answer with a :class:`Bid`."""
+    information; 0 for cleaning). ``bidders`` are the robots in the market when the round was
+    called (a bid from another is refused as from a robot not in the market; empty: anyone).
+    Agents answer with a :class:`Bid`."""
 
     TYPE: ClassVar[str] = "task_call"
     stamp: float
@@ -385,6 +387,7 @@ class TaskCall(Message):
     time_s: float
     area_m2: float
     gain_s: float = 0.0
+    bidders: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True, eq=False)

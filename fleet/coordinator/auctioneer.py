@@ -126,6 +126,7 @@ class Auctioneer:
                 lot.time_s,
                 lot.area_m2,
                 lot.gain_s,
+                sorted(bidders),
             )
             self.publish(self.keys.task(lot.id), call, True)
         deadline = time.monotonic() + self.params.bid_timeout_s

@@ -1,13 +1,19 @@
-"""The robot's side of the market without a bus: its queue, its prices, and its swept pieces."""
+"""The robot's side of the market without a bus: its queue, its prices, its swept pieces, and
+the rounds it bids in."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
+from agents.agent import Agent
 from agents.follow.state import FollowState
 from agents.market import MarketClient, swept_pieces
-from fleet.protocol import Award, BatteryState, TaskCall
+from agents.pose_source import OdometryPose
+from fleet.params import load_fleet_config
+from fleet.protocol import Award, BatteryState, Bid, Keys, Message, TaskCall
 from planners.battery import BatterySpec
 from planners.grid import GridMap
 
@@ -138,3 +144,37 @@ def test_without_batteries_nothing_is_declined() -> None:
         BatteryState(0.0, 0.0, False),
     )
     assert not bid.declined
+
+
+class _NoFloorBus:
+    """What the agent's bidding needs of a bus: its bids are kept; no coordinator serves a
+    floor plan (an exploring fleet's)."""
+
+    def __init__(self) -> None:
+        self.keys = Keys()
+        self.bids: list[Bid] = []
+
+    def publish(self, key: str, msg: Message, control: bool = False) -> None:
+        if isinstance(msg, Bid):
+            self.bids.append(msg)
+
+    def request(self, *_args: object, **_kwargs: object) -> Message:
+        raise TimeoutError("no floor plan served")
+
+    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
+        return None
+
+
+def test_an_agent_bids_only_on_rounds_that_count_it_in_the_market() -> None:
+    """A robot just placed (or found in its saved map) hears rounds called before the
+    coordinator knew it was ready; bids on them would be refused as from a robot not in the
+    market."""
+    bus = _NoFloorBus()
+    agent = Agent(bus, "robot-0", load_fleet_config())  # type: ignore[arg-type]
+    agent.pose_source = OdometryPose((0.0, 0.0, 0.0))
+    before = dataclasses.replace(_call("t01", (1.0, 0.0), (2.0, 0.0), 5.0), bidders=["robot-1"])
+    agent._bid([before])
+    assert bus.bids == []
+    counted = dataclasses.replace(before, round=4, bidders=["robot-0", "robot-1"])
+    agent._bid([counted])
+    assert [(b.task, b.robot) for b in bus.bids] == [("t01", "robot-0")]
