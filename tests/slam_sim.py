@@ -1,14 +1,17 @@
 """A tiny 2D world for SLAM tests: rooms made of line segments, a vectorized lidar ray caster,
-the rooms' occupancy raster, and a loop route with drifting odometry."""
+the rooms' occupancy raster, a loop route with drifting odometry, and a driver for SimCore."""
 
 from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
+from agents.pose_source import PoseSource
 from agents.slam.geometry import compose, relative, wrap_angle
+from sim_server.core import SimCore
 
 
 def box(x0: float, y0: float, x1: float, y1: float) -> list[tuple[float, float, float, float]]:
@@ -165,3 +168,17 @@ def drifting_odometry(
         )
         odom.append(compose(odom[-1], noisy))
     return np.array(odom)
+
+
+def drive_sim(core: SimCore, source: PoseSource, commands: Sequence, robot: str = "r") -> None:
+    """Step the simulator through (seconds, v, w) commands to ``robot``, feeding its odometry
+    and scans to ``source``."""
+    for seconds, v, w in commands:
+        core.set_cmd(robot, v, w)
+        end = core.t + seconds
+        while core.t < end - 1e-9:
+            out = core.step()
+            for _, msg in out.odometry:
+                source.on_odometry(msg)
+            for _, msg in out.scans:
+                source.on_scan(msg)

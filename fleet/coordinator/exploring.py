@@ -9,7 +9,9 @@ copy of each; a gap in ``seq`` has the whole map fetched by query). Every
    and Carpin 2006). A robot's SLAM starts at its known start pose, so its map frame is the
    common frame (the prior is the identity, at every update); each map is then matched against
    the merge of those before it (``planners.map_match.refine_transforms``, Olson 2009) and
-   moved only where the match is confident, which takes out the drift between the robots' maps;
+   moved only where the match is confident, which takes out the drift between the robots' maps.
+   A map still in its robot's own frame (the robot started with no known pose) is left out and
+   placed on the merge instead (:meth:`Explorer.place`, ``planners.map_match.place_map``);
 2. extracts the merged map's frontiers a robot can reach (``planners.frontiers.find_frontiers``,
    Yamauchi 1997) with their expected information gain (Burgard et al. 2005);
 3. makes each new frontier a task (``planners.frontier_tasks``: drive to its goal), and takes

@@ -11,6 +11,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from slam_sim import drive_sim
 
 from agents.placing import UnplacedSlamPose
 from agents.slam.geometry import wrap_angle
@@ -20,18 +21,6 @@ from fleet.world import load_world
 from sim_server.core import SimCore
 
 START = (1.0, 1.2, math.radians(30.0))
-
-
-def _drive(core: SimCore, source: UnplacedSlamPose, commands: Sequence) -> None:
-    for seconds, v, w in commands:
-        core.set_cmd("r", v, w)
-        end = core.t + seconds
-        while core.t < end - 1e-9:
-            out = core.step()
-            for _, msg in out.odometry:
-                source.on_odometry(msg)
-            for _, msg in out.scans:
-                source.on_scan(msg)
 
 
 def _error(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
@@ -45,14 +34,14 @@ def test_an_unplaced_robot_maps_in_its_own_frame_and_tracks_in_the_fleets_once_p
     lidar = cfg.lidar
     source = UnplacedSlamPose(cfg.slam, lidar.range_min, lidar.range_max)
     assert not source.place(*START), "placed before any scan"
-    _drive(core, source, [(2.0, 0.0, 0.0)])
+    drive_sim(core, source, [(2.0, 0.0, 0.0)])
     assert not source.localized and source.own_frame and source.reason
     # its own frame: it stands at the origin, and its map holds walls around there
     assert _error(source.pose(), (0.0, 0.0, 0.0))[0] < 0.02
     own_map = source.occupancy()
     assert own_map is not None and (own_map.log_odds > 0).any()
     # it is pushed on a little (an unplaced robot stands, but the frame must hold all the same)
-    _drive(core, source, [(2.0, 0.2, 0.0)])
+    drive_sim(core, source, [(2.0, 0.2, 0.0)])
     assert 0.3 < source.pose()[0] < 0.5
     # the coordinator's placement: its frame's origin is where it started
     placed = source.place(*START)
@@ -61,7 +50,7 @@ def test_an_unplaced_robot_maps_in_its_own_frame_and_tracks_in_the_fleets_once_p
     assert dxy < 0.03 and dth < math.radians(1.0), (placed, core.truth()["r"])
     assert source.localized and not source.own_frame and source.reason == ""
     assert source.place(0.0, 0.0, 0.0) is None, "placed twice"
-    _drive(core, source, [(4.0, 0.2, 0.0), (3.0, 0.0, 0.5), (3.0, 0.2, 0.0)])
+    drive_sim(core, source, [(4.0, 0.2, 0.0), (3.0, 0.0, 0.5), (3.0, 0.2, 0.0)])
     dxy, dth = _error(source.pose(), core.truth()["r"])
     assert dxy < 0.06 and dth < math.radians(2.0), (source.pose(), core.truth()["r"])
     # the map now lies in the fleet's frame: a wall the truth has is where the map has it

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from slam_sim import box, scan
+from slam_sim import box, drive_sim, scan
 
 from agents.agent import respawn_window
 from agents.pose_source import RelocalizingSlamPose, SlamPose, overlay
@@ -48,19 +48,6 @@ def _core(cfg: FleetConfig, world_name: str, pose: Pose, seed: int) -> SimCore:
     core = SimCore(load_world(resolve_world(world_name), cfg.robot.radius), cfg, seed=seed)
     core.add_robot("r", pose)
     return core
-
-
-def _drive(core: SimCore, source: SlamPose | RelocalizingSlamPose, commands: Sequence) -> None:
-    """Step the sim through (seconds, v, w) commands, feeding odometry and scans to ``source``."""
-    for seconds, v, w in commands:
-        core.set_cmd("r", v, w)
-        end = core.t + seconds
-        while core.t < end - 1e-9:
-            out = core.step()
-            for _, msg in out.odometry:
-                source.on_odometry(msg)
-            for _, msg in out.scans:
-                source.on_scan(msg)
 
 
 def _one_scan(core: SimCore) -> LaserScan:
@@ -99,7 +86,7 @@ def home_run(cfg: FleetConfig, tmp_path_factory: pytest.TempPathFactory) -> tupl
     world_start = load_world(resolve_world("home"), cfg.robot.radius).starts[0]
     core = _core(cfg, "home", world_start, seed=5)
     slam = SlamPose(cfg.slam, world_start, cfg.lidar.range_min, cfg.lidar.range_max)
-    _drive(core, slam, MAPPING_RUN)
+    drive_sim(core, slam, MAPPING_RUN)
     directory = tmp_path_factory.mktemp("robot") / "state"
     save_state(directory, slam.occupancy(), slam.pose(), core.t)
     return load_state(directory), core.truth()["r"]
@@ -283,7 +270,7 @@ def test_relocalizing_pose_source_localizes_then_tracks_the_robot(
     assert not source.localized and not source.failed and source.reason
     assert source.pose() == saved.pose
     assert source.occupancy() is saved.occupancy
-    _drive(core, source, [(0.1, 0.0, 0.0)])  # until the first scan (10 Hz)
+    drive_sim(core, source, [(0.1, 0.0, 0.0)])  # until the first scan (10 Hz)
     assert source.localized and not source.failed and source.reason == ""
     xy, theta = _error(source.pose(), core.truth()["r"])
     assert xy < 0.05 and theta < math.radians(2.0)
@@ -296,7 +283,7 @@ def test_relocalizing_pose_source_localizes_then_tracks_the_robot(
     travelled = 0.0
     for leg in legs:
         for _ in range(round(leg[0] / 0.5)):
-            _drive(core, source, [(0.5, leg[1], leg[2])])
+            drive_sim(core, source, [(0.5, leg[1], leg[2])])
             truth = core.truth()["r"]
             worst = max(worst, _error(source.pose(), truth)[0])
         travelled += leg[0] * leg[1]
@@ -313,13 +300,13 @@ def test_relocalizing_pose_source_fails_after_max_scans_with_the_last_reason(
     params = dataclasses.replace(cfg.slam, reloc_max_scans=3)
     core = _core(cfg, "home", (9.0, 4.6, 0.3), seed=22)
     source = RelocalizingSlamPose(params, saved, cfg.lidar.range_min, cfg.lidar.range_max)
-    _drive(core, source, [(0.25, 0.0, 0.0)])
+    drive_sim(core, source, [(0.25, 0.0, 0.0)])
     assert not source.failed and not source.localized  # two attempts so far
-    _drive(core, source, [(0.1, 0.0, 0.0)])
+    drive_sim(core, source, [(0.1, 0.0, 0.0)])
     assert source.failed and not source.localized
     assert source.reason.startswith("attempt 3: ") and "reloc_min_score" in source.reason
     assert source.pose() == saved.pose
-    _drive(core, source, [(0.5, 0.0, 0.0)])  # five more scans: one more attempt (every third)
+    drive_sim(core, source, [(0.5, 0.0, 0.0)])  # five more scans: one more attempt (every third)
     assert source.reason.startswith("attempt 4: ")
 
 
@@ -332,11 +319,11 @@ def test_failed_relocalization_retries_and_succeeds_once_the_view_matches(
     params = dataclasses.replace(cfg.slam, reloc_max_scans=3)
     core = _core(cfg, "home", (9.0, 4.6, 0.3), seed=23)
     source = RelocalizingSlamPose(params, saved, cfg.lidar.range_min, cfg.lidar.range_max)
-    _drive(core, source, [(0.35, 0.0, 0.0)])
+    drive_sim(core, source, [(0.35, 0.0, 0.0)])
     assert source.failed and not source.localized
     core.remove_robot("r")
     core.add_robot("r", _moved(truth_at_save, 0.3, 1.0, math.radians(30)))
-    _drive(core, source, [(0.35, 0.0, 0.0)])
+    drive_sim(core, source, [(0.35, 0.0, 0.0)])
     assert source.localized, source.reason
     xy, theta = _error(source.pose(), core.truth()["r"])
     assert xy < 0.05 and theta < math.radians(2.0)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fleet.config import configs_dir
-from fleet.coordinator.exploring import Explorer, MapPlanner, RobotMaps, Snapshot
+from fleet.coordinator.exploring import Explorer, MapPlanner, RobotMaps, Snapshot, Survey
 from fleet.coordinator.store import JobStore
 from fleet.params import load_fleet_config
 from fleet.protocol import MapPatches
@@ -71,23 +71,24 @@ def _own_frame_map(truth: GridMap, start: tuple[float, float, float], radius: fl
     return GridMap(occupied, ~(occupied | free), RES, origin)
 
 
-def _snapshot(fleet_map: np.ndarray, fleet_origin: tuple[float, float], own: GridMap) -> Snapshot:
-    own_cells = _ros(own, own.occupied | own.free)
-    return Snapshot(
-        {"robot-0": fleet_map, "robot-1": own_cells},
-        {"robot-0": (RES, fleet_origin), "robot-1": (RES, own.origin)},
+def _survey(seen_from: tuple[float, float], radius: float) -> Survey | None:
+    """The explorer's update when robot-0 has mapped the home within ``radius`` of
+    ``seen_from`` (in the fleet's frame) and robot-1, standing at START, has mapped 3 m round
+    it in its own frame."""
+    truth = _home()
+    fleet_map = _ros(truth, _seen_from(truth, seen_from, radius))
+    own = _own_frame_map(truth, START, 3.0)
+    snap = Snapshot(
+        {"robot-0": fleet_map, "robot-1": _ros(own, own.occupied | own.free)},
+        {"robot-0": (RES, truth.origin), "robot-1": (RES, own.origin)},
         {},
         frozenset({"robot-1"}),
     )
+    return Explorer(CFG, MapPlanner(CFG), None).survey(snap)
 
 
 def test_a_map_in_its_own_frame_is_placed_on_the_merged_map_not_merged_into_it():
-    truth = _home()
-    explorer = Explorer(CFG, MapPlanner(CFG), None)
-    # robot-0 has mapped everything within 4 m of the dock corner
-    known = _seen_from(truth, (1.5, 1.5), 4.0)
-    own = _own_frame_map(truth, START, 3.0)
-    survey = explorer.survey(_snapshot(_ros(truth, known), truth.origin, own))
+    survey = _survey((1.5, 1.5), 4.0)  # robot-0 has mapped the near end of the home
     assert survey is not None and survey.mapped == frozenset({"robot-0"})
     match = survey.placements["robot-1"]
     assert match.confident, match.reason
@@ -97,12 +98,7 @@ def test_a_map_in_its_own_frame_is_placed_on_the_merged_map_not_merged_into_it()
 
 
 def test_a_map_of_a_place_the_fleet_has_not_seen_is_refused():
-    truth = _home()
-    explorer = Explorer(CFG, MapPlanner(CFG), None)
-    # robot-0 knows only the far end of the home, robot-1 stands at the near one
-    known = _seen_from(truth, (8.5, 5.5), 2.0)
-    own = _own_frame_map(truth, START, 3.0)
-    survey = explorer.survey(_snapshot(_ros(truth, known), truth.origin, own))
+    survey = _survey((8.5, 5.5), 2.0)  # robot-0 knows only the far end
     assert survey is not None
     assert not survey.placements["robot-1"].confident
 
