@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 
 import pytest
 from test_coordinator_exploring import patches, room
@@ -37,7 +38,9 @@ def _robot_and_clock(sim: Bus, agent: Bus, stop: threading.Event) -> None:
         sim.publish(k.clock(), Clock(t, 4.0))
         agent.publish(k.robot("robot-0", "heartbeat"), Heartbeat(t, seq, True))
         agent.publish(k.robot("robot-0", "pose"), PoseEstimate(t, 1.6, 1.6, 0.0))
-        agent.publish(k.robot("robot-0", "map"), patches(room(door=True), seq))
+        # stamped with the clock, as an agent stamps its map: one stamped ahead of the clock
+        # by more than the lag a receiver allows is dropped as implausible
+        agent.publish(k.robot("robot-0", "map"), replace(patches(room(door=True), seq), stamp=t))
         time.sleep(0.1)
 
 
