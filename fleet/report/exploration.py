@@ -212,9 +212,11 @@ def placements(
         entry = out.get(rid)
         if entry is None or entry["placed_s"] is not None:
             continue
+        if kind == "unplaced":
+            entry["refused"] += 1
+            continue
         m = PLACED.match(detail)
-        if kind == "unplaced" or m is None:
-            entry["refused"] += kind == "unplaced"
+        if m is None:
             continue
         x, y, deg = (float(v) for v in m.groups())
         sx, sy, sth = starts[rid]
