@@ -83,11 +83,9 @@ class UnplacedSlamPose:
         own = np.array(self._own.at_scan)
         x1, y1, th1 = compose(np.array([x, y, theta]), own)
         start = (float(x1), float(y1), float(th1))
-        slam = SlamPose(self._params, start, *self._range)
-        for odom in self._history:
-            slam.on_odometry(odom)
-        slam.on_scan(self._last_scan)
-        self._placed = slam
+        self._placed = SlamPose.found_at(
+            self._params, start, *self._range, self._history, self._last_scan
+        )
         self._history.clear()
         return start
 

@@ -173,6 +173,26 @@ class SlamPose:
         self._odom_at_scan = odom
         self._covariance = est.covariance.reshape(9)
 
+    @classmethod
+    def found_at(
+        cls,
+        params: SlamParams,
+        start: Pose,
+        range_min: float,
+        range_max: float,
+        history: Sequence[Odometry],
+        scan: LaserScan,
+    ) -> SlamPose:
+        """SLAM started at ``start``, the pose at ``scan``'s stamp, and given the recent
+        odometry and that scan: its pose is tied to the odometry at the scan's stamp, and later
+        odometry increments apply from there (a robot found in its saved map, or placed on the
+        fleet's)."""
+        slam = cls(params, start, range_min, range_max)
+        for odom in history:
+            slam.on_odometry(odom)
+        slam.on_scan(scan)
+        return slam
+
     @property
     def at_scan(self) -> Pose:
         """The estimate at the last scan's stamp (the start pose before any scan)."""
@@ -292,11 +312,9 @@ class RelocalizingSlamPose:
             self._reason = f"attempt {self._attempts}: {'; '.join(reasons)}"
             self._failed = self._attempts >= p.reloc_max_scans
             return
-        slam = SlamPose(p, result.pose, self._range_min, self._range_max)
-        for odom in self._history:
-            slam.on_odometry(odom)
-        slam.on_scan(msg)
-        self._slam = slam
+        self._slam = SlamPose.found_at(
+            p, result.pose, self._range_min, self._range_max, self._history, msg
+        )
         self._field = None
         self._reason = ""
 
