@@ -467,12 +467,14 @@ class FleetEvent(Message):
 @dataclass(frozen=True, eq=False)
 class OpsRequest(Message):
     """An operator's request to the process that launched the fleet (``ops/<verb>``), e.g.
-    respawn of ``name``."""
+    respawn of ``name``; for ``dock``, the dock to send it to (``dock``, an index into the
+    world's docks; −1: the one the coordinator picks)."""
 
     TYPE: ClassVar[str] = "ops_request"
     sender: str
     verb: str
     name: str
+    dock: int = -1
 
 
 @dataclass(frozen=True, eq=False)

@@ -121,6 +121,14 @@ def respawn(
 
 def dock(
     name: NameArg,
+    to: Annotated[
+        int | None,
+        typer.Option(
+            "--dock",
+            help="The dock to send it to: its number among the world's docks, from 0, in the "
+            "order the world file lists them (default: the one the coordinator picks).",
+        ),
+    ] = None,
     timeout: Annotated[
         float, typer.Option("--timeout", help="Seconds to wait for the coordinator to answer.")
     ] = 10.0,
@@ -129,16 +137,20 @@ def dock(
     """Send a robot home to a dock now, with robot.battery on.
 
     The coordinator takes its work back (the unswept rest of its task and its unstarted tasks
-    go back to the market), sends it to the nearest free dock (or to wait by one that is taken)
-    and lets it bid again once it has charged to robot.battery.recharge_to.
+    go back to the market) and sends it to charge: by default to the dock it is on soonest,
+    counting the robots ahead of it there, whose charge covers the trip (to wait by it while
+    another robot holds it); with --dock, to that dock, waiting by it if it is held. The robot
+    bids again once it has charged to robot.battery.recharge_to.
 
-    Example: `fleet dock robot-1`.
+    Example: `fleet dock robot-1`, or `fleet dock robot-2 --dock 0`.
     """
     if timeout <= 0:
         _fail(f"--timeout must be > 0 seconds, got {timeout}")
+    if to is not None and to < 0:
+        _fail(f"--dock must be a dock's number, 0 or more, got {to}")
     _, table = _table(run_dir)
     try:
-        typer.echo(ask_dock(table, name, timeout, sender="cli"))
+        typer.echo(ask_dock(table, name, timeout, sender="cli", dock=-1 if to is None else to))
     except OpsError as e:
         _fail(str(e))
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fleet.coordinator import go_home
-from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.dispatcher import Dispatcher, Errand
 from fleet.coordinator.job import EMPTY, LOST
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
@@ -42,7 +42,6 @@ from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
 from planners.battery import BatterySpec, DockUser, pick_dock
 from planners.grid import clearance
-from planners.polyline import without_straight_vertices
 
 log = logging.getLogger("coordinator")
 
@@ -105,16 +104,7 @@ class Docking:
         self.trips: dict[str, Trip] = {}
         self.spots = [waiting_spots(planner, d, docks) for d in docks]
         self.travel = planner.travel()
-
-    # ---- geometry ---------------------------------------------------------------------------
-
-    def _path(
-        self, xy: tuple[float, float], goal: np.ndarray, onto: np.ndarray | None
-    ) -> np.ndarray:
-        """A* on the floor plan from ``xy`` to ``goal``, then straight to ``onto`` if given."""
-        leg = self.planner.transit.path(np.asarray(xy, dtype=float), goal)
-        leg = without_straight_vertices(np.asarray(leg, dtype=float))
-        return leg if onto is None else np.vstack([leg, onto[None]])
+        dispatcher.on_errand = self._replanned
 
     # ---- who holds what ---------------------------------------------------------------------
 
@@ -200,15 +190,18 @@ class Docking:
 
     # ---- trips ------------------------------------------------------------------------------
 
-    def send(self, rid: str, why: str, parking: bool) -> bool:
+    def send(self, rid: str, why: str, parking: bool, dock: int | None = None) -> bool:
         """Send ``rid`` (with no work) home; False when there is no way there. To charge: to
         the dock its charge covers that it is on soonest, counting the robots ahead there
         (``planners.battery.pick_dock``), to wait by it when it is held. To park at the job's
-        end: to the nearest free dock, else to wait by the nearest."""
+        end: to the nearest free dock, else to wait by the nearest. Given a ``dock`` (an
+        operator's choice), to that one, to wait by it when it is held."""
         r = self.job.robots[rid]
         if r.xy is None or not self.docks:
             return False
-        if parking:
+        if dock is not None:
+            k, waiting = dock, self.holder(dock) not in (None, rid)
+        elif parking:
             k = self._nearest(r.xy, free_only=True)
             waiting = k is None
             if k is None:
@@ -239,43 +232,39 @@ class Docking:
     ) -> bool:
         """Plan ``rid``'s trip from where it stands to dock ``k`` or, ``waiting``, to the
         first waiting spot by it no other robot is bound for (nor ``avoid``), and send it."""
-        r = self.job.robots[rid]
-        assert r.xy is not None
         dock = self.docks[k]
+        if waiting:
+            taken = {
+                t.plan.waypoints[-1].tobytes()
+                for other, t in self.trips.items()
+                if t.waiting and other != rid
+            }
+            if avoid is not None:
+                taken.add(np.asarray(avoid, dtype=float).tobytes())
+            spot = next(
+                (s for s in self.spots[k] if np.array(s).tobytes() not in taken),
+                self.spots[k][-1] if self.spots[k] else None,
+            )
+            if spot is None:
+                return False
+            errand = Errand(f"{WAIT_PREFIX}{k}", spot)
+        else:
+            front = _approach(dock)
+            onto = _approach(dock, STOP_SHORT_M)[None]
+            errand = Errand(f"{DOCK_PREFIX}{k}", (float(front[0]), float(front[1])), onto)
         try:
-            if waiting:
-                taken = {
-                    t.plan.waypoints[-1].tobytes()
-                    for other, t in self.trips.items()
-                    if t.waiting and other != rid
-                }
-                if avoid is not None:
-                    taken.add(np.asarray(avoid, dtype=float).tobytes())
-                spot = next(
-                    (s for s in self.spots[k] if np.array(s).tobytes() not in taken),
-                    self.spots[k][-1] if self.spots[k] else None,
-                )
-                if spot is None:
-                    return False
-                waypoints = self._path(r.xy, np.array(spot), None)
-                task = f"{WAIT_PREFIX}{k}"
-            else:
-                waypoints = self._path(r.xy, _approach(dock), _approach(dock, STOP_SHORT_M))
-                task = f"{DOCK_PREFIX}{k}"
+            plan = self.dispatcher.send_errand(rid, errand)
         except ValueError as e:
             self.journal.event("unreachable", rid, f"{DOCK_PREFIX}{k}", str(e))
             return False
-        d = self.dispatcher
-        d.plan_seq += 1
-        n = len(waypoints)
-        plan = Plan(self.journal.clock, d.plan_seq, task, waypoints, n - 1)
-        d.plans[rid] = plan
-        d.schedules.pop(rid, None)
-        self.journal.save_plan(rid, plan)
-        self.journal.set_meta(plan_seq=d.plan_seq)
         self.trips[rid] = Trip(k, waiting, plan, parking, tries, stalls, time.monotonic())
-        d.publish(d.keys.plan(rid), plan, True)
         return True
+
+    def _replanned(self, rid: str, plan: Plan) -> None:
+        """A round planned ``rid``'s errand again (:meth:`Dispatcher.send_errand`)."""
+        t = self.trips.get(rid)
+        if t is not None and plan.task == t.plan.task:
+            t.plan = plan
 
     def heard(self, rid: str, msg: RobotStatus) -> None:
         r = self.job.robots[rid]
@@ -402,7 +391,7 @@ class Docking:
     def _drop(self, rid: str) -> None:
         self.trips.pop(rid, None)
         self.job.robots[rid].docking = ""
-        self.dispatcher.plans.pop(rid, None)
+        self.dispatcher.forget(rid)
 
     def empty(self, rid: str) -> None:
         """``rid``'s battery ran out away from a dock: it stands for good, holds no dock and

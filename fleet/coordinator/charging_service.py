@@ -145,11 +145,12 @@ class ChargingMarket(Market):
         super().observe(rid, msg)
         self.docking.heard(rid, msg)
 
-    def send_home(self, rid: str, why: str, parking: bool = False) -> None:
+    def send_home(self, rid: str, why: str, parking: bool = False, dock: int | None = None) -> None:
         """Take ``rid``'s work back (the unswept remainder of the task it drives and its
-        unstarted tasks go back to the market, not as tried by it) and send it home."""
+        unstarted tasks go back to the market, not as tried by it) and send it home: to dock
+        number ``dock`` if given, else to the one :meth:`Docking.send` picks."""
         self._take_back(rid, "its robot went to charge")
-        if not self.docking.send(rid, why, parking):
+        if not self.docking.send(rid, why, parking, dock):
             log.warning("%s: no way home (%s)", rid, why)
         self.wake.set()
 
@@ -220,10 +221,16 @@ class ChargingCoordinator(Coordinator):
         self.docks = docks
         self.battery = battery
         super().__init__(bus, planner, expected, params, store, transits, bounds=bounds)
-        self.docking = Docking(self.journal, planner, self.dispatcher, battery, docks)
+
+    def _wire(self) -> None:
+        """The docks and the trips to them, before the first status is heard (a status handled
+        without them was dropped with an error at the start of a run)."""
+        self.docking = Docking(
+            self.journal, self.planner, self.dispatcher, self.battery, self.docks
+        )
         market = self.market
         assert isinstance(market, ChargingMarket)
-        market.docking, market.battery = self.docking, battery
+        market.docking, market.battery = self.docking, self.battery
 
     def _serve_floor(self) -> None:
         super()._serve_floor()
@@ -232,18 +239,28 @@ class ChargingCoordinator(Coordinator):
         self.bus.serve(self.keys.ops("dock"), OpsRequest, self._on_dock)
 
     def _on_dock(self, req: OpsRequest) -> OpsReply:
-        """`fleet dock ROBOT`: send it home now."""
+        """`fleet dock ROBOT [--dock K]`: send it home now (to dock K)."""
         with self.lock:
             r = self.job.robots.get(req.name)
             if req.verb != "dock" or r is None:
                 return OpsReply(False, f"no robot {req.name!r} in the job")
             if r.liveness == LOST or r.xy is None:
                 return OpsReply(False, f"{req.name} is lost, or has not said where it is")
+            dock = None if req.dock < 0 else req.dock
+            if dock is not None and dock >= len(self.docks):
+                count = f"{len(self.docks)} dock{'s' if len(self.docks) != 1 else ''}"
+                return OpsReply(False, f"no dock {dock}: the world has {count}, from 0")
+            if dock is not None and not self.docking.usable(dock):
+                return OpsReply(False, f"dock {dock} cannot be reached: a body stands on it")
             if r.docking:
-                return OpsReply(True, "")
+                trip = self.docking.trips.get(req.name)
+                if dock is None or trip is None or trip.dock == dock:
+                    return OpsReply(True, "")
+                return OpsReply(False, f"{req.name} is already bound for dock {trip.dock}")
             market = self.market
             assert isinstance(market, ChargingMarket)
-            market.send_home(req.name, f"sent home by {req.sender}", parking=self.job.finished)
+            why = f"sent home by {req.sender}"
+            market.send_home(req.name, why, parking=self.job.finished, dock=dock)
             ok = bool(r.docking)
         return OpsReply(ok, "" if ok else f"no way home for {req.name}")
 

@@ -14,6 +14,10 @@ or lost: their bodies stay). Each such plan keeps its schedule (the planned sim 
 each transit waypoint), and as the robots report their progress a round is planned again when
 one falls ``replan_lag_s`` further behind its schedule than another. A round that cannot be
 planned falls back to local transits (A* on the floor plan).
+
+Errands (:class:`Errand`, :meth:`Dispatcher.send_errand`) are trips that drive no task: to a
+dock and to a waiting spot by one. With deconfliction they are planned in the rounds like the
+transits to tasks, both when they go out and while they are under way.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,12 +37,28 @@ from fleet.coordinator.transits import PlannedTransit, TransitPlanner
 from fleet.params import CoordinatorParams
 from fleet.plan_chain import chain_length, chain_of, cut_plan, driven_ends
 from fleet.protocol import Keys, Plan
+from planners.polyline import without_straight_vertices
 
 # a robot's current plan that its statuses do not show it driving goes out again this many wall
 # seconds after it was last sent
 PLAN_RESEND_S = 2.0
 
 log = logging.getLogger("coordinator")
+
+
+@dataclass(frozen=True, eq=False)
+class Errand:
+    """A trip that drives no task (to a dock, or to a waiting spot by one): its plan's
+    ``task`` name, the ``goal`` its transit ends at, and the points driven straight on from
+    there (onto the dock; none to a waiting spot)."""
+
+    task: str
+    goal: tuple[float, float]
+    tail: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+# what a robot of a round drives to: the chain of tasks its plan sweeps, or an errand
+Leg = list[TaskRecord] | Errand
 
 
 class Dispatcher:
@@ -71,6 +92,9 @@ class Dispatcher:
         self.last_transit_round = -math.inf
         # told when no transit takes a robot to its task: (robot, task, why)
         self.on_unreachable: Callable[[str, str, str], None] = lambda *_: None
+        # the robots on an errand, and who is told each errand plan sent (a round's new one)
+        self.errands: dict[str, Errand] = {}
+        self.on_errand: Callable[[str, Plan], None] = lambda *_: None
 
     def resume(self, plans: dict[str, Plan], plan_seq: int) -> None:
         """Serve the plans a restarted coordinator's store holds, and number on from there."""
@@ -113,9 +137,10 @@ class Dispatcher:
             self.publish(self.keys.plan(rid), plan, True)
 
     def forget(self, rid: str) -> None:
-        """``rid`` is lost: it drives no plan."""
+        """``rid`` is lost, or its errand is over: it drives no plan."""
         self.plans.pop(rid, None)
         self.schedules.pop(rid, None)
+        self.errands.pop(rid, None)
 
     def cut(self, withdrawn: list[str]) -> None:
         """Cut each plan before the first of its tasks in ``withdrawn``, under the same plan id,
@@ -147,12 +172,28 @@ class Dispatcher:
         in_transit = self._in_transit()
         if not fresh and not self._lagging(in_transit):
             return
-        moving = {**in_transit, **fresh}
+        moving: dict[str, Leg] = {**in_transit, **fresh}
         transits = self._plan_transits(moving)
         ids = {rid: self.plan_seq + 1 + i for i, rid in enumerate(sorted(moving))}
         for rid in sorted(moving):
             if rid in fresh or rid in transits:
-                self._send_plan(rid, moving[rid], transits.get(rid), ids)
+                self._send(rid, moving[rid], transits.get(rid), ids)
+
+    def send_errand(self, rid: str, errand: Errand) -> Plan:
+        """Send ``rid`` on ``errand`` from where it stands and return its plan. With
+        deconfliction its transit is planned in a round with the robots in transit, whose plans
+        go out again with the round's order of passage; without, or when the round fails, it is
+        A* on the floor plan. Raises ValueError when no way leads to the goal."""
+        if self.transits is None:
+            return self._send_errand(rid, errand, None, {})
+        moving: dict[str, Leg] = {**self._in_transit(), rid: errand}
+        transits = self._plan_transits(moving)
+        if rid not in transits:
+            return self._send_errand(rid, errand, None, {})
+        ids = {other: self.plan_seq + 1 + i for i, other in enumerate(sorted(moving))}
+        for other in sorted(transits):
+            self._send(other, moving[other], transits[other], ids)
+        return self.plans[rid]
 
     def _unplanned(self) -> dict[str, list[TaskRecord]]:
         """The robots whose current task no plan drives yet, once they have acknowledged its
@@ -170,22 +211,27 @@ class Dispatcher:
             out[rid] = queue[: chain_length([(rec.task, rec.reverse) for rec in queue])]
         return out
 
-    def _in_transit(self) -> dict[str, list[TaskRecord]]:
-        """The robots driving a planned transit, with their chains: by their last status, or
-        sent one so recently that no status of it has come yet."""
-        out = {}
+    def _in_transit(self) -> dict[str, Leg]:
+        """The robots driving a planned transit, with their chains or errands: by their last
+        status, or sent one so recently that no status of it has come yet."""
+        out: dict[str, Leg] = {}
         for rid, (plan_id, _arrivals) in self.schedules.items():
             plan, r = self.plans.get(rid), self.job.robots[rid]
             if plan is None or plan.plan_id != plan_id or r.liveness == LOST:
                 continue
             at = self.progress_of.get(rid)
-            if at is None or at[0] != plan_id or at[1] < plan.sweep_from:
-                chain = [self.job.tasks[t] for t in chain_of(plan)]
-                if all(rec.state == ASSIGNED and rec.owner == rid for rec in chain):
-                    out[rid] = chain
+            if not (at is None or at[0] != plan_id or at[1] < plan.sweep_from):
+                continue
+            errand = self.errands.get(rid)
+            if errand is not None and errand.task == plan.task:
+                out[rid] = errand
+                continue
+            chain = [self.job.tasks[t] for t in chain_of(plan)]
+            if chain and all(rec.state == ASSIGNED and rec.owner == rid for rec in chain):
+                out[rid] = chain
         return out
 
-    def _lagging(self, in_transit: dict[str, list[TaskRecord]]) -> bool:
+    def _lagging(self, in_transit: dict[str, Leg]) -> bool:
         """Whether one robot in transit has fallen ``replan_lag_s`` further behind its schedule
         than another. Robots that are all late alike keep their plans: the order of passage
         holds whatever the delays, and only a robot that makes the others wait for it costs
@@ -205,9 +251,10 @@ class Dispatcher:
         )
         return True
 
-    def _plan_transits(self, moving: dict[str, list[TaskRecord]]) -> dict[str, PlannedTransit]:
-        """One round of transits: ``moving`` robots to the start of their chains, around the
-        robots that stand (no work, or lost); {} (local transits) if the round fails."""
+    def _plan_transits(self, moving: dict[str, Leg]) -> dict[str, PlannedTransit]:
+        """One round of transits: ``moving`` robots to the start of their chains or to their
+        errands' goals, around the robots that stand (no work, or lost); {} (local transits)
+        if the round fails."""
         assert self.transits is not None
         self.last_transit_round = self.journal.clock
         parked = {
@@ -217,10 +264,7 @@ class Dispatcher:
             and rid not in moving
             and (r.liveness == LOST or (r.ready and self.job.current(rid) is None))
         }
-        goals = {
-            rid: _xy(driven_ends(chain[0].task, chain[0].reverse)[0])
-            for rid, chain in moving.items()
-        }
+        goals = {rid: _goal(leg) for rid, leg in moving.items()}
         froms = {rid: self.job.robots[rid].xy for rid in moving}
         t0 = time.perf_counter()
         plan, transits = self.transits.plan(
@@ -229,7 +273,7 @@ class Dispatcher:
         ms = 1e3 * (time.perf_counter() - t0)
         if plan.status == "unreachable":
             for rid in plan.unreachable:
-                task = moving[rid][0].task.id if rid in moving else ""
+                task = _task_of(moving[rid]) if rid in moving else ""
                 self.journal.event("unreachable", rid, task, plan.message)
             log.warning("transits not planned: %s; local transits instead", plan.message)
         elif plan.status != "success":
@@ -245,6 +289,33 @@ class Dispatcher:
                 f"{len(moving)} robots by {plan.method} in {ms:.0f} ms, {len(parked)} standing",
             )
         return transits
+
+    def _send(
+        self, rid: str, leg: Leg, transit: PlannedTransit | None, ids: dict[str, int]
+    ) -> None:
+        if isinstance(leg, Errand):
+            self._send_errand(rid, leg, transit, ids)
+        else:
+            self._send_plan(rid, leg, transit, ids)
+
+    def _send_errand(
+        self, rid: str, errand: Errand, transit: PlannedTransit | None, ids: dict[str, int]
+    ) -> Plan:
+        """Plan ``rid``'s ``errand`` (by ``transit`` if planned in space and time, then on to
+        the goal, else A* on the floor plan; raises ValueError when no way leads there) and
+        send it."""
+        r = self.job.robots[rid]
+        assert r.xy is not None
+        if transit is not None:
+            leg = _ends_on(transit.waypoints, r.xy, errand.goal, self.planner.transit.clear)
+        else:
+            path = self.planner.transit.path(np.asarray(r.xy, dtype=float), np.array(errand.goal))
+            leg = without_straight_vertices(np.asarray(path, dtype=float))
+        waypoints = np.vstack([leg, errand.tail]) if len(errand.tail) else leg
+        self.errands[rid] = errand
+        plan = self._publish(rid, errand.task, waypoints, len(waypoints) - 1, [], [], transit, ids)
+        self.on_errand(rid, plan)
+        return plan
 
     def _send_plan(
         self,
@@ -264,6 +335,32 @@ class Dispatcher:
         except ValueError as e:
             self.on_unreachable(rid, chain[0].task.id, str(e))
             return
+        self.errands.pop(rid, None)
+        starts = [int(i) for i in starts]
+        self._publish(
+            rid,
+            chain[0].task.id,
+            waypoints,
+            starts[0],
+            [rec.task.id for rec in chain],
+            starts,
+            transit,
+            ids,
+        )
+
+    def _publish(
+        self,
+        rid: str,
+        task: str,
+        waypoints: np.ndarray,
+        sweep_from: int,
+        chain: list[str],
+        starts: list[int],
+        transit: PlannedTransit | None,
+        ids: dict[str, int],
+    ) -> Plan:
+        """Number, record and send ``rid``'s plan, with its transit's order of passage (its
+        waits naming the peers' new plans by ``ids``) and schedule if planned in a round."""
         self.plan_seq = max(self.plan_seq + 1, ids.get(rid, 0))
         # a robot standing in the round (no work, stuck or lost) is planned round, not waited
         # for: it drives no plan of the round whose progress could release the wait
@@ -271,10 +368,10 @@ class Dispatcher:
         plan = Plan(
             self.journal.clock,
             self.plan_seq,
-            chain[0].task.id,
+            task,
             waypoints,
-            starts[0],
-            [rec.task.id for rec in chain],
+            sweep_from,
+            chain,
             np.array(starts, dtype=np.int32),
             np.array([w[0] for w in waits], dtype=np.int32),
             [w[1] for w in waits],
@@ -290,6 +387,40 @@ class Dispatcher:
         self.journal.set_meta(plan_seq=self.plan_seq)
         self.sent_wall[rid] = time.monotonic()
         self.publish(self.keys.plan(rid), plan, True)
+        return plan
+
+
+def _goal(leg: Leg) -> tuple[float, float]:
+    """Where a robot's transit of a round ends: its errand's goal, or its chain's start."""
+    if isinstance(leg, Errand):
+        return leg.goal
+    return _xy(driven_ends(leg[0].task, leg[0].reverse)[0])
+
+
+def _ends_on(
+    points: np.ndarray,
+    start: tuple[float, float],
+    goal: tuple[float, float],
+    clear: Callable[[np.ndarray, np.ndarray], bool],
+) -> np.ndarray:
+    """An errand's transit through the points of its cells, run from the robot's ``start`` and
+    into its ``goal``: the first point moved to the start, and the last to the goal, where the
+    straight line to the next (from the one before) is clear. A cell's point lies up to half a
+    cell beside or beyond where the robot stands or goes, and driving to it cost two turns in
+    place on most trips. Each point keeps its index, which the order of passage counts by."""
+    out = np.array(points, dtype=float)
+    a, b = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    if len(out) >= 2 and clear(a, out[1]):
+        out[0] = a
+    if len(out) >= 2 and clear(out[-2], b):
+        out[-1] = b
+    elif not np.allclose(out[-1], b):
+        out = np.vstack([out, b[None]])
+    return out
+
+
+def _task_of(leg: Leg) -> str:
+    return leg.task if isinstance(leg, Errand) else leg[0].task.id
 
 
 def _xy(point: np.ndarray) -> tuple[float, float]:

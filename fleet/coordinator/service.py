@@ -133,6 +133,7 @@ class Coordinator:
         self.market.stall_progress_m = params.stall_progress_m
         self.market.first_regions = params.first_regions
         self.dispatcher.on_unreachable = self.market.cannot_reach
+        self._wire()
         self.auctioneer = Auctioneer(
             self.keys,
             bus.publish,
@@ -165,6 +166,10 @@ class Coordinator:
         bus.subscribe(self.keys.ack("*"), AwardAck, self._on_ack)
         bus.serve(self.keys.plan("*"), Request, self._on_plan_query)
         self._serve_floor()
+
+    def _wire(self) -> None:
+        """What a kind of coordinator adds to its market, before any message is heard (none
+        here)."""
 
     def _serve_floor(self) -> None:
         """Serve the floor plan the tasks are cut from on ``coord/map``: robots price on it."""

@@ -91,14 +91,15 @@ def ask_respawn(run_dir: Path, table: RunTable, name: str, timeout: float, sende
     )
 
 
-def ask_dock(table: RunTable, name: str, timeout: float, sender: str) -> str:
+def ask_dock(table: RunTable, name: str, timeout: float, sender: str, dock: int = -1) -> str:
     """`fleet dock ROBOT`: ask the run's coordinator to send ``name`` home now (its work goes
-    back to the market; it charges to ``robot.battery.recharge_to`` and bids again). Returns
-    what was done; raises OpsError naming the reason when it cannot be done."""
+    back to the market; it charges to ``robot.battery.recharge_to`` and bids again), to dock
+    number ``dock`` of the world's (−1: the one the coordinator picks). Returns what was done;
+    raises OpsError naming the reason when it cannot be done."""
     from fleet.protocol import Keys, OpsReply, OpsRequest
 
     key = Keys(table.fleet).ops("dock")
-    request = OpsRequest(sender=sender, verb="dock", name=name)
+    request = OpsRequest(sender=sender, verb="dock", name=name, dock=dock)
     try:
         reply = _ask(table, key, request, OpsReply, timeout)
     except OpsError as e:
@@ -107,7 +108,7 @@ def ask_dock(table: RunTable, name: str, timeout: float, sender: str) -> str:
         ) from None
     if not reply.ok:
         raise OpsError(f"the coordinator refused: {reply.error}")
-    return f"{name} is on its way to a dock"
+    return f"{name} is on its way to {'a dock' if dock < 0 else f'dock {dock}'}"
 
 
 class ProcessActions:

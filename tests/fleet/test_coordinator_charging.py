@@ -32,6 +32,7 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import _left_out
 from fleet.coordinator.store import JobStore
+from fleet.coordinator.transits import TransitPlanner
 from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import (
     Award,
@@ -73,7 +74,13 @@ def _task(i: int) -> Task:
 class Fleet:
     """The charging market's parts; robots bid ``price`` on every lot, ``declined`` or not."""
 
-    def __init__(self, planner: TaskPlanner, world: World, robots: list[str]) -> None:
+    def __init__(
+        self,
+        planner: TaskPlanner,
+        world: World,
+        robots: list[str],
+        transits: TransitPlanner | None = None,
+    ) -> None:
         self.job = Job(CoverageParams(), ROBOT, 0.0)
         self.job.add_tasks(tuple(_task(i) for i in range(4)))
         for i, rid in enumerate(robots):
@@ -84,7 +91,7 @@ class Fleet:
         params = CoordinatorParams(bid_timeout_s=0.2)
         self.journal = Journal(self.job, None, KEYS, self.publish)
         self.awards = Awards(self.journal, KEYS, self.publish)
-        self.dispatcher = Dispatcher(self.journal, planner, None, params, KEYS, self.publish)
+        self.dispatcher = Dispatcher(self.journal, planner, transits, params, KEYS, self.publish)
         self.market = ChargingMarket(
             self.journal,
             self.awards,
@@ -405,6 +412,66 @@ def test_at_the_end_of_the_job_each_dock_goes_to_the_robot_nearest_it(corridor: 
     tasks = {rid: f.plans(rid)[-1].task for rid in where}
     assert tasks == {"robot-0": "wait-1", "robot-1": "dock-1", "robot-2": "dock-0"}, tasks
     assert all(f.plans(rid)[-1].waypoints[:, 0].min() > 5.0 for rid in ("robot-0", "robot-1"))
+
+
+def test_a_robot_sent_to_a_dock_by_its_number_goes_there_and_waits_by_it_when_held(
+    corridor: World,
+) -> None:
+    """`fleet dock ROBOT --dock K`: a robot in the right room sent to the left room's dock
+    crosses to it, though its charge would have it charge in its own room; a second robot
+    sent to the same dock waits by it."""
+    f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
+    f.job.robots["robot-0"].xy, f.job.robots["robot-1"].xy = (7.0, 2.6), (6.5, 2.6)
+    f.market.send_home("robot-0", "sent home by cli", False)
+    assert f.plans("robot-0")[-1].task == "dock-1"  # its own room's, by default
+    f.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    assert f.plans("robot-1")[-1].task == "dock-0"
+    assert f.plans("robot-1")[-1].waypoints[-1][0] < 3.0  # across the corridor
+    g = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
+    g.job.robots["robot-0"].xy, g.job.robots["robot-1"].xy = (7.0, 2.6), (6.5, 2.6)
+    g.market.send_home("robot-0", "sent home by cli", False, dock=0)
+    g.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    assert g.plans("robot-1")[-1].task == "wait-0"
+    assert ("dock", "robot-1", "sent home by cli: to wait by dock 0") in g.events()
+
+
+def test_trips_to_docks_through_the_corridor_both_ways_are_planned_in_one_round(
+    corridor: World,
+) -> None:
+    """Under ``prioritized`` a trip to a dock is a transit of a round like any other: robot-0
+    sent from the left room to the right room's dock, then robot-1 from the right room to the
+    left room's, while robot-0 is still on its way. The second round plans both (robot-0's trip
+    goes out again under a new plan id), one of them waits for the other to pass, and each
+    plan carries its schedule; with local transits neither waits."""
+    cfg = load_fleet_config()
+    planner = TaskPlanner(corridor, cfg)
+    transits = TransitPlanner(corridor, cfg, "prioritized", planner.transit.clear)
+    f = Fleet(planner, corridor, ["robot-0", "robot-1"], transits)
+    f.job.robots["robot-0"].xy, f.job.robots["robot-1"].xy = (1.2, 1.5), (6.8, 2.6)
+    f.market.send_home("robot-0", "sent home by cli", False, dock=1)
+    first = f.plans("robot-0")[-1]
+    f.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    again, other = f.plans("robot-0")[-1], f.plans("robot-1")[-1]
+    assert (again.task, other.task) == ("dock-1", "dock-0")
+    assert again.plan_id > first.plan_id and f.docking.trips["robot-0"].plan is again
+    waits = {(p.task, peer) for p in (again, other) for peer in p.wait_for}
+    assert waits in ({("dock-1", "robot-1")}, {("dock-0", "robot-0")}), waits
+    assert {"robot-0", "robot-1"} <= set(f.dispatcher.schedules)
+    # from where it stands and into the point in front of the dock, not via their cells' points
+    assert np.allclose(again.waypoints[0], (1.2, 1.5))
+    assert np.allclose(again.waypoints[-2], (corridor.docks[1][0] - APPROACH_M, 1.0))
+    legs = np.diff(again.waypoints, axis=0)
+    headings = np.arctan2(legs[:, 1], legs[:, 0])
+    turns = np.abs(np.remainder(np.diff(headings) + np.pi, 2 * np.pi) - np.pi)
+    assert turns[-1] < 0.6, again.waypoints  # no turn in place before driving onto the dock
+    for plan in (again, other):  # through the corridor (faces at y 1.2 and 1.7, x 3 to 5)
+        inside = plan.waypoints[(plan.waypoints[:, 0] > 3.2) & (plan.waypoints[:, 0] < 4.8)]
+        assert len(inside) and np.all(np.abs(inside[:, 1] - 1.45) < 0.08), plan.waypoints
+    g = Fleet(planner, corridor, ["robot-0", "robot-1"])
+    g.job.robots["robot-0"].xy, g.job.robots["robot-1"].xy = (1.2, 1.5), (6.8, 2.6)
+    g.market.send_home("robot-0", "sent home by cli", False, dock=1)
+    g.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    assert not any(g.plans(rid)[-1].wait_for for rid in ("robot-0", "robot-1"))
 
 
 def test_a_robot_at_work_passing_over_a_dock_does_not_hold_it(corridor: World) -> None:

@@ -3,7 +3,8 @@ whose full charge lasts 100 s of sweeping and who go to charge below 35 % (the j
 100 s for each). Each must go to
 charge once on the way, one at a time at the one dock (the other waits by it), the work each
 leaves goes to the other, and the job still finishes with every robot home; `fleet dock
-robot-1` sends robot-1 home early on, and it comes back to work."""
+robot-1` sends robot-1 home early on, and it comes back to work (`--dock 1`, a dock the world
+does not have, is refused first)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import yaml
 from fleet_runs import FleetRun
 
 from fleet.params import default_config_path
+from fleet.supervisor.runner import RunningFleet
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(900)]
 # robot-1 is sent home this long after its first award (sim s; 15 s into an idle run's sim)
@@ -37,11 +39,15 @@ def test_robots_run_down_charge_and_the_job_still_finishes(tmp_path: Path) -> No
         run.wait_for(lambda: run.first_award("robot-1") is not None, 180, "robot-1's award")
         at = (run.first_award("robot-1") or 0.0) + DOCK_AFTER_AWARD_S
         run.wait_for(lambda: clock.t >= at, timeout=180, what=f"sim time {at:.1f} s")
+        wrong = RunningFleet.verb(run, "dock", "robot-1", "--dock", "1")
         run.verb("dock", "robot-1")
         report = run.finish()
     finally:
         run.cleanup()
     assert run.left == [], f"processes left behind: {run.left}"
+    assert wrong.returncode != 0 and "no dock 1: the world has 1 dock, from 0" in wrong.stderr, (
+        wrong.stdout + wrong.stderr
+    )
     events = run.events()
     homes = [(e["robot"], e["detail"]) for e in events if e["kind"] == "dock"]
     assert ("robot-1", "sent home by cli: to dock 0") in homes, run.explained()
