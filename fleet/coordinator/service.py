@@ -117,7 +117,7 @@ class Coordinator:
         self.job = Job(planner.params, planner.robot, planner.wall_clearance)
         self.phase = "gathering"
         self.given_up = GivenUpWaypoints()
-        resumed = self._load(store)
+        resumed = load_job(self.job, store)
         meta = resumed or {}
         self.journal = Journal(
             self.job, store, self.keys, bus.publish, float(meta.get("clock", 0.0))
@@ -177,13 +177,6 @@ class Coordinator:
         self.bus.serve(self.keys.floor_map(), Request, lambda _req: floor)
 
     # ---- restart ------------------------------------------------------------------------
-
-    def _load(self, store: JobStore | None) -> dict[str, object] | None:
-        """Fill the job from ``store``; its counters if it holds a job to resume, else None."""
-        if store is None:
-            return None
-        store.load_job(self.job)
-        return store.meta() if self.job.tasks else None
 
     def _resume(self, store: JobStore, meta: dict[str, object]) -> None:
         """Carry on the job ``store`` holds: the same plans, phase and counts."""
@@ -443,6 +436,14 @@ class Coordinator:
     def _publish_state(self) -> None:
         state = fleet_state(self.job, self.journal.clock, self.phase, self._dropped())
         self.bus.publish(self.keys.coord_state(), state, control=True)
+
+
+def load_job(job: Job, store: JobStore | None) -> dict[str, object] | None:
+    """Fill ``job`` from ``store``; its counters if it holds a job to resume, else None."""
+    if store is None:
+        return None
+    store.load_job(job)
+    return store.meta() if job.tasks else None
 
 
 def fleet_state(job: Job, clock: float, phase: str, dropped: tuple[int, int]) -> FleetState:

@@ -5,12 +5,13 @@ starts are all in the left room and a robot sent to charge goes to the dock it i
 to chance; here robot-0 starts in the left room and robot-1 and robot-2 in the right one (the
 walls and docks are the world's), and `fleet dock --dock` makes the traffic: at one moment
 robot-0 is sent to the right room's dock and robot-2 to the left room's, so each crosses the
-corridor against the other. A full charge lasts 300 s of sweeping, so the robots charge on the
-way home and at the job's end, and rarely before.
+corridor against the other, on trips planned together (the corridor is one robot wide: the
+plan's order of passage lets one through first while the other waits). A full charge lasts 300 s
+of sweeping, so the robots charge on the way home and at the job's end, and rarely before.
 
-The recorded true tracks must show a robot crossing left to right and another right to left
-at the same time (in the corridor or at its mouths), the job done with a robot parked on each
-dock, no robot–robot contact and no robot out of charge."""
+The recorded true tracks must show robot-0 crossing left to right and robot-2 right to left,
+each between the moment both were sent and its charging on the far dock; the job done with a
+robot parked on each dock, no robot–robot contact and no robot out of charge."""
 
 from __future__ import annotations
 
@@ -54,14 +55,12 @@ def passages(tracks: Path) -> list[tuple[str, str, float, float]]:
     return out
 
 
-def both_ways(found: list[tuple[str, str, float, float]]) -> list[tuple]:
-    """Pairs of passages by two robots, one each way, at the same time (their spans overlap)."""
-    return [
-        (a, b)
-        for a in found
-        for b in found
-        if a[1] == "LR" and b[1] == "RL" and a[0] != b[0] and a[2] < b[3] and b[2] < a[3]
-    ]
+def crossed(
+    found: list[tuple[str, str, float, float]], robot: str, way: str, start: float, end: float
+) -> bool:
+    """Whether ``robot`` came out of the corridor ``way`` ("LR" or "RL") on the far side
+    between sim times ``start`` and ``end`` (it may have been at the near mouth already)."""
+    return any(r == robot and w == way and start < t1 <= end for r, w, _, t1 in found)
 
 
 def test_passages_are_read_from_the_tracks(tmp_path: Path) -> None:
@@ -72,9 +71,10 @@ def test_passages_are_read_from_the_tracks(tmp_path: Path) -> None:
     path.write_text("sim_s,robot,x,y\n" + "".join(f"{t},{r},{x},1.45\n" for t, r, x in rows))
     found = passages(path)
     assert found == [("a", "LR", 5.0, 10.0), ("b", "RL", 6.0, 14.0)]
-    assert both_ways(found) == [(found[0], found[1])]
-    assert both_ways([found[0], ("b", "RL", 10.5, 14.0)]) == []
-    assert both_ways([found[0], ("b", "LR", 6.0, 14.0)]) == []
+    assert crossed(found, "a", "LR", 4.0, 10.0) and crossed(found, "b", "RL", 4.0, 15.0)
+    assert not crossed(found, "a", "RL", 0.0, 30.0)  # the other way
+    assert not crossed(found, "b", "RL", 14.0, 30.0)  # out before
+    assert not crossed(found, "a", "LR", 0.0, 9.0)  # not out by then
 
 
 def _world(path: Path) -> Path:
@@ -110,11 +110,17 @@ def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Pa
     finally:
         run.cleanup()
     assert run.left == [], f"processes left behind: {run.left}"
-    sent = {(e["robot"], e["detail"]) for e in run.events("dock")}
-    assert ("robot-0", "sent home by cli: to dock 1") in sent, run.explained()
-    assert ("robot-2", "sent home by cli: to dock 0") in sent, run.explained()
+    sent = {(e["robot"], e["detail"]): e["sim"] for e in run.events("dock")}
+    at = max(
+        sent[("robot-0", "sent home by cli: to dock 1")],
+        sent[("robot-2", "sent home by cli: to dock 0")],
+    )
     found = passages(tracks)
-    assert both_ways(found), f"no crossing both ways at once: {found}"
+    for rid, way in (("robot-0", "LR"), ("robot-2", "RL")):
+        docked = min(
+            (e["sim"] for e in run.events("charging", rid) if e["sim"] > at), default=math.inf
+        )
+        assert crossed(found, rid, way, at, docked), f"{rid} did not cross {way}: {found}"
     assert report["status"] == "done", run.explained()
     assert report["collisions"]["robot_robot"] == 0, run.explained()
     batteries = {rid: r["battery"] for rid, r in report["robots"].items()}
