@@ -115,9 +115,16 @@ class Bus:
         self._lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._handles: list[Any] = []
+        # set once close() begins: callbacks still in flight hand nothing on
+        self.closed = threading.Event()
         self._token = self.session.liveliness().declare_token(self.keys.alive(role, ident))
 
     def close(self) -> None:
+        """Close the session. From the moment this begins, messages and tokens still delivered
+        (zenoh may run a callback after its subscriber is undeclared) are ignored, and a handler
+        that fails meanwhile (publishing on the closing session) is not an error: an object
+        that lives on after its bus, a finished test's coordinator say, hears nothing more."""
+        self.closed.set()
         for h in self._handles:
             with contextlib.suppress(Exception):
                 h.undeclare()
@@ -171,7 +178,10 @@ class Bus:
     def handler_failed(self, kind: str) -> None:
         """Count a message of ``kind`` (a key class, or a loop's name) whose handler raised;
         call it from the ``except`` block. The message is lost, never the process: the
-        traceback is logged the first time per kind, a line every 100th."""
+        traceback is logged the first time per kind, a line every 100th. Once the bus is
+        closing, a failing handler (publishing on the closing session) is not counted."""
+        if self.closed.is_set():
+            return
         with self._lock:
             self.handler_errors[kind] += 1
             n = self.handler_errors[kind]
@@ -189,6 +199,8 @@ class Bus:
         """Call ``callback(key, message)`` for each valid ``cls`` message on ``key``."""
 
         def on_sample(sample: zenoh.Sample) -> None:
+            if self.closed.is_set():
+                return
             k = str(sample.key_expr)
             try:
                 msg = decode(sample.payload.to_bytes(), cls)
@@ -209,6 +221,8 @@ class Bus:
         any other exception is logged with its traceback and also answered as an error."""
 
         def on_query(query: zenoh.Query) -> None:
+            if self.closed.is_set():
+                return
             k = str(query.key_expr)
             try:
                 req = decode(query.payload.to_bytes() if query.payload else b"", cls)
@@ -253,6 +267,8 @@ class Bus:
         """Track liveliness tokens of ``role`` (``*`` for all); existing ones are reported too."""
 
         def on_sample(sample: zenoh.Sample) -> None:
+            if self.closed.is_set():
+                return
             ident = str(sample.key_expr).rsplit("/", 1)[-1]
             try:
                 if sample.kind == zenoh.SampleKind.PUT:
