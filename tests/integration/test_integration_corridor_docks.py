@@ -10,8 +10,10 @@ plan's order of passage lets one through first while the other waits). A full ch
 of sweeping, so the robots charge on the way home and at the job's end, and rarely before.
 
 The recorded true tracks must show robot-0 crossing left to right and robot-2 right to left,
-each between the moment both were sent and its charging on the far dock; the job done with a
-robot parked on each dock, no robot–robot contact and no robot out of charge."""
+each between the moment both were sent and its charging on the far dock, with no robot–robot
+contact and no robot out of charge. The fleet is stopped (`fleet down`) once both charge: the
+rest of the job, and parking at its end, are the battery test's and the unit tests' (a full
+job here took two minutes of the suite's time)."""
 
 from __future__ import annotations
 
@@ -94,7 +96,7 @@ def _config(path: Path) -> Path:
 @pytest.mark.integration
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Path) -> None:
+def test_robots_sent_to_each_others_docks_cross_the_corridor_both_ways(tmp_path: Path) -> None:
     options = ("--config", str(_config(tmp_path / "fleet.yaml")), "--deconfliction", "prioritized")
     world = str(_world(tmp_path / "corridor.yaml"))
     run = FleetRun(tmp_path / "run", robots=3, world=world, timeout_s=600.0, options=options)
@@ -106,6 +108,9 @@ def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Pa
         run.wait_for(lambda: clock.t >= at, timeout=180, what=f"sim time {at:.1f} s")
         run.verb("dock", "robot-0", "--dock", "1")
         run.verb("dock", "robot-2", "--dock", "0")
+        for rid in ("robot-0", "robot-2"):
+            run.wait_for(lambda r=rid: run.events("charging", r), 240, f"{rid} charging")
+        run.verb("down")
         report = run.finish()
     finally:
         run.cleanup()
@@ -121,8 +126,6 @@ def test_robots_cross_the_corridor_both_ways_and_park_at_both_docks(tmp_path: Pa
             (e["sim"] for e in run.events("charging", rid) if e["sim"] > at), default=math.inf
         )
         assert crossed(found, rid, way, at, docked), f"{rid} did not cross {way}: {found}"
-    assert report["status"] == "done", run.explained()
     assert report["collisions"]["robot_robot"] == 0, run.explained()
     batteries = {rid: r["battery"] for rid, r in report["robots"].items()}
     assert all(b["min_charge"] > 0 for b in batteries.values()), batteries
-    assert sum(b["parked"] for b in batteries.values()) == 2, batteries  # a robot on each dock
