@@ -37,6 +37,7 @@ from fleet.coordinator.transits import PlannedTransit, TransitPlanner
 from fleet.params import CoordinatorParams
 from fleet.plan_chain import chain_length, chain_of, cut_plan, driven_ends
 from fleet.protocol import Keys, Plan
+from planners.dependencies import ends_on
 from planners.polyline import without_straight_vertices
 
 # a robot's current plan that its statuses do not show it driving goes out again this many wall
@@ -307,7 +308,7 @@ class Dispatcher:
         r = self.job.robots[rid]
         assert r.xy is not None
         if transit is not None:
-            leg = _ends_on(transit.waypoints, r.xy, errand.goal, self.planner.transit.clear)
+            leg = ends_on(transit.waypoints, r.xy, errand.goal, self.planner.transit.clear)
         else:
             path = self.planner.transit.path(np.asarray(r.xy, dtype=float), np.array(errand.goal))
             leg = without_straight_vertices(np.asarray(path, dtype=float))
@@ -395,28 +396,6 @@ def _goal(leg: Leg) -> tuple[float, float]:
     if isinstance(leg, Errand):
         return leg.goal
     return _xy(driven_ends(leg[0].task, leg[0].reverse)[0])
-
-
-def _ends_on(
-    points: np.ndarray,
-    start: tuple[float, float],
-    goal: tuple[float, float],
-    clear: Callable[[np.ndarray, np.ndarray], bool],
-) -> np.ndarray:
-    """An errand's transit through the points of its cells, run from the robot's ``start`` and
-    into its ``goal``: the first point moved to the start, and the last to the goal, where the
-    straight line to the next (from the one before) is clear. A cell's point lies up to half a
-    cell beside or beyond where the robot stands or goes, and driving to it cost two turns in
-    place on most trips. Each point keeps its index, which the order of passage counts by."""
-    out = np.array(points, dtype=float)
-    a, b = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
-    if len(out) >= 2 and clear(a, out[1]):
-        out[0] = a
-    if len(out) >= 2 and clear(out[-2], b):
-        out[-1] = b
-    elif not np.allclose(out[-1], b):
-        out = np.vstack([out, b[None]])
-    return out
 
 
 def _task_of(leg: Leg) -> str:

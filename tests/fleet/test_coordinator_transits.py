@@ -16,6 +16,8 @@ from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.transits import TransitPlanner
 from fleet.params import load_fleet_config
 from fleet.world import load_world
+from planners.auction import Task
+from planners.polyline import count_turns
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +47,24 @@ def test_a_round_through_the_corridor(corridor: TransitPlanner) -> None:
             assert 0 < at < len(t.waypoints) and 0 <= passed < len(out[peer].waypoints)
     # robots crossing the one-lane corridor in opposite directions wait for each other
     assert out["robot-2"].waits or out["robot-0"].waits
+
+
+def test_a_planned_transit_runs_into_its_task_without_a_cell_point_beside_it(
+    corridor: TransitPlanner,
+) -> None:
+    """The goal cell's point lies up to half a cell beside or beyond the task's start; a robot
+    sent through it turned in place there and again at the start. The drive ends on the start
+    itself where the line from the cell before is clear, and starts where the robot stands."""
+    planner = TaskPlanner(load_world(resolve_world("corridor")), load_fleet_config())
+    start, lane = (0.9, 1.5), np.linspace((7.3, 2.6), (8.3, 2.6), 5)
+    _, out = corridor.plan(0.0, {"robot-0": (start, tuple(lane[0]))}, {})
+    transit = out["robot-0"].waypoints
+    waypoints, starts = planner.drive(start, [(Task("t01", lane, 1.0, 8.0, (1,)), False)], transit)
+    leg = waypoints[: starts[0] + 1]
+    assert np.allclose(leg[0], start) and np.allclose(leg[-1], lane[0])
+    assert len(leg) == len(transit), "each point keeps the index the order of passage counts by"
+    assert np.linalg.norm(leg[:-1] - lane[0], axis=1).min() > 0.3
+    assert count_turns(leg, 45.0) == 1
 
 
 @pytest.mark.parametrize("member", FAMILY, ids=lambda m: m.name)
