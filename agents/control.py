@@ -32,7 +32,7 @@ from agents.follow.escape import keep_clear
 from agents.follow.motion import follow_step, predict
 from agents.follow.state import FollowParams, FollowState, Situation
 from agents.market import Won, swept_pieces
-from agents.passage import Holding, Waits, hold
+from agents.passage import Holding, Waits, hold, stop_before_held
 from agents.peers import cut_out, own_intent, progress, to_avoid
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
@@ -258,7 +258,17 @@ def _command(
     state = replace(state, holding=holding)
     if ahead is not None:
         return state, Command(0.0, 0.0, "holding", "hold", ahead, notes)
-    return state, _follow(heard, state, params, pose, obstacles, notes)
+    stop_at = stop_before_held(
+        holding,
+        follow,
+        np.array(pose[:2]),
+        drive.plan_id,
+        drive.waits,
+        progress(heard.peers),
+        stamp,
+        agent,
+    )
+    return state, _follow(heard, state, params, pose, obstacles, notes, stop_at)
 
 
 def _lost(
@@ -282,13 +292,17 @@ def _follow(
     pose: Pose,
     obstacles: np.ndarray,
     notes: tuple[Note, ...],
+    stop_at: int = -1,
 ) -> Command:
     """Follow the path, giving way by rank to the peers the plan does not order it against:
     on a transit planned in space and time it keeps the order of passage with the peers it
-    waits for (and that wait for it) instead."""
+    waits for (and that wait for it) instead, coming to rest on waypoint ``stop_at`` (the
+    order of passage holds it before the next)."""
     drive, agent = heard.drive, params.follow.agent
     before = drive.follow
     assert before is not None
+    if before.stop_at != stop_at:
+        before = replace(before, stop_at=stop_at)
     ordered = frozenset(drive.waits.peer) if before.index <= drive.sweep_from else frozenset()
     peers = to_avoid(
         params.robot_id,

@@ -11,7 +11,9 @@ newer plan (it is done with that transit), dropped the plan, or has been silent 
 ``silent_s`` (a dead robot's body stays where it stopped; the DWA and the intents deal with
 it). A peer not heard from yet, or still on an older plan (the round's plan has not reached
 it), is waited for. Holding one waypoint for longer than the agent's ``hold_max_s`` is given
-up, so a lost message never stops a robot for good (:func:`hold`).
+up, so a lost message never stops a robot for good (:func:`hold`). A robot that will have to
+hold before its next waypoint brakes to rest on the one before it (:func:`stop_before_held`):
+that point is its cell's, clear of the cell it waits to enter.
 """
 
 from __future__ import annotations
@@ -130,3 +132,27 @@ def hold(
         )
         return Holding(None, holding.given_up | {key}), None, (note,)
     return holding, ahead, ()
+
+
+def stop_before_held(
+    holding: Holding,
+    follow: FollowState,
+    xy: np.ndarray,
+    plan_id: int,
+    waits: Waits,
+    peers: Mapping[str, PeerProgress],
+    now: float,
+    agent: AgentParams,
+) -> int:
+    """The waypoint a robot at ``xy`` heads for when the order of passage would hold it before
+    the one after (so it must come to rest on it, ``FollowState.stop_at``), else -1. Told to
+    hold only once it has reached that waypoint, a robot at full speed came to rest its braking
+    distance (0.25 m) past it, inside the next cell, where its body stood in the way of the
+    peer it waited for."""
+    if not len(waits.at):
+        return -1
+    ahead = advance(follow, xy, agent)
+    nxt = ahead.index + 1
+    if nxt >= len(ahead.waypoints) or (plan_id, nxt) in holding.given_up:
+        return -1
+    return ahead.index if waiting_for(waits, nxt, peers, now, agent.hold_silent_s) else -1

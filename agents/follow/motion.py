@@ -65,7 +65,7 @@ def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowSta
         break
     if i == state.index:
         return state
-    return FollowState(wps, i, skipped=state.skipped, missed=state.missed)
+    return FollowState(wps, i, skipped=state.skipped, missed=state.missed, stop_at=state.stop_at)
 
 
 def _ahead(start: np.ndarray, waypoints: np.ndarray, horizon_m: float) -> np.ndarray:
@@ -131,7 +131,8 @@ def stop_speed(state: FollowState, xy: np.ndarray, params: FollowParams) -> floa
     """The speed for the approach to a stop, or None when the next waypoint is no stop or is
     farther than the braking distance from full speed.
 
-    A stop is the last waypoint or one where the path turns by more than ``corner_angle``. The
+    A stop is the last waypoint, one where the path turns by more than ``corner_angle``, or
+    ``state.stop_at`` (the robot must wait there before driving on). The
     speed is the largest from which the robot can still brake to rest on it,
     v = √(2·acc_lim_x·d) with d the distance left along the segment (Fox et al. 1997's
     admissible velocity, applied to the stop as to an obstacle). DWA alone would aim its
@@ -139,7 +140,7 @@ def stop_speed(state: FollowState, xy: np.ndarray, params: FollowParams) -> floa
     """
     robot, along_tolerance = params.robot, params.agent.along_tolerance
     wps, i = state.waypoints, state.index
-    if 0 < i < len(wps) - 1:
+    if 0 < i < len(wps) - 1 and i != state.stop_at:
         a, b = wps[i] - wps[i - 1], wps[i + 1] - wps[i]
         turn = abs(math.remainder(math.atan2(b[1], b[0]) - math.atan2(a[1], a[0]), 2 * math.pi))
         if turn <= params.dwa.corner_angle:
@@ -256,6 +257,10 @@ def watchdog(state: FollowState, now: Situation, params: FollowParams) -> Follow
         short = state.best_dist > agent.swept_within
         missed = (*state.missed, state.index) if short else state.missed
         return FollowState(
-            state.waypoints, state.index + 1, skipped=state.skipped + 1, missed=missed
+            state.waypoints,
+            state.index + 1,
+            skipped=state.skipped + 1,
+            missed=missed,
+            stop_at=state.stop_at,
         )
     return replace(state, stalled_s=state.stalled_s + dt)

@@ -32,6 +32,9 @@ class FollowState:
     edge_side: int = 0
     # waypoints given up farther than agent.swept_within from them: their pieces are unswept
     missed: tuple[int, ...] = ()
+    # a waypoint to come to rest on, as on the last (the order of passage holds the robot
+    # before the one after it); -1: none
+    stop_at: int = -1
 
     @property
     def done(self) -> bool:
