@@ -148,29 +148,6 @@ def thin(
     return out
 
 
-def ends_on(
-    points: np.ndarray,
-    start: tuple[float, float] | np.ndarray,
-    goal: tuple[float, float] | np.ndarray,
-    clear: Callable[[np.ndarray, np.ndarray], bool],
-) -> np.ndarray:
-    """A transit through the kept points of its cells, run from the robot's ``start`` and into
-    its ``goal``: the first point moved to the start, and the last to the goal, where the
-    straight line to the next (from the one before) is clear, else the goal appended. A cell's
-    point lies up to half a cell beside or beyond where the robot stands or goes, and driving
-    to it cost a turn in place at each end. Each point keeps its index, which the order of
-    passage counts by."""
-    out = np.array(points, dtype=float)
-    a, b = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
-    if len(out) >= 2 and clear(a, out[1]):
-        out[0] = a
-    if len(out) >= 2 and clear(out[-2], b):
-        out[-1] = b
-    elif not np.allclose(out[-1], b):
-        out = np.vstack([out, b[None]])
-    return out
-
-
 def renumber(
     edges: Mapping[str, Sequence[Dependency]], kept: Mapping[str, Sequence[int]]
 ) -> dict[str, tuple[Dependency, ...]]:

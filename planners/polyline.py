@@ -69,6 +69,15 @@ def without_repeats(points: np.ndarray) -> np.ndarray:
     return pts[keep]
 
 
+def ending_at(points: np.ndarray, end: np.ndarray | tuple[float, float]) -> np.ndarray:
+    """The polyline run on to ``end``: ``end`` appended unless the points already end there."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    end = np.asarray(end, dtype=float)
+    if len(pts) and np.allclose(pts[-1], end):
+        return pts.copy()
+    return np.vstack([pts, end[None]])
+
+
 def heading_changes(points: np.ndarray) -> np.ndarray:
     """Absolute heading change (rad, in [0, π]) at each interior vertex of a polyline.
 

@@ -37,8 +37,7 @@ from fleet.coordinator.transits import PlannedTransit, TransitPlanner
 from fleet.params import CoordinatorParams
 from fleet.plan_chain import chain_length, chain_of, cut_plan, driven_ends
 from fleet.protocol import Keys, Plan
-from planners.dependencies import ends_on
-from planners.polyline import without_straight_vertices
+from planners.polyline import ending_at, without_straight_vertices
 
 # a robot's current plan that its statuses do not show it driving goes out again this many wall
 # seconds after it was last sent
@@ -308,7 +307,7 @@ class Dispatcher:
         r = self.job.robots[rid]
         assert r.xy is not None
         if transit is not None:
-            leg = ends_on(transit.waypoints, r.xy, errand.goal, self.planner.transit.clear)
+            leg = ending_at(transit.waypoints, errand.goal)
         else:
             path = self.planner.transit.path(np.asarray(r.xy, dtype=float), np.array(errand.goal))
             leg = without_straight_vertices(np.asarray(path, dtype=float))

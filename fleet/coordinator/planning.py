@@ -36,9 +36,8 @@ from planners.coverage import CoverageParams, CoveragePlan, plan_coverage
 from planners.coverage.metrics import swath
 from planners.coverage.patch import patch_sweep
 from planners.coverage.transit import Transit
-from planners.dependencies import ends_on
 from planners.grid import GridMap, clearance, dilate, reachable
-from planners.polyline import densify, without_straight_vertices
+from planners.polyline import densify, ending_at, without_straight_vertices
 from planners.robot import RobotSpec
 from planners.tour_elements import plan_elements
 
@@ -245,15 +244,14 @@ class TaskPlanner:
     ) -> tuple[np.ndarray, list[int]]:
         """(waypoints, where each task's sweep begins): the transit to the first task, then the
         sweeps of ``chain`` ((task, reverse) pairs, each beginning where the one before ends).
-        The transit is ``transit`` (points of a transit planned in space and time, run from
-        ``from_xy`` into the first sweep by :func:`planners.dependencies.ends_on`, each point
-        keeping its index, which the order of passage numbers them by), else A* on the floor
-        plan around the bodies of lost robots; ValueError when there is no way from ``from_xy``
-        to the first task."""
+        The transit is ``transit`` (points of a transit planned in space and time, kept as they
+        are: the order of passage numbers them; run on to the first sweep's start unless it
+        ends there), else A* on the floor plan around the bodies of lost robots; ValueError
+        when there is no way from ``from_xy`` to the first task."""
         sweeps = [task.path[::-1] if reverse else task.path for task, reverse in chain]
         start = np.asarray(from_xy, dtype=float)
         if transit is not None:
-            leg = ends_on(transit, start, sweeps[0][0], self.transit.clear)
+            leg = ending_at(transit, sweeps[0][0])
         else:
             leg = self.transit.path(start, sweeps[0][0])
             leg = without_straight_vertices(np.asarray(leg, dtype=float))

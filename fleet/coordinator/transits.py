@@ -46,7 +46,8 @@ GRAPH_RESOLUTION = PLAN_RESOLUTION
 @dataclass(frozen=True, eq=False)
 class PlannedTransit:
     """One robot's transit of a round: its waypoints (the cells' points; the first is where the
-    robot stands when it is in its start cell already), and its dependencies as rows of
+    robot stands when it is in its start cell already, the last its goal when that is in its
+    last cell), and its dependencies as rows of
     (waypoint, peer, the peer's waypoint it waits for)."""
 
     waypoints: np.ndarray
@@ -99,10 +100,16 @@ class TransitPlanner:
             name: np.array([self.graph.point(c) for c in r.cells], dtype=float)
             for name, r in routes.items()
         }
-        for name in moving:
-            start = moving[name][0]
-            if self.graph.locate(np.array([start]))[0] == routes[name].cells[0]:
+        for name, (start, goal) in moving.items():
+            # a robot's own start and goal cells run from its start and into its goal: a
+            # cell's point lies up to half a cell beside or beyond them, a turn in place at
+            # each end. A goal in a cell given to another robot (two goals in one cell) keeps
+            # its route's last cell, and the robot drives on from there on its own.
+            first, last = self.graph.locate(np.array([start, goal]))
+            if first == routes[name].cells[0]:
                 points[name][0] = start
+            if last == routes[name].cells[-1] and len(routes[name].cells) > 1:
+                points[name][-1] = goal
         kept = {name: thin(points[name], pinned[name], self.clear) for name in routes}
         edges = renumber(plan.edges, kept)
         out = {}

@@ -67,6 +67,22 @@ def test_a_planned_transit_runs_into_its_task_without_a_cell_point_beside_it(
     assert count_turns(leg, 45.0) == 1
 
 
+def test_two_transits_to_one_point_end_in_two_cells(corridor: TransitPlanner) -> None:
+    """Two lanes that begin at one point (a lane cut in two, its pieces sold to two robots):
+    the round gives one robot the goal's cell and the other the next free cell. Only the first
+    transit runs into the goal; the second ends on its own cell's point, from where its robot
+    drives on once the first has gone (run on into the goal, both met on one point)."""
+    goal = (2.2, 2.4)
+    moving = {"robot-0": ((0.9, 1.5), goal), "robot-1": ((1.5, 0.6), goal)}
+    plan, out = corridor.plan(0.0, moving, {})
+    assert plan.status == "success", plan.message
+    ends = {rid: tuple(t.waypoints[-1]) for rid, t in out.items()}
+    on_goal = [rid for rid, end in ends.items() if np.allclose(end, goal)]
+    assert len(on_goal) == 1, ends
+    other = next(rid for rid in ends if rid not in on_goal)
+    assert np.linalg.norm(np.subtract(ends[other], goal)) > 0.1
+
+
 @pytest.mark.parametrize("member", FAMILY, ids=lambda m: m.name)
 def test_every_room_of_a_generated_world_is_reached_from_every_start(
     member: FamilyMember, tmp_path: Path
