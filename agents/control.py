@@ -32,7 +32,7 @@ from agents.follow.escape import keep_clear
 from agents.follow.motion import follow_step, predict
 from agents.follow.state import FollowParams, FollowState, Situation
 from agents.market import Won, swept_pieces
-from agents.passage import Holding, Waits, hold, stop_before_held
+from agents.passage import Holding, Waits, hold
 from agents.peers import cut_out, own_intent, progress, to_avoid
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
@@ -245,7 +245,7 @@ def _command(
         idle, result = keep_clear(state.idle, now, params.follow)
         mode = "done" if drive.plan_id >= 0 else "waiting"
         return replace(state, idle=idle), Command(result.v, result.w, mode, "idle", follow)
-    holding, ahead, notes = hold(
+    holding, ahead, stop_at, notes = hold(
         state.holding,
         follow,
         np.array(pose[:2]),
@@ -258,16 +258,6 @@ def _command(
     state = replace(state, holding=holding)
     if ahead is not None:
         return state, Command(0.0, 0.0, "holding", "hold", ahead, notes)
-    stop_at = stop_before_held(
-        holding,
-        follow,
-        np.array(pose[:2]),
-        drive.plan_id,
-        drive.waits,
-        progress(heard.peers),
-        stamp,
-        agent,
-    )
     return state, _follow(heard, state, params, pose, obstacles, notes, stop_at)
 
 

@@ -12,8 +12,8 @@ newer plan (it is done with that transit), dropped the plan, or has been silent 
 it). A peer not heard from yet, or still on an older plan (the round's plan has not reached
 it), is waited for. Holding one waypoint for longer than the agent's ``hold_max_s`` is given
 up, so a lost message never stops a robot for good (:func:`hold`). A robot that will have to
-hold before its next waypoint brakes to rest on the one before it (:func:`stop_before_held`):
-that point is its cell's, clear of the cell it waits to enter.
+hold before its next waypoint brakes to rest on the one before it (:func:`hold`'s stop): that
+point is its cell's, clear of the cell it waits to enter.
 """
 
 from __future__ import annotations
@@ -104,55 +104,41 @@ def hold(
     peers: Mapping[str, PeerProgress],
     now: float,
     agent: AgentParams,
-) -> tuple[Holding, FollowState | None, tuple[tuple[int, str], ...]]:
+) -> tuple[Holding, FollowState | None, int, tuple[tuple[int, str], ...]]:
     """Whether a robot at ``xy`` on plan ``plan_id`` must hold for a peer before the waypoint it
     heads for: the follower advanced to where the robot stands if it must, None if it may drive
-    on; with the log lines (level, text after the robot's id) of holding and of giving up.
+    on; the waypoint it must come to rest on when it may drive on but would be held before the
+    one after (``FollowState.stop_at``, else -1); and the log lines (level, text after the
+    robot's id) of holding and of giving up.
 
-    Holding before one waypoint for longer than ``agent.hold_max_s`` is given up, and that
-    waypoint of that plan is never held at again."""
+    Told to hold only once it had reached the waypoint before, a robot at full speed came to
+    rest its braking distance (0.25 m) past it, inside the next cell, where its body stood in
+    the way of the peer it waited for. Holding before one waypoint for longer than
+    ``agent.hold_max_s`` is given up, and that waypoint of that plan is never held at again."""
     if not len(waits.at):
-        return holding, None, ()
+        return holding, None, -1, ()
     ahead = advance(follow, xy, agent)
     key = (plan_id, ahead.index)
     if ahead.done or key in holding.given_up:
-        return holding, None, ()
+        return holding, None, -1, ()
     names = waiting_for(waits, ahead.index, peers, now, agent.hold_silent_s)
     if not names:
-        return Holding(None, holding.given_up), None, ()
+        nxt = ahead.index + 1
+        held_next = (
+            nxt < len(ahead.waypoints)
+            and (plan_id, nxt) not in holding.given_up
+            and waiting_for(waits, nxt, peers, now, agent.hold_silent_s)
+        )
+        return Holding(None, holding.given_up), None, ahead.index if held_next else -1, ()
     who = ", ".join(names)
     if holding.at is None or holding.at[:2] != key:
         note = (logging.INFO, f"holds before waypoint {ahead.index} for {who}")
-        return Holding((*key, now), holding.given_up), ahead, (note,)
+        return Holding((*key, now), holding.given_up), ahead, -1, (note,)
     if now - holding.at[2] > agent.hold_max_s:
         note = (
             logging.WARNING,
             f"gave up holding before waypoint {ahead.index} after {agent.hold_max_s:.0f} s: "
             f"{who} not heard to pass",
         )
-        return Holding(None, holding.given_up | {key}), None, (note,)
-    return holding, ahead, ()
-
-
-def stop_before_held(
-    holding: Holding,
-    follow: FollowState,
-    xy: np.ndarray,
-    plan_id: int,
-    waits: Waits,
-    peers: Mapping[str, PeerProgress],
-    now: float,
-    agent: AgentParams,
-) -> int:
-    """The waypoint a robot at ``xy`` heads for when the order of passage would hold it before
-    the one after (so it must come to rest on it, ``FollowState.stop_at``), else -1. Told to
-    hold only once it has reached that waypoint, a robot at full speed came to rest its braking
-    distance (0.25 m) past it, inside the next cell, where its body stood in the way of the
-    peer it waited for."""
-    if not len(waits.at):
-        return -1
-    ahead = advance(follow, xy, agent)
-    nxt = ahead.index + 1
-    if nxt >= len(ahead.waypoints) or (plan_id, nxt) in holding.given_up:
-        return -1
-    return ahead.index if waiting_for(waits, nxt, peers, now, agent.hold_silent_s) else -1
+        return Holding(None, holding.given_up | {key}), None, -1, (note,)
+    return holding, ahead, -1, ()
