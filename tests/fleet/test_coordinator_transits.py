@@ -53,8 +53,8 @@ def test_a_planned_transit_runs_into_its_task_without_a_cell_point_beside_it(
     corridor: TransitPlanner,
 ) -> None:
     """The goal cell's point lies up to half a cell beside or beyond the task's start; a robot
-    sent through it turned in place there and again at the start. The drive ends on the start
-    itself where the line from the cell before is clear, and starts where the robot stands."""
+    sent through it turned in place there and again at the start. A transit whose goal lies in
+    its route's last cell ends on the goal itself, and starts where the robot stands."""
     planner = TaskPlanner(load_world(resolve_world("corridor")), load_fleet_config())
     start, lane = (0.9, 1.5), np.linspace((7.3, 2.6), (8.3, 2.6), 5)
     _, out = corridor.plan(0.0, {"robot-0": (start, tuple(lane[0]))}, {})
