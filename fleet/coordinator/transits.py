@@ -47,8 +47,8 @@ GRAPH_RESOLUTION = PLAN_RESOLUTION
 class PlannedTransit:
     """One robot's transit of a round: its waypoints (the cells' points; the first is where the
     robot stands when it is in its start cell already, the last its goal when that is in its
-    last cell), and its dependencies as rows of
-    (waypoint, peer, the peer's waypoint it waits for)."""
+    last cell), and its dependencies as rows of (waypoint, peer, the peer's waypoint it waits
+    for)."""
 
     waypoints: np.ndarray
     waits: tuple[tuple[int, str, int], ...]
