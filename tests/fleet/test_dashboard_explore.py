@@ -104,8 +104,15 @@ def test_over_a_live_bus_the_view_fetches_the_merged_map_again_while_exploring(
         w = FleetWatcher()
         feed = BusFeed(view_bus, w, fetch=False)
         try:
-            coord.publish(coord.keys.coord_state(), FleetState(1.0, EXPLORING, ["robot-0"], []))
-            assert wait_until(lambda: feed.pump() >= 0 and w.phase == EXPLORING), "no state heard"
+            state = FleetState(1.0, EXPLORING, ["robot-0"], [])
+
+            def heard() -> bool:
+                # published again until heard, as the coordinator does every loop: the first
+                # message can go before the router has the view's subscription
+                coord.publish(coord.keys.coord_state(), state)
+                return feed.pump() >= 0 and w.phase == EXPLORING
+
+            assert wait_until(heard, poll=0.1), "no state heard"
             feed.fetch_once()
             assert w.floor is not None and w.floor.unknown[1:59, 30:79].all()
             served.append(pack_grid(_room(known_up_to_x=3.0)))
