@@ -1,9 +1,10 @@
-"""A stand-in for a process's bus, for tests that drive a server's handlers directly: it
-subscribes and serves nothing, and records what the server drops as implausible."""
+"""Stand-ins for a process's bus, for tests that drive a server's handlers or an agent's control
+step directly: :class:`NoBus` subscribes and serves nothing and records what the server drops
+as implausible; :class:`LoopbackBus` hands an agent's publications to the test."""
 
 from __future__ import annotations
 
-from fleet.protocol import Keys
+from fleet.protocol import Keys, Message
 
 
 class NoBus:
@@ -23,3 +24,23 @@ class NoBus:
 
     def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
         self.dropped.append((key, sender, why))
+
+
+class LoopbackBus:
+    """What an agent's control step needs of :class:`fleet.bus.Bus`: its publications are
+    handed to the test (intents to the other agents, commands to the simulator)."""
+
+    def __init__(self, keys: Keys, deliver: dict[str, list[tuple[str, Message]]]) -> None:
+        self.keys = keys
+        self.decode_errors: dict[str, int] = {}
+        self._deliver = deliver
+        self.implausible = 0
+
+    def publish(self, key: str, msg: Message, control: bool = False) -> None:
+        self._deliver.setdefault(type(msg).__name__, []).append((key, msg))
+
+    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
+        self.implausible += n
+
+    def dropped(self) -> tuple[int, int]:
+        return sum(self.decode_errors.values()), self.implausible

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bus_stand_in import LoopbackBus
 
 from agents import control
 from agents.agent import Agent, pose_source_for
@@ -54,26 +55,6 @@ SCENES = {
     ),
 }
 SIM_SECONDS = 40.0
-
-
-class LoopbackBus:
-    """What an agent's control step needs of :class:`fleet.bus.Bus`: its publications are
-    handed to the test (intents to the other agents, commands to the simulator)."""
-
-    def __init__(self, keys: Keys, deliver: dict[str, list[tuple[str, Message]]]) -> None:
-        self.keys = keys
-        self.decode_errors: dict[str, int] = {}
-        self._deliver = deliver
-        self.implausible = 0
-
-    def publish(self, key: str, msg: Message, control: bool = False) -> None:
-        self._deliver.setdefault(type(msg).__name__, []).append((key, msg))
-
-    def drop_implausible(self, key: str, sender: str, why: str, n: int = 1) -> None:
-        self.implausible += n
-
-    def dropped(self) -> tuple[int, int]:
-        return sum(self.decode_errors.values()), self.implausible
 
 
 def _drive(scene: str, tmp_path: Path, cfg: FleetConfig) -> tuple[int, int, bool]:
