@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planners.checks import require_non_negative, require_positive
+from planners.polyline import simplify_indices
 from planners.robot import RobotSpec
 
 
@@ -59,13 +60,13 @@ class TrackerParams:
     gain_lateral: float = 16.0
     gain_heading: float = 8.0
     lateral_acc: float = 0.5
-    corner_deviation: float = 0.02
+    corner_deviation: float = 0.01
     stop_tolerance: float = 0.005
     heading_tolerance: float = 0.02
     turn_heading: float = 0.1
     creep_speed: float = 0.02
     check_margin: float = 0.0
-    rejoin_distance: float = 0.1
+    rejoin_distance: float = 0.15
     rejoin_heading: float = 0.6
 
     def validate(self) -> None:
@@ -131,24 +132,44 @@ def turn_time(angle: np.ndarray, robot: RobotSpec) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Profile:
-    """A path's plan for the tracker: the rounding radius at each vertex (:func:`corner_radii`)
-    and the speed at each vertex of the time-optimal braking profile (the backward pass,
-    v_i = min(cap_i, √(v_{i+1}² + 2·a·|p_{i+1} − p_i|)), with the cap 0 at the ends and at
-    stops; on a rounded vertex √(lateral_acc·R), max_vel_theta·R, and the speed that drives the
-    arc's two tangent lengths in the least time the heading can turn through it,
-    :func:`turn_time`: the turn rate cannot step to v/R at the arc's start)."""
+    """A path's plan for the tracker, from waypoint ``kept[0]`` on.
 
+    The path is tracked as its Ramer–Douglas–Peucker simplification (the plan's
+    ``coverage.simplify_tolerance``, as its time estimates see it: a staircase of grid steps
+    along a slanted wall is one line, not a dozen stops): ``kept`` (M) are the indices of the
+    waypoints it keeps, ``segment`` (N) for each waypoint i the simplified segment k (from
+    vertex k − 1 to k) that the path's segment into i lies on (0 before ``kept[0]``). At each
+    kept vertex: the rounding radius (:func:`corner_radii`), and the speed of the time-optimal
+    braking profile (the backward pass, v_k = min(cap_k, √(v_{k+1}² + 2·a·|p_{k+1} − p_k|)),
+    with the cap 0 at the ends and at stops; on a rounded vertex √(lateral_acc·R),
+    max_vel_theta·R, and the speed that drives the arc's two tangent lengths in the least time
+    the heading can turn through it, :func:`turn_time`: the turn rate cannot step to v/R)."""
+
+    kept: np.ndarray
+    segment: np.ndarray
     radii: np.ndarray
     speeds: np.ndarray
 
     @classmethod
     def of(
-        cls, points: np.ndarray, stop_angle: float, params: TrackerParams, robot: RobotSpec
+        cls,
+        points: np.ndarray,
+        start: int,
+        stop_angle: float,
+        tolerance: float,
+        params: TrackerParams,
+        robot: RobotSpec,
     ) -> Profile:
         pts = np.asarray(points, dtype=float)
-        radii = corner_radii(pts, stop_angle, params)
-        caps = np.full(len(pts), robot.max_vel_x)
-        turn = turn_angles(pts)
+        start = min(max(start, 0), max(len(pts) - 1, 0))
+        kept = start + simplify_indices(pts[start:], tolerance)
+        segment = np.zeros(len(pts), dtype=np.int64)
+        if len(kept) > 1:
+            segment[start + 1 :] = np.searchsorted(kept, np.arange(start + 1, len(pts)))
+        simple = pts[kept]
+        radii = corner_radii(simple, stop_angle, params)
+        caps = np.full(len(simple), robot.max_vel_x)
+        turn = turn_angles(simple)
         caps[turn > stop_angle] = 0.0
         round_ = radii > 0
         r, theta = radii[round_], turn[round_]
@@ -162,18 +183,30 @@ class Profile:
         )
         if len(caps):
             caps[0] = caps[-1] = 0.0
-        seg = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
+        seg = np.hypot(*np.diff(simple, axis=0).T) if len(simple) > 1 else np.zeros(0)
         v = caps
-        for i in range(len(v) - 2, -1, -1):
-            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2.0 * robot.acc_lim_x * seg[i]))
-        return cls(radii, v)
+        for k in range(len(v) - 2, -1, -1):
+            v[k] = min(v[k], math.sqrt(v[k + 1] ** 2 + 2.0 * robot.acc_lim_x * seg[k]))
+        return cls(kept, segment, radii, v)
 
-    def tangent(self, points: np.ndarray, i: int) -> float:
-        """How far before and after vertex ``i`` its rounding arc leaves the segments (m)."""
-        r = float(self.radii[i])
-        if r <= 0:
+    def vertex(self, i: int) -> int:
+        """The simplified vertex that waypoint ``i`` is, or −1."""
+        k = int(np.searchsorted(self.kept, i))
+        return k if k < len(self.kept) and self.kept[k] == i else -1
+
+    def is_stop(self, i: int) -> bool:
+        """Whether the robot comes to rest on waypoint ``i``."""
+        k = self.vertex(i)
+        return k >= 0 and self.speeds[k] == 0.0
+
+    def tangent(self, points: np.ndarray, k: int) -> float:
+        """How far before and after simplified vertex ``k`` its rounding arc leaves the
+        segments (m); 0 where it is not rounded."""
+        r = float(self.radii[k])
+        if r <= 0 or not 0 < k < len(self.kept) - 1:
             return 0.0
-        return r * math.tan(float(turn_angles(points[i - 1 : i + 2])[1]) / 2)
+        turn = turn_angles(points[self.kept[k - 1 : k + 2]])[1]
+        return r * math.tan(float(turn) / 2)
 
 
 @dataclass(frozen=True)
@@ -272,14 +305,22 @@ def turn_rate(heading_error: float, w_now: float, dt: float, robot: RobotSpec) -
 
 
 def braking_arc(
-    pose: tuple[float, float, float], v: float, w: float, accel: float, spacing: float
+    pose: tuple[float, float, float],
+    v: float,
+    w: float,
+    v_now: float,
+    dt: float,
+    accel: float,
+    spacing: float,
 ) -> np.ndarray:
     """Points (K, 2) at most ``spacing`` apart of the arc the robot drives when it holds the
-    curvature of (v, ω) and brakes from v at ``accel``: the v²/(2·accel) it needs to stop,
-    the trajectory Fox et al. (1997) check a velocity's admissibility on. Empty at v ≤ 0."""
+    curvature of (v, ω) for the control period ``dt`` (covering about (v_now + v)·dt/2) and then
+    brakes from v at ``accel`` (v²/(2·accel) more): the trajectory on which Fox et al. (1997)
+    judge a velocity admissible, with the period before the next command can brake.
+    Empty at v ≤ 0."""
     if v <= 0:
         return np.zeros((0, 2))
-    length = v * v / (2 * accel)
+    length = (max(v_now, 0.0) + v) / 2 * dt + v * v / (2 * accel)
     s = np.linspace(0.0, length, max(2, math.ceil(length / spacing) + 1))[1:]
     kappa = w / v
     half = kappa * s / 2

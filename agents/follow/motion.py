@@ -29,7 +29,7 @@ from agents.follow.edge import edge_step
 from agents.follow.escape import ESCAPE_MARGIN_M, escape_step, start_escape
 from agents.follow.primitives import gaps, held, rotate_in_place
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
-from agents.follow.track import track_step
+from agents.follow.track import reached, track_step
 from agents.peers import rim_points
 from fleet.params import AgentParams
 from planners.dwa import DWAResult, dwa_control, rollout
@@ -48,22 +48,21 @@ def advance(
     short of (or past) the waypoint along the segment into it and at most
     ``waypoint_tolerance`` beside that segment, or within ``along_tolerance`` of it
     (``goal_tolerance`` for the last one). Lanes thus end where they end, whatever the robot's
-    small sideways offset, instead of being cut short by a radius around their ends. A tracked
-    segment (:attr:`FollowState.tracked`) ends only level with its waypoint: a stop of its
-    braking profile (speed 0 in ``state.profile``) within ``stop_tolerance`` short of it (the
-    tracker's;
-    ``along_tolerance`` when not given), so the robot turns onto the next lane on its line."""
+    small sideways offset, instead of being cut short by a radius around their ends. On a
+    tracked segment (:attr:`FollowState.tracked`) a waypoint is reached level with it on the
+    simplified segment the tracker drives, a stop within ``stop_tolerance`` (the tracker's;
+    ``along_tolerance`` when not given) short of it (:func:`agents.follow.track.reached`), so
+    the robot turns onto the next lane on its line."""
     wps, i = state.waypoints, state.index
     n = len(wps)
+    stop_tolerance = agent.along_tolerance if stop_tolerance is None else stop_tolerance
     while i < n:
-        if state.track_from is not None and state.track_from < i and state.profile is not None:
-            stop = state.profile.speeds[i] == 0.0 or i == state.stop_at
-            tol = agent.along_tolerance if stop_tolerance is None else stop_tolerance
-            near = tol if stop else 0.0
-            along_tolerance = near
-        else:
-            near = agent.goal_tolerance if i == n - 1 else agent.along_tolerance
-            along_tolerance = agent.along_tolerance
+        if state.track_from is not None and state.profile is not None and state.track_from < i:
+            if reached(state.at(i), xy, stop_tolerance, agent.waypoint_tolerance):
+                i += 1
+                continue
+            break
+        near = agent.goal_tolerance if i == n - 1 else agent.along_tolerance
         if math.dist(xy, wps[i]) <= near:
             i += 1
             continue
@@ -74,7 +73,7 @@ def advance(
                 rel = xy - wps[i - 1]
                 along = float(rel @ seg) / length
                 beside = abs(float(rel[0] * seg[1] - rel[1] * seg[0])) / length
-                if along >= length - along_tolerance and beside <= agent.waypoint_tolerance:
+                if along >= length - agent.along_tolerance and beside <= agent.waypoint_tolerance:
                     i += 1
                     continue
         break

@@ -85,8 +85,8 @@ class Situation:
 class FollowParams:
     """Everything the follower is tuned by, built once from the config (:meth:`of`): DWA's
     parameters, the robot, the agent's, the wall follower's (None: no edge pass), the
-    control period ``dt`` (s), the path tracker's and the turn (rad) beyond which a vertex of
-    the plan is a stop."""
+    control period ``dt`` (s), the path tracker's, the turn (rad) beyond which a vertex of the
+    plan is a stop and the tolerance (m) of the simplification the tracker drives."""
 
     dwa: DWAParams
     robot: RobotSpec
@@ -95,11 +95,15 @@ class FollowParams:
     dt: float
     tracker: TrackerParams = field(default_factory=TrackerParams)
     stop_angle: float = math.radians(45.0)
+    simplify_tolerance: float = 0.03
 
     @classmethod
     def of(cls, cfg: FleetConfig) -> FollowParams:
-        """The control period is the scan period: one step per scan. The tracker stops to turn
-        where the plan's time estimates do (``coverage.turn_angle_deg``)."""
+        """The control period is the scan period: one step per scan. The tracker drives the
+        path nearly as the plan's time estimates see it: simplified, though by no more than the
+        plan's clearance from obstacles (``coordinator.wall_clearance``; the estimates'
+        ``coverage.simplify_tolerance`` cut a table's corner), stopping to turn where it turns by
+        more than ``coverage.turn_angle_deg``."""
         wall = cfg.wall_follow if cfg.agent.edge_pass else None
         return cls(
             cfg.dwa,
@@ -109,4 +113,5 @@ class FollowParams:
             1.0 / cfg.lidar.rate_hz,
             cfg.tracker,
             math.radians(cfg.coverage.turn_angle_deg),
+            min(cfg.coverage.simplify_tolerance, cfg.coordinator.wall_clearance),
         )

@@ -39,30 +39,70 @@ NOISE_M = 0.005
 
 def tracked(waypoints: np.ndarray, sweep_from: int, params: FollowParams) -> FollowState:
     """A follower whose segments after waypoint ``sweep_from`` (the plan's sweeps) are tracked,
-    by the :class:`planners.tracking.Profile` of the whole path."""
-    profile = Profile.of(waypoints, params.stop_angle, params.tracker, params.robot)
+    by their :class:`planners.tracking.Profile`."""
+    profile = Profile.of(
+        waypoints,
+        sweep_from,
+        params.stop_angle,
+        params.simplify_tolerance,
+        params.tracker,
+        params.robot,
+    )
     return FollowState(waypoints, track_from=sweep_from, profile=profile)
 
 
+def segment(state: FollowState) -> tuple[int, np.ndarray, np.ndarray]:
+    """The simplified segment k the robot is on, heading for waypoint ``state.index``, and its
+    two ends."""
+    assert state.profile is not None
+    profile, wps = state.profile, state.waypoints
+    k = int(profile.segment[state.index])
+    return k, wps[profile.kept[k - 1]], wps[profile.kept[k]]
+
+
+def reached(state: FollowState, xy: np.ndarray, stop_tolerance: float, beside_max: float) -> bool:
+    """Whether the robot at ``xy`` has reached waypoint ``state.index`` of a tracked segment:
+    its projection on the simplified segment is level with the waypoint's (within
+    ``stop_tolerance`` short of it where the robot comes to rest there) and it is at most
+    ``beside_max`` beside the segment."""
+    assert state.profile is not None
+    _, a, b = segment(state)
+    i = state.index
+    here = Frenet.of((float(xy[0]), float(xy[1]), 0.0), a, b)
+    there = Frenet.of((*state.waypoints[i], 0.0), a, b)
+    stop = state.profile.is_stop(i) or i == state.stop_at
+    return (
+        here.along >= there.along - (stop_tolerance if stop else 0.0)
+        and abs(here.left) <= beside_max
+    )
+
+
 def reference(state: FollowState, pose: Pose) -> tuple[Frenet, tuple[tuple[float, float], ...]]:
-    """The robot against its reference: the segment into the next waypoint, or the arc that
+    """The robot against its reference: the simplified segment it is on, or the arc that
     rounds one of its ends when the robot is abreast of that arc; with the speed limits ahead
     as (distance, speed) pairs: the arc it is on (0 m ahead), the next arc's start or the
-    segment's end (0 m/s at a stop, the order of passage's ``stop_at`` among them)."""
+    segment's end (0 m/s at a stop), and the order of passage's ``stop_at`` on the segment."""
     assert state.profile is not None
-    profile, wps, i = state.profile, state.waypoints, state.index
-    error = Frenet.of(pose, wps[i - 1], wps[i])
-    v_end = 0.0 if i == state.stop_at else float(profile.speeds[i])
+    profile, wps = state.profile, state.waypoints
+    k, a, b = segment(state)
+    error = Frenet.of(pose, a, b)
     short = error.length - error.along
-    into = profile.tangent(wps, i) if 0 < i < len(wps) - 1 and i != state.stop_at else 0.0
-    out_of = profile.tangent(wps, i - 1) if i - 1 > 0 else 0.0
+    limits: list[tuple[float, float]] = []
+    if state.index <= state.stop_at <= profile.kept[k]:
+        held = Frenet.of((*wps[state.stop_at], 0.0), a, b)
+        limits.append((max(held.along - error.along, 0.0), 0.0))
+    into = profile.tangent(wps, k)
+    out_of = profile.tangent(wps, k - 1)
+    v_end = float(profile.speeds[k])
     if into and short <= into:
-        return error.on_arc(pose, wps[i - 1], wps[i], wps[i + 1], profile.radii[i]), ((0.0, v_end),)
-    ahead = ((max(short - into, 0.0), v_end),)
+        c = wps[profile.kept[k + 1]]
+        return error.on_arc(pose, a, b, c, profile.radii[k]), ((0.0, v_end), *limits)
+    limits.append((max(short - into, 0.0), v_end))
     if out_of and error.along <= out_of:
-        arc = error.on_arc(pose, wps[i - 2], wps[i - 1], wps[i], profile.radii[i - 1])
-        return arc, ((0.0, float(profile.speeds[i - 1])), *ahead)
-    return error, ahead
+        before = wps[profile.kept[k - 2]]
+        arc = error.on_arc(pose, before, a, b, profile.radii[k - 1])
+        return arc, ((0.0, float(profile.speeds[k - 1])), *limits)
+    return error, tuple(limits)
 
 
 def clear(now: Situation, v: float, w: float, params: FollowParams) -> bool:
@@ -72,7 +112,9 @@ def clear(now: Situation, v: float, w: float, params: FollowParams) -> bool:
     where the robot is nearer already, it may come no more than ``NOISE_M`` nearer."""
     radius, margin = params.robot.radius, params.tracker.check_margin
     here = np.asarray(now.pose[:2], dtype=float)[None, :]
-    arc = braking_arc(now.pose, v, w, params.robot.acc_lim_x, CHECK_SPACING_M)
+    arc = braking_arc(
+        now.pose, v, w, now.velocity[0], params.dt, params.robot.acc_lim_x, CHECK_SPACING_M
+    )
     if len(arc) and len(now.obstacles):
         walls, _ = gaps(np.vstack([here, arc]), now.obstacles, np.zeros((0, 2)), radius)
         walls = walls - radius
@@ -101,11 +143,11 @@ def track_step(
     (``aligning``); otherwise it drives by Samson's law at the braking profile's speed."""
     assert state.profile is not None
     tracker, robot, dt = params.tracker, params.robot, params.dt
-    i = state.index
     error, limits = reference(state, now.pose)
     if abs(error.left) > tracker.rejoin_distance:
         return None
-    after_stop = state.profile.speeds[i - 1] == 0.0 or i - 1 == state.stop_at
+    k, start = int(state.profile.segment[state.index]), state.index - 1
+    after_stop = state.profile.speeds[k - 1] == 0.0 or start == state.stop_at
     limit = tracker.heading_tolerance if state.aligning else tracker.turn_heading
     if after_stop and error.along < tracker.rejoin_distance and abs(error.heading) > limit:
         v0, w0 = now.velocity

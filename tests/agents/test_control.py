@@ -145,7 +145,9 @@ def test_on_a_transit_a_robot_keeps_the_order_of_passage_not_the_rank() -> None:
     rank. The same transit without that order gives way to robot-0 as to any peer above it."""
     cruising = (0.3, 0.0)
     crossing = {"robot-0": _crossing(10.0, plan_id=7, waypoint=2)}
-    ordered = Drive.of(_plan(([1], ["robot-0"], [7], [1]), sweep_from=len(LANE)), [], _params().follow)
+    ordered = Drive.of(
+        _plan(([1], ["robot-0"], [7], [1]), sweep_from=len(LANE)), [], _params().follow
+    )
     unordered = Drive.of(_plan(sweep_from=len(LANE)), [], _params().follow)
     alone = _step(_heard(10.0, unordered, velocity=cruising))[1].cmd_vel
     keeps_order = _step(_heard(10.0, ordered, crossing, cruising))
