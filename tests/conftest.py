@@ -9,6 +9,9 @@ import pytest
 from fleet.bus import open_router
 from fleet.supervisor.launcher import free_port
 
+# one fleet at a time in the whole run, on any number of workers (tests/fleet_lock.py)
+pytest_plugins = ["fleet_lock"]
+
 
 @pytest.fixture(scope="module")
 def router_endpoint() -> Iterator[str]:
@@ -27,12 +30,18 @@ FLEETS = "fleets"
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Run as the README runs the suite (``-n 2``, with ``--dist loadgroup`` from pyproject):
-    the multi-process tests are one group, so one worker runs them one after another, those
-    marked slow first, and never two fleets at once (a fleet at ``--speed 0`` takes both cores,
-    and two starve each other into runs no user would see); every other test module is a group
-    of its own (its module fixtures are made once), taken by whichever worker is free, so the
-    other worker runs nearly all of them while the fleets run."""
+    """Order and group the tests for ``-n 2`` (the README's run, ``--dist loadgroup`` from
+    pyproject). The multi-process tests (marked ``integration``) come first, those marked slow
+    first of all, so the longest fleets start at once; and they are one xdist group, so one
+    worker runs them one after another while the other runs nearly all the rest (every other
+    module is a group of its own, its module fixtures made once, taken by whichever worker is
+    free). That grouping rests on xdist rewriting each node id it schedules by (``…@fleets``),
+    which pytest-xdist 3.8 does under pytest 9.0 but silently does not under the structured
+    node ids of pytest's main branch (pytest-xdist#1386); then the fleets go round both
+    workers. Either way two fleets never run at once (a fleet at ``--speed 0`` takes both
+    cores, and two would starve each other into runs no user would see): every
+    ``integration`` test holds the lock of ``tests/fleet_lock.py``, shared by the workers, so
+    at worst one worker waits for the other's fleet."""
     for item in items:
         integration = item.get_closest_marker("integration") is not None
         group = FLEETS if integration else item.nodeid.split("::", 1)[0]
