@@ -52,6 +52,9 @@ class TrackerParams:
       the scan's points (and the peers' discs); where the robot is nearer already, it may not
       come nearer by more than the scan's noise. 0: not touching, so that a lane planned
       beside a wall (``coordinator.wall_clearance`` from it) is driven at speed.
+    - ``clear_ahead`` (m): the plan's path ahead must be that clear, by ``check_margin``, this
+      much beyond where the robot can stop: a peer or a box on the lane ahead hands the robot to
+      DWA before it has to brake hard, not when it stands at the obstacle.
     - ``rejoin_distance`` (m) and ``rejoin_heading`` (rad): the tracker drives only a robot this
       near its segment and heading this near it; farther off (after a detour round an
       obstacle), the local planner brings it back first.
@@ -66,6 +69,7 @@ class TrackerParams:
     turn_heading: float = 0.1
     creep_speed: float = 0.02
     check_margin: float = 0.0
+    clear_ahead: float = 0.1
     rejoin_distance: float = 0.15
     rejoin_heading: float = 0.6
 
@@ -83,7 +87,7 @@ class TrackerParams:
             "rejoin_distance",
             "rejoin_heading",
         )
-        require_non_negative(self, "check_margin")
+        require_non_negative(self, "check_margin", "clear_ahead")
 
 
 def turn_angles(points: np.ndarray) -> np.ndarray:

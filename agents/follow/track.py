@@ -21,6 +21,7 @@ import numpy as np
 from agents.follow.primitives import gaps, held
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
 from planners.dwa import DWAResult, rollout
+from planners.polyline import densify
 from planners.tracking import (
     Frenet,
     Profile,
@@ -30,6 +31,9 @@ from planners.tracking import (
     turn_rate,
 )
 
+# a scan point this far (m) inside the body on the plan's path ahead is the scan's noise at a
+# wall the plan keeps coordinator.wall_clearance from, not something on the path
+PATH_NOISE_M = 0.01
 # the braking arc is checked at points this far apart (m)
 CHECK_SPACING_M = 0.02
 # a command may bring the body this much (m) nearer an obstacle it is already within
@@ -105,12 +109,43 @@ def reference(state: FollowState, pose: Pose) -> tuple[Frenet, tuple[tuple[float
     return error, tuple(limits)
 
 
-def clear(now: Situation, v: float, w: float, params: FollowParams) -> bool:
+def path_ahead(state: FollowState, pose: Pose, length: float) -> np.ndarray:
+    """Points at most ``CHECK_SPACING_M`` apart of the simplified path ahead of the robot's
+    projection onto it, ``length`` metres along it or up to its next stop (beyond a stop the
+    robot turns first, and checks again)."""
+    assert state.profile is not None
+    profile, wps = state.profile, state.waypoints
+    k, a, b = segment(state)
+    error = Frenet.of(pose, a, b)
+    u = (b - a) / max(error.length, 1e-12)
+    points = [a + u * min(max(error.along, 0.0), error.length)]
+    left = length
+    while left > 0 and k < len(profile.kept):
+        end = wps[profile.kept[k]]
+        step = math.dist(points[-1], end)
+        if step >= left:
+            points.append(points[-1] + (end - points[-1]) * (left / step))
+            break
+        points.append(end)
+        left -= step
+        if profile.speeds[k] == 0.0 or profile.kept[k] >= state.stop_at >= state.index:
+            break
+        k += 1
+    return densify(np.array(points), CHECK_SPACING_M)
+
+
+def clear(now: Situation, v: float, w: float, ahead: np.ndarray, params: FollowParams) -> bool:
     """Whether (v, ω) keeps the body ``tracker.check_margin`` clear of the scan's points along
-    the arc the robot brakes along from it, and of the peers' discs along DWA's own rollout
+    the plan's path ``ahead`` (:func:`path_ahead`: something the plan does not know stands on
+    it, a peer or a box), along the arc the robot brakes along from the command, and of the
+    peers' discs along DWA's own rollout
     (the command held for ``dwa.sim_time``, as far ahead as the peers' intents are judged);
     where the robot is nearer already, it may come no more than ``NOISE_M`` nearer."""
     radius, margin = params.robot.radius, params.tracker.check_margin
+    if len(ahead) and len(now.obstacles):
+        walls, _ = gaps(ahead, now.obstacles, np.zeros((0, 2)), radius)
+        if (walls - radius).min() < margin - PATH_NOISE_M:
+            return False
     here = np.asarray(now.pose[:2], dtype=float)[None, :]
     arc = braking_arc(
         now.pose, v, w, now.velocity[0], params.dt, params.robot.acc_lim_x, CHECK_SPACING_M
@@ -136,7 +171,8 @@ def track_step(
 ) -> tuple[FollowState, DWAResult] | None:
     """The tracker's command on a tracked segment, or None where DWA drives: the robot is more
     than ``rejoin_distance`` off its reference or heads more than ``rejoin_heading`` off it
-    (away from a stop it turns at), or the command fails :func:`clear`.
+    (away from a stop it turns at), or the command fails :func:`clear` (the path checked as far
+    as the robot needs to stop, and ``clear_ahead`` farther).
 
     At the segment's start, after a stop, a robot heading more than ``turn_heading`` off the
     segment brakes to rest and turns in place onto it, to within ``heading_tolerance``
@@ -168,6 +204,7 @@ def track_step(
     v = min(max(v, v0 - dv, 0.0), v0 + dv)
     w = samson_turn_rate(v, error, tracker)
     w = min(max(w, -robot.max_vel_theta, w0 - dw), robot.max_vel_theta, w0 + dw)
-    if not clear(now, v, w, params):
+    reach = (v0 + v) / 2 * dt + v * v / (2 * robot.acc_lim_x) + tracker.clear_ahead
+    if not clear(now, v, w, path_ahead(state, now.pose, reach), params):
         return None
     return replace(state, aligning=False), held(now.pose, v, w, params.dwa)
