@@ -50,8 +50,9 @@ class TrackerParams:
       of the braking are driven, not approached for ever.
     - ``check_margin`` (m): the gap the braking arc of a command must keep between the body and
       the scan's points (and the peers' discs); where the robot is nearer already, it may not
-      come nearer by more than the scan's noise. 0: not touching, so that a lane planned
-      beside a wall (``coordinator.wall_clearance`` from it) is driven at speed.
+      come nearer by more than the scan's noise, so that a lane planned beside a wall
+      (``coordinator.wall_clearance`` from it) is driven at speed. As DWA's ``safety_margin``:
+      at a convex corner the nearest scan point errs outward.
     - ``clear_ahead`` (m): the plan's path ahead must be that clear, by ``check_margin``, this
       much beyond where the robot can stop: a peer or a box on the lane ahead hands the robot to
       DWA before it has to brake hard, not when it stands at the obstacle.
@@ -68,7 +69,7 @@ class TrackerParams:
     heading_tolerance: float = 0.02
     turn_heading: float = 0.1
     creep_speed: float = 0.02
-    check_margin: float = 0.0
+    check_margin: float = 0.01
     clear_ahead: float = 0.1
     rejoin_distance: float = 0.15
     rejoin_heading: float = 0.6

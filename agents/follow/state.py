@@ -100,10 +100,9 @@ class FollowParams:
     @classmethod
     def of(cls, cfg: FleetConfig) -> FollowParams:
         """The control period is the scan period: one step per scan. The tracker drives the
-        path nearly as the plan's time estimates see it: simplified, though by no more than the
-        plan's clearance from obstacles (``coordinator.wall_clearance``; the estimates'
-        ``coverage.simplify_tolerance`` cut a table's corner), stopping to turn where it turns by
-        more than ``coverage.turn_angle_deg``."""
+        path as the plan's time estimates see it: simplified by ``coverage.simplify_tolerance``,
+        stopping to turn where it turns by more than ``coverage.turn_angle_deg`` (a
+        simplification that cuts a corner is caught by the tracker's check, and DWA drives it)."""
         wall = cfg.wall_follow if cfg.agent.edge_pass else None
         return cls(
             cfg.dwa,
@@ -113,5 +112,5 @@ class FollowParams:
             1.0 / cfg.lidar.rate_hz,
             cfg.tracker,
             math.radians(cfg.coverage.turn_angle_deg),
-            min(cfg.coverage.simplify_tolerance, cfg.coordinator.wall_clearance),
+            cfg.coverage.simplify_tolerance,
         )
