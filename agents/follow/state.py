@@ -72,13 +72,16 @@ class FollowState:
 @dataclass(frozen=True, eq=False)
 class Situation:
     """What one step sees: the robot's ``pose`` and ``velocity`` (v, ω), the world-frame
-    obstacle points of its scan, and ``peers``, the centres of the discs the robots it gives
-    way to will cover (:func:`agents.peers.intent_centres`)."""
+    obstacle points of its scan, ``peers``, the centres of the discs the robots it gives
+    way to will cover (:func:`agents.peers.intent_centres`), and ``everyone``'s."""
 
     pose: Pose
     velocity: tuple[float, float]
     obstacles: np.ndarray
     peers: np.ndarray
+    # the centres of the discs every live peer will cover, whoever gives way (the tracker
+    # leaves the driving to DWA and its give-way near any of them)
+    everyone: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass(frozen=True)

@@ -169,16 +169,25 @@ def clear(now: Situation, v: float, w: float, ahead: np.ndarray, params: FollowP
 def track_step(
     state: FollowState, now: Situation, params: FollowParams
 ) -> tuple[FollowState, DWAResult] | None:
-    """The tracker's command on a tracked segment, or None where DWA drives: the robot is more
-    than ``rejoin_distance`` off its reference or heads more than ``rejoin_heading`` off it
-    (away from a stop it turns at), or the command fails :func:`clear` (the path checked as far
-    as the robot needs to stop, and ``clear_ahead`` farther).
+    """The tracker's command on a tracked segment, or None where DWA drives: a peer's intent
+    comes within ``agent.edge_peer_clear`` (near peers DWA and its give-way drive, as for the
+    edge pass: a peer that gives way moves, and the check below judges only where it is), the
+    robot is more than ``rejoin_distance`` off its reference or heads more than
+    ``rejoin_heading`` off it (away from a stop it turns at), or the command fails
+    :func:`clear` (the path checked as far as the robot needs to stop, and ``clear_ahead``
+    farther).
 
     At the segment's start, after a stop, a robot heading more than ``turn_heading`` off the
     segment brakes to rest and turns in place onto it, to within ``heading_tolerance``
     (``aligning``); otherwise it drives by Samson's law at the braking profile's speed."""
     assert state.profile is not None
     tracker, robot, dt = params.tracker, params.robot, params.dt
+    if (
+        len(now.everyone)
+        and float(np.hypot(*(now.everyone - np.asarray(now.pose[:2])).T).min())
+        < params.agent.edge_peer_clear
+    ):
+        return None
     error, limits = reference(state, now.pose)
     if abs(error.left) > tracker.rejoin_distance:
         return None
