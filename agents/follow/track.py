@@ -109,42 +109,63 @@ def reference(state: FollowState, pose: Pose) -> tuple[Frenet, tuple[tuple[float
     return error, tuple(limits)
 
 
-def path_ahead(state: FollowState, pose: Pose, length: float) -> np.ndarray:
-    """Points at most ``CHECK_SPACING_M`` apart of the simplified path ahead of the robot's
-    projection onto it, ``length`` metres along it or up to its next stop (beyond a stop the
-    robot turns first, and checks again)."""
-    assert state.profile is not None
-    profile, wps = state.profile, state.waypoints
-    k, a, b = segment(state)
-    error = Frenet.of(pose, a, b)
-    u = (b - a) / max(error.length, 1e-12)
-    points = [a + u * min(max(error.along, 0.0), error.length)]
+def _along(points: list[np.ndarray], ends: list[np.ndarray], length: float) -> np.ndarray:
+    """``points`` (the start) run on through ``ends`` for ``length`` metres, densified."""
     left = length
-    while left > 0 and k < len(profile.kept):
-        end = wps[profile.kept[k]]
+    for end in ends:
         step = math.dist(points[-1], end)
         if step >= left:
-            points.append(points[-1] + (end - points[-1]) * (left / step))
+            points.append(points[-1] + (end - points[-1]) * (left / max(step, 1e-12)))
             break
         points.append(end)
         left -= step
-        if profile.speeds[k] == 0.0 or profile.kept[k] >= state.stop_at >= state.index:
-            break
-        k += 1
     return densify(np.array(points), CHECK_SPACING_M)
 
 
-def clear(now: Situation, v: float, w: float, ahead: np.ndarray, params: FollowParams) -> bool:
+def path_ahead(state: FollowState, pose: Pose, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points at most ``CHECK_SPACING_M`` apart of the path ahead of the robot's projection
+    onto it, ``length`` metres along it or up to its next stop (beyond a stop the robot turns
+    first, and checks again): the simplified path the tracker drives, and the plan's own."""
+    assert state.profile is not None
+    profile, wps, i = state.profile, state.waypoints, state.index
+    k, a, b = segment(state)
+    error = Frenet.of(pose, a, b)
+    u = (b - a) / max(error.length, 1e-12)
+    last = k
+    while last < len(profile.kept) - 1 and profile.speeds[last] > 0.0:
+        last += 1
+    last_wp = int(profile.kept[last])
+    if i <= state.stop_at < last_wp:
+        last_wp = state.stop_at
+        last = int(profile.segment[last_wp])
+    ends = [wps[j] for j in profile.kept[k : last + 1] if j <= last_wp]
+    tracked_path = _along([a + u * min(max(error.along, 0.0), error.length)], ends, length)
+    raw = Frenet.of(pose, wps[i - 1], wps[i])
+    ru = (wps[i] - wps[i - 1]) / max(raw.length, 1e-12)
+    start = wps[i - 1] + ru * min(max(raw.along, 0.0), raw.length)
+    return tracked_path, _along([start], list(wps[i : last_wp + 1]), length)
+
+
+def clear(
+    now: Situation,
+    v: float,
+    w: float,
+    ahead: tuple[np.ndarray, np.ndarray],
+    params: FollowParams,
+) -> bool:
     """Whether (v, ω) keeps the body ``tracker.check_margin`` clear of the scan's points along
-    the plan's path ``ahead`` (:func:`path_ahead`: something the plan does not know stands on
-    it, a peer or a box), along the arc the robot brakes along from the command, and of the
+    the path ``ahead`` (:func:`path_ahead`: something the plan does not know stands on it, a
+    peer or a box) and as clear as along the plan's own path there (the simplification cut no
+    corner of a table), along the arc the robot brakes along from the command, and of the
     peers' discs along DWA's own rollout
     (the command held for ``dwa.sim_time``, as far ahead as the peers' intents are judged);
     where the robot is nearer already, it may come no more than ``NOISE_M`` nearer."""
     radius, margin = params.robot.radius, params.tracker.check_margin
-    if len(ahead) and len(now.obstacles):
-        walls, _ = gaps(ahead, now.obstacles, np.zeros((0, 2)), radius)
-        if (walls - radius).min() < margin - PATH_NOISE_M:
+    tracked_path, plan = ahead
+    if len(tracked_path) and len(now.obstacles):
+        walls, _ = gaps(tracked_path, now.obstacles, np.zeros((0, 2)), radius)
+        planned, _ = gaps(plan, now.obstacles, np.zeros((0, 2)), radius)
+        if walls.min() - radius < margin - PATH_NOISE_M or walls.min() < planned.min() - NOISE_M:
             return False
     here = np.asarray(now.pose[:2], dtype=float)[None, :]
     arc = braking_arc(
