@@ -308,9 +308,12 @@ def _follow(
         everyone=False,
         skip=ordered,
     )
+    everyone = to_avoid(
+        params.robot_id, heard.peers, heard.scan.stamp, agent.stale_after_s, everyone=True
+    )
     predicted = predict(pose, state.command, heard.latency_s)
     follow, result = follow_step(
-        before, Situation(predicted, heard.velocity, obstacles, peers), params.follow
+        before, Situation(predicted, heard.velocity, obstacles, peers, everyone), params.follow
     )
     if follow.skipped > before.skipped:
         at = before.waypoints[before.index]

@@ -50,8 +50,12 @@ class TrackerParams:
       of the braking are driven, not approached for ever.
     - ``check_margin`` (m): the gap the braking arc of a command must keep between the body and
       the scan's points (and the peers' discs); where the robot is nearer already, it may not
-      come nearer by more than the scan's noise. 0: not touching, so that a lane planned
-      beside a wall (``coordinator.wall_clearance`` from it) is driven at speed.
+      come nearer by more than the scan's noise, so that a lane planned beside a wall
+      (``coordinator.wall_clearance`` from it) is driven at speed. As DWA's ``safety_margin``:
+      at a convex corner the nearest scan point errs outward.
+    - ``clear_ahead`` (m): the plan's path ahead must be that clear, by ``check_margin``, this
+      much beyond where the robot can stop: a peer or a box on the lane ahead hands the robot to
+      DWA before it has to brake hard, not when it stands at the obstacle.
     - ``rejoin_distance`` (m) and ``rejoin_heading`` (rad): the tracker drives only a robot this
       near its segment and heading this near it; farther off (after a detour round an
       obstacle), the local planner brings it back first.
@@ -65,7 +69,8 @@ class TrackerParams:
     heading_tolerance: float = 0.02
     turn_heading: float = 0.1
     creep_speed: float = 0.02
-    check_margin: float = 0.0
+    check_margin: float = 0.01
+    clear_ahead: float = 0.1
     rejoin_distance: float = 0.15
     rejoin_heading: float = 0.6
 
@@ -83,7 +88,7 @@ class TrackerParams:
             "rejoin_distance",
             "rejoin_heading",
         )
-        require_non_negative(self, "check_margin")
+        require_non_negative(self, "check_margin", "clear_ahead")
 
 
 def turn_angles(points: np.ndarray) -> np.ndarray:
@@ -280,11 +285,15 @@ def track_speed(
     The robot's speed moves from ``v_now`` toward the command v at up to ``acc_lim_x`` within
     the period and covers about (v_now + v)·dt/2 in it; the command is the largest v from which
     it can still brake to ``v_end`` in what is left after that:
-    v² + a·dt·v + a·dt·v_now − v_end² − 2·a·d ≤ 0, d the distance to the segment's end. At
-    least ``creep_speed`` short of a stop, so the last millimetres are driven; scaled by the
-    cosine of the heading error."""
+    v² + a·dt·v + a·dt·v_now − v_end² − 2·a·d ≤ 0, with d the distance to the segment's end
+    less v_now·dt/2: the speed a command is judged from is older than the command's effect by
+    about half a period (the odometry's age and the wait for the next scan; in the simulator
+    the robot stopped 15 mm past its stops without it and 2 mm short with it). At least
+    ``creep_speed`` short of a stop, so the last millimetres are driven; scaled by the cosine
+    of the heading error."""
     a = robot.acc_lim_x
-    c = a * dt * max(v_now, 0.0) - v_end**2 - 2 * a * max(short, 0.0)
+    v0 = max(v_now, 0.0)
+    c = a * dt * v0 - v_end**2 - 2 * a * max(short - v0 * dt / 2, 0.0)
     v = (-a * dt + math.sqrt(max((a * dt) ** 2 - 4 * c, 0.0))) / 2
     v = min(robot.max_vel_x, max(v, 0.0))
     if v_end == 0.0 and short > params.stop_tolerance:

@@ -72,13 +72,16 @@ class FollowState:
 @dataclass(frozen=True, eq=False)
 class Situation:
     """What one step sees: the robot's ``pose`` and ``velocity`` (v, ω), the world-frame
-    obstacle points of its scan, and ``peers``, the centres of the discs the robots it gives
-    way to will cover (:func:`agents.peers.intent_centres`)."""
+    obstacle points of its scan, ``peers``, the centres of the discs the robots it gives
+    way to will cover (:func:`agents.peers.intent_centres`), and ``everyone``'s."""
 
     pose: Pose
     velocity: tuple[float, float]
     obstacles: np.ndarray
     peers: np.ndarray
+    # the centres of the discs every live peer will cover, whoever gives way (the tracker
+    # leaves the driving to DWA and its give-way near any of them)
+    everyone: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass(frozen=True)
@@ -100,10 +103,9 @@ class FollowParams:
     @classmethod
     def of(cls, cfg: FleetConfig) -> FollowParams:
         """The control period is the scan period: one step per scan. The tracker drives the
-        path nearly as the plan's time estimates see it: simplified, though by no more than the
-        plan's clearance from obstacles (``coordinator.wall_clearance``; the estimates'
-        ``coverage.simplify_tolerance`` cut a table's corner), stopping to turn where it turns by
-        more than ``coverage.turn_angle_deg``."""
+        path as the plan's time estimates see it: simplified by ``coverage.simplify_tolerance``,
+        stopping to turn where it turns by more than ``coverage.turn_angle_deg`` (a
+        simplification that cuts a corner is caught by the tracker's check, and DWA drives it)."""
         wall = cfg.wall_follow if cfg.agent.edge_pass else None
         return cls(
             cfg.dwa,
@@ -113,5 +115,5 @@ class FollowParams:
             1.0 / cfg.lidar.rate_hz,
             cfg.tracker,
             math.radians(cfg.coverage.turn_angle_deg),
-            min(cfg.coverage.simplify_tolerance, cfg.coordinator.wall_clearance),
+            cfg.coverage.simplify_tolerance,
         )

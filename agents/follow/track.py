@@ -21,6 +21,7 @@ import numpy as np
 from agents.follow.primitives import gaps, held
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
 from planners.dwa import DWAResult, rollout
+from planners.polyline import densify
 from planners.tracking import (
     Frenet,
     Profile,
@@ -30,6 +31,9 @@ from planners.tracking import (
     turn_rate,
 )
 
+# a scan point this far (m) inside the body on the plan's path ahead is the scan's noise at a
+# wall the plan keeps coordinator.wall_clearance from, not something on the path
+PATH_NOISE_M = 0.01
 # the braking arc is checked at points this far apart (m)
 CHECK_SPACING_M = 0.02
 # a command may bring the body this much (m) nearer an obstacle it is already within
@@ -105,12 +109,66 @@ def reference(state: FollowState, pose: Pose) -> tuple[Frenet, tuple[tuple[float
     return error, tuple(limits)
 
 
-def clear(now: Situation, v: float, w: float, params: FollowParams) -> bool:
+def _along(points: list[np.ndarray], ends: list[np.ndarray], length: float) -> np.ndarray:
+    """``points`` (the start) run on through ``ends`` for ``length`` metres, densified."""
+    left = length
+    for end in ends:
+        step = math.dist(points[-1], end)
+        if step >= left:
+            points.append(points[-1] + (end - points[-1]) * (left / max(step, 1e-12)))
+            break
+        points.append(end)
+        left -= step
+    return densify(np.array(points), CHECK_SPACING_M)
+
+
+def path_ahead(state: FollowState, pose: Pose, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points at most ``CHECK_SPACING_M`` apart of the path ahead of the robot's projection
+    onto it, ``length`` metres along it or up to its next stop (beyond a stop the robot turns
+    first, and checks again): the simplified path the tracker drives, and the plan's own."""
+    assert state.profile is not None
+    profile, wps, i = state.profile, state.waypoints, state.index
+    k, a, b = segment(state)
+    error = Frenet.of(pose, a, b)
+    u = (b - a) / max(error.length, 1e-12)
+    last = k
+    while last < len(profile.kept) - 1 and profile.speeds[last] > 0.0:
+        last += 1
+    last_wp = int(profile.kept[last])
+    if i <= state.stop_at < last_wp:
+        last_wp = state.stop_at
+        last = int(profile.segment[last_wp])
+    ends = [wps[j] for j in profile.kept[k : last + 1] if j <= last_wp]
+    tracked_path = _along([a + u * min(max(error.along, 0.0), error.length)], ends, length)
+    raw = Frenet.of(pose, wps[i - 1], wps[i])
+    ru = (wps[i] - wps[i - 1]) / max(raw.length, 1e-12)
+    start = wps[i - 1] + ru * min(max(raw.along, 0.0), raw.length)
+    return tracked_path, _along([start], list(wps[i : last_wp + 1]), length)
+
+
+def clear(
+    now: Situation,
+    v: float,
+    w: float,
+    ahead: tuple[np.ndarray, np.ndarray],
+    params: FollowParams,
+) -> bool:
     """Whether (v, ω) keeps the body ``tracker.check_margin`` clear of the scan's points along
-    the arc the robot brakes along from it, and of the peers' discs along DWA's own rollout
+    the path ``ahead`` (:func:`path_ahead`: something the plan does not know stands on it, a
+    peer or a box) and as clear as along the plan's own path there (the simplification cut no
+    corner of a table), along the arc the robot brakes along from the command, and of the
+    peers' discs along DWA's own rollout
     (the command held for ``dwa.sim_time``, as far ahead as the peers' intents are judged);
-    where the robot is nearer already, it may come no more than ``NOISE_M`` nearer."""
+    where the robot is nearer already, it may come no more than ``NOISE_M`` nearer, and never
+    nearer than ``NOISE_M`` (step by step that allowance let a robot 1.2 cm off its line creep
+    onto a table's edge)."""
     radius, margin = params.robot.radius, params.tracker.check_margin
+    tracked_path, plan = ahead
+    if len(tracked_path) and len(now.obstacles):
+        walls, _ = gaps(tracked_path, now.obstacles, np.zeros((0, 2)), radius)
+        planned, _ = gaps(plan, now.obstacles, np.zeros((0, 2)), radius)
+        if walls.min() - radius < margin - PATH_NOISE_M or walls.min() < planned.min() - NOISE_M:
+            return False
     here = np.asarray(now.pose[:2], dtype=float)[None, :]
     arc = braking_arc(
         now.pose, v, w, now.velocity[0], params.dt, params.robot.acc_lim_x, CHECK_SPACING_M
@@ -118,7 +176,7 @@ def clear(now: Situation, v: float, w: float, params: FollowParams) -> bool:
     if len(arc) and len(now.obstacles):
         walls, _ = gaps(np.vstack([here, arc]), now.obstacles, np.zeros((0, 2)), radius)
         walls = walls - radius
-        if walls[1:].min() < min(margin, walls[0] - NOISE_M):
+        if walls[1:].min() < max(NOISE_M, min(margin, walls[0] - NOISE_M)):
             return False
     if not len(now.peers) or v <= 0:
         return True
@@ -134,15 +192,25 @@ def clear(now: Situation, v: float, w: float, params: FollowParams) -> bool:
 def track_step(
     state: FollowState, now: Situation, params: FollowParams
 ) -> tuple[FollowState, DWAResult] | None:
-    """The tracker's command on a tracked segment, or None where DWA drives: the robot is more
-    than ``rejoin_distance`` off its reference or heads more than ``rejoin_heading`` off it
-    (away from a stop it turns at), or the command fails :func:`clear`.
+    """The tracker's command on a tracked segment, or None where DWA drives: a peer's intent
+    comes within ``agent.edge_peer_clear`` (near peers DWA and its give-way drive, as for the
+    edge pass: a peer that gives way moves, and the check below judges only where it is), the
+    robot is more than ``rejoin_distance`` off its reference or heads more than
+    ``rejoin_heading`` off it (away from a stop it turns at), or the command fails
+    :func:`clear` (the path checked as far as the robot needs to stop, and ``clear_ahead``
+    farther).
 
     At the segment's start, after a stop, a robot heading more than ``turn_heading`` off the
     segment brakes to rest and turns in place onto it, to within ``heading_tolerance``
     (``aligning``); otherwise it drives by Samson's law at the braking profile's speed."""
     assert state.profile is not None
     tracker, robot, dt = params.tracker, params.robot, params.dt
+    if (
+        len(now.everyone)
+        and float(np.hypot(*(now.everyone - np.asarray(now.pose[:2])).T).min())
+        < params.agent.edge_peer_clear
+    ):
+        return None
     error, limits = reference(state, now.pose)
     if abs(error.left) > tracker.rejoin_distance:
         return None
@@ -168,6 +236,7 @@ def track_step(
     v = min(max(v, v0 - dv, 0.0), v0 + dv)
     w = samson_turn_rate(v, error, tracker)
     w = min(max(w, -robot.max_vel_theta, w0 - dw), robot.max_vel_theta, w0 + dw)
-    if not clear(now, v, w, params):
+    reach = (v0 + v) / 2 * dt + v * v / (2 * robot.acc_lim_x) + tracker.clear_ahead
+    if not clear(now, v, w, path_ahead(state, now.pose, reach), params):
         return None
     return replace(state, aligning=False), held(now.pose, v, w, params.dwa)

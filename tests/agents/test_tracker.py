@@ -99,11 +99,6 @@ def test_a_lane_entered_from_a_u_turn_stays_within_15_mm(tmp_path: Path) -> None
     assert np.abs(across).max() <= 0.015
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the tracker stops 1 cm short of the box, then DWA's fallback creeps on within the "
-    "scan's noise of it (its rollouts may start and stay within safety_margin) until it touches",
-)
 def test_a_box_the_plan_does_not_know_on_the_lane_is_never_touched(tmp_path: Path) -> None:
     cfg = load_fleet_config()
     path = np.array([[0.5, 1.45], [4.5, 1.45]])
