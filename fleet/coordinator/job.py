@@ -239,11 +239,12 @@ class Job:
                 reopened.append(rec.task.id)
         return reopened, made
 
-    def give_back(self, rid: str, task_id: str) -> str | None:
+    def give_back(self, rid: str, task_id: str, tried: bool = True) -> str | None:
         """``rid``'s plan ended with pieces of ``task_id`` unswept (waypoints it gave up, often
         because a peer stood in the way for a while, or because no robot of its size gets
         there): the remainder of its unswept pieces goes back to the market, remembering that
-        ``rid`` tried it, and its id is returned; None when nothing is left unswept."""
+        ``rid`` tried it unless ``tried`` is false (a peer held it up), and its id is returned;
+        None when nothing is left unswept."""
         rec = self.tasks.get(task_id)
         if rec is None or rec.state != ASSIGNED or rec.owner != rid:
             return None
@@ -251,24 +252,25 @@ class Job:
         if rest is None:
             return None
         rec.state, rec.owner = REPLACED, None
-        self.tasks[rest.id] = TaskRecord(rest, parent=task_id, tried=rec.tried | {rid})
+        by = {rid} if tried else set()
+        self.tasks[rest.id] = TaskRecord(rest, parent=task_id, tried=rec.tried | by)
         return rest.id
 
-    def release(self, rid: str) -> list[str]:
+    def release(self, rid: str, tried: bool = True) -> list[str]:
         """``rid`` is alive but makes no progress: the unswept remainder of the task it drives
-        goes back to the market as a new task that it has tried, its unstarted tasks open
-        again; the tasks opened are returned."""
+        goes back to the market as a new task that it has tried (unless ``tried`` is false: a
+        peer held it up), its unstarted tasks open again; the tasks opened are returned."""
         reopened = []
         for i, rec in enumerate(self.queue(rid)):
             if i == 0 and rec.started:
-                rest = self.give_back(rid, rec.task.id)
+                rest = self.give_back(rid, rec.task.id, tried)
                 if rest is None:
                     self.finish(rid, rec.task.id)
                 else:
                     reopened.append(rest)
             else:
                 rec.state, rec.owner, rec.reverse = OPEN, None, False
-                if i == 0:
+                if i == 0 and tried:
                     rec.tried = rec.tried | {rid}
                 reopened.append(rec.task.id)
         return reopened

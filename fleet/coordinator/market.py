@@ -29,7 +29,10 @@ Progress, not only liveliness: a robot that for ``coordinator.stall_s`` sim seco
 waypoint of its plan and comes no ``coordinator.stall_progress_m`` nearer the one it heads for
 (holding for a peer at a shared cell aside; giving waypoints up is no progress) is stuck: the
 unswept remainder of its task goes back to the market as work it has tried, and its unstarted
-tasks with it; it stays in the market with no work (it waits) and may win other work, whose
+tasks with it (not as tried the first time a robot stalls, or ends its plan with pieces given
+up, on a task after a peer came within ``PEER_NEAR_GAP_M`` of its body on that plan: two
+robots that held each other up in a narrow way have learnt nothing about the task's floor,
+and each may take it again once; a second time it counts); it stays in the market with no work (it waits) and may win other work, whose
 plan starts with a transit planned from where it stands. A robot that no transit takes to its
 task gives the task back the same way. No robot wins a task it has tried; a task every robot
 in the market has tried is ``unreachable``, never counted done (see the job's rules in
@@ -65,6 +68,9 @@ Hook = Callable[[], None]
 WAITING_STATES = ("holding", "done", "waiting", "localizing", "unlocalized")
 # how often the auction looks whether the last winner has acknowledged its award (wall s)
 ACK_POLL_S = 0.002
+# a peer whose centre came within two robot radii and this much (m) of a robot's held it up:
+# the mutual holds seen had centres 0.35-0.54 m apart
+PEER_NEAR_GAP_M = 0.3
 
 
 @dataclass
@@ -113,6 +119,10 @@ class Market:
         # lost robots' bodies, where they last reported themselves
         self.bodies: dict[str, tuple[float, float]] = {}
         self.progress: dict[str, Progress] = {}
+        # the plan on which a peer last came near each robot, and the (robot, task) stalls
+        # forgiven as a peer's doing (each once)
+        self.met: dict[str, int] = {}
+        self.forgiven: set[tuple[str, str]] = set()
         self.stall_s = math.inf
         self.stall_progress_m = 0.0
         self.first_regions = "tour"  # or "compact" (coordinator.first_regions)
@@ -251,13 +261,15 @@ class Market:
             rec = self.job.tasks.get(tid)
             held = rec is not None and rec.state == ASSIGNED and rec.owner == rid
             if held and (msg.state == "done" or swept.all()):
-                again = None if swept.all() else self.job.give_back(rid, tid)
+                held_up = not swept.all() and self.held_up(rid, plan.plan_id, tid)
+                again = None if swept.all() else self.job.give_back(rid, tid, not held_up)
                 if again is None:
                     self.job.finish(rid, tid)
                     self.journal.event("done", rid, tid, "")
                 else:
+                    peer = " (a peer held it up: not as tried by it)" if held_up else ""
                     self.journal.event(
-                        "withdrawn", rid, tid, f"pieces given up: once more as {again}"
+                        "withdrawn", rid, tid, f"pieces given up: once more as {again}{peer}"
                     )
                     self.need_auction = True
                 self.version += 1
@@ -324,6 +336,12 @@ class Market:
             return
         target = plan.waypoints[min(max(msg.waypoint, 0), len(plan.waypoints) - 1)]
         gap = math.dist(xy, target)
+        near = 2 * self.dispatcher.planner.robot.radius + PEER_NEAR_GAP_M
+        if any(
+            o != rid and r.liveness != LOST and r.xy is not None and math.dist(xy, r.xy) < near
+            for o, r in self.job.robots.items()
+        ):
+            self.met[rid] = msg.plan_id
         p = self.progress.get(rid)
         fresh = p is None or p.plan_id != msg.plan_id or msg.state in WAITING_STATES
         if fresh or reached > p.reached or gap < p.best_m - self.stall_progress_m:
@@ -341,14 +359,27 @@ class Market:
                 continue
             if plan is None or plan.plan_id != p.plan_id or now - p.since < self.stall_s:
                 continue
-            self.stuck(rid, f"no progress on its plan for {now - p.since:.0f} s")
+            held_up = self.held_up(rid, plan.plan_id, self.job.current(rid).task.id)
+            self.stuck(rid, f"no progress on its plan for {now - p.since:.0f} s", held_up)
 
-    def stuck(self, rid: str, why: str) -> None:
+    def held_up(self, rid: str, plan_id: int, task_id: str) -> bool:
+        """Whether ``rid``'s trouble on ``task_id``, driven under plan ``plan_id``, is put down
+        to a peer that came near it on that plan: once per robot and task (its remainders
+        included), so two robots that keep meeting there end the way one alone does."""
+        key = (rid, task_id.partition(".")[0])
+        if self.met.get(rid) != plan_id or key in self.forgiven:
+            return False
+        self.forgiven.add(key)
+        return True
+
+    def stuck(self, rid: str, why: str, held_up: bool = False) -> None:
         """``rid`` is alive but gets nowhere: its work goes back to the market (what it was
-        driving as tried by it), and it waits for other work, planned from where it stands."""
+        driving as tried by it, unless a peer ``held_up`` it), and it waits for other work,
+        planned from where it stands."""
         queued = [r.task.id for r in self.job.queue(rid)]  # each saved in its new state
-        reopened = self.job.release(rid)
-        self.journal.event("stuck", rid, "", f"{why}; its work goes back to the market")
+        reopened = self.job.release(rid, tried=not held_up)
+        peer = "; a peer held it up, so not as tried by it" if held_up else ""
+        self.journal.event("stuck", rid, "", f"{why}; its work goes back to the market{peer}")
         for tid in reopened:
             self.journal.event("reopened", rid, tid, "from a stuck robot")
         self.journal.save_tasks(*queued, *reopened)

@@ -64,9 +64,9 @@ class Coordinator:
     def __init__(self, planner: TaskPlanner, robots: list[str]) -> None:
         self.job = Job(CoverageParams(), ROBOT, 0.0)
         self.job.add_tasks(tuple(_task(i) for i in range(6)))
-        for rid in robots:
+        for i, rid in enumerate(robots):
             r = self.job.robot(rid)
-            r.ready, r.xy = True, (0.0, 0.0)
+            r.ready, r.xy = True, (0.0, 2.0 * i)  # 2 m apart: no peer holds another up
         self.sent: list[tuple[str, Message]] = []
         self.sales: list[Sale] = []
         self.bidding: dict[str, float] = {}  # robot -> its price for any lot
@@ -624,3 +624,45 @@ def test_a_task_added_for_freed_floor_before_the_first_sale_is_sold_after_the_to
     owner = c.job.tasks["m01"].owner
     assert owner is not None
     assert [r.task.id for r in c.job.queue(owner)][-2:] == ["t05", "m01"]
+
+
+def _stall(c: Coordinator, start: float, peer_xy: tuple[float, float]) -> None:
+    """robot-0 reports plan 7 on t00 every 5 s from ``start`` without getting anywhere while
+    robot-1 stands at ``peer_xy``, until stall_s has passed."""
+    c.job.robots["robot-1"].xy = peer_xy
+    for at in np.arange(start, start + 45.0, 5.0):
+        c.journal.heard(float(at))
+        c.market.observe(
+            "robot-0", RobotStatus(float(at), "blocked", "t00", 0.2, 2, 5, 0.0, 0, 0, 7)
+        )
+        c.market.check_stalls()
+
+
+@pytest.mark.parametrize(
+    ("peer_xy", "tried"), [((0.45, 0.0), frozenset()), ((3.0, 0.0), frozenset({"robot-0"}))]
+)
+def test_a_robot_a_peer_held_up_has_not_tried_its_task(
+    planner: TaskPlanner, peer_xy: tuple[float, float], tried: frozenset[str]
+) -> None:
+    """robot-0 stalls on t00 with robot-1 0.45 m away (two robots in a narrow way): t00 goes
+    back to the market not as tried by robot-0; with robot-1 3 m away it is robot-0's own
+    failure, and t00 is tried by it."""
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.market.stall_s = 30.0
+    c.job.award("t00", "robot-0", False)
+    c.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", c.job.tasks["t00"].task.path, 0)
+    _stall(c, 0.0, peer_xy)
+    assert [r for r, _, _ in c.events("stuck")] == ["robot-0"]
+    assert c.job.tasks["t00"].state == OPEN and c.job.tasks["t00"].tried == tried
+
+
+def test_a_peer_holds_a_robot_up_on_a_task_once(planner: TaskPlanner) -> None:
+    """The same two robots meet on t00 a second time: now robot-0 has tried it, so two robots
+    that keep holding each other there end as one alone would, not in a loop."""
+    c = Coordinator(planner, ["robot-0", "robot-1"])
+    c.market.stall_s = 30.0
+    for round_, start in enumerate((0.0, 100.0)):
+        c.job.award("t00", "robot-0", False)
+        c.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", c.job.tasks["t00"].task.path, 0)
+        _stall(c, start, (0.45, 0.0))
+        assert c.job.tasks["t00"].tried == (frozenset({"robot-0"}) if round_ else frozenset())
