@@ -111,7 +111,10 @@ def find_changes(
     """The blobs where ``seen`` (the robots' fused map, in the stored map's frame) differs from
     ``stored``, robots at ``robots_xy`` ((R, 2) world metres); added ones first.
     ``stored_clearance`` is ``planners.grid.clearance(stored)`` when the caller keeps it (a
-    watch that looks again and again at one stored map)."""
+    watch that looks again and again at one stored map), or the clearance of the map as it was
+    stored, before the furniture found since went on it: then a face seen near a piece found
+    before (its far side, seen later from the other side) is a change, however near, but a
+    cell on the piece is not."""
     params.validate()
     level = math.log(params.confidence / (1.0 - params.confidence))
     rows, cols = seen.shape
@@ -122,7 +125,7 @@ def find_changes(
     room_of = clearance(stored) if stored_clearance is None else stored_clearance
     room = np.where(inside, room_of[r, c], 0.0)
     stored_occupied = inside & stored.occupied[r, c]
-    added = (seen.log_odds >= level) & (room >= params.wall_margin_m)
+    added = (seen.log_odds >= level) & (room >= params.wall_margin_m) & ~stored_occupied
     body = np.zeros(seen.shape, dtype=bool)
     for p in np.asarray(robots_xy if robots_xy is not None else (), float).reshape(-1, 2):
         body |= np.hypot(xy[..., 0] - p[0], xy[..., 1] - p[1]) <= params.robot_clear_m
@@ -168,9 +171,9 @@ def obstacle_cells(
 
     Scans see furniture's faces towards the robots, not its inside nor its far faces: two faces
     seen at a corner span the whole of a box, one face only itself, and a face seen later from
-    another side (a change of its own: it lies ``wall_margin_m`` or more from what was put on
-    the map before) spans the whole piece once joined with it. Nothing passes between pieces
-    ``join_m`` apart, so filling the gap between them costs no floor a robot reaches."""
+    another side (a change of its own: cells seen occupied off what was put on the map before,
+    see :func:`find_changes`) spans the whole piece once joined with it. Nothing passes between
+    pieces ``join_m`` apart, so filling the gap between them costs no floor a robot reaches."""
     cells = np.asarray(change.cells, float).reshape(-1, 2)
     joined = []
     for i, other in enumerate(earlier):

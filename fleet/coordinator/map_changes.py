@@ -87,6 +87,10 @@ class MapChanges:
         # floor furniture taken away frees gets a task (coordinator.sweep_freed_floor)
         self.sweep_freed = sweep_freed
         self.stored = stored
+        # the wall margin is kept from the map as it was stored, not from the furniture found
+        # since: a piece's faces are seen one side at a time, and the side seen later (its far
+        # face, 0.4 m off, say) must not be lost in the margin of the part found first
+        self._base = stored
         self._stored_clearance = clearance(stored)
         self.params = params
         # the furniture moved in so far, each piece the cells of its box (world centres)
@@ -145,7 +149,9 @@ class MapChanges:
                 self.obstacles = [o for i, o in enumerate(self.obstacles) if i not in joined]
                 self.obstacles.append(cells)
             self.stored = with_cells(self.stored, cells, size, added)
-            self._stored_clearance = clearance(self.stored)
+            if not added:
+                self._base = with_cells(self._base, cells, size, added)
+                self._stored_clearance = clearance(self._base)
             before = planner.brushable
             planner.change_floor(with_cells(planner.grid, cells, size, added))
             c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))

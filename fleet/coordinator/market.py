@@ -32,11 +32,11 @@ unswept remainder of its task goes back to the market as work it has tried, and 
 tasks with it (not as tried the first time a robot stalls, or ends its plan with pieces given
 up, on a task after a peer came within ``PEER_NEAR_GAP_M`` of its body on that plan: two
 robots that held each other up in a narrow way have learnt nothing about the task's floor,
-and each may take it again once; a second time it counts); it stays in the market with no work (it waits) and may win other work, whose
-plan starts with a transit planned from where it stands. A robot that no transit takes to its
-task gives the task back the same way. No robot wins a task it has tried; a task every robot
-in the market has tried is ``unreachable``, never counted done (see the job's rules in
-:mod:`fleet.coordinator.job`).
+and each may take it again once; a second time it counts); it stays in the market with no
+work (it waits) and may win other work, whose plan starts with a transit planned from where
+it stands. A robot that no transit takes to its task gives the task back the same way. No
+robot wins a task it has tried; a task every robot in the market has tried is
+``unreachable``, never counted done (see the job's rules in :mod:`fleet.coordinator.job`).
 """
 
 from __future__ import annotations

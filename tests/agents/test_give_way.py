@@ -49,7 +49,8 @@ starts: [[0.5, 0.5, 0.0]]
 """
 # Each scene: the world, and per robot its start and its waypoints. Crossing: paths at right
 # angles that reach the room's centre at the same time. Head-on: both along the corridor's
-# middle line, towards each other. Strip: up into the strip at its two ends at once, along it, and down.
+# middle line, towards each other. Strip: up into the strip at its two ends at once, along it,
+# and down.
 SCENES = {
     "crossing": (
         ROOM,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from map_pieces import L_FREE, L_OCC, RES, box, flat_segments, lidar_map, route, segment_floor
 
-from planners.grid import GridMap
+from planners.grid import GridMap, clearance
 from planners.map_change import (
     ADDED,
     REMOVED,
@@ -199,3 +199,21 @@ def test_two_faces_span_their_box_and_a_face_seen_later_joins_it() -> None:
     # a face farther off than join_m is a piece of its own
     alone, joined = obstacle_cells(MapChange(ADDED, east, RES), [first], join_m=0.1)
     assert joined == [] and len(alone) == 4
+
+
+def test_the_far_face_of_a_piece_found_before_is_a_change_however_near_it() -> None:
+    """The south part of a chest (x 1.05–1.55, y 2.0–2.3) is on the map already; its north face
+    (y 2.35–2.40) is seen later, 0.1 m from it: a change, judged by the margin from the map as
+    it was stored; by the margin from the map with the south part on it, it is lost."""
+    stored = room_stored()
+    south = stored.cell_to_world(np.argwhere(np.ones((6, 10), bool)) + np.array([40, 21]))
+    on_map = with_cells(stored, south, RES, True)
+    lo = room_seen().log_odds.copy()
+    lo[40:46, 21:31] = L_OCC  # the part found before, seen still
+    lo[47, 21:31] = L_OCC  # the north face
+    seen = LogOddsMap(lo, RES, (0.0, 0.0))
+    found = find_changes(seen, on_map, PARAMS, None, clearance(stored))
+    assert [c.kind for c in found] == [ADDED], [c.describe() for c in found]
+    x0, y0, x1, y1 = found[0].bounds
+    assert (y0, y1) == pytest.approx((2.35, 2.40)) and (x0, x1) == pytest.approx((1.05, 1.55))
+    assert find_changes(seen, on_map, PARAMS) == ()
