@@ -5,7 +5,9 @@ one a user gets). Per run: coverage, repetition, makespan, the makespan the coor
 allocation priced (``plan_estimate_s``) and their ratio, wall time, real-time factor (sim
 seconds per wall second), contacts, waypoints given up, and where the robots' time went (sim
 seconds summed over robots per kind of control step, ``fleet.protocol.TIME_KINDS``), the
-coordinator's ``unreachable`` events (a transit or task it could not route), and where the
+coordinator's ``unreachable`` events (a transit or task it could not route), its ``stuck``
+events (a robot at work that got nowhere for ``coordinator.stall_s``; those with a peer near,
+two robots that held each other, counted apart), and where the
 missed floor lies (report.json's ``missed``: by clearance from walls and furniture). Per
 world: the medians, and the worst run's contacts and given-up waypoints.
 """
@@ -20,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from fleet.coordinator.market import PEER_HELD
 from fleet.protocol import TIME_KINDS
 from fleet.report.summary import MISSED_BANDS
 from fleet.supervisor.runner import RunningFleet
@@ -47,6 +50,7 @@ def run_figures(report: dict[str, Any] | None, world: str, seed: int) -> dict[st
             time_use[k] = round(time_use.get(k, 0.0) + t, 1)
     makespan, estimate = report.get("makespan_s"), report.get("plan_estimate_s")
     wall = report.get("wall_s") or 0.0
+    events = report.get("events") or []
     return {
         "world": world,
         "seed": seed,
@@ -61,10 +65,10 @@ def run_figures(report: dict[str, Any] | None, world: str, seed: int) -> dict[st
         "contacts": report["collisions"],
         "skipped_waypoints": sum(s for s in skipped if s is not None),
         "unreachable": [
-            f"{e['robot']} {e['task']}: {e['detail']}"
-            for e in report.get("events") or []
-            if e["kind"] == "unreachable"
+            f"{e['robot']} {e['task']}: {e['detail']}" for e in events if e["kind"] == "unreachable"
         ],
+        "stuck": sum(e["kind"] == "stuck" for e in events),
+        "stuck_by_peer": sum(e["kind"] == "stuck" and PEER_HELD in e["detail"] for e in events),
         "time_s": time_use,
         "missed": report.get("missed"),
     }
@@ -86,6 +90,8 @@ def world_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     out["contacts_total"] = sum(contacts)
     out["contacts_worst_run"] = max(contacts, default=None)
     out["skipped_total"] = sum(r["skipped_waypoints"] for r in done)
+    out["stuck_total"] = sum(r.get("stuck", 0) for r in done)
+    out["stuck_by_peer_total"] = sum(r.get("stuck_by_peer", 0) for r in done)
     out["time_s_median"] = {k: _median([r["time_s"][k] for r in done]) for k in TIME_KINDS}
     out["missed_median"] = {
         band: _median([(r.get("missed") or {}).get(band) for r in done]) for band in MISSED_BANDS
@@ -165,7 +171,8 @@ def run_line(r: dict[str, Any]) -> str:
         f"makespan {r['makespan_s']} s (plan {r['plan_estimate_s']} s, "
         f"×{r['makespan_over_estimate']}), {r['wall_s']} s wall, RTF {r['real_time_factor']}, "
         f"contacts wall {c['robot_wall']} robot {c['robot_robot']}, "
-        f"given up {r['skipped_waypoints']}"
+        f"given up {r['skipped_waypoints']}, stuck {r.get('stuck', 0)} "
+        f"({r.get('stuck_by_peer', 0)} by a peer)"
         + (
             "; missed " + ", ".join(f"{b} {_pct(v)}" for b, v in r["missed"].items())
             if r.get("missed")
@@ -185,7 +192,8 @@ def table_lines(result: dict[str, Any]) -> list[str]:
             f"(×{s['makespan_over_estimate']}), wall {s['wall_s']} s, RTF "
             f"{s['real_time_factor']}",
             f"  contacts {s['contacts_total']} in all (worst run {s['contacts_worst_run']}), "
-            f"waypoints given up {s['skipped_total']} in all",
+            f"waypoints given up {s['skipped_total']} in all, stuck {s['stuck_total']} in all "
+            f"({s['stuck_by_peer_total']} by a peer)",
             "  robot-seconds (median over runs, summed over robots): "
             + ", ".join(f"{k} {t[k]}" for k in TIME_KINDS),
             "  floor missed by clearance from walls and furniture (median, of the cleanable): "

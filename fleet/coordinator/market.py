@@ -71,6 +71,8 @@ ACK_POLL_S = 0.002
 # a peer whose centre came within two robot radii and this much (m) of a robot's held it up:
 # the mutual holds seen had centres 0.35-0.54 m apart
 PEER_NEAR_GAP_M = 0.3
+# what a stall or give-back put down to a peer says in its event
+PEER_HELD = "a peer held it up"
 
 
 @dataclass
@@ -267,7 +269,7 @@ class Market:
                     self.job.finish(rid, tid)
                     self.journal.event("done", rid, tid, "")
                 else:
-                    peer = " (a peer held it up: not as tried by it)" if held_up else ""
+                    peer = f" ({PEER_HELD}: not as tried by it)" if held_up else ""
                     self.journal.event(
                         "withdrawn", rid, tid, f"pieces given up: once more as {again}{peer}"
                     )
@@ -378,7 +380,7 @@ class Market:
         planned from where it stands."""
         queued = [r.task.id for r in self.job.queue(rid)]  # each saved in its new state
         reopened = self.job.release(rid, tried=not held_up)
-        peer = "; a peer held it up, so not as tried by it" if held_up else ""
+        peer = f"; {PEER_HELD}, so not as tried by it" if held_up else ""
         self.journal.event("stuck", rid, "", f"{why}; its work goes back to the market{peer}")
         for tid in reopened:
             self.journal.event("reopened", rid, tid, "from a stuck robot")

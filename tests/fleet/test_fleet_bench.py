@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from fleet.bench.fleet import run_figures, world_summary
+from fleet.coordinator.market import PEER_HELD
 from fleet.protocol import TIME_KINDS
 
 
@@ -52,6 +53,19 @@ def test_a_runs_unreachable_events_are_kept_with_robot_task_and_why() -> None:
         "robot-1 t4: its goal cannot be reached"
     ]
     assert run_figures(_report(150.0, 0, [0]), "home", 0)["unreachable"] == []
+
+
+def test_stuck_events_are_counted_and_those_a_peer_caused_apart() -> None:
+    report = _report(150.0, 0, [0])
+    report["events"] = [
+        {"kind": "stuck", "robot": "robot-1", "task": "", "detail": "no progress for 30 s"},
+        {"kind": "stuck", "robot": "robot-2", "task": "", "detail": f"…; {PEER_HELD}, so …"},
+        {"kind": "done", "robot": "robot-2", "task": "t01", "detail": ""},
+    ]
+    r = run_figures(report, "home", 0)
+    assert (r["stuck"], r["stuck_by_peer"]) == (2, 1)
+    s = world_summary([r, run_figures(_report(150.0, 0, [0]), "home", 1)])
+    assert (s["stuck_total"], s["stuck_by_peer_total"]) == (2, 1)
 
 
 def test_a_worlds_medians_skip_runs_without_a_report_and_contacts_are_summed() -> None:
