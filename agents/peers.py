@@ -6,9 +6,8 @@ path ahead at cruising speed while it follows one (:func:`path_intent`), else wh
 command takes it (:func:`intent_points`). Robots are ranked by id (:func:`gives_way`);
 an agent treats the intents of the robots ranked above it as obstacles for the time they cover
 (:func:`intent_centres`, which DWA sees as :func:`rim_points`), so DWA keeps it out of their
-way and stops it short of a crossing, and the follower's give-way
-(:mod:`agents.follow.give_way`) makes it leave their way, aside or back along its own path,
-when one of them comes at it. The robot with the right of way sees the other only in its
+way, stops it short of a crossing, or — through the follower's escape move — makes it step
+aside when one of them comes at it. The robot with the right of way sees the other only in its
 scan. A fixed priority order is the simplest rule under which two robots never both yield to
 each other (prioritized planning, Erdmann and Lozano-Pérez 1987, applied to the robots'
 short-term trajectories). A robot without work gives way to everyone.

@@ -27,7 +27,6 @@ import numpy as np
 
 from agents.follow.edge import edge_step
 from agents.follow.escape import ESCAPE_MARGIN_M, escape_step, start_escape
-from agents.follow.give_way import give_way
 from agents.follow.primitives import gaps, held, rotate_in_place
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
 from agents.follow.track import reached, track_step
@@ -205,10 +204,8 @@ def follow_step(
 ) -> tuple[FollowState, DWAResult | None]:
     """Advance along the path and choose a command; ``None`` when the path is finished.
 
-    In order: an escape move under way goes on (:mod:`agents.follow.escape`); a robot in the
-    way of a peer it gives way to steps aside or backs off along its path
-    (:mod:`agents.follow.give_way`); a robot facing more than ``align_enter`` off its lane
-    turns in place onto it; else it drives
+    In order: an escape move under way goes on (:mod:`agents.follow.escape`); a robot facing
+    more than ``align_enter`` off its lane turns in place onto it; else it drives
     (:func:`drive`: the edge pass or DWA). Without progress, the watchdog
     (:func:`watchdog`) counts toward giving the waypoint up, and after ``escape_after_s``
     under DWA the escape move begins (boxed in, or caught in a minimum of its costs, see
@@ -228,8 +225,6 @@ def follow_step(
         if escaping is not None:
             return escaping
         state = replace(state, escape_m=0.0)
-    if (giving := give_way(state, now, params)) is not None:
-        return giving
     dist = math.dist(xy, state.waypoints[state.index])
     if state.tracked and (tracking := track_step(state, now, params)) is not None:
         return _progress(*tracking, dist, now, params)
