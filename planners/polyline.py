@@ -9,19 +9,14 @@ import numpy as np
 
 
 def simplify(points: np.ndarray, tolerance: float) -> np.ndarray:
-    """Ramer–Douglas–Peucker simplification (Douglas & Peucker 1973) of an (N, 2) polyline."""
-    pts = np.asarray(points, dtype=float)
-    return pts[simplify_indices(pts, tolerance)]
+    """Ramer–Douglas–Peucker simplification (Douglas & Peucker 1973) of an (N, 2) polyline.
 
-
-def simplify_indices(points: np.ndarray, tolerance: float) -> np.ndarray:
-    """The indices of the points :func:`simplify` keeps, in order (the first and the last
-    among them). Iterative with an explicit stack; each split's point–line distances are one
-    numpy call."""
+    Iterative with an explicit stack; each split's point–line distances are one numpy call.
+    """
     pts = np.asarray(points, dtype=float)
     n = len(pts)
     if n < 3:
-        return np.arange(n)
+        return pts.copy()
     keep = np.zeros(n, dtype=bool)
     keep[0] = keep[-1] = True
     stack = [(0, n - 1)]
@@ -32,7 +27,7 @@ def simplify_indices(points: np.ndarray, tolerance: float) -> np.ndarray:
             keep[m] = True
             stack.append((i, m))
             stack.append((m, j))
-    return np.flatnonzero(keep)
+    return pts[keep]
 
 
 def rdp_split(pts: np.ndarray, i: int, j: int, tolerance: float) -> int:
