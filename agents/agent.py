@@ -234,7 +234,7 @@ class Agent:
                 return
             if not self.market.holds(msg.task) and not is_dock_trip(msg.task):
                 return
-            self.drive = Drive.of(msg, self.market.queue)
+            self.drive = Drive.of(msg, self.market.queue, self.params.follow)
         log.info(
             "%s: plan %d (%s) with %d waypoints",
             self.rid,
@@ -249,7 +249,7 @@ class Agent:
         follow = self.drive.follow
         if follow is None or len(msg.waypoints) >= len(follow.waypoints):
             return
-        self.drive = self.drive.cut(msg, self.market.queue)
+        self.drive = self.drive.cut(msg, self.market.queue, self.params.follow)
         log.info("%s: plan %d now ends after %s", self.rid, msg.plan_id, self.drive.chain[-1])
 
     def _on_award(self, _key: str, msg: Award) -> None:

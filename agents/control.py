@@ -31,6 +31,7 @@ import numpy as np
 from agents.follow.escape import keep_clear
 from agents.follow.motion import follow_step, predict
 from agents.follow.state import FollowParams, FollowState, Situation
+from agents.follow.track import tracked
 from agents.market import Won, swept_pieces
 from agents.passage import Holding, Waits, hold
 from agents.peers import cut_out, own_intent, progress, to_avoid
@@ -71,8 +72,9 @@ class Drive:
     follow: FollowState | None = None
 
     @classmethod
-    def of(cls, plan: Plan, queue: Sequence[Won]) -> Drive:
-        """A new plan, its chain timed by the robot's ``queue`` of won tasks."""
+    def of(cls, plan: Plan, queue: Sequence[Won], params: FollowParams) -> Drive:
+        """A new plan, its chain timed by the robot's ``queue`` of won tasks; its sweeps (the
+        waypoints after ``sweep_from``) tracked (:func:`agents.follow.track.tracked`)."""
         chain = tuple(chain_of(plan))
         return cls(
             plan.plan_id,
@@ -82,12 +84,12 @@ class Drive:
             chain_starts(plan),
             sum(w.time_s for w in queue if w.id in chain),
             Waits.of(plan),
-            FollowState(plan.waypoints) if len(plan.waypoints) else None,
+            tracked(plan.waypoints, plan.sweep_from, params) if len(plan.waypoints) else None,
         )
 
-    def cut(self, plan: Plan, queue: Sequence[Won]) -> Drive:
+    def cut(self, plan: Plan, queue: Sequence[Won], params: FollowParams) -> Drive:
         """The same drive ending where ``plan``, this plan cut short, now ends: the follower
-        drives on as before until there."""
+        drives on as before until there, braking into the new end."""
         assert self.follow is not None
         chain = tuple(chain_of(plan))
         return replace(
@@ -95,7 +97,11 @@ class Drive:
             chain=chain,
             chain_starts=chain_starts(plan),
             chain_time_s=sum(w.time_s for w in queue if w.id in chain),
-            follow=replace(self.follow, waypoints=plan.waypoints),
+            follow=replace(
+                self.follow,
+                waypoints=plan.waypoints,
+                profile=tracked(plan.waypoints, plan.sweep_from, params).profile,
+            ),
         )
 
 
@@ -302,9 +308,12 @@ def _follow(
         everyone=False,
         skip=ordered,
     )
+    everyone = to_avoid(
+        params.robot_id, heard.peers, heard.scan.stamp, agent.stale_after_s, everyone=True
+    )
     predicted = predict(pose, state.command, heard.latency_s)
     follow, result = follow_step(
-        before, Situation(predicted, heard.velocity, obstacles, peers), params.follow
+        before, Situation(predicted, heard.velocity, obstacles, peers, everyone), params.follow
     )
     if follow.skipped > before.skipped:
         at = before.waypoints[before.index]

@@ -17,6 +17,7 @@ from planners.checks import require_non_negative, require_positive
 from planners.coverage.params import CoverageParams
 from planners.dwa import DWAParams
 from planners.robot import RobotSpec
+from planners.tracking import TrackerParams
 from planners.wall_follow import WallFollowParams
 
 # how transits between tasks are kept apart: see fleet.coordinator.transits
@@ -245,6 +246,7 @@ class FleetConfig:
     agent: AgentParams = field(default_factory=AgentParams)
     coordinator: CoordinatorParams = field(default_factory=CoordinatorParams)
     dwa: DWAParams = field(default_factory=DWAParams)
+    tracker: TrackerParams = field(default_factory=TrackerParams)
     wall_follow: WallFollowParams = field(default_factory=WallFollowParams)
     slam: SlamParams = field(default_factory=SlamParams)
     coverage: CoverageParams = field(default_factory=CoverageParams)

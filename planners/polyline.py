@@ -9,14 +9,19 @@ import numpy as np
 
 
 def simplify(points: np.ndarray, tolerance: float) -> np.ndarray:
-    """Ramer–Douglas–Peucker simplification (Douglas & Peucker 1973) of an (N, 2) polyline.
+    """Ramer–Douglas–Peucker simplification (Douglas & Peucker 1973) of an (N, 2) polyline."""
+    pts = np.asarray(points, dtype=float)
+    return pts[simplify_indices(pts, tolerance)]
 
-    Iterative with an explicit stack; each split's point–line distances are one numpy call.
-    """
+
+def simplify_indices(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """The indices of the points :func:`simplify` keeps, in order (the first and the last
+    among them). Iterative with an explicit stack; each split's point–line distances are one
+    numpy call."""
     pts = np.asarray(points, dtype=float)
     n = len(pts)
     if n < 3:
-        return pts.copy()
+        return np.arange(n)
     keep = np.zeros(n, dtype=bool)
     keep[0] = keep[-1] = True
     stack = [(0, n - 1)]
@@ -27,7 +32,7 @@ def simplify(points: np.ndarray, tolerance: float) -> np.ndarray:
             keep[m] = True
             stack.append((i, m))
             stack.append((m, j))
-    return pts[keep]
+    return np.flatnonzero(keep)
 
 
 def rdp_split(pts: np.ndarray, i: int, j: int, tolerance: float) -> int:

@@ -29,25 +29,39 @@ from agents.follow.edge import edge_step
 from agents.follow.escape import ESCAPE_MARGIN_M, escape_step, start_escape
 from agents.follow.primitives import gaps, held, rotate_in_place
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
+from agents.follow.track import reached, track_step
 from agents.peers import rim_points
 from fleet.params import AgentParams
 from planners.dwa import DWAResult, dwa_control, rollout
 from planners.polyline import densify
+from planners.tracking import Frenet
 
 LOCAL_PATH_M = 3.0
 PROGRESS_M = 0.02
 TURN_PROGRESS_RAD = 0.05
 
 
-def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowState:
+def advance(
+    state: FollowState, xy: np.ndarray, agent: AgentParams, stop_tolerance: float | None = None
+) -> FollowState:
     """Skip the waypoints the robot at ``xy`` has reached: it is at most ``along_tolerance``
     short of (or past) the waypoint along the segment into it and at most
     ``waypoint_tolerance`` beside that segment, or within ``along_tolerance`` of it
     (``goal_tolerance`` for the last one). Lanes thus end where they end, whatever the robot's
-    small sideways offset, instead of being cut short by a radius around their ends."""
+    small sideways offset, instead of being cut short by a radius around their ends. On a
+    tracked segment (:attr:`FollowState.tracked`) a waypoint is reached level with it on the
+    simplified segment the tracker drives, a stop within ``stop_tolerance`` (the tracker's;
+    ``along_tolerance`` when not given) short of it (:func:`agents.follow.track.reached`), so
+    the robot turns onto the next lane on its line."""
     wps, i = state.waypoints, state.index
     n = len(wps)
+    stop_tolerance = agent.along_tolerance if stop_tolerance is None else stop_tolerance
     while i < n:
+        if state.track_from is not None and state.profile is not None and state.track_from < i:
+            if reached(state.at(i), xy, stop_tolerance, agent.waypoint_tolerance):
+                i += 1
+                continue
+            break
         near = agent.goal_tolerance if i == n - 1 else agent.along_tolerance
         if math.dist(xy, wps[i]) <= near:
             i += 1
@@ -65,7 +79,7 @@ def advance(state: FollowState, xy: np.ndarray, agent: AgentParams) -> FollowSta
         break
     if i == state.index:
         return state
-    return FollowState(wps, i, skipped=state.skipped, missed=state.missed, stop_at=state.stop_at)
+    return state.at(i)
 
 
 def _ahead(start: np.ndarray, waypoints: np.ndarray, horizon_m: float) -> np.ndarray:
@@ -201,7 +215,7 @@ def follow_step(
     """
     agent = params.agent
     xy = np.array(now.pose[:2])
-    state = advance(state, xy, agent)
+    state = advance(state, xy, agent, params.tracker.stop_tolerance)
     if state.done:
         return state, None
     if state.edge_side:
@@ -212,6 +226,8 @@ def follow_step(
             return escaping
         state = replace(state, escape_m=0.0)
     dist = math.dist(xy, state.waypoints[state.index])
+    if state.tracked and (tracking := track_step(state, now, params)) is not None:
+        return _progress(*tracking, dist, now, params)
     aim = carrot(state, xy, agent.align_lookahead)
     error = math.remainder(math.atan2(aim[1] - xy[1], aim[0] - xy[0]) - now.pose[2], 2 * math.pi)
     limit = agent.align_exit if state.aligning else agent.align_enter
@@ -231,6 +247,23 @@ def follow_step(
             state = start_escape(state, now, aim, params)
         if progressed:
             return replace(state, stalled_s=0.0, yielded_s=0.0, best_dist=dist), result
+    return watchdog(state, now, params), result
+
+
+def _progress(
+    state: FollowState, result: DWAResult, dist: float, now: Situation, params: FollowParams
+) -> tuple[FollowState, DWAResult]:
+    """The watchdog's bookkeeping after a tracker's step: turning in place holds its clock, as
+    it does for the follower's own turns; driving nearer the next waypoint resets it."""
+    if state.aligning:
+        error = abs(
+            Frenet.of(now.pose, *state.waypoints[state.index - 1 : state.index + 1]).heading
+        )
+        if error < state.best_error - TURN_PROGRESS_RAD:
+            return replace(state, best_error=error), result
+        return watchdog(state, now, params), result
+    if dist < state.best_dist - PROGRESS_M:
+        return replace(state, stalled_s=0.0, yielded_s=0.0, blocked_s=0.0, best_dist=dist), result
     return watchdog(state, now, params), result
 
 
@@ -256,11 +289,5 @@ def watchdog(state: FollowState, now: Situation, params: FollowParams) -> Follow
     if state.stalled_s + dt >= agent.give_up_after_s:
         short = state.best_dist > agent.swept_within
         missed = (*state.missed, state.index) if short else state.missed
-        return FollowState(
-            state.waypoints,
-            state.index + 1,
-            skipped=state.skipped + 1,
-            missed=missed,
-            stop_at=state.stop_at,
-        )
+        return state.at(state.index + 1, skipped=state.skipped + 1, missed=missed)
     return replace(state, stalled_s=state.stalled_s + dt)

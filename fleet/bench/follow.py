@@ -31,7 +31,8 @@ import numpy as np
 
 from agents.control import scan_points
 from agents.follow.motion import follow_step, predict
-from agents.follow.state import FollowParams, FollowState, Situation
+from agents.follow.state import FollowParams, Situation
+from agents.follow.track import tracked
 from agents.pose_source import SlamPose
 from agents.time_use import step_kind
 from fleet.coordinator.planning import TaskPlanner
@@ -119,11 +120,11 @@ def follow_tour(
         if pose_source == "slam"
         else None
     )
-    follow = FollowState(waypoints)
+    params = FollowParams.of(cfg)
+    follow = tracked(waypoints, sweep_from, params)
     command = (0.0, 0.0)
     pending: list[tuple[float, float, float]] = []
     velocity = (0.0, 0.0)
-    params = FollowParams.of(cfg)
     dt = params.dt
     time_use = dict.fromkeys(TIME_KINDS, 0.0)
     tracking: list[float] = []

@@ -92,7 +92,7 @@ def _crossing(stamp: float, plan_id: int = -1, waypoint: int = -1) -> Intent:
 
 
 def test_a_step_follows_the_plan_and_says_what_to_publish() -> None:
-    drive = Drive.of(_plan(), [])
+    drive = Drive.of(_plan(), [], _params().follow)
     state, out = _step(_heard(10.0, drive))
     assert (
         out.cmd_vel.stamp == 10.0
@@ -114,7 +114,7 @@ def test_a_step_follows_the_plan_and_says_what_to_publish() -> None:
 def test_a_robot_holds_for_the_peer_its_plan_waits_for_then_drives_on() -> None:
     """Its plan lets it head for waypoint 1 only once robot-0 has reached waypoint 1 of its
     plan 7 (Hönig et al. 2019); robot-0 outranks it, but the plan orders them instead."""
-    drive = Drive.of(_plan(([1], ["robot-0"], [7], [1])), [])
+    drive = Drive.of(_plan(([1], ["robot-0"], [7], [1])), [], _params().follow)
     behind = {"robot-0": _crossing(10.0, plan_id=7, waypoint=1)}
     state, out = _step(_heard(10.0, drive, behind))
     assert (out.cmd_vel.v, out.cmd_vel.w) == (0.0, 0.0)
@@ -130,7 +130,7 @@ def test_a_robot_holds_for_the_peer_its_plan_waits_for_then_drives_on() -> None:
 
 
 def test_holding_is_given_up_after_hold_max_s() -> None:
-    drive = Drive.of(_plan(([1], ["robot-0"], [7], [1])), [])
+    drive = Drive.of(_plan(([1], ["robot-0"], [7], [1])), [], _params().follow)
     state, out = _step(_heard(10.0, drive))  # robot-0 not heard yet: waited for
     assert state.mode == "holding"
     late = 10.0 + AGENT.hold_max_s + 0.1
@@ -145,8 +145,10 @@ def test_on_a_transit_a_robot_keeps_the_order_of_passage_not_the_rank() -> None:
     rank. The same transit without that order gives way to robot-0 as to any peer above it."""
     cruising = (0.3, 0.0)
     crossing = {"robot-0": _crossing(10.0, plan_id=7, waypoint=2)}
-    ordered = Drive.of(_plan(([1], ["robot-0"], [7], [1]), sweep_from=len(LANE)), [])
-    unordered = Drive.of(_plan(sweep_from=len(LANE)), [])
+    ordered = Drive.of(
+        _plan(([1], ["robot-0"], [7], [1]), sweep_from=len(LANE)), [], _params().follow
+    )
+    unordered = Drive.of(_plan(sweep_from=len(LANE)), [], _params().follow)
     alone = _step(_heard(10.0, unordered, velocity=cruising))[1].cmd_vel
     keeps_order = _step(_heard(10.0, ordered, crossing, cruising))
     gives_way = _step(_heard(10.0, unordered, crossing, cruising))[1].cmd_vel
@@ -158,7 +160,7 @@ def test_on_a_transit_a_robot_keeps_the_order_of_passage_not_the_rank() -> None:
 def test_a_robot_gives_way_to_a_peer_ranked_above_it_and_not_to_one_below() -> None:
     """Erdmann and Lozano-Pérez's priorities on the robots' intents: robot-1 slows for robot-0
     crossing ahead of it, and drives on as if robot-2 crossing there were not there."""
-    drive = Drive.of(_plan(), [])
+    drive = Drive.of(_plan(), [], _params().follow)
     cruising = (0.3, 0.0)
     alone = _step(_heard(10.0, drive, velocity=cruising))[1].cmd_vel
     gives_way = _step(
@@ -185,7 +187,7 @@ def test_a_robot_without_work_steps_aside_from_anyone() -> None:
 
 
 def test_stale_odometry_stops_the_robot() -> None:
-    drive = Drive.of(_plan(), [])
+    drive = Drive.of(_plan(), [], _params().follow)
     heard = _heard(10.0, drive, velocity=(0.3, 0.0), odom_stamp=10.0 - AGENT.stale_after_s - 0.1)
     state, out = _step(heard)
     assert (out.cmd_vel.v, out.cmd_vel.w) == (0.0, 0.0)
@@ -220,7 +222,7 @@ def test_a_respawned_robot_stands_until_it_finds_itself() -> None:
         failed = True
         reason = "attempt 3: near: no match"
 
-    drive = Drive.of(_plan(), [])
+    drive = Drive.of(_plan(), [], _params().follow)
     state = ControlState(localized=False)
     state, out = control(_heard(10.0, drive), state, _params(), Lost(START))
     assert state.mode == "unlocalized" and (out.cmd_vel.v, out.cmd_vel.w) == (0.0, 0.0)
@@ -239,7 +241,7 @@ def test_a_robot_on_its_dock_does_not_step_aside() -> None:
         10.0, path_intent(np.array([0.4, 3.0]), np.array([[3.0, 3.0]]), 0.3, 10.0, 2.0)
     )
     plan = replace(_plan(), task="dock-0", waypoints=np.array([START[:2]]), sweep_from=0)
-    drive = Drive.of(plan, [])
+    drive = Drive.of(plan, [], _params().follow)
     assert drive.follow is not None
     drive = replace(drive, follow=replace(drive.follow, index=1))
     _, out = _step(_heard(10.0, drive, {"robot-9": through}))

@@ -224,3 +224,14 @@ def test_what_counts_as_furniture_moved_is_checked_naming_the_field(
     path = _with(tmp_path / "fleet.yaml", "coordinator", field, value)
     msg = _config_error(path)
     assert "coordinator" in msg and field in msg and says in msg, msg
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("gain_lateral", -2.0), ("lateral_acc", 0.0), ("clear_ahead", -0.1)]
+)
+def test_tracker_parameters_that_cannot_work_are_refused_at_load(
+    tmp_path: Path, field: str, value: float
+) -> None:
+    path = _with(tmp_path / "fleet.yaml", "tracker", field, value)
+    msg = _config_error(path)
+    assert msg.startswith(f"{path}: tracker") and field in msg, msg

@@ -118,10 +118,11 @@ def test_one_robot_drives_the_small_worlds_whole_tour_in_process() -> None:
     assert sum(r["time_s"].values()) == pytest.approx(r["sim_s"], abs=0.5)
     assert r["time_s"]["sweep"] > 0.5 * r["plan_estimate_s"] and r["time_over_estimate"] > 1.0
     assert 0 < r["tracking_m"]["mean"] < r["tracking_m"]["p95"] <= r["tracking_m"]["max"]
-    # the cross-track error is measured on lanes only, most of the sweep, and never exceeds
-    # the distance to the segment
+    # the cross-track error is measured on lanes only, a good part of the sweep (lanes are
+    # driven at full speed, hops and U-turns slower), and never exceeds the distance to the
+    # segment
     lane = r["lane_cross_track_m"]
-    assert lane["steps"] > 0.5 * r["time_s"]["sweep"] / FollowParams.of(cfg).dt
+    assert lane["steps"] > 0.25 * r["time_s"]["sweep"] / FollowParams.of(cfg).dt
     assert 0 < lane["mean"] < lane["p95"] <= lane["max"] <= r["tracking_m"]["max"]
     assert len(r["given_up_points"]) == r["given_up"]
 
