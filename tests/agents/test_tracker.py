@@ -106,3 +106,24 @@ def test_a_box_the_plan_does_not_know_on_the_lane_is_never_touched(tmp_path: Pat
     assert contacts == 0
     xs = np.array([p[0] for p in poses])
     assert xs.max() > 1.9  # it drove up to the box, not stood at the start
+
+
+@pytest.mark.parametrize("into", [0.006, 0.03])
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_a_box_whose_corner_the_lane_grazes_is_never_touched(
+    tmp_path: Path, into: float, side: float
+) -> None:
+    """A box the plan does not know, its near face ``into`` m inside the body's swept strip
+    along the lane (a lane planned before a chest was moved beside it): the robot drives on
+    past it or round it, and never touches its corner."""
+    cfg = load_fleet_config()
+    r = cfg.robot.radius
+    near = 1.5 + side * (r - into)  # the box's face nearest the lane at y = 1.5
+    centre_y = near + side * 0.2
+    world = ROOM + (
+        f"furniture:\n  - {{name: box, type: box, center: [2.75, {centre_y}], size: [0.5, 0.4]}}\n"
+    )
+    path = np.array([[0.5, 1.5], [4.5, 1.5]])
+    poses, contacts, _ = _drive(tmp_path, world, path, (0.5, 1.5, 0.0), cfg, 40.0)
+    assert contacts == 0
+    assert max(p[0] for p in poses) > 2.3  # it drove up to the box's corner at x = 2.5
