@@ -15,6 +15,7 @@ WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "small.yaml
 
 @pytest.mark.integration
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.timeout(300)
 def test_the_bench_makes_its_faults_and_the_job_survives_them(tmp_path: Path) -> None:
     # seed 3 draws robot-0 killed at 21 s sim and a rogue at 86 s of a 130 s job

@@ -95,6 +95,7 @@ def _config(path: Path) -> Path:
 
 @pytest.mark.integration
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.timeout(900)
 def test_robots_sent_to_each_others_docks_cross_the_corridor_both_ways(tmp_path: Path) -> None:
     options = ("--config", str(_config(tmp_path / "fleet.yaml")), "--deconfliction", "prioritized")

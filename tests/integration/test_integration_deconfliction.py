@@ -17,7 +17,12 @@ import pytest
 
 from fleet.supervisor.runner import RunningFleet
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(400)]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.slow,
+    pytest.mark.long,
+    pytest.mark.timeout(400),
+]
 
 WORLD = Path(__file__).resolve().parents[2] / "configs" / "worlds" / "corridor_wide.yaml"
 # the corridor runs from x = 6 to x = 9 m

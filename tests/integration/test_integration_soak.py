@@ -16,6 +16,7 @@ PROCESSES = {"up", "router", "sim", "coordinator", "robot-0", "robot-1"}
 
 @pytest.mark.integration
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.timeout(300)
 def test_the_soak_samples_every_process_and_judges_them(tmp_path: Path) -> None:
     run_dir = tmp_path / "soak"

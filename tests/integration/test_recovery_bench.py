@@ -30,6 +30,7 @@ def test_the_summary_takes_medians_and_p95_per_signal() -> None:
 
 
 @pytest.mark.integration
+@pytest.mark.long
 @pytest.mark.timeout(300)
 def test_the_bench_measures_a_kill_and_a_hang_on_a_real_fleet(tmp_path: Path) -> None:
     done = subprocess.run(
