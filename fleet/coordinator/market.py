@@ -263,7 +263,7 @@ class Market:
             rec = self.job.tasks.get(tid)
             held = rec is not None and rec.state == ASSIGNED and rec.owner == rid
             if held and (msg.state == "done" or swept.all()):
-                held_up = not swept.all() and self.held_up(rid, plan.plan_id, tid)
+                held_up = not swept.all() and self.forgive(rid, plan.plan_id, tid)
                 again = None if swept.all() else self.job.give_back(rid, tid, not held_up)
                 if again is None:
                     self.job.finish(rid, tid)
@@ -361,13 +361,14 @@ class Market:
                 continue
             if plan is None or plan.plan_id != p.plan_id or now - p.since < self.stall_s:
                 continue
-            held_up = self.held_up(rid, plan.plan_id, self.job.current(rid).task.id)
+            held_up = self.forgive(rid, plan.plan_id, self.job.current(rid).task.id)
             self.stuck(rid, f"no progress on its plan for {now - p.since:.0f} s", held_up)
 
-    def held_up(self, rid: str, plan_id: int, task_id: str) -> bool:
-        """Whether ``rid``'s trouble on ``task_id``, driven under plan ``plan_id``, is put down
-        to a peer that came near it on that plan: once per robot and task (its remainders
-        included), so two robots that keep meeting there end the way one alone does."""
+    def forgive(self, rid: str, plan_id: int, task_id: str) -> bool:
+        """Put ``rid``'s trouble on ``task_id``, driven under plan ``plan_id``, down to a peer
+        that came near it on that plan, and say whether it was: once per robot and task (its
+        remainders included; the forgiveness is recorded), so two robots that keep meeting
+        there end the way one alone does."""
         key = (rid, task_id.partition(".")[0])
         if self.met.get(rid) != plan_id or key in self.forgiven:
             return False
