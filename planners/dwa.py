@@ -6,7 +6,7 @@ sample out at constant velocity for ``sim_time``, discard the ones that come too
 obstacle, and score the rest by how well their end pose follows the given path. Everything is
 vectorized over samples and time steps at once; obstacle clearance comes from one
 ``scipy.spatial.cKDTree`` query (measured about 10× faster than a dense numpy distance matrix for
-360 obstacle points and ~1300 trajectory points; see BENCHMARKS.md, ``## DWA``).
+360 obstacle points and ~1300 trajectory points; see BENCHMARKS.md, ``## fleet bench dwa``).
 """
 
 from __future__ import annotations

@@ -233,7 +233,7 @@ class Slam:
         """Drop the submap that just finished, its log-odds folded into the older ones, if
         older kept submaps hold at least ``trim_overlap`` of its walls. Its pose and its nodes
         stay in the pose graph with their constraints (a few dozen bytes each): dropping them
-        cost accuracy (see BENCHMARKS.md), while its grid and likelihood field are what
+        cost accuracy (docs/notes/slam.md), while its grid and likelihood field are what
         weighs."""
         p = self.params
         older = [k for k in self._submaps.all if k.finished and k is not finished]

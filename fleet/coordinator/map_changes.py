@@ -19,8 +19,9 @@ change found:
   where it runs into the furniture and joined round it where a transit gets round
   (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again;
 - for furniture taken away, with ``coordinator.sweep_freed_floor`` (off by default: on home it
-  cost more time than the floor it gained, BENCHMARKS.md): the floor the brush reaches now and
-  did not reach before (under it, and the band round it that robot centres kept clear of) waits
+  cost more time than the floor it gained, BENCHMARKS.md, "Options off by default"): the floor
+  the brush reaches now and did not reach before (under it, and the band round it that robot
+  centres kept clear of) waits
   until no more of it has been found for ``SETTLE_S`` (the robots see a piece's floor free a
   part at a time, seconds apart: each part a task of its own was a trip of its own), then,
   less what a task of the job sweeps already (the same change found again by a restarted
@@ -157,7 +158,8 @@ class MapChanges:
             c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
             if not added:
                 # before the tour is cut, the tour is planned on the changed floor (it sweeps
-                # what robot centres reach there; a rim the blob left keeps them out: BENCHMARKS)
+                # what robot centres reach there; a rim the blob left keeps them out:
+                # docs/notes/stored-maps.md)
                 if c.job.tasks and self.sweep_freed:
                     gained = planner.brushable & ~before
                     self.freed = gained if self.freed is None else self.freed | gained

@@ -36,8 +36,8 @@ EVENT_COLUMNS = ("seq", "wall", "sim", "kind", "robot", "task", "detail")
 STALL_S = 30.0
 # sim seconds per wall second of a fleet at --speed 0 on an idle 2-core machine at its fastest
 # (5.7-6.3 with 3 robots on home in BENCHMARKS.md's batches; today's agents make 2.5 on home
-# and 3.3-3.9 on small, "The test suite's time"): a wait's sim budget is its wall bound times
-# this, so it is generous, never what cuts a slow run short
+# and 3.3-3.9 on small, "Where a fleet run's time goes"): a wait's sim budget is its wall bound
+# times this, so it is generous, never what cuts a slow run short
 IDLE_RTF = 6.0
 # fleet up writes its process table at its start; it is waited for this long (wall s)
 TABLE_WAIT_S = 30.0

@@ -16,7 +16,7 @@ lane length (shoulder lanes priced as separate tasks) among the phases that bala
 cells' lattice in its reachable band (the first and the last lane equally far inside it) and
 the phases that put a lane on every whole row: balancing alone leaves a margin at both walls,
 which often costs a clamp lane at each where a lattice laid against one wall needs one (measured
-in BENCHMARKS.md, Cleaning efficiency); ties go to the balanced phases. A cell
+in BENCHMARKS.md at f9accd2, "After, final"); ties go to the balanced phases. A cell
 adds a lane off the lattice (a clamp lane, as close to the wall as the uncovered floor needs and
 only as long as it) only where cleanable floor it owns lies below its first or above its last
 lattice lane — typically along a wall. Where the cell's width changes (a shoulder beside

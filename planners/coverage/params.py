@@ -28,7 +28,7 @@ class CoverageParams:
     neighbour and come back, and k robots can balance the work finely; with ``skip_order`` a
     group of three lanes or more may also be driven in Fields2Cover's skip order (out along
     every other lane, back along the rest), which ends beside the lane it began on (measured:
-    not better than single lanes, BENCHMARKS.md, Cleaning efficiency). With ``neighbour_cuts``
+    not better than single lanes, docs/notes/coverage-planner.md). With ``neighbour_cuts``
     a single lane is also cut where another lane of its cell ends (at least a quarter of
     ``max_lane_length`` inside it), so the tour may sweep either side of a shoulder as a block
     of its own and turn there. Time estimates use the

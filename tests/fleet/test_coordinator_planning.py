@@ -113,7 +113,7 @@ def test_a_body_in_the_only_way_cuts_the_far_room_off(corridor):
 
 
 # the coordinator's one-robot tour on the built-in worlds: its repetition (its own figure, on
-# its own floor; BENCHMARKS.md, "Cleaning efficiency": home 28.7 %, small 26.0 %, corridor
+# its own floor; BENCHMARKS.md, "fleet bench coverage": home 28.7 %, small 26.0 %, corridor
 # 21.4 %, corridor_wide 24.5 %) plus half a point
 TOUR_REPETITION = {"home": 0.292, "small": 0.265, "corridor": 0.219, "corridor_wide": 0.25}
 

@@ -5,8 +5,7 @@ coordinator finds the chest on the robots' maps, says where in a `map changed` e
 re-plans the lanes that ran through it, so the job ends `done`; it finds the stool's floor
 free and, with `coordinator.sweep_freed_floor` on, has it swept by a task of its own. With
 `coordinator.map_changes: false` the same run ends `incomplete` (exit 4): the lanes through
-the chest are tried by every robot in vain (BENCHMARKS.md, SLAM, "Furniture moved since the
-map was made")."""
+the chest are tried by every robot in vain (BENCHMARKS.md, "Stored maps: fleet up --map")."""
 
 from __future__ import annotations
 
@@ -105,5 +104,5 @@ def test_a_chest_moved_in_is_planned_round_and_a_stool_taken_away_swept(tmp_path
     assert fleet.events("rerouted"), fleet.output
     assert report["coverage"] >= 0.9, fleet.output
     # robots against walls and furniture; two robots meeting by the dock is a standing defect
-    # of every run on a stored map (BENCHMARKS.md), not asserted here
+    # of every run on a stored map (docs/notes/stored-maps.md), not asserted here
     assert report["collisions"]["robot_wall"] == 0, fleet.output

@@ -73,15 +73,17 @@ def _explained(run_dir: Path) -> str:
 def test_small_world_is_cleaned_without_contact(run: dict) -> None:
     report = json.loads((run["dir"] / "report.json").read_text())
     assert run["rc"] == 0 and report["status"] == "done", run["output"]
-    # three robots with the edge pass: 97.2-97.9 % over seeds 0-4 (BENCHMARKS.md, the edge pass)
+    # three robots with the edge pass: 97.2-97.9 % over seeds 0-4 (BENCHMARKS.md at f9accd2,
+    # "The edge pass")
     assert report["coverage"] >= 0.96, _explained(run["dir"])
     assert report["collisions"] == {"robot_wall": 0, "robot_robot": 0}, _explained(run["dir"])
     for r in report["robots"].values():
         assert r["wall_collisions"] == 0 and r["robot_collisions"] == 0, _explained(run["dir"])
     assert report["makespan_s"] is not None and report["makespan_s"] > 0
     # each region goes to the robot that bids the least time for it: repetition 37.3-40.6 %
-    # and makespan 121-129 s over seeds 0-4 (BENCHMARKS.md, "Cleaning efficiency"); an auction
-    # that picked its winner at random among the bids ran this test to 67.9 % repetition
+    # and makespan 121-129 s over seeds 0-4 (BENCHMARKS.md at f9accd2, "Where this leaves the
+    # targets"); an auction that picked its winner at random among the bids ran this test to
+    # 67.9 % repetition
     assert report["repetition"] <= 0.5, _explained(run["dir"])
     assert report["makespan_s"] <= 170.0, _explained(run["dir"])
 
