@@ -23,8 +23,6 @@ from planners.wall_follow import WallFollowParams
 # how transits between tasks are kept apart: see fleet.coordinator.transits
 DeconflictionMode = Literal["local", "prioritized", "cbs"]
 DECONFLICTION_MODES: tuple[str, ...] = get_args(DeconflictionMode)
-FirstRegions = Literal["tour", "compact"]
-FIRST_REGIONS: tuple[str, ...] = get_args(FirstRegions)
 
 
 @dataclass(frozen=True)
@@ -163,7 +161,6 @@ class CoordinatorParams:
     heartbeat_timeout_s: float = 1.0
     bid_timeout_s: float = 0.5
     objective: Literal["minimax", "minisum"] = "minimax"
-    first_regions: FirstRegions = "tour"
     deconfliction: DeconflictionMode = "local"
     replan_lag_s: float = 10.0
     body_margin: float = 0.05
@@ -184,11 +181,6 @@ class CoordinatorParams:
     sweep_freed_floor: bool = False
 
     def validate(self) -> None:
-        if self.first_regions not in FIRST_REGIONS:
-            raise ValueError(
-                f"first_regions must be one of {', '.join(FIRST_REGIONS)}, "
-                f"got {self.first_regions!r}"
-            )
         require_non_negative(self, "explore_gain_s_per_m2", "explore_min_gain_m2")
         require_positive(
             self,

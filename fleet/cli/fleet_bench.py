@@ -1,6 +1,6 @@
-"""`fleet bench fleet`, `follow`, `repetition`, `regions` and `explore`: what fleets, and one
-robot on its own, deliver on the floor, over worlds and seeds, where their repetition comes
-from, the first allocation's regions priced offline, and what an explored map is worth."""
+"""`fleet bench fleet`, `follow`, `repetition` and `explore`: what fleets, and one robot on its
+own, deliver on the floor, over worlds and seeds, where their repetition comes from, and what
+an explored map is worth."""
 
 from __future__ import annotations
 
@@ -285,49 +285,6 @@ def bench_explore(
         typer.echo("\n".join(table_lines(result)))
 
 
-def bench_regions(
-    worlds: WorldsOpt = "home,small",
-    robots: Annotated[
-        str, typer.Option("--robots", "-n", help="Robot counts, comma-separated: 2,3,4,6.")
-    ] = "2,3,4,6",
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-) -> None:
-    """Price the first allocation offline, without processes: the tour's runs of about equal
-    time, sold by sequential MiniMax auctions, against compact regions grown from each robot's
-    start (`coordinator.first_regions`).
-
-    Per world and robot count, robots at the world's start poses and travel priced as their
-    bids price it: the makespan the allocation prices (what the coordinator reports as its
-    estimate), the travel in it (to each region and between its tasks), each robot's time,
-    and the time the regions took to cut.
-
-    Examples: `fleet bench regions`; `fleet bench regions --worlds home --robots 3 --json`.
-    """
-    from fleet.bench.regions import compare, table_lines
-    from fleet.config import ConfigError, resolve_world
-    from fleet.params import load_fleet_config
-    from fleet.world import load_world
-
-    try:
-        counts = [int(n) for n in robots.split(",") if n.strip()]
-    except ValueError:
-        _fail(f"--robots: comma-separated counts, got {robots!r}")
-    if not counts or min(counts) < 1:
-        _fail("--robots: each count must be >= 1")
-    cfg = load_fleet_config()
-    rows = []
-    for name in (w.strip() for w in worlds.split(",") if w.strip()):
-        try:
-            world = load_world(resolve_world(name), cfg.robot.radius)
-        except ConfigError as e:
-            _fail(f"--worlds: {e}")
-        rows += compare(world, Path(name).stem, counts, cfg)
-    if as_json:
-        print(json.dumps({"rows": rows}))
-    else:
-        typer.echo("\n".join(table_lines(rows)))
-
-
 def register(
     app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app: typer.Typer
 ) -> None:
@@ -335,4 +292,3 @@ def register(
     bench_app.command("follow", help=reflow(bench_follow.__doc__ or ""))(bench_follow)
     bench_app.command("repetition", help=reflow(bench_repetition.__doc__ or ""))(bench_repetition)
     bench_app.command("explore", help=reflow(bench_explore.__doc__ or ""))(bench_explore)
-    bench_app.command("regions", help=reflow(bench_regions.__doc__ or ""))(bench_regions)

@@ -56,13 +56,13 @@ class ChargingMarket(Market):
     docking: Docking
     battery: BatterySpec
     sold = 0
-    # the first allocation's regions, one per robot: each one's work (s), its mean trip to a
-    # dock (s) and the robot it was cut for
-    first_regions: tuple[tuple[float, float, str | None], ...] = ()
+    # the first allocation's regions, one per robot: each one's work (s) and its mean trip to a
+    # dock (s)
+    first_regions: tuple[tuple[float, float], ...] = ()
 
     @property
     def first_regions_s(self) -> tuple[float, ...]:
-        return tuple(work for work, _, _ in self.first_regions)
+        return tuple(work for work, _ in self.first_regions)
 
     def sell(self, sale: Sale) -> None:
         self.sold += 1
@@ -91,9 +91,7 @@ class ChargingMarket(Market):
         def within_charge() -> tuple[auction.Lot, ...]:
             regions = cut()
             if first:
-                self.first_regions = tuple(
-                    (lot.time_s, self._trip_s(lot), lot.robot) for lot in regions
-                )
+                self.first_regions = tuple((lot.time_s, self._trip_s(lot)) for lot in regions)
             return () if any(lot.time_s > reach_s for lot in regions) else regions
 
         return first, within_charge
@@ -115,12 +113,9 @@ class ChargingMarket(Market):
         if not regions or len(regions) != len(market):
             super().estimate_first(committed)
             return
-        if all(rid in market for _, _, rid in regions):
-            charges = [self._charge(rid) for _, _, rid in regions if rid is not None]
-        else:
-            charges = sorted((self._charge(rid) for rid in market), reverse=True)
-        work = [w for w, _, _ in regions]
-        trips = [t for _, t, _ in regions]
+        charges = sorted((self._charge(rid) for rid in market), reverse=True)
+        work = [w for w, _ in regions]
+        trips = [t for _, t in regions]
         docks = len(self.docking.docks)
         estimate(self.journal, makespan_with_charging(self.battery, work, charges, docks, trips))
 

@@ -4,12 +4,9 @@ or an idle one changes.
 Sequential single-item auctions (Koenig et al. 2006, :mod:`fleet.coordinator.auctioneer`): the
 auction runs rounds until nothing is open or no robot bids, one lot sold per round. Runs of the
 tour are sold as regions, one per robot in the market (``planners.auction.regions``): all tasks
-in the first allocation, and the work a lost robot leaves; everything else task by task. With
-``coordinator.first_regions: compact`` the first allocation sells compact groups instead, one
-grown from each robot's start (``planners.auction.compact_regions``), each only to its robot;
-a lot's tasks keep the directions its group's driving order gives them. The winner's whole
-queue goes out as its award (:mod:`fleet.coordinator.awards`). The first allocation's makespan
-(the longest of the winners' committed times) is the job's estimate.
+in the first allocation, and the work a lost robot leaves; everything else task by task. The
+winner's whole queue goes out as its award (:mod:`fleet.coordinator.awards`). The first
+allocation's makespan (the longest of the winners' committed times) is the job's estimate.
 
 A task is done when its pieces are swept; a plan that ends with pieces of a tour task unswept
 (waypoints given up) gives them back to the market once, as a remainder (``Job.give_back``).
@@ -55,7 +52,6 @@ from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import ASSIGNED, FREED_PREFIX, LOST, OPEN, Job
 from fleet.coordinator.journal import Journal
-from fleet.coordinator.planning import TaskPlanner
 from fleet.plan_chain import chain_pieces, piece_count
 from fleet.protocol import Plan, RobotStatus
 from planners import auction
@@ -127,7 +123,6 @@ class Market:
         self.forgiven: set[tuple[str, str]] = set()
         self.stall_s = math.inf
         self.stall_progress_m = 0.0
-        self.first_regions = "tour"  # or "compact" (coordinator.first_regions)
 
     # ---- selling --------------------------------------------------------------------------
 
@@ -212,17 +207,15 @@ class Market:
         if first:
             self.region_sale = list(self.job.tasks)
         sale, self.region_sale = self.region_sale, []
-        compact = first and self.first_regions == "compact"
-        return first, region_lots(self.job, sale, self.dispatcher.planner if compact else None)
+        return first, region_lots(self.job, sale)
 
     def _bidders(self) -> list[str]:
         """The robots called to bid: those in the market."""
         return self.job.market()
 
     def _untried(self, lot: auction.Lot, robot: str) -> bool:
-        """Whether ``robot`` may win ``lot``: it is for any robot or for it, untried by it."""
-        tried = any(robot in self.job.tasks[t].tried for t in lot.tasks)
-        return lot.robot in (None, robot) and not tried
+        """Whether ``robot`` may win ``lot``: untried by it."""
+        return not any(robot in self.job.tasks[t].tried for t in lot.tasks)
 
     def _settle(self) -> None:
         """Open tasks every robot in the market has tried are unreachable, and said so."""
@@ -519,22 +512,15 @@ def await_ack(lock: threading.RLock, job: Job, rid: str, timeout_s: float) -> No
         time.sleep(ACK_POLL_S)
 
 
-def region_lots(
-    job: Job, sale: list[str], compact: TaskPlanner | None = None
-) -> Callable[[], tuple[auction.Lot, ...]]:
+def region_lots(job: Job, sale: list[str]) -> Callable[[], tuple[auction.Lot, ...]]:
     """The open tasks of ``sale`` as regions, one per robot in the market: runs of the tour
-    (``planners.auction.regions``), or with ``compact`` its compact groups, each for one robot
-    (:meth:`TaskPlanner.compact_lots`); none without robots. Read from the job now, cut when
-    called: a compact partition takes a second or so, which the market's lock must not wait
-    for (robots' heartbeats would wait with it)."""
+    (``planners.auction.regions``); none without robots. Read from the job now, cut when
+    called (outside the market's lock)."""
     bidders = job.market()
     open_ = (t for t in sale if job.tasks[t].state == OPEN)
     runs = [job.tasks[t].task for t in sorted(open_, key=_tour_key)]
     if not bidders:
         return lambda: ()
-    if compact is not None:
-        starts = {rid: job.robots[rid].xy for rid in bidders}
-        return lambda: compact.compact_lots(runs, starts)
     return lambda: auction.regions(runs, len(bidders))
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,7 +29,7 @@ import numpy as np
 
 from fleet.params import FleetConfig
 from fleet.world import World
-from planners.auction import Lot, Task, TravelGrid, compact_regions, region_lot, split_tour
+from planners.auction import Task, TravelGrid, split_tour
 from planners.auction.tasks import task_time
 from planners.bodies import Rerouted, reroute, with_bodies
 from planners.coverage import CoverageParams, CoveragePlan, plan_coverage
@@ -209,32 +209,6 @@ class TaskPlanner:
         g = self.grid
         blocked = dilate(g.occupied | g.unknown, self.robot.radius, g.resolution)
         return TravelGrid(~blocked, g.resolution, g.origin, self.transit_speed)
-
-    def compact_lots(
-        self, tasks: Sequence[Task], starts: Mapping[str, tuple[float, float] | None]
-    ) -> tuple[Lot, ...]:
-        """The first allocation's compact regions (``planners.auction.compact_regions``): one
-        connected group of ``tasks`` grown from each robot's start in ``starts``, balanced by
-        estimated time, as a lot only that robot may win (none for a robot left without)."""
-        robots = sorted(rid for rid, xy in starts.items() if xy is not None)
-        if not robots or not tasks:
-            return ()
-        xy = np.array([starts[rid] for rid in robots], dtype=float)
-        regions = compact_regions(tasks, xy, self.travel(), self.robot.cleaning_width)
-        by_id = {t.id: t for t in tasks}
-        lots = tuple(
-            region_lot(f"region-{i}", reg, by_id, robots[reg.robot])
-            for i, reg in enumerate(regions)
-            if reg.tasks
-        )
-        log.info(
-            "compact regions: %s",
-            ", ".join(
-                f"{lot.robot} {len(lot.tasks)} tasks {r.time_s:.0f} s"
-                for lot, r in zip(lots, [r for r in regions if r.tasks], strict=True)
-            ),
-        )
-        return lots
 
     def drive(
         self,

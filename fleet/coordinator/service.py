@@ -131,7 +131,6 @@ class Coordinator:
         )
         self.market.stall_s = params.stall_s
         self.market.stall_progress_m = params.stall_progress_m
-        self.market.first_regions = params.first_regions
         self.dispatcher.on_unreachable = self.market.cannot_reach
         self._wire()
         self.auctioneer = Auctioneer(

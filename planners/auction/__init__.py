@@ -24,9 +24,7 @@ The model:
   rounds in one process; :func:`makespan` judges the result.
 * **Lots.** A call sells a :class:`Lot`: one task, or — in the first allocation — a region of
   consecutive tasks, one per robot (:func:`regions`), so each robot starts on a contiguous part
-  of the floor; or compact, connected groups grown from each robot's start and balanced by
-  estimated time (:func:`compact_regions`, DARP's objective, Kapoutsis et al. 2017), each sold
-  to its robot alone (:func:`region_lot`).
+  of the floor.
 
 Public API::
 
@@ -43,16 +41,13 @@ Public API::
     winner(bids, objective="minimax") -> Bid | None
     allocate(tasks, robots, travel, objective="minimax") -> {robot: [(task id, reverse)]}
     makespan(allocation, tasks, robots, travel) -> seconds
-    Lot(id, tasks, entry, exit, time_s, area_m2, gain_s=0, reverse=(), robot=None).driven(back)
+    Lot(id, tasks, entry, exit, time_s, area_m2, gain_s=0).driven(back)
     task_lot(task); regions(tasks, k) -> lots
-    compact_regions(tasks, starts, travel, adjacent_m) -> (Region, ...)
-    Region(robot, tasks, reverse, time_s, start_s, seed); region_lot(id, region, tasks, robot)
 """
 
 from planners.auction.allocation import allocate, makespan
 from planners.auction.bids import OBJECTIVES, Bid, Commitment, Travel, make_bid, winner
-from planners.auction.compact import Region, compact_regions
-from planners.auction.lots import Lot, region_lot, regions, task_lot
+from planners.auction.lots import Lot, regions, task_lot
 from planners.auction.tasks import Task, ahead_of, remainder, split_tour
 from planners.auction.travel import UNREACHABLE_FACTOR, TravelGrid, travel_times
 
@@ -62,16 +57,13 @@ __all__ = [
     "Bid",
     "Commitment",
     "Lot",
-    "Region",
     "Task",
     "Travel",
     "TravelGrid",
     "ahead_of",
     "allocate",
-    "compact_regions",
     "make_bid",
     "makespan",
-    "region_lot",
     "regions",
     "remainder",
     "split_tour",

@@ -2,33 +2,28 @@
 
 The first allocation sells regions, one per robot, so each robot starts with a part of the floor
 of its own, as a static split would give it (robots that interleave over the whole floor cross
-each other's paths and drive over swept floor between tasks): either the tour's tasks cut into
-runs of about equal time (:func:`regions`), or compact groups grown from each robot's start
-(:func:`planners.auction.compact.compact_regions`, sold by :func:`region_lot` to that robot
-alone). Everything sold later — a lost robot's remainder, tasks withdrawn to feed an idle robot
-— goes task by task (:func:`task_lot`).
+each other's paths and drive over swept floor between tasks): the tour's tasks cut into runs
+of about equal time (:func:`regions`). Everything sold later — a lost robot's remainder, tasks
+withdrawn to feed an idle robot — goes task by task (:func:`task_lot`).
 """
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from planners.auction.compact import Region
 from planners.auction.tasks import Task
 
 
 @dataclass(frozen=True, eq=False)
 class Lot:
-    """One call's item: ``tasks`` in driving order from ``entry`` to ``exit``, each driven
-    backwards where ``reverse`` says so (empty: all forwards). A lot bought backwards (entered
-    at its exit) is driven last task first, each task the other way round (:meth:`driven`).
-    ``gain_s``: what it is worth beyond its work, in seconds a bid takes off (a frontier's
-    expected information; 0 for cleaning). ``robot``: the only robot that may win it (a compact
-    region grown from its start), None for any."""
+    """One call's item: ``tasks`` in driving order from ``entry`` to ``exit``. A lot bought
+    backwards (entered at its exit) is driven last task first, each task the other way round
+    (:meth:`driven`). ``gain_s``: what it is worth beyond its work, in seconds a bid takes off
+    (a frontier's expected information; 0 for cleaning)."""
 
     id: str
     tasks: tuple[str, ...]
@@ -37,46 +32,17 @@ class Lot:
     time_s: float
     area_m2: float
     gain_s: float = 0.0
-    reverse: tuple[bool, ...] = ()
-    robot: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.reverse and len(self.reverse) != len(self.tasks):
-            raise ValueError(
-                f"lot {self.id}: {len(self.reverse)} directions for {len(self.tasks)} tasks"
-            )
 
     def driven(self, backwards: bool) -> list[tuple[str, bool]]:
         """(task id, driven backwards) in the order a winner drives them, bought ``backwards``
         (entered at :attr:`exit`) or not."""
-        pairs = list(zip(self.tasks, self.reverse or (False,) * len(self.tasks), strict=True))
         if backwards:
-            return [(t, not r) for t, r in reversed(pairs)]
-        return pairs
+            return [(t, True) for t in reversed(self.tasks)]
+        return [(t, False) for t in self.tasks]
 
 
 def task_lot(task: Task) -> Lot:
     return Lot(task.id, (task.id,), task.entry, task.exit, task.time_s, task.area_m2)
-
-
-def region_lot(lot_id: str, region: Region, tasks: Mapping[str, Task], robot: str) -> Lot:
-    """A compact region sold to ``robot`` alone: its tasks in its driving order and directions,
-    entered where its first task's drive begins; its time is the region's less the travel from
-    the robot's start to it, which the robot's bid adds."""
-    if not region.tasks:
-        raise ValueError(f"lot {lot_id}: a region without tasks")
-    own = [tasks[t] for t in region.tasks]
-    first, last = own[0], own[-1]
-    return Lot(
-        lot_id,
-        region.tasks,
-        first.exit if region.reverse[0] else first.entry,
-        last.entry if region.reverse[-1] else last.exit,
-        float(region.time_s - region.start_s),
-        float(sum(t.area_m2 for t in own)),
-        reverse=region.reverse,
-        robot=robot,
-    )
 
 
 def regions(tasks: Sequence[Task], k: int, prefix: str = "region-") -> tuple[Lot, ...]:

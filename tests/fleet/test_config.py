@@ -197,16 +197,6 @@ def test_a_given_up_waypoint_counts_swept_only_within_the_brush(tmp_path: Path) 
     assert "agent.swept_within (0.2) must not exceed half robot.cleaning_width (0.15)" in msg, msg
 
 
-def test_the_first_allocations_regions_are_tour_or_compact(tmp_path: Path) -> None:
-    path = _with(tmp_path / "fleet.yaml", "coordinator", "first_regions", "voronoi")
-    msg = _config_error(path)
-    assert msg.startswith(f"{path}: coordinator.first_regions: must be one of"), msg
-    compact = load_fleet_config(_with(path, "coordinator", "first_regions", "compact"))
-    assert compact.coordinator.first_regions == "compact"
-    with pytest.raises(ValueError, match="first_regions must be one of tour, compact"):
-        dataclasses.replace(load_fleet_config().coordinator, first_regions="voronoi").validate()  # type: ignore[arg-type]
-
-
 @pytest.mark.parametrize(
     ("field", "value", "says"),
     [

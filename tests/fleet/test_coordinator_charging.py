@@ -334,7 +334,7 @@ def test_the_first_allocation_estimates_the_makespan_with_the_charges_in_it(
     f.declined = declined
     f.market.auction(f.auctioneer)
     regions = sorted(f.market.first_regions, key=lambda r: -r[0])
-    work, trips = [w for w, _, _ in regions], [t for _, t, _ in regions]
+    work, trips = [w for w, _ in regions], [t for _, t in regions]
     assert len(work) == 2 and all(w > 10.0 for w in work)
     assert all(t > 0.5 for t in trips)  # the small room's dock is a few metres from the lanes
     want = makespan_with_charging(SPEC, work, [0.25, 0.25], 1, trips)

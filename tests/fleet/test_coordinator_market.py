@@ -580,36 +580,6 @@ def test_a_new_job_sells_the_whole_floor_again_as_a_first_allocation(
     store.close()
 
 
-def test_the_first_allocation_under_compact_awards_each_robot_its_group(
-    planner: TaskPlanner,
-) -> None:
-    """With ``coordinator.first_regions: compact`` the first auction sells each robot the group
-    grown from its start, its tasks in the group's driving order and directions. robot-0 bids
-    lowest on every lot, as it would win every run of the tour; here it may win only its own."""
-    c = Coordinator(planner, ["robot-0", "robot-1", "robot-2"])
-    c.market.first_regions = "compact"
-    # the tasks lie end to end along y = 0 from x = 0 to 24: one robot at each end, one between
-    # (off the small world's floor: travel is priced as the straight line's detour; robot-1
-    # would come back to t03 from t02's far end, so robot-2 drives it on from t04)
-    starts = {"robot-0": (0.0, 0.0), "robot-1": (13.0, 0.0), "robot-2": (24.0, 0.0)}
-    for rid, xy in starts.items():
-        c.job.robots[rid].xy = xy
-    c.bidding = {"robot-0": 1.0, "robot-1": 2.0, "robot-2": 3.0}
-    c.market.auction(c.auctioneer)
-    assert not c.job.open_tasks() and len(c.sales) == 3
-    queues = {rid: [(r.task.id, r.reverse) for r in c.job.queue(rid)] for rid in starts}
-    assert queues == {
-        "robot-0": [("t00", False), ("t01", False)],
-        "robot-1": [("t02", True)],
-        "robot-2": [("t05", True), ("t04", True), ("t03", True)],
-    }
-    tasks = [_task(i) for i in range(6)]
-    for lot in planner.compact_lots(tasks, starts):
-        assert queues[lot.robot or ""] == lot.driven(False)
-    assert [s.lot.robot for s in c.sales] == [s.best.robot for s in c.sales]
-    assert len(c.events("estimated")) == 1
-
-
 def test_a_task_added_for_freed_floor_before_the_first_sale_is_sold_after_the_tour(
     planner: TaskPlanner,
 ) -> None:

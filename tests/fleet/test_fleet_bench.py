@@ -151,18 +151,3 @@ def test_the_missed_floor_is_split_by_clearance_in_the_report_and_the_bench() ->
     runs = [run_figures(report, "small", 0), run_figures(report, "small", 1)]
     assert runs[0]["missed"] == missed
     assert world_summary(runs)["missed_median"] == pytest.approx(missed, abs=1e-4)
-
-
-def test_the_regions_bench_sells_a_lot_for_one_robot_only_to_it() -> None:
-    """Sequential MiniMax over the lots: robot-0 takes lot a (10 s), then lot b, which only it
-    may win, 9 s away (29 s), though robot-1 stands at b's entry."""
-    from fleet.bench.regions import _times
-    from planners.auction import Lot
-
-    def straight(start: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        return np.hypot(*(np.asarray(targets).reshape(-1, 2) - start).T)
-
-    a = Lot("a", ("t0",), np.array([0.0, 0.0]), np.array([1.0, 0.0]), 10.0, 1.0)
-    b = Lot("b", ("t1",), np.array([10.0, 0.0]), np.array([11.0, 0.0]), 10.0, 1.0, robot="robot-0")
-    starts = {"robot-0": (0.0, 0.0), "robot-1": (10.0, 0.0)}
-    assert _times((a, b), starts, straight) == {"robot-0": 29.0, "robot-1": 0.0}
