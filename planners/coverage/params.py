@@ -28,10 +28,7 @@ class CoverageParams:
     neighbour and come back, and k robots can balance the work finely; with ``skip_order`` a
     group of three lanes or more may also be driven in Fields2Cover's skip order (out along
     every other lane, back along the rest), which ends beside the lane it began on (measured:
-    not better than single lanes, docs/notes/coverage-planner.md). With ``neighbour_cuts``
-    a single lane is also cut where another lane of its cell ends (at least a quarter of
-    ``max_lane_length`` inside it), so the tour may sweep either side of a shoulder as a block
-    of its own and turn there. Time estimates use the
+    not better than single lanes, docs/notes/coverage-planner.md). Time estimates use the
     robot's top speed ``max_vel_x`` plus ``turn_cost_s`` per turn (a heading change over
     ``turn_angle_deg``); the market's tasks (``planners.auction.split_tour``) are timed by the
     robot's kinematics instead: a stop and a turn in place at each such turn (``max_vel_theta``,
@@ -50,7 +47,6 @@ class CoverageParams:
     min_room_area: float = 2.0
     max_task_area: float = 0.0
     skip_order: bool = False
-    neighbour_cuts: bool = False
     max_lane_length: float = 1.25
     simplify_tolerance: float = 0.03
 

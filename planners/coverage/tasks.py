@@ -62,8 +62,7 @@ def cell_tasks(
     """The boustrophedon tasks of one cell over ``lanes`` ((n, 3) row coordinate, first and
     last column, sorted by row), lanes grouped so each group is ≤ ``max_area``; a group's
     variants are its plain order and, with ``params.skip_order``, its skip order, each with
-    the first lane driven either way. A lane alone is cut into pieces (``_lane_pieces``),
-    with ``params.neighbour_cuts`` also where another lane of the cell ends."""
+    the first lane driven either way. A lane alone is cut into pieces (``_lane_pieces``)."""
     res = frame.resolution
     lengths = (lanes[:, 2] - lanes[:, 1] + 1) * res
     lane_area = lengths * params.lane_spacing(robot)
@@ -78,8 +77,7 @@ def cell_tasks(
     tasks = []
     for g in groups:
         if len(g) == 1:
-            cuts = _neighbour_ends(lanes, g[0], params, res) if params.neighbour_cuts else ()
-            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot, cuts))
+            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot))
             continue
         sel = lanes[g]
         orders = [np.arange(len(sel))]
@@ -95,18 +93,6 @@ def cell_tasks(
     return tasks
 
 
-def _neighbour_ends(
-    lanes: np.ndarray, k: int, params: CoverageParams, res: float
-) -> tuple[float, ...]:
-    """The columns inside lane ``k`` where another lane of its cell ends, at least
-    ``params.max_lane_length / 4`` from its own ends: where the cell's width changes, so the
-    tour may turn there (sweep one side of a shoulder as a block of its own)."""
-    _, lo, hi = lanes[k]
-    margin = params.max_lane_length / 4 / res
-    ends = np.unique(lanes[:, 1:3])
-    return tuple(float(c) for c in ends if lo + margin < c < hi - margin)
-
-
 def _lane_pieces(
     room: int,
     cell_id: int,
@@ -114,20 +100,14 @@ def _lane_pieces(
     frame: RotatedFrame,
     params: CoverageParams,
     robot: RobotSpec,
-    cuts: tuple[float, ...] = (),
 ) -> list[SweepTask]:
-    """One lane as tasks of at most ``params.max_lane_length``: cut at ``cuts`` (columns), each
-    part in equal pieces, pieces meeting at a cell centre, so driving them one after the other
-    sweeps exactly what the whole lane does (each segment's brush rectangle is half-open),
-    while the tour may also turn in the middle."""
+    """One lane as tasks of at most ``params.max_lane_length``: equal pieces meeting at a cell
+    centre, so driving them one after the other sweeps exactly what the whole lane does (each
+    segment's brush rectangle is half-open), while the tour may also turn in the middle."""
     res = frame.resolution
     y, lo, hi = (float(v) for v in lane)
-    bounds = [lo, *sorted(cuts), hi]
-    parts = []
-    for a, b in itertools.pairwise(bounds):
-        n = max(1, math.ceil((b - a) * res / params.max_lane_length - 1e-9))
-        parts.append(np.rint(np.linspace(a, b, n + 1)))
-    cuts_all = np.unique(np.concatenate(parts))
+    n = max(1, math.ceil((hi - lo) * res / params.max_lane_length - 1e-9))
+    cuts_all = np.unique(np.rint(np.linspace(lo, hi, n + 1)))
     spacing = params.lane_spacing(robot)
     tasks = []
     for a, b in itertools.pairwise(cuts_all):

@@ -1,6 +1,5 @@
 """A lane alone as pieces: they chain end to end over exactly the lane, none longer than
-``max_lane_length``, and with ``neighbour_cuts`` one ends wherever another lane of the cell
-ends well inside it."""
+``max_lane_length``."""
 
 from __future__ import annotations
 
@@ -29,13 +28,13 @@ ROBOT = RobotSpec(
 )
 
 
-def _pieces(lanes: np.ndarray, cuts: bool) -> list[list[tuple[float, float]]]:
+def _pieces(lanes: np.ndarray) -> list[list[tuple[float, float]]]:
     """Per lane, its pieces as (first, last) column, in the order of the lane."""
     width = int(lanes[:, 2].max()) + 1
     rows = int(lanes[:, 0].max()) + 2
     cell = MonotoneCell(0, np.zeros(rows, dtype=int), np.full(rows, width - 1))
     frame = RotatedFrame(0.0, (0.0, 0.0), RES, (rows, width))
-    params = CoverageParams(overlap=1 / 6, neighbour_cuts=cuts)
+    params = CoverageParams(overlap=1 / 6)
     tasks = cell_tasks(1, 1, cell, lanes, frame, params, ROBOT, max_area=0.0)
     out: list[list[tuple[float, float]]] = [[] for _ in lanes]
     for t in tasks:
@@ -57,24 +56,18 @@ def cell_lanes(draw) -> np.ndarray:
 
 
 @settings(max_examples=200, deadline=None)
-@given(cell_lanes(), st.booleans())
-def test_pieces_chain_over_the_lane_and_end_at_neighbour_ends(lanes, cuts):
+@given(cell_lanes())
+def test_pieces_chain_over_the_lane(lanes):
     params = CoverageParams()
-    margin = params.max_lane_length / 4 / RES
-    for (_, lo, hi), pieces in zip(lanes, _pieces(lanes, cuts), strict=True):
+    for (_, lo, hi), pieces in zip(lanes, _pieces(lanes), strict=True):
         pieces.sort()
         assert pieces[0][0] == lo and pieces[-1][1] == hi
         for (_, b), (a, _) in itertools.pairwise(pieces):
             assert a == b
         assert all((b - a) * RES <= params.max_lane_length + RES for a, b in pieces)
-        bounds = {b for _, b in pieces[:-1]}
-        inside = {c for c in lanes[:, 1:3].ravel() if lo + margin < c < hi - margin}
-        if cuts:
-            assert inside <= bounds
 
 
-def test_a_long_lane_is_cut_where_its_neighbour_ends_only_when_asked():
-    # a 2.25 m lane beside a 1 m one ending at column 40: plain pieces meet at 45
+def test_a_long_lane_is_cut_in_equal_pieces_whatever_its_neighbour():
+    # a 2.25 m lane beside a 1 m one ending at column 40: the pieces meet at 45
     lanes = np.array([(2.0, 0.0, 90.0), (12.0, 0.0, 40.0)])
-    assert _pieces(lanes, False)[0] == [(0.0, 45.0), (45.0, 90.0)]
-    assert _pieces(lanes, True)[0] == [(0.0, 40.0), (40.0, 90.0)]
+    assert _pieces(lanes)[0] == [(0.0, 45.0), (45.0, 90.0)]
