@@ -22,13 +22,10 @@ class CoverageParams:
     nothing lost). With ``return_strips`` a dead-end room may get a lane along the wall where
     its lanes end (and lanes across its usual axis), so the way back to its door is sweeping
     rather than a transit. Rooms are separated at openings narrower than ``door_width``; a room
-    smaller than ``min_room_area`` joins its largest neighbour. A boustrophedon cell is cut into
-    lane groups of at most ``max_task_area`` (0: every lane is a task of its own, cut into
-    pieces of at most ``max_lane_length``), so the tour can leave a cell part-swept to visit a
-    neighbour and come back, and k robots can balance the work finely; with ``skip_order`` a
-    group of three lanes or more may also be driven in Fields2Cover's skip order (out along
-    every other lane, back along the rest), which ends beside the lane it began on (measured:
-    not better than single lanes, docs/notes/coverage-planner.md). Time estimates use the
+    smaller than ``min_room_area`` joins its largest neighbour. Every lane of a boustrophedon
+    cell is a task of its own, cut into pieces of at most ``max_lane_length``, so the tour
+    chooses the order and direction of every lane, can leave a cell part-swept to visit a
+    neighbour and come back, and k robots can balance the work finely. Time estimates use the
     robot's top speed ``max_vel_x`` plus ``turn_cost_s`` per turn (a heading change over
     ``turn_angle_deg``); the market's tasks (``planners.auction.split_tour``) are timed by the
     robot's kinematics instead: a stop and a turn in place at each such turn (``max_vel_theta``,
@@ -45,16 +42,12 @@ class CoverageParams:
     turn_angle_deg: float = 45.0
     door_width: float = 1.0
     min_room_area: float = 2.0
-    max_task_area: float = 0.0
-    skip_order: bool = False
     max_lane_length: float = 1.25
     simplify_tolerance: float = 0.03
 
     def validate(self) -> None:
         require_positive(self, "door_width", "max_lane_length")
-        require_non_negative(
-            self, "turn_cost_s", "min_room_area", "max_task_area", "simplify_tolerance"
-        )
+        require_non_negative(self, "turn_cost_s", "min_room_area", "simplify_tolerance")
         if not 0.0 <= self.overlap < 0.9:
             raise ValueError("overlap must be within [0, 0.9)")
         if self.method not in ("bcd", "spiral"):

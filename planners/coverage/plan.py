@@ -444,17 +444,9 @@ def _cell_tasks(
             tasks.append(spiral_task(room, cid, cell, frame, params, robot))
             continue
         if len(lanes[k - 1]):
-            tasks.extend(
-                cell_tasks(
-                    room, cid, cell, lanes[k - 1], frame, params, robot, params.max_task_area
-                )
-            )
+            tasks.extend(cell_tasks(room, cid, lanes[k - 1], frame, params, robot))
         for lane in shoulders[k - 1]:
-            tasks.extend(
-                cell_tasks(
-                    room, cid, cell, lane[None, :], frame, params, robot, params.max_task_area
-                )
-            )
+            tasks.extend(cell_tasks(room, cid, lane[None, :], frame, params, robot))
         for strip in strips[k - 1] if strips else ():
             tasks.append(strip_task(room, cid, strip, frame, params, robot))
     return tasks

@@ -57,15 +57,6 @@ def boustrophedon(cell: MonotoneCell, lanes: np.ndarray, left_first: bool) -> np
     return np.array(pts, dtype=float)
 
 
-def skip_order(n: int) -> np.ndarray:
-    """The "skip" (snake) order of ``n`` lanes of Fields2Cover (Mier et al. 2023): out along
-    lanes 0, 2, 4, …, back along …, 5, 3, 1, so the run ends on the lane beside the one it
-    began on. Every turn but the one at the far end spans two lane spacings; driven by
-    :func:`boustrophedon` it runs along the cell's side, over the ends of the lane it skips."""
-    k = np.arange(n)
-    return np.concatenate([k[0::2], k[1::2][::-1]])
-
-
 def lanes_of(cell: MonotoneCell, ys: np.ndarray) -> np.ndarray:
     """(n, 3) lanes at row coordinates ``ys`` spanning the cell's full extent."""
     return np.array([(float(y), *lane_extent(cell, float(y))) for y in ys], dtype=float)

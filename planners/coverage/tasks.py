@@ -1,13 +1,8 @@
 """Sweep tasks: the units of work the planner orders and splits among robots.
 
-A task is a run of consecutive lanes of one boustrophedon cell (or one cell's spiral), with its
-ways to drive it: ``variants`` are paths, each of which may also be driven backwards (the tour
-chooses). A lane run has two (its first lane driven either way, the turns on opposite sides);
-reversed, they give the runs starting from the last lane. With
-``CoverageParams.skip_order`` a run of three lanes or more also has the two of its "skip" order
-(``sweeps.skip_order``, Fields2Cover's snake), which end beside the lane they began on: the
-tour can leave the run on the side it came in by, where a plain boustrophedon would leave it on
-the far side and hop back across swept floor.
+A task is a piece of one lane of a boustrophedon cell (or one cell's spiral, or a return
+strip), with its ways to drive it: ``variants`` are paths, each of which may also be driven
+backwards (the tour chooses).
 """
 
 from __future__ import annotations
@@ -22,13 +17,7 @@ from planners.coverage.bcd import MonotoneCell
 from planners.coverage.frame import RotatedFrame
 from planners.coverage.metrics import path_time
 from planners.coverage.params import CoverageParams
-from planners.coverage.sweeps import (
-    boustrophedon,
-    eroded_sides,
-    lane_rows,
-    lanes_of,
-    skip_order,
-)
+from planners.coverage.sweeps import boustrophedon, eroded_sides, lane_rows, lanes_of
 from planners.polyline import path_length, simplify
 from planners.robot import RobotSpec
 
@@ -52,44 +41,17 @@ class SweepTask:
 def cell_tasks(
     room: int,
     cell_id: int,
-    cell: MonotoneCell,
     lanes: np.ndarray,
     frame: RotatedFrame,
     params: CoverageParams,
     robot: RobotSpec,
-    max_area: float,
 ) -> list[SweepTask]:
     """The boustrophedon tasks of one cell over ``lanes`` ((n, 3) row coordinate, first and
-    last column, sorted by row), lanes grouped so each group is ≤ ``max_area``; a group's
-    variants are its plain order and, with ``params.skip_order``, its skip order, each with
-    the first lane driven either way. A lane alone is cut into pieces (``_lane_pieces``)."""
-    res = frame.resolution
-    lengths = (lanes[:, 2] - lanes[:, 1] + 1) * res
-    lane_area = lengths * params.lane_spacing(robot)
-    groups: list[list[int]] = [[]]
-    acc = 0.0
-    for k, a in enumerate(lane_area):
-        if groups[-1] and acc + a > max_area:
-            groups.append([])
-            acc = 0.0
-        groups[-1].append(k)
-        acc += a
+    last column, sorted by row): every lane a task of its own, cut into pieces
+    (``_lane_pieces``); the tour chooses their order and directions."""
     tasks = []
-    for g in groups:
-        if len(g) == 1:
-            tasks.extend(_lane_pieces(room, cell_id, lanes[g[0]], frame, params, robot))
-            continue
-        sel = lanes[g]
-        orders = [np.arange(len(sel))]
-        if params.skip_order and len(sel) > 2:
-            orders.append(skip_order(len(sel)))
-        variants = tuple(
-            _to_world(frame, boustrophedon(cell, sel[order], left), params)
-            for order in orders
-            for left in (True, False)
-        )
-        _, _, t = path_time(variants[0], robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
-        tasks.append(SweepTask(room, cell_id, variants, float(lane_area[g].sum()), t))
+    for lane in lanes:
+        tasks.extend(_lane_pieces(room, cell_id, lane, frame, params, robot))
     return tasks
 
 

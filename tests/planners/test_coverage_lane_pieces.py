@@ -9,7 +9,6 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from planners.coverage.bcd import MonotoneCell
 from planners.coverage.frame import RotatedFrame
 from planners.coverage.params import CoverageParams
 from planners.coverage.tasks import cell_tasks
@@ -32,10 +31,9 @@ def _pieces(lanes: np.ndarray) -> list[list[tuple[float, float]]]:
     """Per lane, its pieces as (first, last) column, in the order of the lane."""
     width = int(lanes[:, 2].max()) + 1
     rows = int(lanes[:, 0].max()) + 2
-    cell = MonotoneCell(0, np.zeros(rows, dtype=int), np.full(rows, width - 1))
     frame = RotatedFrame(0.0, (0.0, 0.0), RES, (rows, width))
     params = CoverageParams(overlap=1 / 6)
-    tasks = cell_tasks(1, 1, cell, lanes, frame, params, ROBOT, max_area=0.0)
+    tasks = cell_tasks(1, 1, lanes, frame, params, ROBOT)
     out: list[list[tuple[float, float]]] = [[] for _ in lanes]
     for t in tasks:
         (x0, y0), (x1, _) = t.variants[0]
