@@ -103,10 +103,6 @@ def plan_coverage_cmd(
             "start poses, else free spots near the dock or the most open point of the map.",
         ),
     ] = None,
-    edge_pass: Annotated[
-        bool | None,
-        typer.Option("--edge-pass/--no-edge-pass", help="Also drive once around every cell."),
-    ] = None,
     coverage_target: Annotated[
         float | None,
         typer.Option(
@@ -180,8 +176,6 @@ def plan_coverage_cmd(
         if method not in ("bcd", "spiral"):
             _fail(f"--method must be bcd or spiral, got {method!r}")
         params = dataclasses.replace(params, method=method)
-    if edge_pass is not None:
-        params = dataclasses.replace(params, edge_pass=edge_pass)
     if coverage_target is not None:
         params = dataclasses.replace(params, fill_in_target=coverage_target)
     spec = dataclasses.replace(spec, params=params)

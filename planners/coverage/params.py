@@ -34,7 +34,6 @@ class CoverageParams:
 
     overlap: float = 0.0
     method: Literal["bcd", "spiral"] = "bcd"
-    edge_pass: bool = False
     fill_in: bool = True
     return_strips: bool = True
     fill_in_target: float = 0.995

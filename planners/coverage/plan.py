@@ -28,7 +28,6 @@ from planners.coverage.strips import return_strips
 from planners.coverage.tasks import (
     SweepTask,
     cell_tasks,
-    edge_task,
     spiral_task,
     strip_task,
 )
@@ -434,12 +433,10 @@ def _cell_tasks(
     params: CoverageParams,
     robot: RobotSpec,
 ) -> list[SweepTask]:
-    """The room's tasks: per cell its edge pass, spiral or lanes, shoulder lanes and strips."""
+    """The room's tasks: per cell its spiral or lanes, shoulder lanes and strips."""
     tasks: list[SweepTask] = []
     for k, cell in enumerate(cells, start=1):
         cid = base + k
-        if params.edge_pass:
-            tasks.append(edge_task(room, cid, cell, frame, params, robot))
         if params.method == "spiral":
             tasks.append(spiral_task(room, cid, cell, frame, params, robot))
             continue

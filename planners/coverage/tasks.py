@@ -116,23 +116,6 @@ def spiral_task(
     return SweepTask(room, cell_id, (world,), cell.cells * res * res, t)
 
 
-def edge_task(
-    room: int,
-    cell_id: int,
-    cell: MonotoneCell,
-    frame: RotatedFrame,
-    params: CoverageParams,
-    robot: RobotSpec,
-) -> SweepTask:
-    """The edge pass of a cell: once around its outermost cells (walls and furniture, and the
-    borders it shares with neighbouring cells), so the swath reaches every corner."""
-    rows, left, right = eroded_sides(cell, 0)
-    ring = _ring(rows.astype(float), left.astype(float), right.astype(float), 0, 0.0)
-    world = _to_world(frame, np.vstack([ring, ring[:1]]), params)
-    _, _, t = path_time(world, robot.max_vel_x, params.turn_cost_s, params.turn_angle_deg)
-    return SweepTask(room, cell_id, (world,), 0.0, t)
-
-
 def _ring(rows: np.ndarray, left: np.ndarray, right: np.ndarray, step: int, shift: float):
     """One spiral ring: bottom edge, up the right side, top edge, down the left side to the
     row where the next ring begins."""
