@@ -8,11 +8,10 @@ segment; elements are therefore arc-length intervals, not vertex ranges.
 
 Within a pass, a segment runs *along the lane axis* when its direction is within
 ``AXIS_TOLERANCE_DEG`` of the pass's room's lane direction. A pass that runs along its axis
-for at least ``LANE_SHARE`` of its length is a lane pass (single lane pieces, boustrophedon lane
-groups): its axis segments are ``lane`` elements and the rest ``turn`` elements (the U-turns
-inside a lane group). Every other pass (fill-in passes, return strips, spirals) is
-one ``pass`` element. Lane elements that continue one another on one straight line (a lane
-cut into pieces) share a ``run`` id: the same lane.
+for at least ``LANE_SHARE`` of its length is a lane pass (a lane piece): its axis segments are
+``lane`` elements and the rest ``turn`` elements. Every other pass (fill-in passes, return
+strips) is one ``pass`` element. Lane elements that continue one another on one straight line
+(a lane cut into pieces) share a ``run`` id: the same lane.
 """
 
 from __future__ import annotations

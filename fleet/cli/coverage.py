@@ -88,13 +88,6 @@ def plan_coverage_cmd(
     robots: Annotated[
         int, typer.Option("--robots", "-k", min=1, help="Number of robots to split the work.")
     ] = 1,
-    method: Annotated[
-        str | None,
-        typer.Option(
-            help="bcd = boustrophedon lanes per cell; spiral = inward spiral per cell. "
-            "Default: coverage.method in configs/fleet.yaml."
-        ),
-    ] = None,
     start: Annotated[
         list[str] | None,
         typer.Option(
@@ -146,7 +139,7 @@ def plan_coverage_cmd(
 
       fleet plan coverage home --robots 3
 
-      fleet plan coverage ../shared/data/maps/cob_ipa_apartment.yaml --method spiral --json
+      fleet plan coverage ../shared/data/maps/cob_ipa_apartment.yaml --json
 
       fleet plan coverage configs/worlds/small.yaml --start 0.6,0.85 --out /tmp/small
 
@@ -172,10 +165,6 @@ def plan_coverage_cmd(
     except ConfigError as err:
         _fail(str(err))
     params, robot = spec.params, cfg.robot
-    if method is not None:
-        if method not in ("bcd", "spiral"):
-            _fail(f"--method must be bcd or spiral, got {method!r}")
-        params = dataclasses.replace(params, method=method)
     if coverage_target is not None:
         params = dataclasses.replace(params, fill_in_target=coverage_target)
     spec = dataclasses.replace(spec, params=params)
@@ -216,8 +205,7 @@ def plan_coverage_cmd(
     which = "the planner alone" if bare else "the fleet's plan"
     _print_table(
         plan,
-        f"Coverage of {path.name}: {robots} robot(s), {params.method}; {which} "
-        f"({_spec_text(spec)})",
+        f"Coverage of {path.name}: {robots} robot(s); {which} ({_spec_text(spec)})",
     )
     from rich.console import Console
 
@@ -310,12 +298,11 @@ def bench_coverage(
 
     Every plan is made as the coordinator makes its tour (2.5 cm, coordinator.lane_overlap,
     radius + coordinator.wall_clearance; --bare: the planner alone at 5 cm). For each map: 1
-    robot and 3 robots with the boustrophedon planner, 1 robot with the spiral, and as the
-    baseline the old strip-and-lanes planner (planners/lanes.py) judged by the same metrics.
-    Reports coverage of the cleanable area, repetition, length, turns, the makespan ratio of 3
-    robots to 1, and planning time (wall clock, the fastest of --repeat runs; the machine may
-    be shared). The apartment (../shared/data/maps/cob_ipa_apartment.yaml)
-    is skipped if absent.
+    robot and 3 robots with the boustrophedon planner, and as the baseline the old
+    strip-and-lanes planner (planners/lanes.py) judged by the same metrics. Reports coverage
+    of the cleanable area, repetition, length, turns, the makespan ratio of 3 robots to 1, and
+    planning time (wall clock, the fastest of --repeat runs; the machine may be shared). The
+    apartment (../shared/data/maps/cob_ipa_apartment.yaml) is skipped if absent.
     """
     from fleet.config import configs_dir
     from fleet.params import load_fleet_config
@@ -395,11 +382,6 @@ def _bench_map(
     for label, starts, case in (
         ("bcd k=1", s1, spec),
         ("bcd k=3", s3, spec),
-        (
-            "spiral k=1",
-            s1,
-            dataclasses.replace(spec, params=dataclasses.replace(spec.params, method="spiral")),
-        ),
     ):
         status.update(f"fleet bench coverage: {name}, {label}, run 1 of {repeat}")
         plan = case.plan(grid, starts, robot)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 from planners.checks import require_non_negative, require_positive
 from planners.robot import RobotSpec
@@ -33,7 +32,6 @@ class CoverageParams:
     """
 
     overlap: float = 0.0
-    method: Literal["bcd", "spiral"] = "bcd"
     fill_in: bool = True
     return_strips: bool = True
     fill_in_target: float = 0.995
@@ -49,8 +47,6 @@ class CoverageParams:
         require_non_negative(self, "turn_cost_s", "min_room_area", "simplify_tolerance")
         if not 0.0 <= self.overlap < 0.9:
             raise ValueError("overlap must be within [0, 0.9)")
-        if self.method not in ("bcd", "spiral"):
-            raise ValueError(f"method must be 'bcd' or 'spiral', got {self.method!r}")
         if not 0 < self.turn_angle_deg < 180:
             raise ValueError("turn_angle_deg must be within (0, 180)")
         if not 0.0 <= self.fill_in_target <= 1.0:

@@ -28,7 +28,6 @@ from planners.coverage.strips import return_strips
 from planners.coverage.tasks import (
     SweepTask,
     cell_tasks,
-    spiral_task,
     strip_task,
 )
 from planners.coverage.tour import (
@@ -109,8 +108,8 @@ def plan_coverage(
     lanes on one lattice per room (``lattice.room_lanes``); in a dead-end room with
     ``params.return_strips``, lanes along either axis, with a return strip
     (``strips.return_strips``) on either lane-end side or none, whichever gives the shortest
-    tour of the room alone from its door and back; sweep tasks per cell (groups of boustrophedon
-    lanes, or a spiral); one tour over all tasks of a connected part of the floor
+    tour of the room alone from its door and back; sweep tasks per cell (its boustrophedon
+    lanes, each cut into pieces); one tour over all tasks of a connected part of the floor
     (``tour.plan_tour``: task order, direction and variant by path-cost estimates between task
     ends, ``geodesic.PathCosts``); with ``params.fill_in``, targeted passes for the floor the
     sweeps miss (``fill_in.fill_in_tasks``) inserted into the tour where they cost least; for k
@@ -236,7 +235,7 @@ def _room_sweeps(
         room_mask = room_img == room
         angle = _sweep_angle(mask, res)
         base = len(cell_room)
-        strips = room in doors and params.method == "bcd" and params.return_strips
+        strips = room in doors and params.return_strips
         options = []
         for a in (angle, angle + math.pi / 2) if strips else (angle,):
             options.extend(
@@ -317,17 +316,15 @@ def _robot_tours(
         grid, floor.comp, floor.robot_comp, tasks, costs, floor.start_xy, blocks=sweeps.blocks
     )
     pieces = _split(tasks, tours, floor.robot_comp, costs, floor.start_xy, robot)
-    # only BCD plans get the final pruning, which trades the fill-in's surplus back
-    pruned = params.method == "bcd"
     prints = Footprints(grid, floor.clean, robot.cleaning_width / 2)
     if params.fill_in:
-        goal = _fill_in_goal(params.fill_in_target) if pruned else params.fill_in_target
+        goal = _fill_in_goal(params.fill_in_target)
         tasks, pieces = _add_fill_in(
             grid, floor, sweeps, tasks, pieces, prints, transit, costs, params, robot, goal
         )
-    if pruned:
-        keep = math.ceil(params.fill_in_target * int(floor.clean.sum())) if params.fill_in else None
-        tasks, pieces = prune_driven(tasks, pieces, floor.start_xy, prints, transit, keep)
+    # the final pruning trades the fill-in's surplus back
+    keep = math.ceil(params.fill_in_target * int(floor.clean.sum())) if params.fill_in else None
+    tasks, pieces = prune_driven(tasks, pieces, floor.start_xy, prints, transit, keep)
     return tasks, pieces
 
 
@@ -433,13 +430,10 @@ def _cell_tasks(
     params: CoverageParams,
     robot: RobotSpec,
 ) -> list[SweepTask]:
-    """The room's tasks: per cell its spiral or lanes, shoulder lanes and strips."""
+    """The room's tasks: per cell its lanes, shoulder lanes and strips."""
     tasks: list[SweepTask] = []
-    for k, cell in enumerate(cells, start=1):
+    for k in range(1, len(cells) + 1):
         cid = base + k
-        if params.method == "spiral":
-            tasks.append(spiral_task(room, cid, cell, frame, params, robot))
-            continue
         if len(lanes[k - 1]):
             tasks.extend(cell_tasks(room, cid, lanes[k - 1], frame, params, robot))
         for lane in shoulders[k - 1]:

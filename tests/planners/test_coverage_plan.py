@@ -67,15 +67,14 @@ def _maps():
         yield name, w.grid(RES), [p[:2] for p in w.start_poses(3, 0.17)]
 
 
-@pytest.mark.parametrize("method", ["bcd", "spiral"])
-def test_no_path_crosses_an_occupied_or_unknown_cell(method):
-    params = CoverageParams(method=method)
+def test_no_path_crosses_an_occupied_or_unknown_cell():
+    params = CoverageParams()
     for name, g, starts in _maps():
         for k in (1, 3):
             plan = plan_coverage(g, starts[:k], params, ROBOT, wall_clearance=0.0)
             for path in plan.paths:
-                assert _crossings(g, path) == 0, (name, method, k)
-            assert plan.metrics.total.coverage > 0.95, (name, method, k)
+                assert _crossings(g, path) == 0, (name, k)
+            assert plan.metrics.total.coverage > 0.95, (name, k)
 
 
 def test_apartment_paths_are_safe_and_cover_it():
