@@ -100,7 +100,6 @@ class AgentParams:
     give_up_after_s: float = 3.0
     swept_within: float = 0.15
     give_way_max_s: float = 20.0
-    peer_margin: float = 0.0
     align_enter: float = 0.6
     align_exit: float = 0.1
     align_lookahead: float = 0.3
@@ -145,7 +144,7 @@ class AgentParams:
             "escape_distance",
             "escape_speed",
         )
-        require_non_negative(self, "give_way_max_s", "peer_margin")
+        require_non_negative(self, "give_way_max_s")
         if not self.align_exit <= self.align_enter <= math.pi:
             raise ValueError("need 0 < align_exit <= align_enter <= pi")
         if not 0 < self.edge_cover <= 1:

@@ -174,15 +174,13 @@ def drive(
 ) -> tuple[FollowState, DWAResult]:
     """The command along the segment: the wall follower's where it runs beside a wall
     (:func:`agents.follow.edge.edge_step`), else DWA's (Fox, Burgard, Thrun 1997) on the local
-    path, with the peers' discs as their rims (widened by ``agent.peer_margin``), braking into a
-    stop at :func:`stop_speed` while that is admissible."""
+    path, with the peers' discs as their rims, braking into a stop at :func:`stop_speed` while
+    that is admissible."""
     robot, dt = params.robot, params.dt
     xy = np.array(now.pose[:2])
     peers = now.peers
     seen = (
-        np.vstack([now.obstacles, rim_points(peers, robot.radius + params.agent.peer_margin)])
-        if len(peers)
-        else now.obstacles
+        np.vstack([now.obstacles, rim_points(peers, robot.radius)]) if len(peers) else now.obstacles
     )
     path = local_path(state, xy)
     speed = stop_speed(state, xy, params)

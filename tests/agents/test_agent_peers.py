@@ -11,7 +11,6 @@ import pytest
 from robots import ROBOT
 
 from agents.follow.escape import keep_clear
-from agents.follow.motion import follow_step
 from agents.follow.state import FollowParams, FollowState, Situation
 from agents.peers import (
     PEER_MASK_MARGIN_M,
@@ -69,47 +68,6 @@ def test_dwa_keeps_every_point_of_a_peers_body_off_its_rim_points() -> None:
         centres = d * np.column_stack([np.cos(angles), np.sin(angles)])
         nearest = np.hypot(*(centres[:, None, :] - rim[None, :, :]).transpose(2, 0, 1)).min(axis=1)
         assert nearest.max() < ROBOT.radius + DWA.safety_margin, d
-
-
-def _converge(lead: float, off: float, agent: AgentParams) -> float:
-    """Home seed 0's contact: robot-2's transit converges at 14° on robot-1's, both toward
-    (5.24, 2.47); robot-1 (ranked first) drives its announced path ``off`` m to robot-2's side
-    at 0.5 m/s, starting ``lead`` m behind its start (negative: ahead of it), and robot-2 gives
-    way to its path intent through the follower. The closest their bodies' centres come."""
-    dt, goal = 0.1, np.array([5.2375, 2.475])
-    start = np.array([3.2016, 1.0999])
-    plan = np.array([start, goal, [5.7375, 2.5625]])
-    u = (goal - start) / np.linalg.norm(goal - start)
-    aside = off * np.array([u[1], -u[0]])
-    params = FollowParams(DWA, ROBOT, agent, None, dt)
-    state = FollowState(np.array([[3.7, 0.75], goal, [0.24, 2.47]]), index=1)
-    pose, velocity = (3.7, 0.75, math.atan2(2.475 - 0.75, 5.2375 - 3.7)), (0.0, 0.0)
-    closest = math.inf
-    for k in range(200):
-        along = max(0.5 * (k + 1) * dt - lead, 0.0)
-        peer = start + u * along
-        ahead = plan[1:] if along < np.linalg.norm(goal - start) else plan[2:]
-        centres = intent_centres([path_intent(peer, ahead, 0.5, k * dt, 2.0)], k * dt, 0.5)
-        state, result = follow_step(state, Situation(pose, velocity, NONE, centres), params)
-        if result is None or state.index >= 2:
-            break
-        velocity = (result.v, result.w)
-        xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([dt]))
-        pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))
-        closest = min(closest, math.dist(pose[:2], peer + aside))
-    return closest
-
-
-def test_a_peer_margin_keeps_a_robot_giving_way_off_a_peer_beside_its_announced_path() -> None:
-    """robot-1 drove 2 cm off its path toward robot-2, which kept 1.8 cm off that path and was
-    grazed. ``agent.peer_margin`` 0.03 keeps the robot that gives way that much farther; with
-    none (the default: the rims at the radius) it comes within 0.316 m of the peer's centre
-    here, with 0.02 within 0.338."""
-    wide = dataclasses.replace(AGENT, peer_margin=0.03)
-    closest = [_converge(lead, 0.02, wide) for lead in np.linspace(-0.6, 0.6, 13)]
-    assert min(closest) >= 2 * ROBOT.radius, closest
-    assert AGENT.peer_margin == 0.0
-    assert min(_converge(lead, 0.02, AGENT) for lead in (0.4, 0.5, 0.6)) < 2 * ROBOT.radius
 
 
 def test_path_intent_announces_the_path_ahead_even_when_stopped() -> None:
