@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -49,10 +48,11 @@ class DWAParams:
       drives into a lane end and turns there instead of cutting across to the next lane (ROS has
       no equivalent; its global planner rarely makes such corners). Grid paths' 45° steps stay
       below the default and are cut smoothly.
-    - ``path_aggregation``: ``last`` scores a rollout's distance from the path at its end point
-      only, as ROS's path cost does by default; ``mean`` (our default) averages it over the
-      rollout's points (ROS's MapGridCostFunction offers a ``Sum`` aggregation for the same
-      purpose), so an arc that ends on the path but bulges off it in between scores worse.
+
+    A rollout's distance from the path is averaged over its points, where ROS's path cost
+    scores its end point only by default (its MapGridCostFunction offers a ``Sum`` aggregation
+    for the same purpose), so an arc that ends on the path but bulges off it in between scores
+    worse.
 
     ``safety_margin`` (default 0.01 m, the lidar's range noise σ) covers what the obstacle
     points miss at a convex corner: there the nearest obstacle is one point, seen by one or two
@@ -73,7 +73,6 @@ class DWAParams:
     forward_point_distance: float = 0.325
     goal_lookahead: float = 1.0
     corner_angle: float = 1.0
-    path_aggregation: Literal["last", "mean"] = "mean"
 
     def validate(self) -> None:
         require_positive(self, "sim_time", "sim_granularity", "vx_samples", "vtheta_samples")
@@ -381,7 +380,7 @@ def _cost(
              + goal_distance_bias/2 · (|e − g| + |n − (g + f·u)|)         goal + goal front
              + occdist_scale / max(min clearance − robot_radius, ε)       obstacles
 
-    with d_path(e) the mean over all the rollout's points under ``path_aggregation: mean``, and
+    with d_path(e) the mean over all the rollout's points, and
     a = 0 within ``forward_point_distance`` of a stop that is the local goal (as in ROS,
     keeping the nose on the path there destabilizes the stop) and 1 elsewhere. The nose terms
     make rotating in place toward a path behind the robot strictly better than standing still,
@@ -397,14 +396,10 @@ def _cost(
     heading = rollouts.theta[:, -1]
     nose = end + f * np.column_stack([np.cos(heading), np.sin(heading)])
     reach_goal = max(1, int(np.searchsorted(line.cum, goal.s)))
-    if params.path_aggregation == "mean":
-        body = rollouts.body
-        d_body = line.nearest(np.vstack([body, nose]), reach_goal)[0]
-        d_end = d_body[: len(body)].reshape(k, len(rollouts.t) - 1).mean(axis=1)
-        d_nose = d_body[len(body) :]
-    else:
-        d_path = line.nearest(np.vstack([end, nose]), reach_goal)[0]
-        d_end, d_nose = d_path[:k], d_path[k:]
+    body = rollouts.body
+    d_body = line.nearest(np.vstack([body, nose]), reach_goal)[0]
+    d_end = d_body[: len(body)].reshape(k, len(rollouts.t) - 1).mean(axis=1)
+    d_nose = d_body[len(body) :]
     align = 0.0 if goal.s == goal.stop and goal.distance <= f else 1.0
     path_cost = d_end + align * d_nose
     g = goal.point
