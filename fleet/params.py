@@ -159,7 +159,6 @@ class CoordinatorParams:
     task_target_s: float = 20.0
     heartbeat_timeout_s: float = 1.0
     bid_timeout_s: float = 0.5
-    objective: Literal["minimax", "minisum"] = "minimax"
     deconfliction: DeconflictionMode = "local"
     replan_lag_s: float = 10.0
     body_margin: float = 0.05

@@ -2,10 +2,11 @@
 
 Sequential single-item auctions (Koenig et al. 2006): a round calls every lot on sale on
 ``coord/task/<lot>``; every robot in the market answers each with a :class:`Bid` priced from its
-own pose and commitments; the best bid by ``coordinator.objective`` (``planners.auction.winner``)
-wins, and the sale goes to the result callback, as Open-RMF's bidding ``Auctioneer`` reports
-each winner. Bids that are malformed, late (another round, or a lot not called), from a robot
-that is not in the market, or duplicate are counted by reason and ignored.
+own pose and commitments; the best bid by MiniMax (``planners.auction.winner``: the lowest
+committed time with the lot) wins, and the sale goes to the result callback, as Open-RMF's
+bidding ``Auctioneer`` reports each winner. Bids that are malformed, late (another round, or a
+lot not called), from a robot that is not in the market, or duplicate are counted by reason and
+ignored.
 
 The auctioneer knows no job: what is on sale, who may bid and what a sale changes are its
 caller's. It collects a round's bids on the bus's thread (:meth:`Auctioneer.on_bid`) while the
@@ -157,8 +158,7 @@ class Auctioneer:
             and (allowed is None or allowed(rnd.lots[b.task], b.robot))
         ]
         best = auction.winner(
-            (auction.Bid(b.task, b.robot, b.marginal_s, b.total_s, b.reverse) for b in live),
-            self.params.objective,
+            auction.Bid(b.task, b.robot, b.marginal_s, b.total_s, b.reverse) for b in live
         )
         if best is None and rnd.bids:
             log.info(

@@ -17,10 +17,10 @@ The model:
   (:func:`make_bid`). Travel is priced on the robot's own map (:func:`travel_times`,
   :class:`TravelGrid`: Dijkstra on a coarsened grid).
 * **Winner determination.** Each round every robot bids on every open task and one (task,
-  robot) pair wins (:func:`winner`); only the winner's commitment changes. Two team objectives
-  (Lagoudakis et al., "Auction-based multi-robot routing", RSS 2005): MiniSum takes the lowest
-  marginal cost (least total driving), MiniMax the lowest total committed time of the robot
-  after the award (least makespan: what a cleaning job is judged by). :func:`allocate` runs all
+  robot) pair wins (:func:`winner`); only the winner's commitment changes. The team objective
+  is MiniMax (Lagoudakis et al., "Auction-based multi-robot routing", RSS 2005): the lowest
+  total committed time of the robot after the award (least makespan: what a cleaning job is
+  judged by). :func:`allocate` runs all
   rounds in one process; :func:`makespan` judges the result.
 * **Lots.** A call sells a :class:`Lot`: one task, or — in the first allocation — a region of
   consecutive tasks, one per robot (:func:`regions`), so each robot starts on a contiguous part
@@ -38,21 +38,20 @@ Public API::
         .end .total_s .with_task(entry, exit_, time_s, travel_s) .won(bid, entry, exit_, time_s)
     Bid(task, robot, marginal_s, total_s, reverse)
     make_bid(robot, task_id, entry, exit_, time_s, commitment, travel) -> Bid
-    winner(bids, objective="minimax") -> Bid | None
-    allocate(tasks, robots, travel, objective="minimax") -> {robot: [(task id, reverse)]}
+    winner(bids) -> Bid | None
+    allocate(tasks, robots, travel) -> {robot: [(task id, reverse)]}
     makespan(allocation, tasks, robots, travel) -> seconds
     Lot(id, tasks, entry, exit, time_s, area_m2, gain_s=0).driven(back)
     task_lot(task); regions(tasks, k) -> lots
 """
 
 from planners.auction.allocation import allocate, makespan
-from planners.auction.bids import OBJECTIVES, Bid, Commitment, Travel, make_bid, winner
+from planners.auction.bids import Bid, Commitment, Travel, make_bid, winner
 from planners.auction.lots import Lot, regions, task_lot
 from planners.auction.tasks import Task, ahead_of, remainder, split_tour
 from planners.auction.travel import UNREACHABLE_FACTOR, TravelGrid, travel_times
 
 __all__ = [
-    "OBJECTIVES",
     "UNREACHABLE_FACTOR",
     "Bid",
     "Commitment",

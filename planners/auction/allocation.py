@@ -1,8 +1,8 @@
 """Offline sequential single-item auctions: every round at once in one process.
 
 The coordinator runs the same rounds over the bus, one task call and its bids at a time; this is
-the reference it can be compared with, and what benchmarks use to weigh the two objectives
-against each other and against a static split of the tour.
+the reference it can be compared with, and what benchmarks use to weigh it against a static
+split of the tour.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from planners.auction.bids import OBJECTIVES, Bid, Commitment, Travel, make_bid, winner
+from planners.auction.bids import Bid, Commitment, Travel, make_bid, winner
 from planners.auction.tasks import Task
 
 Allocation = dict[str, list[tuple[str, bool]]]
@@ -21,17 +21,14 @@ def allocate(
     tasks: Sequence[Task],
     robots: Mapping[str, Commitment],
     travel: Travel,
-    objective: str = "minimax",
 ) -> Allocation:
     """Sequential single-item auctions (Koenig et al. 2006): repeat {every robot bids on every
-    unallocated task; the winner (:func:`planners.auction.bids.winner` under ``objective``) takes
+    unallocated task; the MiniMax winner (:func:`planners.auction.bids.winner`) takes
     it; only the winner's commitment changes} until all are allocated. Returns robot →
     [(task id, reverse)] in allocation order, every robot of ``robots`` present.
 
     Only the winner's bids change from one round to the next, so only they are priced again.
     """
-    if objective not in OBJECTIVES:
-        raise ValueError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
     out: Allocation = {r: [] for r in robots}
     by_id = {t.id: t for t in tasks}
     if len(by_id) != len(tasks):
@@ -40,7 +37,7 @@ def allocate(
     bids: dict[tuple[str, str], Bid] = {
         (r, t.id): _bid(r, t, held[r], travel) for r in held for t in tasks
     }
-    while (best := winner(bids.values(), objective)) is not None:
+    while (best := winner(bids.values())) is not None:
         task = by_id.pop(best.task)
         out[best.robot].append((best.task, best.reverse))
         held[best.robot] = held[best.robot].won(best, task.entry, task.exit, task.time_s)

@@ -4,9 +4,8 @@ A robot's bid on a task is the marginal cost of appending it to what it has alre
 (Koenig et al., "The power of sequential single-item auctions for agent coordination", AAAI
 2006): the travel from the end of its commitments to the task's nearer end, plus the task's
 time. The winner of a round is the bid that least increases the team objective (Lagoudakis et
-al., "Auction-based multi-robot routing", RSS 2005): MiniSum, the sum of all robots' times (the
-lowest marginal cost), or MiniMax, the makespan (the lowest total time of the robot after it
-takes the task).
+al., "Auction-based multi-robot routing", RSS 2005), MiniMax: the makespan (the lowest total
+time of the robot after it takes the task).
 """
 
 from __future__ import annotations
@@ -19,7 +18,6 @@ import numpy as np
 Point = tuple[float, float]
 # seconds from a point (2,) to each of K points (K, 2): (K,)
 Travel = Callable[[np.ndarray, np.ndarray], np.ndarray]
-OBJECTIVES = ("minimax", "minisum")
 
 
 @dataclass(frozen=True)
@@ -100,16 +98,11 @@ def make_bid(
     return Bid(task_id, robot, marginal, commitment.total_s + marginal, reverse)
 
 
-def winner(bids: Iterable[Bid], objective: str = "minimax") -> Bid | None:
-    """SSI winner determination over all (task, robot) bids of a round: ``"minisum"`` = the
-    lowest ``marginal_s``, ``"minimax"`` = the lowest ``total_s`` (Lagoudakis et al., RSS 2005,
-    MiniMax team objective); ties broken by ``marginal_s``, then robot id, then task id. None
-    for no bids."""
-    if objective == "minimax":
-        return min(bids, key=lambda b: (b.total_s, b.marginal_s, b.robot, b.task), default=None)
-    if objective == "minisum":
-        return min(bids, key=lambda b: (b.marginal_s, b.robot, b.task), default=None)
-    raise ValueError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+def winner(bids: Iterable[Bid]) -> Bid | None:
+    """SSI winner determination over all (task, robot) bids of a round: the lowest
+    ``total_s`` (Lagoudakis et al., RSS 2005, MiniMax team objective); ties broken by
+    ``marginal_s``, then robot id, then task id. None for no bids."""
+    return min(bids, key=lambda b: (b.total_s, b.marginal_s, b.robot, b.task), default=None)
 
 
 def _point(xy: np.ndarray | Point) -> Point:

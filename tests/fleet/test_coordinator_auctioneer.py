@@ -26,7 +26,6 @@ class Bidders:
     def __init__(
         self,
         prices: Prices,
-        objective: str = "minimax",
         timeout_s: float = 5.0,
         also: Callable[[TaskCall], None] = lambda _call: None,
     ) -> None:
@@ -34,7 +33,7 @@ class Bidders:
         self.also = also
         self.calls: list[tuple[str, TaskCall, bool]] = []
         self.sales: list[Sale] = []
-        params = CoordinatorParams(bid_timeout_s=timeout_s, objective=objective)  # type: ignore[arg-type]
+        params = CoordinatorParams(bid_timeout_s=timeout_s)
         self.auctioneer = Auctioneer(KEYS, self.publish, params, self.sales.append)
 
     def publish(self, key: str, msg: Message, control: bool) -> None:
@@ -73,13 +72,9 @@ PRICES: Prices = {
 ROBOTS = {"robot-0", "robot-1", "robot-2"}
 
 
-@pytest.mark.parametrize(
-    ("objective", "lot", "robot"), [("minimax", "t01", "robot-1"), ("minisum", "t02", "robot-2")]
-)
-def test_the_best_bid_by_the_objective_wins_and_is_reported(
-    objective: str, lot: str, robot: str
-) -> None:
-    m = Bidders(PRICES, objective)
+def test_the_best_bid_by_minimax_wins_and_is_reported() -> None:
+    lot, robot = "t01", "robot-1"
+    m = Bidders(PRICES)
     sale = m.sell(["t01", "t02"], ROBOTS)
     assert sale is not None and m.sales == [sale]
     assert (sale.best.task, sale.best.robot) == (lot, robot)
@@ -94,20 +89,16 @@ def test_the_best_bid_by_the_objective_wins_and_is_reported(
 
 
 @pytest.mark.parametrize(
-    ("objective", "prices", "winner"),
+    ("prices", "winner"),
     [
         # equal totals: the lower marginal wins
-        ("minimax", {("t01", "robot-0"): (9.0, 30.0), ("t01", "robot-1"): (7.0, 30.0)}, "robot-1"),
+        ({("t01", "robot-0"): (9.0, 30.0), ("t01", "robot-1"): (7.0, 30.0)}, "robot-1"),
         # equal totals and marginals: the lower robot id
-        ("minimax", {("t01", "robot-1"): (7.0, 30.0), ("t01", "robot-0"): (7.0, 30.0)}, "robot-0"),
-        # equal marginals under MiniSum: the lower robot id, whatever the totals
-        ("minisum", {("t01", "robot-1"): (7.0, 10.0), ("t01", "robot-0"): (7.0, 90.0)}, "robot-0"),
+        ({("t01", "robot-1"): (7.0, 30.0), ("t01", "robot-0"): (7.0, 30.0)}, "robot-0"),
     ],
 )
-def test_ties_are_broken_by_marginal_then_robot_id(
-    objective: str, prices: Prices, winner: str
-) -> None:
-    sale = Bidders(prices, objective).sell(["t01"], {"robot-0", "robot-1"})
+def test_ties_are_broken_by_marginal_then_robot_id(prices: Prices, winner: str) -> None:
+    sale = Bidders(prices).sell(["t01"], {"robot-0", "robot-1"})
     assert sale is not None and sale.best.robot == winner
 
 

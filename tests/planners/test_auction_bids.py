@@ -99,9 +99,8 @@ BIDS = [
 ]
 
 
-def test_minisum_takes_the_lowest_marginal_cost_and_minimax_the_lowest_total():
-    assert winner(BIDS, "minisum") == BIDS[0]
-    assert winner(BIDS, "minimax") == BIDS[1]
+def test_minimax_takes_the_lowest_total():
+    assert winner(BIDS) == BIDS[1]
     assert winner(iter(BIDS)) == BIDS[1]
 
 
@@ -112,25 +111,17 @@ def test_ties_go_to_the_lower_marginal_cost_then_robot_then_task():
         Bid("t9", "a", 6.0, 10.0, False),
         Bid("t3", "c", 3.0, 10.0, True),
     ]
-    assert winner(tied, "minimax") == tied[3]
-    assert winner(tied[:3], "minimax") == tied[1]
-    assert winner(tied[:2], "minisum") == tied[1]
-    same = [Bid("t5", "b", 4.0, 9.0, False), Bid("t6", "a", 4.0, 12.0, False)]
-    assert winner(same, "minisum") == same[1]
+    assert winner(tied) == tied[3]
+    assert winner(tied[:3]) == tied[1]
 
 
-def test_no_bids_no_winner_and_an_unknown_objective_is_named():
-    assert winner([], "minimax") is None
-    assert winner([], "minisum") is None
-    with pytest.raises(ValueError, match="objective"):
-        winner(BIDS, "fastest")
-    with pytest.raises(ValueError, match="objective"):
-        allocate(_corridor(), _ends(), straight(), "fastest")
+def test_no_bids_no_winner():
+    assert winner([]) is None
 
 
 def test_minimax_gives_each_robot_the_near_half_of_the_corridor():
     tasks, robots = _corridor(), _ends()
-    got = allocate(tasks, robots, straight(), "minimax")
+    got = allocate(tasks, robots, straight())
     assert got == {
         "a": [("t00", False), ("t01", False), ("t02", False)],
         "b": [("t05", True), ("t04", True), ("t03", True)],
@@ -138,22 +129,14 @@ def test_minimax_gives_each_robot_the_near_half_of_the_corridor():
     assert makespan(got, tasks, robots, straight()) == pytest.approx(1.0 + 3.0)
 
 
-def test_minisum_lets_the_robot_that_started_take_the_whole_corridor():
-    tasks, robots = _corridor(), _ends()
-    got = allocate(tasks, robots, straight(), "minisum")
-    assert got == {"a": [(f"t{k:02d}", False) for k in range(6)], "b": []}
-    assert makespan(got, tasks, robots, straight()) == pytest.approx(1.0 + 6.0)
-
-
 def test_the_allocation_does_not_depend_on_the_order_of_tasks_or_robots():
     tasks, robots = _corridor(), _ends()
     rng = np.random.default_rng(3)
-    for objective in ("minimax", "minisum"):
-        base = allocate(tasks, robots, straight(), objective)
-        for _ in range(3):
-            shuffled = [tasks[i] for i in rng.permutation(len(tasks))]
-            flipped = dict(reversed(list(robots.items())))
-            assert allocate(shuffled, flipped, straight(), objective) == base
+    base = allocate(tasks, robots, straight())
+    for _ in range(3):
+        shuffled = [tasks[i] for i in rng.permutation(len(tasks))]
+        flipped = dict(reversed(list(robots.items())))
+        assert allocate(shuffled, flipped, straight()) == base
 
 
 def test_busy_robots_are_priced_from_their_commitments():
@@ -162,7 +145,7 @@ def test_busy_robots_are_priced_from_their_commitments():
         "a": Commitment((0.0, 0.0), current_s=100.0, current_end=(0.0, 0.0)),
         "b": Commitment((20.0, 0.0)),
     }
-    got = allocate(tasks, robots, straight(), "minimax")
+    got = allocate(tasks, robots, straight())
     # b drives 18 m to t01's exit rather than wait for a's 100 s
     assert got == {"a": [], "b": [("t01", True), ("t00", True)]}
     assert makespan(got, tasks, robots, straight()) == pytest.approx(100.0)
