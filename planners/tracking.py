@@ -37,8 +37,9 @@ from planners.robot import RobotSpec
 class TrackerParams:
     """The path tracker's gains and limits (configs/fleet.yaml ``tracker:``).
 
-    - ``gain_lateral`` k_y (1/m²) and ``gain_heading`` k_θ (1/m): Samson's law's gains, per
-      metre of travel (so the response does not depend on the speed).
+    - ``gain_lateral`` k_y (1/m²): Samson's law's lateral gain, per metre of travel (so the
+      response does not depend on the speed); its heading gain k_θ = 2·√k_y (1/m,
+      :attr:`gain_heading`) damps it critically.
     - ``lateral_acc`` (m/s²): the centripetal acceleration allowed through a vertex.
     - ``corner_deviation`` (m): how far from a vertex driven through the rounded path may pass.
     - ``stop_tolerance`` (m): a stop is reached this close to it along the segment.
@@ -62,7 +63,6 @@ class TrackerParams:
     """
 
     gain_lateral: float = 16.0
-    gain_heading: float = 8.0
     lateral_acc: float = 0.5
     corner_deviation: float = 0.01
     stop_tolerance: float = 0.005
@@ -74,11 +74,15 @@ class TrackerParams:
     rejoin_distance: float = 0.15
     rejoin_heading: float = 0.6
 
+    @property
+    def gain_heading(self) -> float:
+        """Samson's law's heading gain k_θ (1/m): critically damped with ``gain_lateral``."""
+        return 2.0 * math.sqrt(self.gain_lateral)
+
     def validate(self) -> None:
         require_positive(
             self,
             "gain_lateral",
-            "gain_heading",
             "lateral_acc",
             "corner_deviation",
             "stop_tolerance",

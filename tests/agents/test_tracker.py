@@ -83,7 +83,7 @@ def test_from_10_cm_and_20_degrees_off_it_merges_onto_the_lane_without_crossing_
 def test_with_its_gains_near_zero_it_does_not_merge(tmp_path: Path) -> None:
     """The same start with a tracker that hardly steers: the robot stays off its lane."""
     cfg = load_fleet_config()
-    cfg = replace(cfg, tracker=replace(cfg.tracker, gain_lateral=1e-6, gain_heading=1e-6))
+    cfg = replace(cfg, tracker=replace(cfg.tracker, gain_lateral=1e-6))
     a, b = np.array([0.5, 1.5]), np.array([4.5, 1.5])
     poses, _, _ = _drive(tmp_path, ROOM, np.array([a, b]), (0.5, 1.55, 0.0), cfg, 30.0)
     assert np.abs(_across(poses, a, b)[-10:]).max() > 0.01

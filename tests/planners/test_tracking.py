@@ -85,7 +85,7 @@ def test_samson_steers_back_onto_the_line() -> None:
 
 @pytest.mark.parametrize(
     "field, value",
-    [("gain_lateral", -1.0), ("gain_heading", 0.0), ("lateral_acc", 0.0), ("check_margin", -0.1)],
+    [("gain_lateral", -1.0), ("lateral_acc", 0.0), ("check_margin", -0.1)],
 )
 def test_parameters_that_cannot_work_are_refused_naming_the_field(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
