@@ -98,7 +98,6 @@ class AgentParams:
     along_tolerance: float = 0.03
     goal_tolerance: float = 0.05
     give_up_after_s: float = 3.0
-    swept_within: float = 0.15
     give_way_max_s: float = 20.0
     align_enter: float = 0.6
     align_exit: float = 0.1
@@ -138,7 +137,6 @@ class AgentParams:
             "transit_speed",
             "stale_after_s",
             "give_up_after_s",
-            "swept_within",
             "align_exit",
             "escape_after_s",
             "escape_distance",
@@ -251,12 +249,6 @@ class FleetConfig:
             raise ValueError(
                 f"wall_follow.distance ({self.wall_follow.distance}) must exceed robot.radius "
                 f"({self.robot.radius}): the robot would drive into the wall it follows"
-            )
-        if self.agent.swept_within > self.robot.cleaning_width / 2:
-            raise ValueError(
-                f"agent.swept_within ({self.agent.swept_within}) must not exceed half "
-                f"robot.cleaning_width ({self.robot.cleaning_width / 2}): a waypoint given up "
-                "beyond the brush's reach would count its piece swept"
             )
 
 

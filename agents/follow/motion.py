@@ -271,8 +271,9 @@ def watchdog(state: FollowState, now: Situation, params: FollowParams) -> Follow
     A waypoint the robot has come no closer to (by ``PROGRESS_M``) for ``give_up_after_s`` is
     skipped, so a robot whose way is shut, that is caught in a local minimum of the DWA costs,
     or whose pose estimate has drifted into a wall moves on instead of waiting forever; the
-    skipped spot stays uncleaned and shows in the coverage, and one given up farther than
-    ``swept_within`` from it is remembered in ``missed`` (its piece is unswept). Time without
+    skipped spot stays uncleaned and shows in the coverage, and one given up farther than the
+    brush reaches (half ``cleaning_width``) from it is remembered in ``missed`` (its piece is
+    unswept). Time without
     progress while a peer is in the way (:func:`peer_in_the_way` within DWA's reach,
     max_vel_x·sim_time) does not count, up to ``give_way_max_s`` of it in a row: a robot that
     gives way to one crossing its path waits for it instead of giving up the lane it was about
@@ -285,7 +286,7 @@ def watchdog(state: FollowState, now: Situation, params: FollowParams) -> Follow
     ):
         return replace(state, yielded_s=state.yielded_s + dt)
     if state.stalled_s + dt >= agent.give_up_after_s:
-        short = state.best_dist > agent.swept_within
+        short = state.best_dist > robot.cleaning_width / 2
         missed = (*state.missed, state.index) if short else state.missed
         return state.at(state.index + 1, skipped=state.skipped + 1, missed=missed)
     return replace(state, stalled_s=state.stalled_s + dt)

@@ -31,7 +31,8 @@ class FollowState:
     skipped: int = 0
     yielded_s: float = 0.0
     edge_side: int = 0
-    # waypoints given up farther than agent.swept_within from them: their pieces are unswept
+    # waypoints given up farther than the brush's reach (half robot.cleaning_width) from them:
+    # their pieces are unswept
     missed: tuple[int, ...] = ()
     # a waypoint to come to rest on, as on the last (the order of passage holds the robot
     # before the one after it); -1: none

@@ -230,7 +230,8 @@ def test_waiting_for_a_peer_in_the_way_holds_the_give_up_clock_up_to_a_cap() -> 
 @pytest.mark.parametrize(("at", "missed"), [(0.0, (1,)), (1.92, ())])
 def test_a_waypoint_given_up_far_short_is_missed(at: float, missed: tuple[int, ...]) -> None:
     """Given up 2 m short, the piece into the waypoint stays unswept (its far end is missed);
-    given up 8 cm short, within agent.swept_within, the brush reached the rest."""
+    given up 8 cm short, within the brush's reach (half robot.cleaning_width), the brush reached
+    the rest."""
     lane = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]])
     state = FollowState(lane, index=1, stalled_s=AGENT.give_up_after_s, best_dist=2.0 - at)
     state, _ = _step(state, (at, 0.0, 0.0), (0.0, 0.0), NONE)

@@ -191,12 +191,6 @@ def test_dwa_may_not_sample_faster_than_the_robot_drives(tmp_path: Path) -> None
     assert "dwa.min_vel_x (0.6) must not exceed robot.max_vel_x (0.5)" in msg, msg
 
 
-def test_a_given_up_waypoint_counts_swept_only_within_the_brush(tmp_path: Path) -> None:
-    path = _with(tmp_path / "fleet.yaml", "agent", "swept_within", 0.2)
-    msg = _config_error(path)
-    assert "agent.swept_within (0.2) must not exceed half robot.cleaning_width (0.15)" in msg, msg
-
-
 @pytest.mark.parametrize(
     ("field", "value", "says"),
     [
