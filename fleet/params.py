@@ -113,7 +113,6 @@ class AgentParams:
     transit_speed: float = 0.25
     hold_max_s: float = 30.0
     hold_silent_s: float = 2.0
-    edge_pass: bool = True
     edge_slack: float = 0.05
     edge_window: float = 0.3
     edge_cover: float = 0.8

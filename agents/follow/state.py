@@ -88,9 +88,10 @@ class Situation:
 @dataclass(frozen=True)
 class FollowParams:
     """Everything the follower is tuned by, built once from the config (:meth:`of`): DWA's
-    parameters, the robot, the agent's, the wall follower's (None: no edge pass), the
-    control period ``dt`` (s), the path tracker's, the turn (rad) beyond which a vertex of the
-    plan is a stop and the tolerance (m) of the simplification the tracker drives."""
+    parameters, the robot, the agent's, the wall follower's (None, for scenes that test the
+    rest alone: no edge pass), the control period ``dt`` (s), the path tracker's, the turn
+    (rad) beyond which a vertex of the plan is a stop and the tolerance (m) of the
+    simplification the tracker drives."""
 
     dwa: DWAParams
     robot: RobotSpec
@@ -107,12 +108,11 @@ class FollowParams:
         path as the plan's time estimates see it: simplified by ``coverage.simplify_tolerance``,
         stopping to turn where it turns by more than ``coverage.turn_angle_deg`` (a
         simplification that cuts a corner is caught by the tracker's check, and DWA drives it)."""
-        wall = cfg.wall_follow if cfg.agent.edge_pass else None
         return cls(
             cfg.dwa,
             cfg.robot,
             cfg.agent,
-            wall,
+            cfg.wall_follow,
             1.0 / cfg.lidar.rate_hz,
             cfg.tracker,
             math.radians(cfg.coverage.turn_angle_deg),
