@@ -221,6 +221,18 @@ MOVED_TO_ROBOT: dict[str, dict[str, str]] = {
 }
 
 
+# Options removed once their alternative was measured and lost (or their value is derived): the
+# code does what their default did. A config that still gives one is refused, naming it, rather
+# than told it is unknown and offered a near name; git and BENCHMARKS.md keep why each went.
+REMOVED: dict[str, tuple[str, ...]] = {
+    "agent": ("edge_pass", "peer_margin", "swept_within"),
+    "coordinator": ("first_regions", "objective"),
+    "tracker": ("gain_heading",),
+    "dwa": ("path_aggregation",),
+    "coverage": ("method", "edge_pass", "max_task_area", "skip_order", "neighbour_cuts"),
+}
+
+
 @dataclass(frozen=True)
 class FleetConfig:
     """The whole file: ``robot:`` must be given (every field), the other sections may be left
@@ -259,11 +271,13 @@ def load_fleet_config(path: str | Path | None = None) -> FleetConfig:
     """Load and validate ``configs/fleet.yaml`` (or ``path``); errors name file and field.
 
     The ``robot:`` section is required in full. A field that moved to it (see
-    ``MOVED_TO_ROBOT``) is refused where it used to be, naming where it lives now.
+    ``MOVED_TO_ROBOT``) is refused where it used to be, naming where it lives now; a removed
+    option (``REMOVED``) is refused naming it.
     """
     p = Path(path) if path is not None else default_config_path()
     data = read_yaml(p)
     _refuse_moved(data, p)
+    _refuse_removed(data, p)
     return from_mapping(FleetConfig, data, str(p))
 
 
@@ -279,4 +293,19 @@ def _refuse_moved(data: object, path: Path) -> None:
                 raise ConfigError(
                     f"{path}: {section}.{old}: the robot's size and limits live in robot: "
                     f"(robot.{new}); remove {section}.{old}"
+                )
+
+
+def _refuse_removed(data: object, path: Path) -> None:
+    if not isinstance(data, dict):
+        return
+    for section, removed in REMOVED.items():
+        given = data.get(section)
+        if not isinstance(given, dict):
+            continue
+        for old in removed:
+            if old in given:
+                raise ConfigError(
+                    f"{path}: {section}.{old}: no longer an option (the code always does what "
+                    f"its default did); remove {section}.{old}"
                 )

@@ -13,7 +13,7 @@ import yaml
 from robots import ROBOT
 
 from fleet.config import ConfigError, from_mapping
-from fleet.params import FleetConfig, default_config_path, load_fleet_config
+from fleet.params import REMOVED, FleetConfig, default_config_path, load_fleet_config
 from fleet.world import load_world
 
 SECTIONS = typing.get_type_hints(FleetConfig)
@@ -183,6 +183,31 @@ def test_an_old_config_with_a_copy_of_the_robot_is_refused(
         f"{path}: {section}.{field}: the robot's size and limits live in robot: "
         f"(robot.{home}); remove {section}.{field}"
     )
+
+
+@pytest.mark.parametrize(
+    ("section", "field", "value"),
+    [
+        ("agent", "peer_margin", 0.0),
+        ("coordinator", "first_regions", "tour"),
+        ("coverage", "method", "bcd"),
+    ],
+)
+def test_an_old_config_with_a_removed_option_is_refused_naming_it(
+    tmp_path: Path, section: str, field: str, value: object
+) -> None:
+    path = _with(tmp_path / "fleet.yaml", section, field, value)
+    assert _config_error(path) == (
+        f"{path}: {section}.{field}: no longer an option (the code always does what its "
+        f"default did); remove {section}.{field}"
+    )
+
+
+def test_no_removed_option_is_a_field_again() -> None:
+    cfg = load_fleet_config()
+    for section, removed in REMOVED.items():
+        fields = {f.name for f in dataclasses.fields(getattr(cfg, section))}
+        assert not fields & set(removed), (section, fields & set(removed))
 
 
 def test_dwa_may_not_sample_faster_than_the_robot_drives(tmp_path: Path) -> None:
