@@ -67,7 +67,7 @@ PRICES: Prices = {
     ("t01", "robot-2"): (25.0, 35.0),
     ("t02", "robot-0"): (10.0, 60.0),
     ("t02", "robot-1"): (8.0, 31.0),
-    ("t02", "robot-2"): (3.0, 40.0),  # the lowest marginal: MiniSum's winner
+    ("t02", "robot-2"): (3.0, 40.0),  # the lowest marginal, not the winner
 }
 ROBOTS = {"robot-0", "robot-1", "robot-2"}
 
