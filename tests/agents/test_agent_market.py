@@ -178,3 +178,23 @@ def test_an_agent_bids_only_on_rounds_that_count_it_in_the_market() -> None:
     counted = dataclasses.replace(before, round=4, bidders=["robot-0", "robot-1"])
     agent._bid([counted])
     assert [(b.task, b.robot) for b in bus.bids] == [("t01", "robot-0")]
+
+
+def test_the_battery_the_agent_hears_is_what_it_bids_on() -> None:
+    """The wiring, not the pricing: a reading heard on the robot's battery key reaches the
+    agent's bids (a robot below its threshold bids nothing, one charged bids), whatever the
+    market client would do with a reading handed to it by hand."""
+    cfg = load_fleet_config()
+    battery = dataclasses.replace(cfg.robot.battery, enabled=True)
+    cfg = dataclasses.replace(cfg, robot=dataclasses.replace(cfg.robot, battery=battery))
+    bus = _NoFloorBus()
+    agent = Agent(bus, "robot-0", cfg)  # type: ignore[arg-type]
+    agent.pose_source = OdometryPose((0.0, 0.0, 0.0))
+    key = bus.keys.robot("robot-0", "battery")
+    call = _call("t01", (1.0, 0.0), (2.0, 0.0), 5.0)
+    agent._on_battery(key, BatteryState(0.0, battery.recharge_threshold / 2, False))
+    agent._bid([call])
+    assert bus.bids == []
+    agent._on_battery(key, BatteryState(0.0, 1.0, False))
+    agent._bid([dataclasses.replace(call, round=call.round + 1)])
+    assert [(b.task, b.declined) for b in bus.bids] == [("t01", False)]

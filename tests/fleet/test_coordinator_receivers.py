@@ -5,6 +5,7 @@ silent heartbeat gives its work back to the market."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from fleet.coordinator.service import Coordinator
 from fleet.coordinator.store import JobStore
 from fleet.params import load_fleet_config
 from fleet.plausible import CONFIRMATIONS, Bounds
-from fleet.protocol import AwardAck, Clock, Heartbeat, PoseEstimate, RobotStatus
+from fleet.protocol import AwardAck, Clock, Heartbeat, Plan, PoseEstimate, RobotStatus
 from fleet.supervisor.runner import read_events
 from fleet.world import load_world
 from planners.auction import Task
@@ -269,3 +270,34 @@ def test_the_counts_survive_a_restart(
     # one pose from robot-9 dropped by each
     assert restarted._dropped() == (0, 2)
     again.close()
+
+
+def test_the_stall_watch_runs_on_the_configured_stall_time(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner, tmp_path: Path
+) -> None:
+    """The wiring, not the rule: a coordinator made with ``coordinator.stall_s`` 7 s calls a
+    robot that got nowhere on its plan for 8 s stuck and takes its work back (the rule itself,
+    in the market, is tested with the time set by hand)."""
+    cbus, _, _ = buses
+    store = JobStore(tmp_path / "job.sqlite")
+    params = dataclasses.replace(CFG.coordinator, stall_s=7.0)
+    coord = Coordinator(cbus, planner, 1, params, store, bounds=Bounds.of(CFG))
+    try:
+        assert wait_until(lambda: "robot-0" in coord.job.robots), "robot-0's token not heard"
+        path = np.array([[0.5, 0.5], [1.5, 0.5]])
+        with coord.lock:
+            coord.job.add_tasks((Task("t00", path, 1.0, 4.0, (1,)),))
+            robot = coord.job.robots["robot-0"]
+            robot.ready, robot.xy = True, (0.5, 0.5)
+            coord.job.award("t00", "robot-0", False)
+            coord.phase = "cleaning"
+            coord.dispatcher.plans["robot-0"] = Plan(0.0, 7, "t00", path, 0)
+            for at in (10.0, 18.0):
+                coord.journal.heard(at)
+                msg = RobotStatus(at, "blocked", "t00", 0.2, 0, 2, 0.0, 0, 0, 7)
+                coord.market.observe("robot-0", msg)
+                coord.market.check_stalls()
+            assert coord.job.queue("robot-0") == []
+        assert "stuck" in [e["kind"] for e in read_events(tmp_path / "job.sqlite")]
+    finally:
+        coord.close()
