@@ -48,7 +48,6 @@ from agents.slam.persistence import SavedState, load_state, state_path
 from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
-from fleet.plan_chain import is_dock_trip
 from fleet.protocol import (
     Award,
     AwardAck,
@@ -232,7 +231,7 @@ class Agent:
             if msg.plan_id == self.drive.plan_id:
                 self._cut_plan(msg)
                 return
-            if not self.market.holds(msg.task) and not is_dock_trip(msg.task):
+            if not self.market.holds(msg.task) and not msg.errand:
                 return
             self.drive = Drive.of(msg, self.market.queue, self.params.follow)
         log.info(
@@ -257,7 +256,7 @@ class Agent:
             taken = self.market.on_award(msg)
             follow = self.drive.follow
             driving = follow is not None and not follow.done
-            held = is_dock_trip(self.drive.task) or any(map(self.market.holds, self.drive.chain))
+            held = self.drive.errand or any(map(self.market.holds, self.drive.chain))
             dropped = taken and driving and not held
             if dropped:
                 self.drive = dataclasses.replace(self.drive, follow=None, task="")

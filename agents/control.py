@@ -38,8 +38,9 @@ from agents.peers import cut_out, own_intent, progress, to_avoid
 from agents.pose_source import Located, Pose, PoseSource, locate
 from agents.time_use import step_kind
 from fleet.params import FleetConfig
-from fleet.plan_chain import DOCK_PREFIX, chain_of, chain_starts, current_task
+from fleet.plan_chain import chain_of, chain_starts, current_task
 from fleet.protocol import (
+    ERRAND_KINDS,
     TIME_KINDS,
     BatteryState,
     Intent,
@@ -59,17 +60,24 @@ Note = tuple[int, str]
 @dataclass(frozen=True, eq=False)
 class Drive:
     """The plan the robot drives, as the shell holds it: what the coordinator sent (plan id,
-    task, the waypoint where the sweep begins, the chain of tasks with where each begins and
-    their time, the order of passage) and the follower's state along it (None: no path)."""
+    task and kind, the waypoint where the sweep begins, the chain of tasks with where each
+    begins and their time, the order of passage) and the follower's state along it (None: no
+    path)."""
 
     plan_id: int = -1
     task: str = ""
+    kind: str = "clean"
     sweep_from: int = 0
     chain: tuple[str, ...] = ()
     chain_starts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
     chain_time_s: float = 0.0
     waits: Waits = field(default_factory=Waits.none)
     follow: FollowState | None = None
+
+    @property
+    def errand(self) -> bool:
+        """Whether the plan is an errand to a dock (``Plan.errand``), no work of the job."""
+        return self.kind in ERRAND_KINDS
 
     @classmethod
     def of(cls, plan: Plan, queue: Sequence[Won], params: FollowParams) -> Drive:
@@ -79,6 +87,7 @@ class Drive:
         return cls(
             plan.plan_id,
             plan.task,
+            plan.kind,
             plan.sweep_from,
             chain,
             chain_starts(plan),
@@ -242,7 +251,7 @@ def _command(
         return state, Command(0.0, 0.0, "stale", "other", follow)
     if not located.localized:
         return _lost(state, located, follow)
-    if follow is not None and follow.done and drive.task.startswith(DOCK_PREFIX):
+    if follow is not None and follow.done and drive.kind == "dock":
         # on its dock: stepping aside for a peer would take it off the charger
         return state, Command(0.0, 0.0, "done", "idle", follow)
     if follow is None or follow.done:

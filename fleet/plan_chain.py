@@ -22,15 +22,6 @@ from planners.auction import Task
 
 # queued tasks whose ends meet within this go into one plan: the robot drives on between them
 CHAIN_M = 0.01
-# a plan whose task is named so takes its robot to a dock (dock-0, dock-1, ...; wait-0, ... to
-# the waiting spot by a taken dock): no task of the job, nothing to sweep
-DOCK_PREFIX = "dock-"
-WAIT_PREFIX = "wait-"
-
-
-def is_dock_trip(task: str) -> bool:
-    """Whether a plan for ``task`` takes its robot to a dock or to wait by one."""
-    return task.startswith((DOCK_PREFIX, WAIT_PREFIX))
 
 
 def driven_ends(task: Task, reverse: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -108,4 +99,5 @@ def cut_plan(plan: Plan, j: int) -> Plan:
         plan.sweep_from,
         list(plan.chain[:j]),
         plan.chain_starts[:j],
+        kind=plan.kind,
     )

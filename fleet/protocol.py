@@ -24,7 +24,7 @@ from typing import Annotated, Any, ClassVar, TypeVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
@@ -329,6 +329,11 @@ class Heartbeat(Message):
     ready: bool
 
 
+# what a Plan is for: sweeping won tasks, or an errand to a dock or to wait by one
+PLAN_KINDS = ("clean", "dock", "wait")
+ERRAND_KINDS = ("dock", "wait")
+
+
 @dataclass(frozen=True, eq=False)
 class Plan(Message):
     """A waypoint path (nav_msgs/Path in 2D) for one robot; ``task`` names the job it serves.
@@ -343,7 +348,12 @@ class Plan(Message):
     transit-graph cells (``fleet.coordinator.transits``) and carries its order of passage
     (``planners.dependencies``): the robot heads for waypoint ``wait_at[i]`` only once robot
     ``wait_for[i]`` has reached waypoint ``wait_passed[i]`` of its plan ``wait_plan[i]`` (or
-    drives another plan since)."""
+    drives another plan since).
+
+    ``kind`` says what the plan is for (``PLAN_KINDS``): ``clean`` sweeps the tasks it names,
+    tasks of the job the robot has won; ``dock`` takes the robot onto a dock to charge and
+    ``wait`` to a waiting spot by a taken dock, errands that sweep nothing and whose ``task`` is
+    only a name."""
 
     TYPE: ClassVar[str] = "plan"
     stamp: float
@@ -365,6 +375,12 @@ class Plan(Message):
     wait_passed: Annotated[np.ndarray, Arr("<i4")] = field(
         default_factory=lambda: np.zeros(0, dtype=np.int32)
     )
+    kind: str = "clean"
+
+    @property
+    def errand(self) -> bool:
+        """Whether the plan is an errand to a dock (``dock`` or ``wait``), no work of the job."""
+        return self.kind in ERRAND_KINDS
 
 
 @dataclass(frozen=True, eq=False)

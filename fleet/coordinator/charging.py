@@ -38,10 +38,14 @@ from fleet.coordinator.dispatcher import Dispatcher, Errand
 from fleet.coordinator.job import EMPTY, LOST
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
-from fleet.plan_chain import DOCK_PREFIX, WAIT_PREFIX
 from fleet.protocol import Plan, RobotStatus
 from planners.battery import BatterySpec, DockUser, pick_dock
 from planners.grid import clearance
+
+# the names of errand plans (their kind says what they are): dock-0, dock-1, ... onto a dock;
+# wait-0, ... to the waiting spot by a taken dock
+DOCK_PREFIX = "dock-"
+WAIT_PREFIX = "wait-"
 
 log = logging.getLogger("coordinator")
 
@@ -247,11 +251,11 @@ class Docking:
             )
             if spot is None:
                 return False
-            errand = Errand(f"{WAIT_PREFIX}{k}", spot)
+            errand = Errand(f"{WAIT_PREFIX}{k}", spot, kind="wait")
         else:
             front = _approach(dock)
             onto = _approach(dock, STOP_SHORT_M)[None]
-            errand = Errand(f"{DOCK_PREFIX}{k}", (float(front[0]), float(front[1])), onto)
+            errand = Errand(f"{DOCK_PREFIX}{k}", (float(front[0]), float(front[1])), onto, "dock")
         try:
             plan = self.dispatcher.send_errand(rid, errand)
         except ValueError as e:

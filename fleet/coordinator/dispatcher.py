@@ -49,12 +49,14 @@ log = logging.getLogger("coordinator")
 @dataclass(frozen=True, eq=False)
 class Errand:
     """A trip that drives no task (to a dock, or to a waiting spot by one): its plan's
-    ``task`` name, the ``goal`` its transit ends at, and the points driven straight on from
-    there (onto the dock; none to a waiting spot)."""
+    ``task`` name, the ``goal`` its transit ends at, the points driven straight on from
+    there (onto the dock; none to a waiting spot), and its plan's ``kind`` (``dock``, ``wait``:
+    :data:`fleet.protocol.ERRAND_KINDS`)."""
 
     task: str
     goal: tuple[float, float]
     tail: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    kind: str = "dock"
 
 
 # what a robot of a round drives to: the chain of tasks its plan sweeps, or an errand
@@ -313,7 +315,9 @@ class Dispatcher:
             leg = without_straight_vertices(np.asarray(path, dtype=float))
         waypoints = np.vstack([leg, errand.tail]) if len(errand.tail) else leg
         self.errands[rid] = errand
-        plan = self._publish(rid, errand.task, waypoints, len(waypoints) - 1, [], [], transit, ids)
+        plan = self._publish(
+            rid, errand.task, waypoints, len(waypoints) - 1, [], [], transit, ids, errand.kind
+        )
         self.on_errand(rid, plan)
         return plan
 
@@ -358,9 +362,11 @@ class Dispatcher:
         starts: list[int],
         transit: PlannedTransit | None,
         ids: dict[str, int],
+        kind: str = "clean",
     ) -> Plan:
-        """Number, record and send ``rid``'s plan, with its transit's order of passage (its
-        waits naming the peers' new plans by ``ids``) and schedule if planned in a round."""
+        """Number, record and send ``rid``'s plan of ``kind``, with its transit's order of
+        passage (its waits naming the peers' new plans by ``ids``) and schedule if planned in a
+        round."""
         self.plan_seq = max(self.plan_seq + 1, ids.get(rid, 0))
         # a robot standing in the round (no work, stuck or lost) is planned round, not waited
         # for: it drives no plan of the round whose progress could release the wait
@@ -377,6 +383,7 @@ class Dispatcher:
             [w[1] for w in waits],
             np.array([ids[w[1]] for w in waits], dtype=np.int32),
             np.array([w[2] for w in waits], dtype=np.int32),
+            kind,
         )
         self.plans[rid] = plan
         if transit is not None:

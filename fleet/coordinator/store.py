@@ -26,7 +26,7 @@ from fleet.coordinator.job import Job, RobotRecord, TaskRecord
 from fleet.protocol import Plan
 from planners.auction import Task
 
-STORE_VERSION = 3
+STORE_VERSION = 4
 SQLITE_MAGIC = b"SQLite format 3\x00"
 SQLITE_HEADER_BYTES = 100
 SCHEMA = """
@@ -40,7 +40,7 @@ CREATE TABLE IF NOT EXISTS robots (
     heartbeat_wall REAL, restarts INTEGER, award_seq INTEGER, acked_seq INTEGER, x REAL, y REAL);
 CREATE TABLE IF NOT EXISTS plans (
     robot TEXT PRIMARY KEY, plan_id INTEGER, task TEXT, waypoints BLOB, sweep_from INTEGER,
-    stamp REAL, chain TEXT, chain_starts BLOB);
+    stamp REAL, chain TEXT, chain_starts BLOB, kind TEXT);
 CREATE TABLE IF NOT EXISTS events (
     seq INTEGER PRIMARY KEY AUTOINCREMENT, wall REAL, sim REAL, kind TEXT, robot TEXT,
     task TEXT, detail TEXT);
@@ -232,7 +232,7 @@ class JobStore:
     def save_plan(self, robot: str, plan: Plan) -> None:
         with self.db:
             self.db.execute(
-                "INSERT OR REPLACE INTO plans VALUES (?,?,?,?,?,?,?,?)",
+                "INSERT OR REPLACE INTO plans VALUES (?,?,?,?,?,?,?,?,?)",
                 (
                     robot,
                     plan.plan_id,
@@ -242,6 +242,7 @@ class JobStore:
                     plan.stamp,
                     json.dumps(list(plan.chain)),
                     np.ascontiguousarray(plan.chain_starts, dtype="<i4").tobytes(),
+                    plan.kind,
                 ),
             )
 
@@ -312,8 +313,8 @@ class JobStore:
 
     def plans(self) -> dict[str, Plan]:
         out = {}
-        for robot, pid, task, wps, sweep_from, stamp, chain, starts in self.db.execute(
-            "SELECT robot, plan_id, task, waypoints, sweep_from, stamp, chain, chain_starts "
+        for robot, pid, task, wps, sweep_from, stamp, chain, starts, kind in self.db.execute(
+            "SELECT robot, plan_id, task, waypoints, sweep_from, stamp, chain, chain_starts, kind "
             "FROM plans"
         ):
             wp = np.frombuffer(wps, dtype="<f8").reshape(-1, 2).copy()
@@ -325,5 +326,6 @@ class JobStore:
                 int(sweep_from),
                 json.loads(chain),
                 np.frombuffer(starts, dtype="<i4").astype(np.int32),
+                kind=kind,
             )
         return out

@@ -240,10 +240,26 @@ def test_a_robot_on_its_dock_does_not_step_aside() -> None:
     through = Intent(
         10.0, path_intent(np.array([0.4, 3.0]), np.array([[3.0, 3.0]]), 0.3, 10.0, 2.0)
     )
-    plan = replace(_plan(), task="dock-0", waypoints=np.array([START[:2]]), sweep_from=0)
+    plan = replace(
+        _plan(), task="dock-0", kind="dock", waypoints=np.array([START[:2]]), sweep_from=0
+    )
     drive = Drive.of(plan, [], _params().follow)
     assert drive.follow is not None
     drive = replace(drive, follow=replace(drive.follow, index=1))
     _, out = _step(_heard(10.0, drive, {"robot-9": through}))
     assert (out.cmd_vel.v, out.cmd_vel.w) == (0.0, 0.0)
     assert out.status is not None and out.status.state == "done"
+
+
+def test_a_plan_named_like_a_dock_trip_but_of_kind_clean_is_no_dock() -> None:
+    """What a plan is for is its kind, not its name: at the end of a cleaning plan whose task
+    happens to be called "dock-0" the robot is not on a charger and does step aside."""
+    through = Intent(
+        10.0, path_intent(np.array([0.4, 3.0]), np.array([[3.0, 3.0]]), 0.3, 10.0, 2.0)
+    )
+    plan = replace(_plan(), task="dock-0", waypoints=np.array([START[:2]]), sweep_from=0)
+    drive = Drive.of(plan, [], _params().follow)
+    assert drive.follow is not None and not drive.errand
+    drive = replace(drive, follow=replace(drive.follow, index=1))
+    _, out = _step(_heard(10.0, drive, {"robot-9": through}))
+    assert (out.cmd_vel.v, out.cmd_vel.w) != (0.0, 0.0)

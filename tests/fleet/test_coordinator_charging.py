@@ -158,7 +158,7 @@ def test_a_robot_below_the_threshold_goes_to_a_dock_and_its_work_is_sold_again(
     assert awards[-1].tasks == []
     (plan,) = f.plans("robot-0")
     dock = world.docks[0]
-    assert plan.task == "dock-0"
+    assert (plan.task, plan.kind) == ("dock-0", "dock")
     assert np.linalg.norm(plan.waypoints[-1] - dock[:2]) < SPEC.dock_tolerance / 2
     # it drives onto the dock straight along the dock's axis: facing it when it arrives
     last = plan.waypoints[-1] - plan.waypoints[-2]
@@ -177,7 +177,8 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     for rid, why, parking in going_home(f.job, f.docking.go_home_below):
         f.market.send_home(rid, why, parking)
     (to_dock,), (to_wait,) = f.plans("robot-0"), f.plans("robot-1")
-    assert to_dock.task == "dock-0" and to_wait.task == "wait-0"
+    assert (to_dock.task, to_dock.kind) == ("dock-0", "dock")
+    assert (to_wait.task, to_wait.kind) == ("wait-0", "wait")
     dock = np.array(world.docks[0][:2])
     assert np.linalg.norm(to_wait.waypoints[-1] - dock) >= SPOT_FROM_DOCK_M
     f.status("robot-0", 0.15, True, to_dock, done=True)
