@@ -38,7 +38,7 @@ def goal_task(task_id: str, frontier: Frontier, step: float) -> Task:
     norm = float(np.hypot(*heading))
     unit = heading / norm if norm > 1e-9 else np.array([1.0, 0.0])
     path = np.stack([goal, goal + step * unit])
-    return Task(task_id, path, frontier.information_gain, 0.0, ())
+    return Task(task_id, path, frontier.information_gain, 0.0, (), "frontier")
 
 
 def _nearest(points: np.ndarray, to: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -50,7 +51,7 @@ import numpy as np
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
-from fleet.coordinator.job import ASSIGNED, FREED_PREFIX, LOST, OPEN, Job
+from fleet.coordinator.job import ASSIGNED, LOST, OPEN, Job
 from fleet.coordinator.journal import Journal
 from fleet.plan_chain import chain_pieces, piece_count
 from fleet.protocol import Plan, RobotStatus
@@ -518,14 +519,13 @@ def region_lots(job: Job, sale: list[str]) -> Callable[[], tuple[auction.Lot, ..
     called (outside the market's lock)."""
     bidders = job.market()
     open_ = (t for t in sale if job.tasks[t].state == OPEN)
-    runs = [job.tasks[t].task for t in sorted(open_, key=_tour_key)]
+    runs = sorted((job.tasks[t].task for t in open_), key=_tour_key)
     if not bidders:
         return lambda: ()
     return lambda: auction.regions(runs, len(bidders))
 
 
-def _tour_key(task_id: str) -> tuple[int, ...]:
+def _tour_key(task: auction.Task) -> tuple[int, ...]:
     """Where a task lies along the tour: "t07" → (0, 7), its remainder "t07.1" → (0, 7, 1); a
-    task added after the tour was cut (freed floor: "m01") after all of it, (1, 1)."""
-    off_tour = int(task_id.startswith(FREED_PREFIX))
-    return (off_tour, *(int(part) for part in task_id.lstrip("t" + FREED_PREFIX).split(".")))
+    task not of the tour (kind ``freed``: "m01") after all of it, (1, 1)."""
+    return (int(task.kind != "tour"), *(int(n) for n in re.findall(r"\d+", task.id)))

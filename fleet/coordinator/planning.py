@@ -185,10 +185,11 @@ class TaskPlanner:
         return tasks
 
     def task_over(self, floor: np.ndarray, task_id: str) -> Task | None:
-        """The task ``task_id`` that sweeps the cells ``floor`` (on :attr:`grid`) the brush
-        reaches (``planners.coverage.patch.patch_sweep``: lanes over the patch, then fill-in
-        passes up to ``coverage.fill_in_target``), priced as the tour's tasks are
-        (``planners.auction.tasks.task_time``); None when the brush reaches none of it."""
+        """The task ``task_id`` (kind ``freed``) that sweeps the cells ``floor`` (on
+        :attr:`grid`) the brush reaches (``planners.coverage.patch.patch_sweep``: lanes over the
+        patch, then fill-in passes up to ``coverage.fill_in_target``), priced as the tour's
+        tasks are (``planners.auction.tasks.task_time``); None when the brush reaches none of
+        it."""
         sweep = patch_sweep(
             self.grid,
             floor & self.brushable,
@@ -201,7 +202,7 @@ class TaskPlanner:
         if sweep is None:
             return None
         path, area = sweep
-        return Task(task_id, path, area, task_time(path, self.params, self.robot), ())
+        return Task(task_id, path, area, task_time(path, self.params, self.robot), (), "freed")
 
     def travel(self) -> TravelGrid:
         """Travel times on the floor plan as the robots' bids price them: obstacles grown by the

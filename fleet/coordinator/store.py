@@ -26,7 +26,7 @@ from fleet.coordinator.job import Job, RobotRecord, TaskRecord
 from fleet.protocol import Plan
 from planners.auction import Task
 
-STORE_VERSION = 4
+STORE_VERSION = 5
 SQLITE_MAGIC = b"SQLite format 3\x00"
 SQLITE_HEADER_BYTES = 100
 SCHEMA = """
@@ -34,7 +34,7 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
 CREATE TABLE IF NOT EXISTS tasks (
     id TEXT PRIMARY KEY, parent TEXT, area_m2 REAL, time_s REAL, path BLOB, cells TEXT,
     state TEXT, owner TEXT, position INTEGER, reverse INTEGER, swept BLOB,
-    created_wall REAL, done_wall REAL, tried TEXT, blocked_by TEXT);
+    created_wall REAL, done_wall REAL, tried TEXT, blocked_by TEXT, kind TEXT);
 CREATE TABLE IF NOT EXISTS robots (
     id TEXT PRIMARY KEY, liveness TEXT, state TEXT, task TEXT, progress REAL,
     heartbeat_wall REAL, restarts INTEGER, award_seq INTEGER, acked_seq INTEGER, x REAL, y REAL);
@@ -194,12 +194,13 @@ class JobStore:
                 now if r.state == "done" else None,
                 json.dumps(sorted(r.tried)),
                 r.blocked_by,
+                r.task.kind,
             )
             for r in records
         ]
         with self.db:
             self.db.executemany(
-                "INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?) ON CONFLICT(id) DO "
+                "INSERT INTO tasks VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?) ON CONFLICT(id) DO "
                 "UPDATE SET state=excluded.state, owner=excluded.owner, "
                 "position=excluded.position, reverse=excluded.reverse, swept=excluded.swept, "
                 "tried=excluded.tried, blocked_by=excluded.blocked_by, "
@@ -271,15 +272,31 @@ class JobStore:
         are heard from again)."""
         for row in self.db.execute(
             "SELECT id, parent, area_m2, time_s, path, cells, state, owner, position, reverse, "
-            "swept, tried, blocked_by FROM tasks ORDER BY rowid"
+            "swept, tried, blocked_by, kind FROM tasks ORDER BY rowid"
         ):
-            tid, parent, area, t_s, path, cells, state, owner, pos, rev, swept, tried, by = row
+            (
+                tid,
+                parent,
+                area,
+                t_s,
+                path,
+                cells,
+                state,
+                owner,
+                pos,
+                rev,
+                swept,
+                tried,
+                by,
+                kind,
+            ) = row
             task = Task(
                 tid,
                 np.frombuffer(path, dtype="<f8").reshape(-1, 2).copy(),
                 float(area),
                 float(t_s),
                 tuple(json.loads(cells)),
+                kind,
             )
             job.tasks[tid] = TaskRecord(
                 task,

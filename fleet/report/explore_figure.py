@@ -26,7 +26,6 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
 from fleet.colours import robot_colour
-from fleet.coordinator.job import FRONTIER_PREFIX
 from fleet.report.summary import ReportError
 from planners.grid import GridMap
 
@@ -52,7 +51,9 @@ def frontier_goals(state: Path) -> list[FrontierGoal]:
     robot its last award went to."""
     db = sqlite3.connect(f"file:{state}?mode=ro", uri=True)
     try:
-        tasks = db.execute("SELECT id, path, state FROM tasks ORDER BY id").fetchall()
+        tasks = db.execute(
+            "SELECT id, path, state FROM tasks WHERE kind = 'frontier' ORDER BY id"
+        ).fetchall()
         awards = db.execute(
             "SELECT task, robot FROM events WHERE kind = 'awarded' ORDER BY seq"
         ).fetchall()
@@ -61,8 +62,6 @@ def frontier_goals(state: Path) -> list[FrontierGoal]:
     owner = dict(awards)
     out = []
     for tid, path, st in tasks:
-        if not str(tid).startswith(FRONTIER_PREFIX):
-            continue
         x, y = np.frombuffer(path, dtype="<f8").reshape(-1, 2)[0]
         out.append(FrontierGoal(str(tid), owner.get(tid, ""), float(x), float(y), str(st)))
     return out

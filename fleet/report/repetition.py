@@ -56,7 +56,6 @@ from typing import Any
 
 import numpy as np
 
-from fleet.coordinator.job import FREED_PREFIX
 from fleet.protocol import TIME_KINDS
 from fleet.report.summary import (
     PLANS_FILE,
@@ -299,7 +298,10 @@ def read_tour(path: Path) -> Tour:
         db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
         try:
             meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
-            rows = db.execute("SELECT id, path FROM tasks WHERE parent IS NULL").fetchall()
+            # the tour's own tasks: not their remainders, nor floor added after it was cut
+            rows = db.execute(
+                "SELECT id, path FROM tasks WHERE parent IS NULL AND kind = 'tour'"
+            ).fetchall()
         finally:
             db.close()
     except sqlite3.Error as e:
@@ -322,9 +324,6 @@ def read_tour(path: Path) -> Tour:
         raise ReportError(f"{path}: meta tour_elements: {e}") from None
     order = []
     for tid, blob in rows:
-        if tid.startswith(FREED_PREFIX):
-            # added after the tour was cut (floor freed): swept off the tour, a detour
-            continue
         m = re.fullmatch(r"[A-Za-z]*(\d+)", tid)
         if m is None:
             raise ReportError(f"{path}: task {tid!r} has no parent and no tour index")

@@ -19,4 +19,6 @@ def part_of(
     recomputed for ``robot``, its cells ``task``'s."""
     whole = path_length(task.path)
     share = min(1.0, path_length(path) / whole) if whole > 0 else 1.0
-    return Task(new_id, path, task.area_m2 * share, task_time(path, params, robot), task.cells)
+    return Task(
+        new_id, path, task.area_m2 * share, task_time(path, params, robot), task.cells, task.kind
+    )

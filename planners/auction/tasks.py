@@ -45,6 +45,10 @@ CUT_WINDOW = 0.25
 HOP_M = 0.5
 
 
+# what a Task is for (see Task)
+TASK_KINDS = ("tour", "freed", "frontier")
+
+
 @dataclass(frozen=True, eq=False)
 class Task:
     """A unit of work: a sweep path driven from path[0] to path[-1] (or reversed, see Bid).
@@ -54,7 +58,10 @@ class Task:
     covers as planned, ``time_s`` its estimated driving time (stops, turns in place and
     rest-to-rest runs, see the module docstring), ``cells`` the ids of the boustrophedon cells
     whose floor it sweeps (sorted, unique). A remainder of ``"t07"`` is ``"t07.1"``, then
-    ``"t07.2"``.
+    ``"t07.2"``, of the same ``kind`` (``TASK_KINDS``): ``tour``, a piece of the coverage tour;
+    ``freed``, floor added after the tour was cut (furniture taken away); ``frontier``, an
+    exploring job's drive to a frontier. What a task is for is read from its kind, never from
+    its id.
     """
 
     id: str
@@ -62,11 +69,14 @@ class Task:
     area_m2: float
     time_s: float
     cells: tuple[int, ...]
+    kind: str = "tour"
 
     def __post_init__(self) -> None:
         path = np.array(self.path, dtype=float)
         if path.ndim != 2 or path.shape[1] != 2 or len(path) < 2:
             raise ValueError(f"task {self.id}: path must be (N, 2) with N >= 2, got {path.shape}")
+        if self.kind not in TASK_KINDS:
+            raise ValueError(f"task {self.id}: kind {self.kind!r} is not one of {TASK_KINDS}")
         path.flags.writeable = False
         object.__setattr__(self, "path", path)
 
@@ -168,7 +178,9 @@ def remainder(
     seg_len = np.hypot(*np.diff(task.path, axis=0).T)
     total = float(seg_len.sum())
     share = float(seg_len[todo].sum()) / total if total > 0 else len(todo) / task.pieces
-    return Task(new_id, path, task.area_m2 * share, task_time(path, params, robot), task.cells)
+    return Task(
+        new_id, path, task.area_m2 * share, task_time(path, params, robot), task.cells, task.kind
+    )
 
 
 def ahead_of(
@@ -202,7 +214,9 @@ def ahead_of(
     rest = cut_start(path, at)
     rest = rest[::-1] if reverse else rest
     share = (total - at) / total
-    return Task(new_id, rest, task.area_m2 * share, task_time(rest, params, robot), task.cells)
+    return Task(
+        new_id, rest, task.area_m2 * share, task_time(rest, params, robot), task.cells, task.kind
+    )
 
 
 def task_time(path: np.ndarray, params: CoverageParams, robot: RobotSpec) -> float:

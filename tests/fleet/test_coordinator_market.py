@@ -586,7 +586,7 @@ def test_a_task_added_for_freed_floor_before_the_first_sale_is_sold_after_the_to
     """A freed-floor task (m01) that joined the job before its first allocation is sold with
     the tour's tasks, placed after them in the regions' order."""
     c = Coordinator(planner, ["robot-0", "robot-1"])
-    freed = Task("m01", np.array([[30.0, 0.0], [31.0, 0.0]]), 0.3, 2.0, ())
+    freed = Task("m01", np.array([[30.0, 0.0], [31.0, 0.0]]), 0.3, 2.0, (), "freed")
     c.job.add_tasks((freed,))
     c.bidding = {"robot-0": 1.0, "robot-1": 2.0}
     c.market.auction(c.auctioneer)

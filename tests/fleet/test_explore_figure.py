@@ -33,9 +33,14 @@ def _state(path: Path) -> Path:
     db.executescript(SCHEMA)
     for tid, goal, state in (("f001", (1.0, 1.5), "done"), ("f002", (3.0, 0.5), "gone")):
         path_blob = np.array([goal, (goal[0] + 0.3, goal[1])], dtype="<f8").tobytes()
-        db.execute("INSERT INTO tasks (id, path, state) VALUES (?, ?, ?)", (tid, path_blob, state))
+        db.execute(
+            "INSERT INTO tasks (id, path, state, kind) VALUES (?, ?, ?, 'frontier')",
+            (tid, path_blob, state),
+        )
     cleaning = np.zeros((2, 2), dtype="<f8").tobytes()
-    db.execute("INSERT INTO tasks (id, path, state) VALUES ('t01', ?, 'done')", (cleaning,))
+    db.execute(
+        "INSERT INTO tasks (id, path, state, kind) VALUES ('t01', ?, 'done', 'tour')", (cleaning,)
+    )
     for seq, (task, robot) in enumerate(
         (("f001", "robot-0"), ("f002", "robot-0"), ("f001", "robot-1")), start=1
     ):

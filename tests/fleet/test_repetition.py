@@ -97,13 +97,13 @@ def _make_run(run_dir: Path, kinds_at: dict[tuple[float, float], str] | None = N
     elements = tour_elements(TOUR, [[LANE_A], [LANE_B]], [0.0, 0.0])
     db = sqlite3.connect(run_dir / "coordinator.sqlite")
     db.execute("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT)")
-    db.execute("CREATE TABLE tasks (id TEXT PRIMARY KEY, parent TEXT, path BLOB)")
+    db.execute("CREATE TABLE tasks (id TEXT PRIMARY KEY, parent TEXT, path BLOB, kind TEXT)")
     tour = {"resolution_m": 0.025, "lane_overlap": 0.1, "repetition": 0.0}
     db.executemany(
         "INSERT INTO meta VALUES (?, ?)",
         [("tour_elements", json.dumps(elements.to_json())), ("tour", json.dumps(tour))],
     )
-    db.execute("INSERT INTO tasks VALUES ('t00', NULL, ?)", (TOUR.astype("<f8").tobytes(),))
+    db.execute("INSERT INTO tasks VALUES ('t00', NULL, ?, 'tour')", (TOUR.astype("<f8").tobytes(),))
     db.commit()
     db.close()
     report = {
@@ -177,7 +177,7 @@ def test_a_task_added_for_freed_floor_is_no_piece_of_the_tour(tmp_path: Path) ->
     before = breakdown(tmp_path / "run")
     db = sqlite3.connect(tmp_path / "run" / "coordinator.sqlite")
     freed = np.array([[0.5, 0.8], [1.5, 0.8]], dtype="<f8")
-    db.execute("INSERT INTO tasks VALUES ('m01', NULL, ?)", (freed.tobytes(),))
+    db.execute("INSERT INTO tasks VALUES ('m01', NULL, ?, 'freed')", (freed.tobytes(),))
     db.commit()
     db.close()
     r = breakdown(tmp_path / "run")
