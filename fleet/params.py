@@ -276,36 +276,25 @@ def load_fleet_config(path: str | Path | None = None) -> FleetConfig:
     """
     p = Path(path) if path is not None else default_config_path()
     data = read_yaml(p)
-    _refuse_moved(data, p)
-    _refuse_removed(data, p)
+    _refuse_gone(data, p)
     return from_mapping(FleetConfig, data, str(p))
 
 
-def _refuse_moved(data: object, path: Path) -> None:
+def _refuse_gone(data: object, path: Path) -> None:
+    """Refuse a key that moved to ``robot:`` (``MOVED_TO_ROBOT``) or was removed
+    (``REMOVED``), saying which."""
     if not isinstance(data, dict):
         return
-    for section, moved in MOVED_TO_ROBOT.items():
+    gone = [
+        (section, old, f"the robot's size and limits live in robot: (robot.{new})")
+        for section, moved in MOVED_TO_ROBOT.items()
+        for old, new in moved.items()
+    ] + [
+        (section, old, "no longer an option (the code always does what its default did)")
+        for section, removed in REMOVED.items()
+        for old in removed
+    ]
+    for section, old, why in gone:
         given = data.get(section)
-        if not isinstance(given, dict):
-            continue
-        for old, new in moved.items():
-            if old in given:
-                raise ConfigError(
-                    f"{path}: {section}.{old}: the robot's size and limits live in robot: "
-                    f"(robot.{new}); remove {section}.{old}"
-                )
-
-
-def _refuse_removed(data: object, path: Path) -> None:
-    if not isinstance(data, dict):
-        return
-    for section, removed in REMOVED.items():
-        given = data.get(section)
-        if not isinstance(given, dict):
-            continue
-        for old in removed:
-            if old in given:
-                raise ConfigError(
-                    f"{path}: {section}.{old}: no longer an option (the code always does what "
-                    f"its default did); remove {section}.{old}"
-                )
+        if isinstance(given, dict) and old in given:
+            raise ConfigError(f"{path}: {section}.{old}: {why}; remove {section}.{old}")
