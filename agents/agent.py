@@ -226,7 +226,9 @@ class Agent:
     def _on_clock(self, key: str, msg: Clock) -> None:
         self.rx.on_clock(key, msg.stamp)
 
-    def _on_plan(self, _key: str, msg: Plan) -> None:
+    def _on_plan(self, key: str, msg: Plan) -> None:
+        if not self.rx.plan(key, msg):
+            return
         with self.lock:
             if msg.plan_id == self.drive.plan_id:
                 self._cut_plan(msg)

@@ -17,7 +17,9 @@ three agreeing messages confirm it. Nothing else moves it. Then, with the sender
   more than a clock step past the clock, whose points are not times from its stamp over the
   intent horizon, that moves faster than a robot can, or that puts the peer where it cannot have
   driven to since its last intent believed, is dropped: one stamped far ahead would stand in
-  everyone's way for good.
+  everyone's way for good;
+- a **plan** of a kind the protocol does not name (``fleet.protocol.PLAN_KINDS``) is dropped:
+  what it would have the robot do is unknown.
 
 The agent does not take its peers' poses (their intents say where they are). The clock starts
 at the sim time of the simulator's answer to the agent's spawn request (:meth:`start`); until
@@ -35,12 +37,13 @@ import numpy as np
 
 from fleet.params import FleetConfig, LidarParams
 from fleet.plausible import Bounds, PoseTrack, SimClock
-from fleet.protocol import BatteryState, Intent, LaserScan, Odometry
+from fleet.protocol import PLAN_KINDS, BatteryState, Intent, LaserScan, Odometry, Plan
 
 # drop(key, sender, why, n): n messages on key from sender dropped as implausible
 Drop = Callable[[str, str, str, int], None]
 
 SIM = "sim"
+COORDINATOR = "coordinator"
 # a scan's angles and range limits are floats sent as such: equal within this
 GEOMETRY_TOL = 1e-6
 
@@ -154,6 +157,11 @@ class Receivers:
         stamped no later than the clock allows."""
         why = "" if 0.0 <= msg.percentage <= 1.0 else f"charge {msg.percentage:.3g} not in 0..1"
         return self._judge(key, SIM, why or self._ahead(msg.stamp))
+
+    def plan(self, key: str, msg: Plan) -> bool:
+        """Whether to take the coordinator's plan ``msg``: of a kind the protocol names."""
+        why = "" if msg.kind in PLAN_KINDS else f"plan kind {msg.kind!r} not one of {PLAN_KINDS}"
+        return self._judge(key, COORDINATOR, why)
 
     def scan(self, key: str, msg: LaserScan) -> bool:
         """Whether to believe the robot's scan ``msg``; a believed one is heard by the clock."""

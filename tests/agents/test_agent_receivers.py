@@ -29,6 +29,7 @@ from fleet.protocol import (
     LaserScan,
     Message,
     Odometry,
+    Plan,
     SpawnReply,
     Twist,
 )
@@ -163,6 +164,15 @@ def test_a_battery_reading_beyond_a_full_charge_or_stamped_ahead_is_dropped() ->
     assert not rx.battery(BATTERY, BatteryState(10.0, 1.5, False))
     assert not rx.battery(BATTERY, BatteryState(60.0, 0.5, False))
     assert drops.count == 2
+
+
+def test_a_plan_of_a_kind_the_protocol_does_not_name_is_dropped() -> None:
+    rx, drops = _rx()
+    plan = Plan(10.0, 3, "t00", np.array([[0.0, 0.0], [1.0, 0.0]]))
+    assert rx.plan(KEYS.plan("robot-1"), plan)
+    assert rx.plan(KEYS.plan("robot-1"), replace(plan, kind="dock"))
+    assert not rx.plan(KEYS.plan("robot-1"), replace(plan, kind="banana"))
+    assert [(r[1], r[3]) for r in drops.rows] == [("coordinator", 1)]
 
 
 def test_a_scan_stamped_far_ahead_is_dropped() -> None:
