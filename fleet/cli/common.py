@@ -1,12 +1,11 @@
-"""What several command modules share: the common options (world, config, bus) and the
-helpers that load parameters, open the bus, log and stop on signals."""
+"""What several command modules share: the helpers that check options, load parameters, open
+the bus, log and stop on signals (the shared options are in ``fleet/cli/options.py``)."""
 
 from __future__ import annotations
 
 import signal
 import threading
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
@@ -14,58 +13,6 @@ from fleet.bus import DEFAULT_ENDPOINT
 
 # the coordinator on a stored map (`--map`) stopped the run: the robots' scans do not match it
 WRONG_MAP_EXIT = 5
-
-ConnectOpt = Annotated[
-    list[str] | None,
-    typer.Option(
-        "--connect",
-        "-c",
-        help="Zenoh router endpoint to connect to (repeatable), e.g. tcp/192.168.1.5:7447; "
-        "FLEET_CONNECT may hold them, separated by spaces.",
-        envvar="FLEET_CONNECT",
-    ),
-]
-FleetOpt = Annotated[
-    str,
-    typer.Option("--fleet", help="Fleet name: the key prefix fleet/<name>/.", envvar="FLEET_NAME"),
-]
-ConfigOpt = Annotated[
-    Path | None,
-    typer.Option(
-        "--config",
-        help="Parameter file (default: the built-in configs/fleet.yaml).",
-        envvar="FLEET_CONFIG",
-    ),
-]
-ZenohConfigOpt = Annotated[
-    Path | None,
-    typer.Option(
-        "--zenoh-config",
-        help="Zenoh config file (JSON5) under the fleet's own settings, e.g. the TLS files, user "
-        "and password for a secured router that `fleet certs DIR` wrote as DIR/<user>.json5.",
-        envvar="FLEET_ZENOH_CONFIG",
-    ),
-]
-WorldOpt = Annotated[
-    str,
-    typer.Option(
-        "--world",
-        "-w",
-        help="World YAML or ROS map_server YAML, or a built-in world name (home, small).",
-        envvar="FLEET_WORLD",
-    ),
-]
-
-DeconflictionOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--deconfliction",
-        help="Transits between tasks: local (robots give way by their intents only), "
-        "prioritized (planned in space and time with priorities, CBS where they fail) or cbs "
-        "(planned jointly); robots keep the plan's order through shared cells. Default: "
-        "coordinator.deconfliction of the config (local).",
-    ),
-]
 
 
 def _check_deconfliction(mode: str | None) -> None:

@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from fleet.cli.options import JsonOpt
+
 if TYPE_CHECKING:
     from rich.status import Status
 
@@ -281,7 +283,7 @@ def _print_table(plan: Any, title: str) -> None:
 
 
 def bench_coverage(
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
     repeat: Annotated[
         int,
         typer.Option(

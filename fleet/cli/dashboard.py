@@ -14,8 +14,9 @@ from typing import Annotated, Any
 
 import typer
 
-from fleet.cli.common import ConfigOpt, ZenohConfigOpt, _bus, _fail, _load
+from fleet.cli.common import _bus, _fail, _load
 from fleet.cli.help_text import reflow
+from fleet.cli.options import ConfigOpt, JsonOpt, ZenohConfigOpt
 from fleet.supervisor.ops import STATE_FILE
 
 REDRAW_HZ = 5.0
@@ -195,7 +196,7 @@ def bench_dashboard(
     width: Annotated[int, typer.Option("--width", help="Terminal columns drawn.")] = 160,
     height: Annotated[int, typer.Option("--height", help="Terminal rows drawn.")] = 50,
     world: Annotated[str, typer.Option("--world", "-w", help="World the fleet is in.")] = "home",
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """What the dashboard costs: its redraw rate and its CPU share of one core while it
     watches a synthetic fleet of N robots at --speed.

@@ -10,6 +10,8 @@ from typing import Annotated
 
 import typer
 
+from fleet.cli.options import JsonOpt
+
 # the fleets' stress worlds: (world, robots)
 STRESS_WORLDS = (("corridor", 3), ("home", 6))
 # wall seconds a fleet run may take before it counts as a deadlock
@@ -66,7 +68,7 @@ def bench_deconfliction(
     joint_time_limit: float = typer.Option(
         1.0, help="Seconds the joint fallback (CBS, or ECBS above 10 robots) may take."
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+    as_json: JsonOpt = False,
     fleet_seeds: str = typer.Option(
         "",
         "--fleet-seeds",

@@ -7,6 +7,8 @@ import time
 
 import typer
 
+from fleet.cli.options import JsonOpt
+
 
 def register(app: typer.Typer, plan_app: typer.Typer, bench_app: typer.Typer, slam_app) -> None:
     bench_app.command("dwa")(bench_dwa)
@@ -37,7 +39,7 @@ def _scene(beams: int):
 def bench_dwa(
     calls: int = typer.Option(500, min=10, help="Timed calls, after 20 warm-up calls."),
     beams: int = typer.Option(360, min=1, help="Lidar points handed to the planner as obstacles."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+    as_json: JsonOpt = False,
 ) -> None:
     """Time one DWA step (planners/dwa.py) with the parameters from configs/fleet.yaml.
 

@@ -13,14 +13,16 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import (
-    DeconflictionOpt,
-    WorldOpt,
-    _check_deconfliction,
-    _fail,
-    parse_seeds,
-)
+from fleet.cli.common import _check_deconfliction, _fail, parse_seeds
 from fleet.cli.help_text import reflow
+from fleet.cli.options import (
+    BenchSpeedOpt,
+    DeconflictionOpt,
+    JsonOpt,
+    RunRobotsOpt,
+    RunTimeoutOpt,
+    WorldOpt,
+)
 
 WorldsOpt = Annotated[
     str,
@@ -37,21 +39,16 @@ SeedsOpt = Annotated[str, typer.Option("--seeds", help="Seeds of the runs: 0,1,2
 def bench_fleet(
     worlds: WorldsOpt = "home",
     seeds: SeedsOpt = "0-4",
-    robots: Annotated[int, typer.Option("--robots", "-n", help="Robots in every run.")] = 3,
-    speed: Annotated[
-        float,
-        typer.Option("--speed", help="Sim seconds per wall second; 0 runs as fast as it can."),
-    ] = 0.0,
-    timeout: Annotated[
-        float, typer.Option("--timeout", help="Wall seconds a run may take before it is stopped.")
-    ] = 1200.0,
+    robots: RunRobotsOpt = 3,
+    speed: BenchSpeedOpt = 0.0,
+    timeout: RunTimeoutOpt = 1200.0,
     run_root: Annotated[
         Path | None,
         typer.Option(
             "--run-root", help="Where each run's dir goes (default: runs/bench-fleet-<time>)."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
     deconfliction: DeconflictionOpt = None,
 ) -> None:
     """Run `fleet up --headless --until-done` for every world and seed, and report what the
@@ -120,7 +117,7 @@ def bench_follow(
     config: Annotated[
         Path | None, typer.Option("--config", help="fleet.yaml to use instead of the default.")
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """One robot drives the coordinator's whole coverage tour with the real path follower on
     the real simulator core, in one process and without the bus: what the plan and the follower
@@ -193,7 +190,7 @@ def bench_repetition(
             "5 cm cells hide or show lane overlap as lanes fall on them); 1: the simulator's.",
         ),
     ] = 1,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Where each run's repetition comes from: every re-entry of a cell under the brush,
     charged to what the robot was doing and to the element of the coordinator's tour it drove.
@@ -232,20 +229,15 @@ def bench_explore(
     world: WorldOpt = "home",
     seeds: SeedsOpt = "0-2",
     robots: Annotated[int, typer.Option("--robots", "-n", help="Robots exploring together.")] = 3,
-    speed: Annotated[
-        float,
-        typer.Option("--speed", help="Sim seconds per wall second; 0 runs as fast as it can."),
-    ] = 0.0,
-    timeout: Annotated[
-        float, typer.Option("--timeout", help="Wall seconds a run may take before it is stopped.")
-    ] = 1800.0,
+    speed: BenchSpeedOpt = 0.0,
+    timeout: RunTimeoutOpt = 1800.0,
     run_root: Annotated[
         Path | None,
         typer.Option(
             "--run-root", help="Where each run's dir goes (default: runs/bench-explore-<time>)."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Explore a world with N robots and with one alone, and clean on the map the N made.
 

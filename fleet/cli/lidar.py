@@ -8,7 +8,8 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import ConfigOpt, _load
+from fleet.cli.common import _load
+from fleet.cli.options import ConfigOpt, JsonOpt
 
 
 def register(
@@ -36,7 +37,7 @@ def bench_lidar(
     baseline: Annotated[
         bool, typer.Option(help="Also time the brute-force caster (every beam × every segment).")
     ] = True,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
     config: ConfigOpt = None,
 ) -> None:
     """Time sim_server.lidar.cast_scans on furnished synthetic floors.

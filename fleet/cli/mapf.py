@@ -9,6 +9,8 @@ from typing import Annotated
 
 import typer
 
+from fleet.cli.options import JsonOpt
+
 SOLVER_HELP = (
     "pp = prioritized planning with space-time A* and random restarts; sipp-pp = the same with "
     "SIPP; cbs = optimal ICBS (MDD cardinal conflicts, bypass, CG heuristic); cbs-plain = CBS "
@@ -65,7 +67,7 @@ def plan_mapf(
         float, typer.Option(min=0.0, help="Seconds before giving up with status timeout.")
     ] = 60.0,
     seed: Annotated[int, typer.Option(help="Seed of PP's restart shuffles.")] = 0,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
     out: Annotated[
         Path | None,
         typer.Option(help="Write the schedule in libMultiRobotPlanning's output YAML format."),
@@ -168,7 +170,7 @@ def _hint(solver: str, status: str) -> str:
 
 
 def bench_mapf(
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
     tiny: Annotated[
         int | None,
         typer.Option(

@@ -11,17 +11,21 @@ import typer
 from fleet.bus import DEFAULT_ENDPOINT
 from fleet.cli.common import (
     WRONG_MAP_EXIT,
-    ConfigOpt,
-    ConnectOpt,
-    DeconflictionOpt,
-    FleetOpt,
-    WorldOpt,
-    ZenohConfigOpt,
     _bus,
     _fail,
     _load,
     _setup_logging,
     _stop_on_signals,
+)
+from fleet.cli.options import (
+    ConfigOpt,
+    ConnectOpt,
+    DeconflictionOpt,
+    FleetOpt,
+    SeedOpt,
+    SpeedOpt,
+    WorldOpt,
+    ZenohConfigOpt,
 )
 from fleet.protocol import DEFAULT_FLEET
 
@@ -63,11 +67,8 @@ def router(
 
 def sim(
     world: WorldOpt = "home",
-    speed: Annotated[
-        float,
-        typer.Option("--speed", help="Real-time factor; 0 runs as fast as the agents keep up."),
-    ] = 1.0,
-    seed: Annotated[int, typer.Option("--seed", help="Seed for sensor noise.")] = 0,
+    speed: SpeedOpt = 1.0,
+    seed: SeedOpt = 0,
     connect: ConnectOpt = None,
     zenoh_config: ZenohConfigOpt = None,
     fleet: FleetOpt = DEFAULT_FLEET,

@@ -11,13 +11,14 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import WorldOpt, _fail
+from fleet.cli.common import _fail
 from fleet.cli.help_text import reflow
+from fleet.cli.options import JsonOpt, RunRobotsOpt, WorldOpt
 
 
 def bench_recovery(
     world: WorldOpt = "home",
-    robots: Annotated[int, typer.Option("--robots", "-n", help="Robots in each run.")] = 3,
+    robots: RunRobotsOpt = 3,
     seed: Annotated[int, typer.Option("--seed", help="Sensor-noise seed of every run.")] = 0,
     kills: Annotated[
         int,
@@ -56,7 +57,7 @@ def bench_recovery(
             "--run-root", help="Where each run's dir goes (default: runs/bench-recovery-<time>)."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Measure recovery on real fleets: every run is `fleet up --speed 0 --until-done`, and
     failures are real signals to its processes.
@@ -112,7 +113,7 @@ def bench_chaos(
         int, typer.Option("--faults", help="Faults per run, at random sim moments (0: none).")
     ] = 5,
     world: WorldOpt = "small",
-    robots: Annotated[int, typer.Option("--robots", "-n", help="Robots in each run.")] = 3,
+    robots: RunRobotsOpt = 3,
     seed: Annotated[
         int,
         typer.Option(
@@ -141,7 +142,7 @@ def bench_chaos(
             "--run-root", help="Where each run's dir goes (default: runs/bench-chaos-<time>)."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Throw faults at real fleets and see whether the job survives: a no-fault run, then RUNS
     runs of `fleet up --speed 0 --until-done`, each with FAULTS faults at random sim moments

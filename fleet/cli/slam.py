@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from fleet.cli.common import parse_seeds
+from fleet.cli.options import JsonOpt
 
 
 def register(
@@ -37,9 +38,7 @@ def replay(
     range_min: Annotated[
         float, typer.Option(help="Shorter returns are treated as no return (metres).")
     ] = 0.05,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of a table.")
-    ] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Replay a recorded CARMEN log through the same SLAM the agents run.
 
@@ -131,9 +130,7 @@ def bench_slam(
     config: Annotated[
         Path | None, typer.Option(help="fleet.yaml to use (default: the built-in one).")
     ] = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of a table.")
-    ] = False,
+    as_json: JsonOpt = False,
     log: Annotated[
         Path | None,
         typer.Option(

@@ -12,8 +12,9 @@ from typing import Annotated
 
 import typer
 
-from fleet.cli.common import WorldOpt, _fail
+from fleet.cli.common import _fail
 from fleet.cli.help_text import reflow
+from fleet.cli.options import BenchSpeedOpt, JsonOpt, SeedOpt, WorldOpt
 
 
 def bench_soak(
@@ -22,10 +23,7 @@ def bench_soak(
     sim_s: Annotated[
         float, typer.Option("--sim-s", help="Sim seconds to run before the fleet is stopped.")
     ] = 3600.0,
-    speed: Annotated[
-        float,
-        typer.Option("--speed", help="Sim seconds per wall second; 0 runs as fast as it can."),
-    ] = 0.0,
+    speed: BenchSpeedOpt = 0.0,
     every: Annotated[
         float, typer.Option("--every", help="Sim seconds between two samples.")
     ] = 60.0,
@@ -35,12 +33,12 @@ def bench_soak(
             "--warmup-s", help="Sim seconds before the figures are judged (the first 10 min)."
         ),
     ] = 600.0,
-    seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
+    seed: SeedOpt = 0,
     run_dir: Annotated[
         Path | None,
         typer.Option("--run-dir", help="The run's dir (default: runs/bench-soak-<time>)."),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Run `fleet up --headless --loop` (the coordinator starts the job again each time it
     finishes) for SIM_S sim seconds and watch whether the fleet holds its resources.

@@ -20,14 +20,16 @@ from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 import numpy as np
 import typer
 
-from fleet.cli.common import (
-    WRONG_MAP_EXIT,
+from fleet.cli.common import WRONG_MAP_EXIT, _check_deconfliction, _fail, _load
+from fleet.cli.options import (
     ConfigOpt,
     DeconflictionOpt,
+    HeadlessOpt,
+    JsonOpt,
+    RobotsOpt,
+    SeedOpt,
+    SpeedOpt,
     WorldOpt,
-    _check_deconfliction,
-    _fail,
-    _load,
 )
 
 TIMED_OUT_EXIT = 3
@@ -67,15 +69,10 @@ M = TypeVar("M", bound="Message")
 
 
 def up(
-    robots: Annotated[int, typer.Option("--robots", "-n", help="Number of robot agents.")] = 3,
+    robots: RobotsOpt = 3,
     world: WorldOpt = "home",
-    speed: Annotated[
-        float,
-        typer.Option("--speed", help="Real-time factor; 0 runs as fast as the agents keep up."),
-    ] = 4.0,
-    headless: Annotated[
-        bool, typer.Option("--headless", help="Plain log lines instead of the live table.")
-    ] = False,
+    speed: SpeedOpt = 4.0,
+    headless: HeadlessOpt = False,
     until_done: Annotated[
         bool, typer.Option("--until-done", help="Stop once every robot has finished its plan.")
     ] = False,
@@ -91,7 +88,7 @@ def up(
         Path | None,
         typer.Option("--run-dir", help="Where logs and the report go (default: runs/<date-time>)."),
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
+    seed: SeedOpt = 0,
     config: ConfigOpt = None,
     deconfliction: DeconflictionOpt = None,
     loop: Annotated[
@@ -320,15 +317,10 @@ def up(
 
 
 def explore(
-    robots: Annotated[int, typer.Option("--robots", "-n", help="Number of robot agents.")] = 2,
+    robots: RobotsOpt = 2,
     world: WorldOpt = "home",
-    speed: Annotated[
-        float,
-        typer.Option("--speed", help="Real-time factor; 0 runs as fast as the agents keep up."),
-    ] = 4.0,
-    headless: Annotated[
-        bool, typer.Option("--headless", help="Plain log lines instead of the live table.")
-    ] = False,
+    speed: SpeedOpt = 4.0,
+    headless: HeadlessOpt = False,
     timeout: Annotated[
         float | None,
         typer.Option(
@@ -341,7 +333,7 @@ def explore(
         Path | None,
         typer.Option("--run-dir", help="Where logs and the map go (default: runs/<date-time>)."),
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Seed for the simulator's sensor noise.")] = 0,
+    seed: SeedOpt = 0,
     config: ConfigOpt = None,
     unknown_start: Annotated[
         int,
@@ -829,7 +821,7 @@ def bench_sim(
     robots: Annotated[int, typer.Option("--robots", "-n", help="Scripted robots.")] = 3,
     seconds: Annotated[float, typer.Option("--seconds", "-s", help="Sim seconds to run.")] = 60.0,
     world: WorldOpt = "home",
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    as_json: JsonOpt = False,
     config: ConfigOpt = None,
 ) -> None:
     """Run the simulator core alone with scripted robots (no bus) and print its real-time
