@@ -11,9 +11,6 @@ import typer
 
 from fleet.bus import DEFAULT_ENDPOINT
 
-# the coordinator on a stored map (`--map`) stopped the run: the robots' scans do not match it
-WRONG_MAP_EXIT = 5
-
 
 def _check_deconfliction(mode: str | None) -> None:
     """Exit with status 2 unless ``--deconfliction`` is unset or one of the modes (checked

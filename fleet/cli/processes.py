@@ -9,14 +9,7 @@ from typing import Annotated
 import typer
 
 from fleet.bus import DEFAULT_ENDPOINT
-from fleet.cli.common import (
-    WRONG_MAP_EXIT,
-    _bus,
-    _fail,
-    _load,
-    _setup_logging,
-    _stop_on_signals,
-)
+from fleet.cli.common import _bus, _fail, _load, _setup_logging, _stop_on_signals
 from fleet.cli.options import (
     ConfigOpt,
     ConnectOpt,
@@ -28,6 +21,7 @@ from fleet.cli.options import (
     ZenohConfigOpt,
 )
 from fleet.protocol import DEFAULT_FLEET
+from fleet.supervisor.fleet_processes import WRONG_MAP_EXIT
 
 
 def router(

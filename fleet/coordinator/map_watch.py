@@ -9,8 +9,9 @@ each robot's map not yet judged is matched against the stored map
 or more, which the market's lock should not wait for). Once more than half of the fleet's
 robots agree with the map the watch ends, saying so in a ``map checked`` event; once more than
 half differ, it tells why in a ``wrong map`` event that names the map file and stops the
-coordinator, whose process then exits with :data:`fleet.cli.common.WRONG_MAP_EXIT`. A map
-accepted is watched on, with ``coordinator.map_changes``, for furniture moved since it was made
+coordinator, whose process then exits with
+:data:`fleet.supervisor.fleet_processes.WRONG_MAP_EXIT`. A map accepted is watched on, with
+``coordinator.map_changes``, for furniture moved since it was made
 (:mod:`fleet.coordinator.map_changes`).
 """
 

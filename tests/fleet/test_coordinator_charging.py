@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from robots import ROBOT
 
-from fleet.cli.up import left_out_line
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
@@ -46,6 +45,7 @@ from fleet.protocol import (
     TaskCall,
 )
 from fleet.report.summary import job_report
+from fleet.report.up_report import left_out_line
 from fleet.world import World, load_world
 from planners.auction import Task
 from planners.battery import BatterySpec, go_home_below, makespan_with_charging

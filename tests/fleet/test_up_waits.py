@@ -10,8 +10,8 @@ import time
 
 import pytest
 
-from fleet.cli import up
 from fleet.protocol import CoverageSummary, Request
+from fleet.supervisor import fleet_processes
 from fleet.supervisor.launcher import WorkWatch, cpu_ticks
 
 BUSY = "while True: pass"
@@ -80,27 +80,27 @@ def quick(monkeypatch: pytest.MonkeyPatch) -> None:
     """The report's waits shorter: the poll and each judgement a hundred times, the give-up
     window ten times, so that twenty misses on a loaded machine (sleeps overshooting) still
     fall well inside it (0.3 s failed once in a CI run with a bench beside it)."""
-    monkeypatch.setattr(up, "REPORT_POLL_S", 0.01)
-    monkeypatch.setattr(up, "REPORT_WAIT_S", 0.05)
-    monkeypatch.setattr(up, "REPORT_GIVE_UP_S", 3.0)
+    monkeypatch.setattr(fleet_processes, "REPORT_POLL_S", 0.01)
+    monkeypatch.setattr(fleet_processes, "REPORT_WAIT_S", 0.05)
+    monkeypatch.setattr(fleet_processes, "REPORT_GIVE_UP_S", 3.0)
 
 
 def test_a_simulator_not_serving_yet_is_asked_again_until_it_answers(quick: None) -> None:
     bus = _SlowBus(misses=20)
     t0 = time.monotonic()
-    answer = up._ask_sim(bus, "sim/report", CoverageSummary, _Sim())  # type: ignore[arg-type]
+    answer = fleet_processes.ask_sim(bus, "sim/report", CoverageSummary, _Sim())  # type: ignore[arg-type]
     assert answer == "the report" and bus.asked == 21
     # a query nothing serves returns at once: it is not asked again sooner than the poll
-    assert time.monotonic() - t0 >= 20 * up.REPORT_POLL_S
+    assert time.monotonic() - t0 >= 20 * fleet_processes.REPORT_POLL_S
 
 
 def test_a_simulator_that_exited_or_does_not_work_is_given_up(quick: None) -> None:
     with pytest.raises(TimeoutError, match="has exited"):
-        up._ask_sim(_SlowBus(5), "sim/report", CoverageSummary, _Sim(alive=False))  # type: ignore[arg-type]
+        fleet_processes.ask_sim(_SlowBus(5), "sim/report", CoverageSummary, _Sim(alive=False))  # type: ignore[arg-type]
     bus = _SlowBus(1000)
     with pytest.raises(TimeoutError, match="not working"):
-        up._ask_sim(bus, "sim/report", CoverageSummary, _Sim(works=False))  # type: ignore[arg-type]
+        fleet_processes.ask_sim(bus, "sim/report", CoverageSummary, _Sim(works=False))  # type: ignore[arg-type]
     # judged over a whole REPORT_WAIT_S, not at the first miss
     assert bus.asked > 1
     with pytest.raises(TimeoutError, match="still works but does not answer"):
-        up._ask_sim(_SlowBus(1000), "sim/report", CoverageSummary, _Sim())  # type: ignore[arg-type]
+        fleet_processes.ask_sim(_SlowBus(1000), "sim/report", CoverageSummary, _Sim())  # type: ignore[arg-type]

@@ -586,7 +586,7 @@ def test_respawns_asked_on_another_thread_are_made_by_the_main_thread() -> None:
     import threading
     from concurrent import futures
 
-    from fleet.cli.up import MainThreadCalls
+    from fleet.supervisor.respawn import MainThreadCalls
 
     calls = MainThreadCalls()
     seen: list[object] = []

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fleet.cli.common import WRONG_MAP_EXIT
 from fleet.coordinator.exploring import write_ros_map
 from fleet.report.exploration import true_floor
+from fleet.supervisor.fleet_processes import WRONG_MAP_EXIT
 from fleet.supervisor.runner import RunningFleet
 from fleet.world import load_world
 from planners.grid import GridMap
