@@ -484,11 +484,7 @@ def bench_sim(
     On a shared machine compare `rtf_cpu` (sim seconds per CPU second of this process), which
     other work disturbs much less than `rtf`; `load_avg` is the 1-minute load when it finished.
     """
-    import os
-
-    import numpy as np
-
-    from sim_server.core import SimCore
+    from fleet.bench.sim import run_bench
 
     if robots < 1 or seconds <= 0:
         _fail("--robots must be >= 1 and --seconds > 0")
@@ -497,35 +493,7 @@ def bench_sim(
         starts = w.start_poses(robots, cfg.robot.radius, spacing=2 * cfg.robot.radius + 0.06)
     except ValueError as e:
         _fail(str(e))
-    core = SimCore(w, cfg, seed=0)
-    for i, pose in enumerate(starts):
-        core.add_robot(f"r{i}", pose)
-    rng = np.random.default_rng(1)
-    phase = rng.uniform(0, 2 * np.pi, robots)
-    steps = round(seconds * cfg.sim.physics_hz)
-    scans = 0
-    t0, cpu0 = time.perf_counter(), time.process_time()
-    for k in range(steps):
-        if k % 10 == 0:
-            t = core.t
-            for i in range(robots):
-                core.set_cmd(f"r{i}", 0.4, 0.8 * math.sin(0.3 * t + phase[i]))
-        scans += len(core.tick(time.perf_counter() - t0).scans)
-    wall = time.perf_counter() - t0
-    cpu = time.process_time() - cpu0
-    result = {
-        "robots": robots,
-        "world": w.name,
-        "sim_seconds": round(core.t, 3),
-        "wall_s": round(wall, 3),
-        "rtf": round(core.t / wall, 2),
-        "cpu_s": round(cpu, 3),
-        "rtf_cpu": round(core.t / cpu, 2),
-        "load_avg": round(os.getloadavg()[0], 2),
-        "rays_per_s": round(scans * cfg.lidar.beams / wall),
-        "scans": scans,
-        "coverage": round(core.cleaning.coverage(), 4),
-    }
+    result = run_bench(w, cfg, starts, seconds)
     if as_json:
         print(json.dumps(result))
     else:
