@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import json
-import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from fleet.cli.options import JsonOpt
+
+if TYPE_CHECKING:
+    from fleet.bench.mapf import BenchConfig, BenchRun
+    from planners.mapf import MapfInstance, MapfResult, ValidationReport
 
 SOLVER_HELP = (
     "pp = prioritized planning with space-time A* and random restarts; sipp-pp = the same with "
@@ -25,6 +29,48 @@ EXIT_INVALID = 3
 EXIT_TIMEOUT = 4
 EXIT_INFEASIBLE = 5
 EXIT_BY_STATUS = {"failed": EXIT_FAILED, "timeout": EXIT_TIMEOUT, "infeasible": EXIT_INFEASIBLE}
+
+
+# `fleet bench mapf`'s options that take more than a line
+TinyOpt = Annotated[
+    int | None,
+    typer.Option(
+        min=1,
+        help="Instead of the 32 x 32 maps: N random tiny instances (up to 5 x 5, up to 4 "
+        "agents), every solver checked against a brute-force optimum.",
+    ),
+]
+BenchTimeLimitOpt = Annotated[
+    float | None,
+    typer.Option(
+        min=0.01,
+        help="Seconds per instance before it counts as unsolved (default 5; 1 with --tiny).",
+    ),
+]
+SolversOpt = Annotated[
+    list[str] | None,
+    typer.Option("--solver", help="Solvers to run (repeatable; default: all). " + SOLVER_HELP),
+]
+MapsOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--map",
+        help="Maps to run (repeatable; default: all generated ones): gen-random-10pct, "
+        "gen-random-20pct, gen-rooms-7x7, gen-maze-2wide, gen-shelves; or the path of a "
+        "MovingAI .map file, run on the .scen files beside it named after it.",
+    ),
+]
+BenchWOpt = Annotated[
+    float | None,
+    typer.Option("--w", min=1.0, help="ECBS suboptimality bound (default 1.2; 1.5 with --tiny)."),
+]
+ScenariosOpt = Annotated[
+    int, typer.Option(min=1, help="Scenarios (random start/goal sets) per map and k.")
+]
+KeepOpt = Annotated[
+    Path | None,
+    typer.Option(help="Keep the generated .map/.scen files in this directory."),
+]
 
 
 def register(
@@ -90,15 +136,49 @@ def plan_mapf(
 
       fleet plan mapf instance.yaml --solver ecbs --w 1.5 --out schedule.yaml
     """
+    from rich.console import Console
+
     from planners.mapf import SOLVERS, solve, validate
-    from planners.mapf.movingai import FormatError, load_instance
-    from planners.mapf.yaml_format import read_instance, result_to_mapping, write_yaml
+    from planners.mapf.yaml_format import result_to_mapping, write_yaml
 
     if solver not in SOLVERS:
         _fail(f"--solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
-    is_yaml = map_file.suffix.lower() in (".yaml", ".yml")
+    instance = _instance(map_file, scen_file, agents)
+    result = solve(instance, solver, w=w, time_limit_s=time_limit, seed=seed)
+    report = validate(instance, result.solution.paths) if result.solution else None
+    summary = _plan_summary(result, solver, instance.num_agents, report)
+    written = out is not None and result.solution is not None
+    if written:
+        write_yaml(out, result_to_mapping(instance, result))
+    if as_json:
+        print(json.dumps(summary))
+    else:
+        _print_plan(summary, f"MAPF {solver} on {map_file.name}, {instance.num_agents} agents")
+        if written:
+            Console().print(f"schedule written to {out}")
+    _exit_unless_solved(solver, result, report)
+
+
+def _exit_unless_solved(solver: str, result: MapfResult, report: ValidationReport | None) -> None:
+    """Exit with the status of an invalid solution or of no solution, saying what to try."""
+    if report is not None and not report.valid:
+        _fail("invalid solution: " + "; ".join(report.errors), code=EXIT_INVALID)
+    if result.status != "success":
+        typer.echo(f"{solver}: {result.status}: {result.message}", err=True)
+        hint = _hint(solver, result.status)
+        if hint:
+            typer.echo(hint, err=True)
+        raise typer.Exit(EXIT_BY_STATUS[result.status])
+
+
+def _instance(map_file: Path, scen_file: Path | None, agents: int | None) -> MapfInstance:
+    """The instance of MAP_FILE (a YAML instance, or a MovingAI map with SCEN_FILE), its
+    first ``agents`` agents; exits naming what is wrong with the files."""
+    from planners.mapf.movingai import FormatError, load_instance
+    from planners.mapf.yaml_format import read_instance
+
     try:
-        if is_yaml:
+        if map_file.suffix.lower() in (".yaml", ".yml"):
             if scen_file is not None:
                 _fail(f"{map_file} is a YAML instance: leave SCEN out")
             instance = read_instance(map_file)
@@ -110,9 +190,14 @@ def plan_mapf(
             instance = load_instance(map_file, scen_file, agents)
     except (FormatError, ValueError) as err:
         _fail(str(err))
-    result = solve(instance, solver, w=w, time_limit_s=time_limit, seed=seed)
-    report = validate(instance, result.solution.paths) if result.solution else None
-    summary = {
+    return instance
+
+
+def _plan_summary(
+    result: MapfResult, solver: str, agents: int, report: ValidationReport | None
+) -> dict[str, Any]:
+    """What `fleet plan mapf` prints of a solver's ``result`` and its validation."""
+    summary: dict[str, Any] = {
         "status": result.status,
         "soc": result.soc,
         "makespan": result.makespan,
@@ -122,37 +207,26 @@ def plan_mapf(
         "expanded_low": result.expanded_low,
         "lower_bound": result.lower_bound,
         "solver": solver,
-        "agents": instance.num_agents,
+        "agents": agents,
         "valid": None if report is None else report.valid,
         "message": result.message,
     }
     if report is not None and not report.valid:
         summary["errors"] = list(report.errors)
-    if out is not None and result.solution is not None:
-        write_yaml(out, result_to_mapping(instance, result))
-    if as_json:
-        print(json.dumps(summary))
-    else:
-        from rich.console import Console
-        from rich.table import Table
+    return summary
 
-        table = Table(title=f"MAPF {solver} on {map_file.name}, {instance.num_agents} agents")
-        table.add_column("field")
-        table.add_column("value", justify="right")
-        for key, value in summary.items():
-            if key != "errors" and value not in (None, ""):
-                table.add_row(key, str(value))
-        Console().print(table)
-        if out is not None and result.solution is not None:
-            Console().print(f"schedule written to {out}")
-    if report is not None and not report.valid:
-        _fail("invalid solution: " + "; ".join(report.errors), code=EXIT_INVALID)
-    if result.status != "success":
-        typer.echo(f"{solver}: {result.status}: {result.message}", err=True)
-        hint = _hint(solver, result.status)
-        if hint:
-            typer.echo(hint, err=True)
-        raise typer.Exit(EXIT_BY_STATUS[result.status])
+
+def _print_plan(summary: dict[str, Any], title: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title)
+    table.add_column("field")
+    table.add_column("value", justify="right")
+    for key, value in summary.items():
+        if key != "errors" and value not in (None, ""):
+            table.add_row(key, str(value))
+    Console().print(table)
 
 
 def _hint(solver: str, status: str) -> str:
@@ -171,51 +245,17 @@ def _hint(solver: str, status: str) -> str:
 
 def bench_mapf(
     as_json: JsonOpt = False,
-    tiny: Annotated[
-        int | None,
-        typer.Option(
-            min=1,
-            help="Instead of the 32 x 32 maps: N random tiny instances (up to 5 x 5, up to 4 "
-            "agents), every solver checked against a brute-force optimum.",
-        ),
-    ] = None,
-    time_limit: Annotated[
-        float | None,
-        typer.Option(
-            min=0.01,
-            help="Seconds per instance before it counts as unsolved (default 5; 1 with --tiny).",
-        ),
-    ] = None,
-    solvers: Annotated[
-        list[str] | None,
-        typer.Option("--solver", help="Solvers to run (repeatable; default: all). " + SOLVER_HELP),
-    ] = None,
-    maps: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--map",
-            help="Maps to run (repeatable; default: all generated ones): gen-random-10pct, "
-            "gen-random-20pct, gen-rooms-7x7, gen-maze-2wide, gen-shelves; or the path of a "
-            "MovingAI .map file, run on the .scen files beside it named after it.",
-        ),
-    ] = None,
+    tiny: TinyOpt = None,
+    time_limit: BenchTimeLimitOpt = None,
+    solvers: SolversOpt = None,
+    maps: MapsOpt = None,
     k_step: Annotated[int, typer.Option(min=1, help="Agents added per step.")] = 10,
     k_max: Annotated[int, typer.Option(min=1, help="Most agents tried.")] = 200,
-    w: Annotated[
-        float | None,
-        typer.Option(
-            "--w", min=1.0, help="ECBS suboptimality bound (default 1.2; 1.5 with --tiny)."
-        ),
-    ] = None,
+    w: BenchWOpt = None,
     seed: Annotated[int, typer.Option(help="Seed of maps and scenarios (or tiny instances).")] = 0,
-    scenarios: Annotated[
-        int, typer.Option(min=1, help="Scenarios (random start/goal sets) per map and k.")
-    ] = 1,
+    scenarios: ScenariosOpt = 1,
     quick: Annotated[bool, typer.Option(help="Smoke run: 1 s limit, k = 20, 40, ... 100.")] = False,
-    keep: Annotated[
-        Path | None,
-        typer.Option(help="Keep the generated .map/.scen files in this directory."),
-    ] = None,
+    keep: KeepOpt = None,
 ) -> None:
     """For each solver and map, the largest number of agents solved within the time limit.
 
@@ -241,7 +281,9 @@ def bench_mapf(
     runtime and the slowest instance, as Python that rebuilds it. Example:
     fleet bench mapf --tiny 2000 --seed 1
     """
+    from fleet.bench.mapf import BenchConfig, chosen_maps, run_bench, user_suite
     from planners.mapf import SOLVERS
+    from planners.mapf.movingai import FormatError
 
     chosen = list(solvers or SOLVERS)
     for name in chosen:
@@ -252,89 +294,55 @@ def bench_mapf(
             tiny, seed, chosen, 1.0 if time_limit is None else time_limit, w or 1.5, as_json
         )
         return
-    time_limit = 5.0 if time_limit is None else time_limit
-    w = 1.2 if w is None else w
-    from planners.mapf.bench import (
-        optimal_soc_mismatches,
-        run_suite,
-        summarize,
-        user_suite,
-        write_suite,
-    )
-    from planners.mapf.generate import benchmark_maps
-    from planners.mapf.movingai import FormatError
-
-    known = list(benchmark_maps(seed))
-    generated = [name for name in maps or [] if name in known]
-    own = [Path(name) for name in maps or [] if name not in known]
-    for path in own:
-        if path.suffix != ".map" or not path.is_file():
-            _fail(
-                f"--map must be among {', '.join(known)} or a MovingAI .map file, got {str(path)!r}"
-            )
     try:
+        generated, own = chosen_maps(maps or [], seed)
         own_files = user_suite(own, scenarios)
     except ValueError as err:
         _fail(str(err))
     if quick:
         time_limit, k_step, k_max = 1.0, 20, 100
-    k_values = list(range(k_step, k_max + 1, k_step))
+    k_values = tuple(range(k_step, k_max + 1, k_step))
+    limit = 5.0 if time_limit is None else time_limit
+    config = BenchConfig(tuple(chosen), k_values, k_max, limit, w or 1.2, seed, scenarios)
+    try:
+        result = run_bench(config, generated, own_files, keep, None if as_json else _progress())
+    except FormatError as err:
+        _fail(str(err))
+    if as_json:
+        print(json.dumps(result))
+    else:
+        _print_bench(result, config)
 
+
+def _progress() -> Callable[[BenchRun], None]:
+    """A line on stderr per bench run."""
     from rich.console import Console
 
     console = Console(stderr=True)
 
-    def progress(run: object) -> None:
-        if not as_json:
-            console.print(
-                f"{run.map_name:16} {run.solver:9} scen {run.scenario} k={run.k:<4} "  # type: ignore[attr-defined]
-                f"{run.status:8} "  # type: ignore[attr-defined]
-                f"{run.runtime_s:7.2f} s"  # type: ignore[attr-defined]
-            )
-
-    with tempfile.TemporaryDirectory() as tmp:
-        directory = keep or Path(tmp)
-        directory.mkdir(parents=True, exist_ok=True)
-        files = {}
-        if generated or not own:
-            files = write_suite(directory, k_max, seed, scenarios, generated)
-        try:
-            runs = run_suite({**files, **own_files}, chosen, k_values, time_limit, w, progress)
-        except FormatError as err:
-            _fail(str(err))
-    rows = summarize(runs)
-    mismatches = optimal_soc_mismatches(runs)
-    config = {
-        "time_limit_s": time_limit,
-        "k_values": k_values,
-        "w": w,
-        "seed": seed,
-        "scenarios": scenarios,
-    }
-    if as_json:
-        print(
-            json.dumps(
-                {
-                    "config": config,
-                    "summary": rows,
-                    "cbs_soc_mismatches": mismatches,
-                    "runs": [run.__dict__ for run in runs],
-                }
-            )
+    def progress(run: BenchRun) -> None:
+        console.print(
+            f"{run.map_name:16} {run.solver:9} scen {run.scenario} k={run.k:<4} "
+            f"{run.status:8} {run.runtime_s:7.2f} s"
         )
-        return
+
+    return progress
+
+
+def _print_bench(result: dict[str, Any], config: BenchConfig) -> None:
+    from rich.console import Console
     from rich.table import Table
 
     table = Table(
-        title=f"MAPF: largest k with all {scenarios} scenario(s) solved in {time_limit:g} s"
+        title=f"MAPF: largest k with all {config.scenarios} scenario(s) solved in "
+        f"{config.time_limit_s:g} s"
     )
     for col in ("map", "solver", "max k", "s at max k", "valid", "k: solved, mean s"):
         table.add_column(col)
-    for row in rows:
+    for row in result["summary"]:
         solved, times = row["solved_by_k"], row["mean_runtime_by_k_s"]
         by_k = ", ".join(
-            f"{k}: {n}" + (f" {times[k]:.2f}" if k in times else "")  # type: ignore[index,operator]
-            for k, n in solved.items()  # type: ignore[union-attr]
+            f"{k}: {n}" + (f" {times[k]:.2f}" if k in times else "") for k, n in solved.items()
         )
         table.add_row(
             str(row["map"]),
@@ -346,6 +354,7 @@ def bench_mapf(
         )
     out = Console()
     out.print(table)
+    mismatches = result["cbs_soc_mismatches"]
     out.print(f"CBS variants with different SOC at the same k: {mismatches or 'none'}")
 
 

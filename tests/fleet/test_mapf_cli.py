@@ -8,9 +8,9 @@ from pathlib import Path
 import yaml
 from typer.testing import CliRunner
 
+from fleet.bench.mapf import user_suite
 from fleet.cli import app
 from planners.mapf import MapfInstance, validate
-from planners.mapf.bench import user_suite
 from planners.mapf.generate import random_instance, random_map
 from planners.mapf.movingai import write_map, write_scen
 from planners.mapf.yaml_format import instance_to_mapping, schedule_from_mapping, write_yaml

@@ -1,4 +1,4 @@
-"""The MAPF benchmark behind ``fleet bench mapf``: the largest k each solver solves per map.
+"""``fleet bench mapf``: the largest k each solver solves per map.
 
 Each map of ``generate.benchmark_maps`` is written as a MovingAI ``.map`` with ``scenarios``
 seeded ``.scen`` files of ``k_max`` agents (or a user's own MovingAI files are taken,
@@ -6,14 +6,17 @@ seeded ``.scen`` files of ``k_max`` agents (or a user's own MovingAI files are t
 on the first k agents of each scenario for k = k_step, 2·k_step, ... up to k_max, stopping after
 the first k at which it solves none. Every solution goes through the validator; CBS runs also
 record whether their SOC equals the optimum found by the other CBS variant at the same k.
+:func:`run_bench` runs a whole bench (:class:`BenchConfig`) and gives what it prints.
 """
 
 from __future__ import annotations
 
 import re
+import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from planners.mapf import solve, validate
 from planners.mapf.generate import benchmark_maps, random_instance
@@ -156,3 +159,74 @@ def optimal_soc_mismatches(runs: Sequence[BenchRun]) -> list[tuple[str, int, int
         if run.solver in ("cbs", "cbs-plain") and run.soc is not None:
             socs.setdefault((run.map_name, run.scenario, run.k), set()).add(run.soc)
     return sorted(key for key, values in socs.items() if len(values) > 1)
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """A bench: ``solvers`` on the first k agents of each of ``scenarios`` scenarios, k in
+    ``k_values`` (the generated scenarios hold ``k_max`` agents), ``time_limit_s`` each, ECBS
+    bound ``w``, maps and scenarios seeded by ``seed``."""
+
+    solvers: tuple[str, ...]
+    k_values: tuple[int, ...]
+    k_max: int
+    time_limit_s: float
+    w: float
+    seed: int
+    scenarios: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "time_limit_s": self.time_limit_s,
+            "k_values": list(self.k_values),
+            "w": self.w,
+            "seed": self.seed,
+            "scenarios": self.scenarios,
+        }
+
+
+def chosen_maps(names: Sequence[str], seed: int) -> tuple[list[str], list[Path]]:
+    """The generated maps among ``names`` and the user's own MovingAI .map files; ValueError
+    naming one that is neither."""
+    known = list(benchmark_maps(seed))
+    generated = [name for name in names if name in known]
+    own = [Path(name) for name in names if name not in known]
+    for path in own:
+        if path.suffix != ".map" or not path.is_file():
+            raise ValueError(
+                f"--map must be among {', '.join(known)} or a MovingAI .map file, got {str(path)!r}"
+            )
+    return generated, own
+
+
+def run_bench(
+    config: BenchConfig,
+    generated: Sequence[str],
+    own: dict[str, tuple[Path, list[Path]]],
+    keep: Path | None = None,
+    progress: Callable[[BenchRun], None] | None = None,
+) -> dict[str, Any]:
+    """The bench on the ``generated`` maps named (all of them when neither those nor ``own``,
+    the user's files of :func:`user_suite`, are given), their files written to ``keep`` (else
+    to a temporary directory); its config, the summary per map and solver, the CBS variants'
+    SOC mismatches and every run. FormatError from a file that does not parse."""
+    with tempfile.TemporaryDirectory() as tmp:
+        directory = keep or Path(tmp)
+        directory.mkdir(parents=True, exist_ok=True)
+        files = {}
+        if generated or not own:
+            files = write_suite(directory, config.k_max, config.seed, config.scenarios, generated)
+        runs = run_suite(
+            {**files, **own},
+            config.solvers,
+            config.k_values,
+            config.time_limit_s,
+            config.w,
+            progress,
+        )
+    return {
+        "config": config.to_json(),
+        "summary": summarize(runs),
+        "cbs_soc_mismatches": optimal_soc_mismatches(runs),
+        "runs": [run.__dict__ for run in runs],
+    }
