@@ -12,6 +12,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -113,3 +114,47 @@ def rays_per_second(
         cast(*args, scene.self_index)
         calls += 1
     return calls * scene.origins.shape[0] * beams / elapsed
+
+
+def run_bench(
+    robot_radius: float,
+    beams: int,
+    range_max: float,
+    min_seconds: float,
+    map_yaml: Path | None = None,
+    baseline: bool = True,
+) -> list[dict[str, Any]]:
+    """The bench's rows: rays per second on the fixed configurations (1 robot with 150
+    segments, 100 robots seeing each other's discs with 150, 1 robot with 5000 with and
+    without a SegmentIndex) and, given ``map_yaml``, 100 robots on that map; with ``baseline``
+    the brute-force caster's rate beside each unindexed one."""
+    runs = [
+        ("1x150", furnished_scene(150, 1, robot_radius), False),
+        ("100x150+discs", furnished_scene(150, 100, robot_radius), False),
+        ("1x5000", furnished_scene(5000, 1, robot_radius), False),
+        ("1x5000 indexed", furnished_scene(5000, 1, robot_radius), True),
+    ]
+    if map_yaml is not None:
+        runs.append(("map 100 indexed", map_scene(map_yaml, 100, robot_radius), True))
+    rows = []
+    for name, scene, indexed in runs:
+        rate = rays_per_second(scene, beams, range_max, indexed=indexed, min_seconds=min_seconds)
+        ref = (
+            rays_per_second(scene, beams, range_max, reference=True, min_seconds=min_seconds)
+            if baseline and not indexed
+            else None
+        )
+        rows.append(
+            {
+                "config": name,
+                "robots": int(scene.origins.shape[0]),
+                "beams": beams,
+                "segments": int(scene.segments.shape[0]),
+                "discs": int(scene.discs.shape[0]),
+                "indexed": indexed,
+                "rays_per_s": rate,
+                "baseline_rays_per_s": ref,
+                "speedup": rate / ref if ref else None,
+            }
+        )
+    return rows

@@ -1,4 +1,5 @@
-"""``fleet bench lidar``: rays per second of the simulated lidar."""
+"""``fleet bench lidar``: rays per second of the simulated lidar (the runner in
+fleet.bench.lidar)."""
 
 from __future__ import annotations
 
@@ -51,39 +52,10 @@ def bench_lidar(
     from rich.console import Console
     from rich.table import Table
 
-    from fleet.bench.lidar import furnished_scene, map_scene, rays_per_second
+    from fleet.bench.lidar import run_bench
 
     radius = _load(config)[0].robot.radius
-    runs = [
-        ("1x150", furnished_scene(150, 1, radius), False),
-        ("100x150+discs", furnished_scene(150, 100, radius), False),
-        ("1x5000", furnished_scene(5000, 1, radius), False),
-        ("1x5000 indexed", furnished_scene(5000, 1, radius), True),
-    ]
-    if map_yaml is not None:
-        scene = map_scene(map_yaml, 100, radius)
-        runs.append(("map 100 indexed", scene, True))
-    rows = []
-    for name, scene, indexed in runs:
-        rate = rays_per_second(scene, beams, range_max, indexed=indexed, min_seconds=seconds)
-        ref = (
-            rays_per_second(scene, beams, range_max, reference=True, min_seconds=seconds)
-            if baseline and not indexed
-            else None
-        )
-        rows.append(
-            {
-                "config": name,
-                "robots": int(scene.origins.shape[0]),
-                "beams": beams,
-                "segments": int(scene.segments.shape[0]),
-                "discs": int(scene.discs.shape[0]),
-                "indexed": indexed,
-                "rays_per_s": rate,
-                "baseline_rays_per_s": ref,
-                "speedup": rate / ref if ref else None,
-            }
-        )
+    rows = run_bench(radius, beams, range_max, seconds, map_yaml, baseline)
     if as_json:
         summary = {r["config"]: r["rays_per_s"] for r in rows}
         print(json.dumps({"rays_per_s": summary, "runs": rows}))
