@@ -1,7 +1,8 @@
-"""A synthetic fleet for `fleet bench dashboard`: one process that puts on the bus what a real
-fleet of N robots does, at the rates of configs/fleet.yaml times the speed factor, without
-the work behind it (no physics, SLAM or planning), so the dashboard's cost can be measured
-under a known, repeatable load on a machine that could not run N real agents at that speed.
+"""`fleet bench dashboard`, what the live view costs (:func:`measure`), and the synthetic fleet
+it watches (:func:`run`): one process that puts on the bus what a real fleet of N robots does,
+at the rates of configs/fleet.yaml times the speed factor, without the work behind it (no
+physics, SLAM or planning), so the dashboard's cost can be measured under a known, repeatable
+load on a machine that could not run N real agents at that speed.
 
 Robots drive circles around their start poses; the floor plan is the world's grid, served
 on the coordinator's key; the cleaned area is served on the simulator's key and grows under
@@ -10,8 +11,13 @@ the robots; the coordinator's state and an event come every sim second.
 
 from __future__ import annotations
 
+import io
 import math
+import os
+import subprocess
+import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -149,3 +155,95 @@ def _summary(t: float, wall: float, ids: list[str], visits: np.ndarray) -> Cover
     return CoverageSummary(
         t, wall, float((visits > 0).mean()), 0.1, 60.0, ids, np.zeros(n), zeros, zeros, zeros
     )
+
+
+# the dashboard is measured after this many wall seconds of drawing
+WARMUP_S = 3.0
+
+
+def measure(
+    robots: int,
+    speed: float,
+    seconds: float,
+    width: int,
+    height: int,
+    world: str,
+    redraw_hz: float,
+) -> dict[str, Any]:
+    """A router and the synthetic fleet (:func:`run`) as two processes, and the dashboard
+    drawn here as `fleet dashboard` draws it, at ``redraw_hz``, for a ``width`` × ``height``
+    terminal, into memory: ``seconds`` measured after WARMUP_S. Its redraws per second, CPU
+    share of one core, frame times and the control-rate messages it drained; StartError when
+    the router does not come up."""
+    from fleet.supervisor.fleet_processes import StartError
+    from fleet.supervisor.launcher import free_port, wait_for_port
+
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    cli = [sys.executable, "-m", "fleet.cli"]
+    procs = [subprocess.Popen([*cli, "router", "--listen", endpoint], stderr=subprocess.DEVNULL)]
+    try:
+        if not wait_for_port("127.0.0.1", port, 15.0):
+            raise StartError("the Zenoh router did not start")
+        code = (
+            "import sys; from fleet.bench.dashboard import run; "
+            "run(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4])"
+        )
+        procs.append(
+            subprocess.Popen([sys.executable, "-c", code, endpoint, str(robots), str(speed), world])
+        )
+        drawn = _draw(endpoint, seconds, width, height, 1.0 / redraw_hz)
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            p.wait(timeout=10)
+    figures = {"robots": robots, "speed": speed, "world": world, "size": f"{width}x{height}"}
+    return {**figures, **drawn, "load_avg": round(os.getloadavg()[0], 2)}
+
+
+def _draw(endpoint: str, seconds: float, width: int, height: int, period: float) -> dict[str, Any]:
+    """Draw the fleet on ``endpoint`` every ``period`` wall seconds; the figures."""
+    from fleet.dashboard.model import BusFeed, FleetWatcher
+    from fleet.dashboard.view import AnsiWriter, screen
+
+    bus = Bus("dashboard", f"bench-{os.getpid()}", [endpoint])
+    watcher = FleetWatcher()
+    feed = BusFeed(bus, watcher)
+    out = io.StringIO()
+    writer = AnsiWriter("truecolor")
+    t_start = time.monotonic()
+    frames: list[float] = []
+    received = 0
+    cpu0 = wall0 = None
+    try:
+        while True:
+            tick = time.monotonic()
+            if cpu0 is None and tick - t_start >= WARMUP_S:
+                cpu0, wall0, received, frames = time.process_time(), tick, 0, []
+            if wall0 is not None and tick - wall0 >= seconds:
+                break
+            received += feed.pump()
+            lines = screen(watcher.snapshot(), width, height, "robot-0", "bench")
+            out.write(writer.frame(lines))
+            frames.append(time.monotonic() - tick)
+            out.seek(0)
+            out.truncate()
+            time.sleep(max(0.0, period - (time.monotonic() - tick)))
+        cpu = time.process_time() - cpu0
+        wall = time.monotonic() - wall0
+    finally:
+        feed.close()
+        bus.close()
+    snap = watcher.snapshot()
+    frames.sort()
+    return {
+        "wall_s": round(wall, 2),
+        "redraw_hz": round(len(frames) / wall, 2),
+        "cpu_percent": round(100 * cpu / wall, 2),
+        "frame_ms_p50": round(1000 * frames[len(frames) // 2], 2),
+        "frame_ms_max": round(1000 * frames[-1], 2),
+        "ring_msgs_per_s": round(received / wall, 1),
+        "robots_seen": len(snap.robots),
+        "floor_plan": snap.floor is not None,
+    }

@@ -24,37 +24,41 @@ PLAIN_LINE_S = 5.0
 TABLE_READ_S = 1.0
 
 
+DashboardRunDirOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--run-dir",
+        "-d",
+        help="The run dir of the fleet to watch (default: the newest one under runs/ with "
+        "a processes.json). Its processes.json gives the router's endpoint, the fleet's "
+        "name, and the pids the k and r keys act on.",
+    ),
+]
+DashboardConnectOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--connect",
+        "-c",
+        help="Zenoh router endpoint to attach to (repeatable), e.g. tcp/10.0.0.5:7447 "
+        "(default: the endpoint in the run dir's processes.json); FLEET_CONNECT may hold "
+        "them, separated by spaces. Without a run dir the k and r keys are off.",
+        envvar="FLEET_CONNECT",
+    ),
+]
+DashboardFleetOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--fleet",
+        help="Fleet name, the key prefix fleet/<name>/ (default: the run dir's, else 'default').",
+        envvar="FLEET_NAME",
+    ),
+]
+
+
 def dashboard(
-    run_dir: Annotated[
-        Path | None,
-        typer.Option(
-            "--run-dir",
-            "-d",
-            help="The run dir of the fleet to watch (default: the newest one under runs/ with "
-            "a processes.json). Its processes.json gives the router's endpoint, the fleet's "
-            "name, and the pids the k and r keys act on.",
-        ),
-    ] = None,
-    connect: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--connect",
-            "-c",
-            help="Zenoh router endpoint to attach to (repeatable), e.g. tcp/10.0.0.5:7447 "
-            "(default: the endpoint in the run dir's processes.json); FLEET_CONNECT may hold "
-            "them, separated by spaces. Without a run dir the k and r keys are off.",
-            envvar="FLEET_CONNECT",
-        ),
-    ] = None,
-    fleet: Annotated[
-        str | None,
-        typer.Option(
-            "--fleet",
-            help="Fleet name, the key prefix fleet/<name>/ (default: the run dir's, else "
-            "'default').",
-            envvar="FLEET_NAME",
-        ),
-    ] = None,
+    run_dir: DashboardRunDirOpt = None,
+    connect: DashboardConnectOpt = None,
+    fleet: DashboardFleetOpt = None,
     zenoh_config: ZenohConfigOpt = None,
     config: ConfigOpt = None,
     plain: Annotated[
@@ -79,29 +83,16 @@ def dashboard(
     """
     from rich.console import Console
 
-    from fleet.dashboard.model import BusFeed, FleetWatcher
+    from fleet.dashboard.model import BusFeed
     from fleet.dashboard.term import TerminalView, ViewControl
-    from fleet.plausible import Bounds, StampWatch
-    from fleet.protocol import DEFAULT_FLEET, Clock
-    from fleet.rundir import RunDirError, RunTable, newest_run_dir, read_table
+    from fleet.protocol import DEFAULT_FLEET
     from fleet.supervisor.ops import ProcessActions
 
-    table: RunTable | None = None
-    if not connect or run_dir is not None:
-        try:
-            run_dir = run_dir if run_dir is not None else newest_run_dir()
-            table = read_table(run_dir)
-        except RunDirError as e:
-            _fail(f"{e}; or attach by endpoint: fleet dashboard --connect tcp/HOST:PORT")
+    table, run_dir = _run_table(run_dir, connect)
     endpoints = connect or [table.endpoint]  # type: ignore[union-attr]
     name = fleet or (table.fleet if table is not None else DEFAULT_FLEET)
     bus = _bus("dashboard", f"view-{os.getpid()}", endpoints, name, zenoh_config)
-    cfg, _ = _load(config)
-    watch = StampWatch(Bounds.of(cfg).clock_step_s, bus.drop_implausible, bus.keys.clock())
-    bus.subscribe(bus.keys.clock(), Clock, watch.hear_clock)
-    watcher = FleetWatcher(name, cfg.coordinator.heartbeat_timeout_s, watch)
-    if run_dir is not None:
-        _past_events(watcher, run_dir / STATE_FILE)
+    watcher = _watcher(bus, _load(config)[0], name, run_dir)
     feed = BusFeed(bus, watcher)
     actions = ProcessActions(run_dir) if table is not None and run_dir is not None else None
     control = ViewControl(watcher, actions)
@@ -126,6 +117,36 @@ def dashboard(
         feed.close()
         bus.close()
     print(watcher.line(time.monotonic() - t0), file=sys.stderr, flush=True)
+
+
+def _run_table(run_dir: Path | None, connect: list[str] | None) -> tuple[Any, Path | None]:
+    """The process table of ``run_dir`` (by default the newest run's), unless the view attaches
+    by ``connect`` alone; exits when there is none. The table (or None) and the run dir."""
+    from fleet.rundir import RunDirError, newest_run_dir, read_table
+
+    table = None
+    if not connect or run_dir is not None:
+        try:
+            run_dir = run_dir if run_dir is not None else newest_run_dir()
+            table = read_table(run_dir)
+        except RunDirError as e:
+            _fail(f"{e}; or attach by endpoint: fleet dashboard --connect tcp/HOST:PORT")
+    return table, run_dir
+
+
+def _watcher(bus: Any, cfg: Any, name: str, run_dir: Path | None) -> Any:
+    """The fleet ``name`` as the bus shows it (its clock's stamps judged), with the job's
+    events so far from the run dir's state file."""
+    from fleet.dashboard.model import FleetWatcher
+    from fleet.plausible import Bounds, StampWatch
+    from fleet.protocol import Clock
+
+    watch = StampWatch(Bounds.of(cfg).clock_step_s, bus.drop_implausible, bus.keys.clock())
+    bus.subscribe(bus.keys.clock(), Clock, watch.hear_clock)
+    watcher = FleetWatcher(name, cfg.coordinator.heartbeat_timeout_s, watch)
+    if run_dir is not None:
+        _past_events(watcher, run_dir / STATE_FILE)
+    return watcher
 
 
 def _loop(
@@ -214,83 +235,15 @@ def bench_dashboard(
 
     Example: `fleet bench dashboard --robots 10 --speed 4 --seconds 20`.
     """
-    import io
-
-    from fleet.bus import Bus
-    from fleet.dashboard.model import BusFeed, FleetWatcher
-    from fleet.dashboard.view import AnsiWriter, screen
-    from fleet.supervisor.launcher import free_port, wait_for_port
+    from fleet.bench.dashboard import measure
+    from fleet.supervisor.fleet_processes import StartError
 
     if not 1 <= robots <= 64 or speed <= 0 or seconds <= 0 or width < 40 or height < 15:
         _fail("--robots must be 1-64, --speed and --seconds > 0, --width >= 40, --height >= 15")
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    import subprocess
-
-    cli = [sys.executable, "-m", "fleet.cli"]
-    procs = [subprocess.Popen([*cli, "router", "--listen", endpoint], stderr=subprocess.DEVNULL)]
     try:
-        if not wait_for_port("127.0.0.1", port, 15.0):
-            _fail("the Zenoh router did not start")
-        code = (
-            "import sys; from fleet.bench.dashboard import run; "
-            "run(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4])"
-        )
-        procs.append(
-            subprocess.Popen([sys.executable, "-c", code, endpoint, str(robots), str(speed), world])
-        )
-        bus = Bus("dashboard", f"bench-{os.getpid()}", [endpoint])
-        watcher = FleetWatcher()
-        feed = BusFeed(bus, watcher)
-        out = io.StringIO()
-        writer = AnsiWriter("truecolor")
-        period = 1.0 / REDRAW_HZ
-        warmup = 3.0
-        t_start = time.monotonic()
-        frames: list[float] = []
-        received = 0
-        cpu0 = wall0 = None
-        try:
-            while True:
-                tick = time.monotonic()
-                if cpu0 is None and tick - t_start >= warmup:
-                    cpu0, wall0, received, frames = time.process_time(), tick, 0, []
-                if wall0 is not None and tick - wall0 >= seconds:
-                    break
-                received += feed.pump()
-                lines = screen(watcher.snapshot(), width, height, "robot-0", "bench")
-                out.write(writer.frame(lines))
-                frames.append(time.monotonic() - tick)
-                out.seek(0)
-                out.truncate()
-                time.sleep(max(0.0, period - (time.monotonic() - tick)))
-            cpu = time.process_time() - cpu0
-            wall = time.monotonic() - wall0
-        finally:
-            feed.close()
-            bus.close()
-    finally:
-        for p in reversed(procs):
-            p.terminate()
-        for p in procs:
-            p.wait(timeout=10)
-    snap = watcher.snapshot()
-    frames.sort()
-    result = {
-        "robots": robots,
-        "speed": speed,
-        "world": world,
-        "size": f"{width}x{height}",
-        "wall_s": round(wall, 2),
-        "redraw_hz": round(len(frames) / wall, 2),
-        "cpu_percent": round(100 * cpu / wall, 2),
-        "frame_ms_p50": round(1000 * frames[len(frames) // 2], 2),
-        "frame_ms_max": round(1000 * frames[-1], 2),
-        "ring_msgs_per_s": round(received / wall, 1),
-        "robots_seen": len(snap.robots),
-        "floor_plan": snap.floor is not None,
-        "load_avg": round(os.getloadavg()[0], 2),
-    }
+        result = measure(robots, speed, seconds, width, height, world, REDRAW_HZ)
+    except StartError as e:
+        _fail(str(e))
     if as_json:
         print(json.dumps(result))
         return
