@@ -1,11 +1,10 @@
-"""``fleet plan coverage`` and ``fleet bench coverage``: coverage paths on any floor plan."""
+"""``fleet plan coverage`` and ``fleet bench coverage``: coverage paths on any floor plan (the
+bench's runner in fleet.bench.coverage)."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import math
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -18,9 +17,9 @@ if TYPE_CHECKING:
 
     from fleet.coordinator.planning import TourSpec
     from fleet.params import FleetConfig
+    from fleet.world import World
+    from planners.grid import GridMap
     from planners.robot import RobotSpec
-
-APARTMENT = Path(__file__).resolve().parents[3] / "shared" / "data" / "maps"
 
 BareOpt = Annotated[
     bool,
@@ -30,6 +29,47 @@ BareOpt = Annotated[
         "figures BENCHMARKS.md gave before the fleet's plan). Default: the coordinator's plan "
         "(2.5 cm, coordinator.lane_overlap, radius + coordinator.wall_clearance), the tour the "
         "fleet drives.",
+    ),
+]
+MapArg = Annotated[
+    str,
+    typer.Argument(
+        metavar="MAP",
+        help="A world YAML (configs/worlds/*.yaml, or the name of a built-in world: home, "
+        "small) or a ROS map_server YAML (image, resolution, origin, thresholds).",
+    ),
+]
+StartsOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--start",
+        help="Start X,Y in metres (world frame), once per robot. Default: the world's "
+        "start poses, else free spots near the dock or the most open point of the map.",
+    ),
+]
+CoverageTargetOpt = Annotated[
+    float | None,
+    typer.Option(
+        min=0.0,
+        max=1.0,
+        help="Share of the cleanable floor to cover, 0-1 (with coverage.fill_in, the "
+        "default): the fill-in passes stop there and a bcd plan drops what costs the most "
+        "driving per cell above it, so a lower target gives a shorter path (1.0: every "
+        "pass, nothing left). Default: coverage.fill_in_target in configs/fleet.yaml.",
+    ),
+]
+ResolutionOpt = Annotated[
+    float | None,
+    typer.Option(min=0.01, help="Grid cell size (m). Default: the plan's (2.5 cm; --bare 5 cm)."),
+]
+RepeatOpt = Annotated[
+    int,
+    typer.Option(
+        "--repeat",
+        min=1,
+        help="Plan every case this many times and report the fastest planning time (the "
+        "plans are the same each time; on a shared machine the fastest run is the least "
+        "disturbed one; single runs vary by up to 1.6x there). 1 for a quick look.",
     ),
 ]
 
@@ -79,42 +119,13 @@ def _parse_start(text: str) -> tuple[float, float]:
 
 
 def plan_coverage_cmd(
-    map_path: Annotated[
-        str,
-        typer.Argument(
-            metavar="MAP",
-            help="A world YAML (configs/worlds/*.yaml, or the name of a built-in world: home, "
-            "small) or a ROS map_server YAML (image, resolution, origin, thresholds).",
-        ),
-    ],
+    map_path: MapArg,
     robots: Annotated[
         int, typer.Option("--robots", "-k", min=1, help="Number of robots to split the work.")
     ] = 1,
-    start: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--start",
-            help="Start X,Y in metres (world frame), once per robot. Default: the world's "
-            "start poses, else free spots near the dock or the most open point of the map.",
-        ),
-    ] = None,
-    coverage_target: Annotated[
-        float | None,
-        typer.Option(
-            min=0.0,
-            max=1.0,
-            help="Share of the cleanable floor to cover, 0-1 (with coverage.fill_in, the "
-            "default): the fill-in passes stop there and a bcd plan drops what costs the most "
-            "driving per cell above it, so a lower target gives a shorter path (1.0: every "
-            "pass, nothing left). Default: coverage.fill_in_target in configs/fleet.yaml.",
-        ),
-    ] = None,
-    resolution: Annotated[
-        float | None,
-        typer.Option(
-            min=0.01, help="Grid cell size (m). Default: the plan's (2.5 cm; --bare 5 cm)."
-        ),
-    ] = None,
+    start: StartsOpt = None,
+    coverage_target: CoverageTargetOpt = None,
+    resolution: ResolutionOpt = None,
     bare: BareOpt = False,
     out: Annotated[
         Path, typer.Option(help="Directory for paths.json and plan.png (created if missing).")
@@ -147,11 +158,38 @@ def plan_coverage_cmd(
 
       fleet plan coverage home --coverage-target 0.98
     """
+    from fleet.bench.coverage import plan_summary
+    from planners.coverage import PlanningError
+
+    cfg, path, world = _read_map(map_path, config)
+    spec, grid = _plan_spec(cfg, world, bare, resolution, coverage_target)
+    starts = _starts(start, robots, world, cfg)
+    robots = len(starts)
+    try:
+        with _status(f"planning coverage of {path.name} for {robots} robot(s)"):
+            plan = spec.plan(grid, starts, cfg.robot)
+    except PlanningError as err:
+        _fail(f"{path}: {err}")
+    summary = plan_summary(plan)
+    summary["map"] = str(path)
+    summary["plan"] = {**spec.to_json(), "bare": bare}
+    summary["files"] = _write_plan(out, plan, grid, cfg.robot)
+    if as_json:
+        print(json.dumps(summary))
+        return
+    which = "the planner alone" if bare else "the fleet's plan"
+    _print_table(
+        plan,
+        f"Coverage of {path.name}: {robots} robot(s); {which} ({_spec_text(spec)})",
+    )
+    _print_plan_notes(plan, summary, cfg.robot, out)
+
+
+def _read_map(map_path: str, config: Path | None) -> tuple[FleetConfig, Path, World]:
+    """The parameters, and MAP's file and world; exits naming what does not load."""
     from fleet.config import ConfigError, resolve_world
     from fleet.params import load_fleet_config
     from fleet.world import load_world
-    from planners.coverage import PlanningError
-    from planners.coverage.render import render_plan
 
     try:
         cfg = load_fleet_config(config)
@@ -159,6 +197,20 @@ def plan_coverage_cmd(
         world = load_world(path, cfg.robot.radius)
     except ConfigError as err:
         _fail(str(err))
+    return cfg, path, world
+
+
+def _plan_spec(
+    cfg: FleetConfig,
+    world: World,
+    bare: bool,
+    resolution: float | None,
+    coverage_target: float | None,
+) -> tuple[TourSpec, GridMap]:
+    """The plan to make (:func:`_spec`, at ``resolution`` and to ``coverage_target`` if
+    given) and its grid of ``world``."""
+    from fleet.config import ConfigError
+
     spec = _spec(cfg, bare)
     if resolution is not None:
         spec = dataclasses.replace(spec, resolution=resolution)
@@ -166,25 +218,34 @@ def plan_coverage_cmd(
         grid = spec.grid(world)
     except ConfigError as err:
         _fail(str(err))
-    params, robot = spec.params, cfg.robot
     if coverage_target is not None:
-        params = dataclasses.replace(params, fill_in_target=coverage_target)
-    spec = dataclasses.replace(spec, params=params)
+        params = dataclasses.replace(spec.params, fill_in_target=coverage_target)
+        spec = dataclasses.replace(spec, params=params)
+    return spec, grid
+
+
+def _starts(
+    start: list[str] | None, robots: int, world: World, cfg: FleetConfig
+) -> list[tuple[float, float]]:
+    """The robots' starts: one per --start, else the world's first ``robots`` start poses."""
+    from fleet.config import ConfigError
+
     if start:
         starts = [_parse_start(s) for s in start]
         if robots not in (1, len(starts)):
             _fail(f"--robots {robots} but {len(starts)} --start given: give one start per robot")
-        robots = len(starts)
-    else:
-        try:
-            starts = [p[:2] for p in world.start_poses(robots, cfg.robot.radius)]
-        except ConfigError as err:
-            _fail(str(err))
+        return starts
     try:
-        with _status(f"planning coverage of {path.name} for {robots} robot(s)"):
-            plan = spec.plan(grid, starts, robot)
-    except PlanningError as err:
-        _fail(f"{path}: {err}")
+        poses = world.start_poses(robots, cfg.robot.radius)
+    except ConfigError as err:
+        _fail(str(err))
+    return [p[:2] for p in poses]
+
+
+def _write_plan(out: Path, plan: Any, grid: GridMap, robot: RobotSpec) -> dict[str, str]:
+    """DIR/paths.json (world metres) and DIR/plan.png; their paths."""
+    from planners.coverage.render import render_plan
+
     out.mkdir(parents=True, exist_ok=True)
     doc = {
         "frame": "world",
@@ -197,18 +258,10 @@ def plan_coverage_cmd(
     }
     (out / "paths.json").write_text(json.dumps(doc))
     render_plan(grid, plan.room_labels, list(plan.paths), plan.unreachable).save(out / "plan.png")
-    summary = _summary(plan)
-    summary["map"] = str(path)
-    summary["plan"] = {**spec.to_json(), "bare": bare}
-    summary["files"] = {"paths": str(out / "paths.json"), "plan": str(out / "plan.png")}
-    if as_json:
-        print(json.dumps(summary))
-        return
-    which = "the planner alone" if bare else "the fleet's plan"
-    _print_table(
-        plan,
-        f"Coverage of {path.name}: {robots} robot(s); {which} ({_spec_text(spec)})",
-    )
+    return {"paths": str(out / "paths.json"), "plan": str(out / "plan.png")}
+
+
+def _print_plan_notes(plan: Any, summary: dict[str, Any], robot: RobotSpec, out: Path) -> None:
     from rich.console import Console
 
     console = Console()
@@ -223,33 +276,6 @@ def plan_coverage_cmd(
         f"for the {robot.cleaning_width:.2f} m swath), hatched red in plan.png"
     )
     console.print(f"wrote {out / 'paths.json'} and {out / 'plan.png'}")
-
-
-def _summary(plan: Any) -> dict[str, Any]:
-    m = plan.metrics
-    t = m.total
-    return {
-        "coverage": round(t.coverage, 5),
-        "repetition": round(t.repetition, 5),
-        "path_length_m": round(t.path_length_m, 3),
-        "turns": t.turns,
-        "est_time_s": round(sum(r.est_time_s for r in m.robots), 2),
-        "makespan_s": round(m.makespan_s, 2),
-        "plan_time_s": round(plan.plan_time_s, 4),
-        "cleanable_area_m2": round(m.cleanable_area_m2, 3),
-        "unreachable_free_m2": round(plan.unreachable_area_m2, 3),
-        "robots": [
-            {
-                "id": i,
-                "coverage": round(r.coverage, 5),
-                "repetition": round(r.repetition, 5),
-                "path_length_m": round(r.path_length_m, 3),
-                "turns": r.turns,
-                "est_time_s": round(r.est_time_s, 2),
-            }
-            for i, r in enumerate(m.robots)
-        ],
-    }
 
 
 def _print_table(plan: Any, title: str) -> None:
@@ -284,16 +310,7 @@ def _print_table(plan: Any, title: str) -> None:
 
 def bench_coverage(
     as_json: JsonOpt = False,
-    repeat: Annotated[
-        int,
-        typer.Option(
-            "--repeat",
-            min=1,
-            help="Plan every case this many times and report the fastest planning time (the "
-            "plans are the same each time; on a shared machine the fastest run is the least "
-            "disturbed one; single runs vary by up to 1.6x there). 1 for a quick look.",
-        ),
-    ] = 3,
+    repeat: RepeatOpt = 3,
     bare: BareOpt = False,
 ) -> None:
     """Coverage quality and planning time on the built-in home and the real apartment map.
@@ -306,24 +323,23 @@ def bench_coverage(
     planning time (wall clock, the fastest of --repeat runs; the machine may be shared). The
     apartment (../shared/data/maps/cob_ipa_apartment.yaml) is skipped if absent.
     """
-    from fleet.config import configs_dir
+    from fleet.bench.coverage import bench_maps, run_bench
     from fleet.params import load_fleet_config
 
     cfg = load_fleet_config()
     spec, robot = _spec(cfg, bare), cfg.robot
-    maps = [("home", configs_dir() / "worlds" / "home.yaml")]
-    apt = APARTMENT / "cob_ipa_apartment.yaml"
-    if apt.exists():
-        maps.append(("apartment", apt))
-    else:
-        typer.echo(f"note: {apt} not found; the apartment is left out", err=True)
-    rows: list[dict[str, Any]] = []
+    maps, missing = bench_maps()
+    for path in missing:
+        typer.echo(f"note: {path} not found; the apartment is left out", err=True)
     with _status("fleet bench coverage") as status:
-        for name, path in maps:
-            _bench_map(name, path, spec, robot, repeat, rows, status)
+        rows = run_bench(maps, spec, robot, repeat, status.update)
     if as_json:
         print(json.dumps({"plan": {**spec.to_json(), "bare": bare}, "results": rows}))
         return
+    _print_bench(rows, spec, robot)
+
+
+def _print_bench(rows: list[dict[str, Any]], spec: TourSpec, robot: RobotSpec) -> None:
     from rich.console import Console
     from rich.table import Table
 
@@ -360,76 +376,3 @@ def bench_coverage(
     if console.width < 120:
         console = Console(width=120)
     console.print(table)
-
-
-def _bench_map(
-    name: str,
-    path: Path,
-    spec: TourSpec,
-    robot: RobotSpec,
-    repeat: int,
-    rows: list[dict[str, Any]],
-    status: Status,
-) -> None:
-    """Append the bench rows of one map to ``rows``, telling ``status`` which case runs."""
-    from fleet.world import load_world
-    from planners.coverage import plan_metrics
-    from planners.lanes import plan_lanes
-
-    world = load_world(path, robot.radius)
-    grid = spec.grid(world)
-    s1 = [p[:2] for p in world.start_poses(1, robot.radius)]
-    s3 = [p[:2] for p in world.start_poses(3, robot.radius)]
-    single = None
-    for label, starts, case in (
-        ("bcd k=1", s1, spec),
-        ("bcd k=3", s3, spec),
-    ):
-        status.update(f"fleet bench coverage: {name}, {label}, run 1 of {repeat}")
-        plan = case.plan(grid, starts, robot)
-        fastest = plan.plan_time_s
-        for run in range(2, repeat + 1):
-            status.update(f"fleet bench coverage: {name}, {label}, run {run} of {repeat}")
-            fastest = min(fastest, case.plan(grid, starts, robot).plan_time_s)
-        row = {
-            "map": name,
-            "planner": label,
-            **_summary(plan),
-            "plan_time_s": round(fastest, 4),
-        }
-        row.pop("robots")
-        row["free_m2"] = round(float(grid.free.sum()) * grid.resolution**2, 2)
-        if label == "bcd k=1":
-            single = plan
-        if label == "bcd k=3" and single is not None:
-            row["makespan_ratio_vs_k1"] = round(
-                plan.metrics.makespan_s / single.metrics.makespan_s, 3
-            )
-        rows.append(row)
-    for label, starts in (("baseline lanes k=1", s1), ("baseline lanes k=3", s3)):
-        status.update(f"fleet bench coverage: {name}, {label}")
-        dt = math.inf
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            paths = plan_lanes(grid, starts, robot, spec.params.overlap)
-            dt = min(dt, time.perf_counter() - t0)
-        m = plan_metrics(
-            grid,
-            paths,
-            spec.params,
-            robot,
-            wall_clearance=spec.wall_clearance,
-            cleanable_mask=single.cleanable if single is not None else None,
-        )
-        rows.append(
-            {
-                "map": name,
-                "planner": label,
-                "coverage": round(m.total.coverage, 5),
-                "repetition": round(m.total.repetition, 5),
-                "path_length_m": round(m.total.path_length_m, 3),
-                "turns": m.total.turns,
-                "makespan_s": round(m.makespan_s, 2),
-                "plan_time_s": round(dt, 4),
-            }
-        )
