@@ -20,7 +20,9 @@ The simulator's side of the benchmark, so it may read truth:
 from __future__ import annotations
 
 import itertools
+import json
 import math
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -295,3 +297,27 @@ def run_slam_bench(
         **scores,
         "sim_wall_seconds": drive.wall_seconds,
     }
+
+
+def bench_route(
+    world: World,
+    cfg: FleetConfig,
+    seconds: float,
+    seed: int,
+    odom_noise_scale: float,
+    out: Path | None,
+    shift: float,
+    progress: Callable[[float], None] | None = None,
+) -> dict:
+    """``fleet bench slam``: :func:`run_slam_bench` recording into ``out`` (None: a temporary
+    directory, gone afterwards), its summary with ``out`` and the world's ``shift`` added, also
+    written to bench.json beside the recording."""
+    with tempfile.TemporaryDirectory(prefix="slam-bench-") as tmp:
+        target = out if out is not None else Path(tmp)
+        summary = run_slam_bench(
+            world, cfg, seconds, seed, odom_noise_scale, target, progress=progress
+        )
+        summary["out"] = str(out) if out is not None else None
+        summary["world_shift_m"] = shift
+        (target / "bench.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

@@ -20,6 +20,7 @@ through the agents' SLAM on it, and scores SLAM and odometry against the referen
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -143,3 +144,18 @@ def run_log_bench(
         "runs": runs,
         "out": str(out),
     }
+
+
+def bench_log(
+    log_path: Path,
+    cfg: FleetConfig,
+    seeds: Sequence[int],
+    out: Path,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> dict:
+    """``fleet bench slam --log``: :func:`run_log_bench` with the lidar's ``range_min``, its
+    result also written to ``out/bench.json``."""
+    summary = run_log_bench(log_path, cfg, seeds, out, cfg.lidar.range_min, progress)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

@@ -4,8 +4,10 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -103,6 +105,41 @@ BENCH_TARGETS = {
 }
 
 
+OdomNoiseScaleOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Multiply every odometry noise term of fleet.yaml (alphas, heading bias) by this "
+        "for the drive. Default 5: with fleet.yaml's gentle drift alone, raw odometry on the "
+        "home route ends at about 0.2 m ATE, too little to show what SLAM corrects; 5× "
+        "gives 0.6–1.1 m (seeds 0–2)."
+    ),
+]
+BenchOutOpt = Annotated[
+    Path | None,
+    typer.Option(
+        help="Keep the recording here: slam.log (CARMEN), slam.log.truth.csv, map.png, "
+        "map.yaml, trajectory.csv, timing.json, bench.json. Default: a temporary directory."
+    ),
+]
+LogOpt = Annotated[
+    Path | None,
+    typer.Option(
+        help="Benchmark on this real CARMEN log instead of a simulated route: odometry "
+        "made from the log's reference poses with noise (data/slam/README.md recipe), "
+        "SLAM scored against the reference. Writes map.png per seed into --out "
+        "(default slam-bench/)."
+    ),
+]
+ShiftOpt = Annotated[
+    float,
+    typer.Option(
+        help="Move the world by this many metres along x and y before driving (e.g. 0.025: "
+        "walls off the SLAM map's cell lattice, as real walls are; 0 keeps the world's own "
+        "coordinates, where home.yaml's walls sit on round numbers)."
+    ),
+]
+
+
 def bench_slam(
     seconds: Annotated[
         float, typer.Option("--seconds", "-s", help="Sim seconds of driving (the route length).")
@@ -111,46 +148,17 @@ def bench_slam(
     world: Annotated[
         str, typer.Option("--world", "-w", help="World YAML or built-in world name.")
     ] = "home",
-    odom_noise_scale: Annotated[
-        float | None,
-        typer.Option(
-            help="Multiply every odometry noise term of fleet.yaml (alphas, heading bias) by this "
-            "for the drive. Default 5: with fleet.yaml's gentle drift alone, raw odometry on the "
-            "home route ends at about 0.2 m ATE, too little to show what SLAM corrects; 5× "
-            "gives 0.6–1.1 m (seeds 0–2)."
-        ),
-    ] = None,
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            help="Keep the recording here: slam.log (CARMEN), slam.log.truth.csv, map.png, "
-            "map.yaml, trajectory.csv, timing.json, bench.json. Default: a temporary directory."
-        ),
-    ] = None,
+    odom_noise_scale: OdomNoiseScaleOpt = None,
+    out: BenchOutOpt = None,
     config: Annotated[
         Path | None, typer.Option(help="fleet.yaml to use (default: the built-in one).")
     ] = None,
     as_json: JsonOpt = False,
-    log: Annotated[
-        Path | None,
-        typer.Option(
-            help="Benchmark on this real CARMEN log instead of a simulated route: odometry "
-            "made from the log's reference poses with noise (data/slam/README.md recipe), "
-            "SLAM scored against the reference. Writes map.png per seed into --out "
-            "(default slam-bench/)."
-        ),
-    ] = None,
+    log: LogOpt = None,
     seeds: Annotated[
         str, typer.Option(help="With --log: noise seeds, 0,1,2 or 0-4 or a mix.")
     ] = "0,1,2",
-    shift: Annotated[
-        float,
-        typer.Option(
-            help="Move the world by this many metres along x and y before driving (e.g. 0.025: "
-            "walls off the SLAM map's cell lattice, as real walls are; 0 keeps the world's own "
-            "coordinates, where home.yaml's walls sit on round numbers)."
-        ),
-    ] = 0.0,
+    shift: ShiftOpt = 0.0,
 ) -> None:
     """Drive one simulated robot around every room of a world, then score SLAM against truth;
     with --log, score SLAM on a real robot's log against the log's reference trajectory.
@@ -177,46 +185,35 @@ def bench_slam(
     Example: fleet bench slam --shift 0.025   # the home's walls off the map's cell lattice
     Example: fleet bench slam --log aces-corrected.log.gz --seeds 0,1,2 --out /tmp/aces
     """
-    import tempfile
-
     if log is not None:
         _bench_log(log, seeds, out or Path("slam-bench"), config, as_json)
         return
 
-    from fleet.bench.slam import DEFAULT_ODOM_NOISE_SCALE, run_slam_bench, shift_world
-    from fleet.config import ConfigError, resolve_world
-    from fleet.params import load_fleet_config
-    from fleet.world import load_world
+    from fleet.bench.slam import DEFAULT_ODOM_NOISE_SCALE, bench_route
 
     scale = DEFAULT_ODOM_NOISE_SCALE if odom_noise_scale is None else odom_noise_scale
     if seconds < 5 or scale < 0:
         typer.echo("error: need --seconds >= 5 and --odom-noise-scale >= 0", err=True)
         raise typer.Exit(2)
+    cfg, w = _route_world(config, world, shift)
     try:
-        cfg = load_fleet_config(config)
-        w = load_world(resolve_world(world), cfg.robot.radius)
-        if shift:
-            w = shift_world(w, shift, shift)
-    except ConfigError as e:
+        with _route_progress(seconds) as progress:
+            summary = bench_route(w, cfg, seconds, seed, scale, out, shift, progress)
+    except ValueError as e:
         typer.echo(f"error: {e}", err=True)
         raise typer.Exit(2) from None
-    with tempfile.TemporaryDirectory(prefix="slam-bench-") as tmp:
-        target = out if out is not None else Path(tmp)
-        try:
-            summary = _run_with_progress(run_slam_bench, w, cfg, seconds, seed, scale, target)
-        except ValueError as e:
-            typer.echo(f"error: {e}", err=True)
-            raise typer.Exit(2) from None
-        summary["out"] = str(out) if out is not None else None
-        summary["world_shift_m"] = shift
-        (target / "bench.json").write_text(json.dumps(summary, indent=2) + "\n")
     if as_json:
         typer.echo(json.dumps(summary))
         return
+    _print_route_bench(summary, w.name)
+
+
+def _print_route_bench(summary: dict[str, Any], world: str) -> None:
+    """The route's figures, each against its target (BENCH_TARGETS) if it has one."""
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"SLAM on a {summary['route_seconds']:.0f} s route through {w.name}")
+    table = Table(title=f"SLAM on a {summary['route_seconds']:.0f} s route through {world}")
     table.add_column("metric")
     table.add_column("value", justify="right")
     table.add_column("target")
@@ -230,13 +227,29 @@ def bench_slam(
     Console().print(table)
 
 
-def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: bool) -> None:
-    """``fleet bench slam --log``: run :func:`fleet.bench.slam_log.run_log_bench` with a
-    progress bar per seed on stderr, then print JSON or a table."""
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+def _route_world(config: Path | None, world: str, shift: float) -> tuple[Any, Any]:
+    """The parameters and the world to drive, moved by ``shift`` along x and y; exits naming
+    what does not load."""
+    from fleet.bench.slam import shift_world
+    from fleet.config import ConfigError, resolve_world
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world
 
-    from fleet.bench.slam_log import LOG_TARGETS, run_log_bench
+    try:
+        cfg = load_fleet_config(config)
+        w = load_world(resolve_world(world), cfg.robot.radius)
+        if shift:
+            w = shift_world(w, shift, shift)
+    except ConfigError as e:
+        typer.echo(f"error: {e}", err=True)
+        raise typer.Exit(2) from None
+    return cfg, w
+
+
+def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: bool) -> None:
+    """``fleet bench slam --log``: run :func:`fleet.bench.slam_log.bench_log` with a progress
+    bar per seed on stderr, then print JSON or the tables."""
+    from fleet.bench.slam_log import bench_log
     from fleet.carmen import CarmenParseError
     from fleet.config import ConfigError
     from fleet.params import load_fleet_config
@@ -244,34 +257,26 @@ def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: b
     seed_list = parse_seeds(seeds)
     try:
         cfg = load_fleet_config(config)
-        with Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            TextColumn("{task.completed}/{task.total} scans"),
-            TimeRemainingColumn(),
-            console=Console(stderr=True),
-            transient=True,
-        ) as bar:
-            tasks: dict[str, int] = {}
-
-            def progress(label: str, done: int, total: int) -> None:
-                if label not in tasks:
-                    tasks[label] = bar.add_task(f"{log.name}, {label}", total=total)
-                bar.update(tasks[label], completed=done)
-
-            summary = run_log_bench(log, cfg, seed_list, out, cfg.lidar.range_min, progress)
+        with _log_progress(log) as progress:
+            summary = bench_log(log, cfg, seed_list, out, progress)
     except (CarmenParseError, ConfigError) as e:
         typer.echo(f"error: {e}", err=True)
         raise typer.Exit(2) from None
     except ValueError as e:
         typer.echo(f"error: {log}: {e}", err=True)
         raise typer.Exit(2) from None
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bench.json").write_text(json.dumps(summary, indent=2) + "\n")
     if as_json:
         typer.echo(json.dumps(summary))
         return
+    _print_log_bench(summary, log, seeds)
+
+
+def _print_log_bench(summary: dict[str, Any], log: Path, seeds: str) -> None:
+    """The errors of each seed's trajectories, the per-scan times, and the targets."""
+    from rich.console import Console
     from rich.table import Table
+
+    from fleet.bench.slam_log import LOG_TARGETS
 
     table = Table(
         title=f"SLAM on {log.name}: {summary['scans']} scans, {summary['beams']} beams over "
@@ -313,9 +318,34 @@ def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: b
         )
 
 
-def _run_with_progress(run, w, cfg, seconds: float, seed: int, scale: float, out: Path) -> dict:
-    """``run_slam_bench`` with a progress bar on stderr over the drive and a spinner for the
-    replay."""
+@contextmanager
+def _log_progress(log: Path) -> Iterator[Callable[[str, int, int], None]]:
+    """A progress bar on stderr per seed's replay of ``log``, while the block runs."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} scans"),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        tasks: dict[str, int] = {}
+
+        def progress(label: str, done: int, total: int) -> None:
+            if label not in tasks:
+                tasks[label] = bar.add_task(f"{log.name}, {label}", total=total)
+            bar.update(tasks[label], completed=done)
+
+        yield progress
+
+
+@contextmanager
+def _route_progress(seconds: float) -> Iterator[Callable[[float], None]]:
+    """A progress bar on stderr over the drive, then a spinner for the replay, while the
+    block runs."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -335,4 +365,4 @@ def _run_with_progress(run, w, cfg, seconds: float, seed: int, scale: float, out
             if t >= seconds - 1.0:
                 bar.update(task, description="replaying SLAM", completed=seconds)
 
-        return run(w, cfg, seconds, seed, scale, out, progress=progress)
+        yield progress
