@@ -1,11 +1,17 @@
 """What several command modules share: the helpers that check options, load parameters, open
-the bus, log and stop on signals (the shared options are in ``fleet/cli/options.py``)."""
+the bus, log and stop on signals, and tell a bench's progress and result (the shared options
+are in ``fleet/cli/options.py``)."""
 
 from __future__ import annotations
 
+import json
 import signal
+import sys
 import threading
+from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -40,6 +46,39 @@ def parse_seeds(text: str) -> list[int]:
     if not out:
         _fail("--seeds: no seed given")
     return out
+
+
+def world_file(world: str, option: str = "") -> str:
+    """The file of ``--world`` (a built-in name or a path); exits naming what is wrong,
+    after ``option`` when given (``--worlds: ...``)."""
+    from fleet.config import ConfigError, resolve_world
+
+    try:
+        path = resolve_world(world)
+    except ConfigError as e:
+        _fail(f"{option}: {e}" if option else str(e))
+    return str(path)
+
+
+def stamped_dir(given: Path | None, pattern: str) -> Path:
+    """``given``, else runs/ and the time now as ``pattern`` (strftime) says:
+    ``bench-fleet-%Y%m%d-%H%M%S``."""
+    return given or Path("runs") / datetime.now().strftime(pattern)
+
+
+def progress_line(line: str) -> None:
+    """A line of a bench's progress, on stderr at once (stdout is the result)."""
+    print(line, file=sys.stderr, flush=True)
+
+
+def print_result(
+    result: dict[str, Any], as_json: bool, table_lines: Callable[[dict[str, Any]], list[str]]
+) -> None:
+    """A bench's result on stdout: one JSON object, or the lines of its table."""
+    if as_json:
+        print(json.dumps(result))
+    else:
+        typer.echo("\n".join(table_lines(result)))
 
 
 def _setup_logging(name: str) -> None:

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 import typer
 
-from fleet.cli.common import _fail, parse_seeds
+from fleet.cli.common import _fail, parse_seeds, stamped_dir
 from fleet.cli.options import JsonOpt
 
 # the family's table of runs needs this many columns of text
@@ -174,9 +174,7 @@ def _modes(modes: str) -> list[str]:
 
 
 def _default_root(run_root: Path | None) -> Path:
-    from datetime import datetime
-
-    return run_root or Path("runs") / datetime.now().strftime("bench-deconf-%Y%m%d-%H%M%S")
+    return stamped_dir(run_root, "bench-deconf-%Y%m%d-%H%M%S")
 
 
 def _fleets(seeds: str, modes: str, worlds: str, run_root: Path | None) -> dict[str, dict]:

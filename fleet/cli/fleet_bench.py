@@ -7,13 +7,20 @@ from __future__ import annotations
 import json
 import math
 import sys
-from datetime import datetime
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from fleet.cli.common import _check_deconfliction, _fail, parse_seeds
+from fleet.cli.common import (
+    _check_deconfliction,
+    _fail,
+    parse_seeds,
+    print_result,
+    progress_line,
+    stamped_dir,
+    world_file,
+)
 from fleet.cli.help_text import reflow
 from fleet.cli.options import (
     BenchSpeedOpt,
@@ -34,6 +41,19 @@ WorldsOpt = Annotated[
     ),
 ]
 SeedsOpt = Annotated[str, typer.Option("--seeds", help="Seeds of the runs: 0,1,2 or 0-4 or a mix.")]
+
+
+def _check_runs(
+    robots: int, speed: float, timeout: float, deconfliction: str | None = None
+) -> None:
+    """Exit unless the runs' robots, speed, wall bound and deconfliction mode can be run."""
+    if robots < 1:
+        _fail("--robots must be >= 1")
+    _check_deconfliction(deconfliction)
+    if speed < 0 or not math.isfinite(speed):
+        _fail(f"--speed must be a finite number >= 0, got {speed}")
+    if timeout <= 0:
+        _fail("--timeout must be > 0")
 
 
 def bench_fleet(
@@ -66,35 +86,17 @@ def bench_fleet(
     `fleet bench fleet --worlds ../shared/data/maps/cob_ipa_apartment.yaml --seeds 0-2`.
     """
     from fleet.bench.fleet import Scenario, run_bench, table_lines
-    from fleet.config import ConfigError, resolve_world
 
-    if robots < 1:
-        _fail("--robots must be >= 1")
-    _check_deconfliction(deconfliction)
-    if speed < 0 or not math.isfinite(speed):
-        _fail(f"--speed must be a finite number >= 0, got {speed}")
-    if timeout <= 0:
-        _fail("--timeout must be > 0")
+    _check_runs(robots, speed, timeout, deconfliction)
     chosen = []
     for name in (w.strip() for w in worlds.split(",") if w.strip()):
-        try:
-            path = resolve_world(name)
-        except ConfigError as e:
-            _fail(f"--worlds: {e}")
         options = ("--deconfliction", deconfliction) if deconfliction else ()
-        chosen.append(Scenario(Path(name).stem, str(path), robots, options))
+        chosen.append(Scenario(Path(name).stem, world_file(name, "--worlds"), robots, options))
     if not chosen:
         _fail("--worlds: no world given")
-    root = run_root or Path("runs") / datetime.now().strftime("bench-fleet-%Y%m%d-%H%M%S")
-
-    def progress(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
-    result = run_bench(root, chosen, parse_seeds(seeds), speed, timeout, progress)
-    if as_json:
-        print(json.dumps(result))
-    else:
-        typer.echo("\n".join(table_lines(result)))
+    root = stamped_dir(run_root, "bench-fleet-%Y%m%d-%H%M%S")
+    result = run_bench(root, chosen, parse_seeds(seeds), speed, timeout, progress_line)
+    print_result(result, as_json, table_lines)
 
 
 def bench_follow(
@@ -212,17 +214,11 @@ def bench_repetition(
     from fleet.bench.repetition import table_lines
     from fleet.report.summary import ReportError
 
-    def progress(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
     try:
-        result = run(run_dirs, subdivide, progress)
+        result = run(run_dirs, subdivide, progress_line)
     except ReportError as e:
         _fail(str(e))
-    if as_json:
-        print(json.dumps(result))
-    else:
-        typer.echo("\n".join(table_lines(result)))
+    print_result(result, as_json, table_lines)
 
 
 def bench_explore(
@@ -253,28 +249,12 @@ def bench_explore(
     Examples: `fleet bench explore --json`; `fleet bench explore --world small --seeds 0 -n 2`.
     """
     from fleet.bench.explore import run_bench, table_lines
-    from fleet.config import ConfigError, resolve_world
 
-    if robots < 1:
-        _fail("--robots must be >= 1")
-    if speed < 0 or not math.isfinite(speed):
-        _fail(f"--speed must be a finite number >= 0, got {speed}")
-    if timeout <= 0:
-        _fail("--timeout must be > 0")
-    try:
-        path = resolve_world(world)
-    except ConfigError as e:
-        _fail(f"--world: {e}")
-    root = run_root or Path("runs") / datetime.now().strftime("bench-explore-%Y%m%d-%H%M%S")
-
-    def progress(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
-    result = run_bench(root, str(path), robots, parse_seeds(seeds), speed, timeout, progress)
-    if as_json:
-        print(json.dumps(result))
-    else:
-        typer.echo("\n".join(table_lines(result)))
+    _check_runs(robots, speed, timeout)
+    path = world_file(world, "--world")
+    root = stamped_dir(run_root, "bench-explore-%Y%m%d-%H%M%S")
+    result = run_bench(root, path, robots, parse_seeds(seeds), speed, timeout, progress_line)
+    print_result(result, as_json, table_lines)
 
 
 def register(

@@ -3,15 +3,12 @@
 
 from __future__ import annotations
 
-import json
-import sys
-from datetime import datetime
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from fleet.cli.common import _fail
+from fleet.cli.common import _fail, print_result, progress_line, stamped_dir, world_file
 from fleet.cli.help_text import reflow
 from fleet.cli.options import JsonOpt, RunRobotsOpt, WorldOpt
 
@@ -79,32 +76,30 @@ def bench_recovery(
     `... --sweep 10 --respawn-after 3`.
     """
     from fleet.bench.recovery import run_bench, table_lines
-    from fleet.config import ConfigError, resolve_world
 
-    if robots < 2:
-        _fail("--robots must be >= 2: a lost robot's work needs another robot to go to")
+    _check_robots(robots)
     if kills < 0:
         _fail("--kills must be >= 0")
+    _check_sweep(sweep, respawn_after)
+    world_path = world_file(world)
+    root = stamped_dir(run_root, "bench-recovery-%Y%m%d-%H%M%S")
+
+    result = run_bench(
+        root, world_path, robots, seed, kills, scenarios, progress_line, sweep, respawn_after
+    )
+    print_result(result, as_json, table_lines)
+
+
+def _check_robots(robots: int) -> None:
+    if robots < 2:
+        _fail("--robots must be >= 2: a lost robot's work needs another robot to go to")
+
+
+def _check_sweep(sweep: int, respawn_after: float | None) -> None:
     if sweep < 0:
         _fail("--sweep must be >= 0")
     if respawn_after is not None and (sweep == 0 or respawn_after < 0):
         _fail("--respawn-after needs --sweep N and a time >= 0")
-    try:
-        world_path = str(resolve_world(world))
-    except ConfigError as e:
-        _fail(str(e))
-    root = run_root or Path("runs") / datetime.now().strftime("bench-recovery-%Y%m%d-%H%M%S")
-
-    def progress(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
-    result = run_bench(
-        root, world_path, robots, seed, kills, scenarios, progress, sweep, respawn_after
-    )
-    if as_json:
-        print(json.dumps(result))
-    else:
-        typer.echo("\n".join(table_lines(result)))
 
 
 def bench_chaos(
@@ -166,30 +161,21 @@ def bench_chaos(
     rogue throughout).
     """
     from fleet.bench.chaos import run_bench, table_lines
-    from fleet.config import ConfigError, resolve_world
 
     if runs < 1:
         _fail("--runs must be >= 1")
     if faults < 0:
         _fail("--faults must be >= 0")
-    if robots < 2:
-        _fail("--robots must be >= 2: a lost robot's work needs another robot to go to")
-    try:
-        world_path = str(resolve_world(world))
-    except ConfigError as e:
-        _fail(str(e))
-    root = run_root or Path("runs") / datetime.now().strftime("bench-chaos-%Y%m%d-%H%M%S")
-
-    def progress(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
+    _check_robots(robots)
+    world_path = world_file(world)
+    root = stamped_dir(run_root, "bench-chaos-%Y%m%d-%H%M%S")
 
     if base_makespan is not None and base_makespan <= 0:
         _fail("--base-makespan must be > 0")
-    result = run_bench(root, world_path, robots, seed, runs, faults, rogue, progress, base_makespan)
-    if as_json:
-        print(json.dumps(result))
-    else:
-        typer.echo("\n".join(table_lines(result)))
+    result = run_bench(
+        root, world_path, robots, seed, runs, faults, rogue, progress_line, base_makespan
+    )
+    print_result(result, as_json, table_lines)
 
 
 def register(

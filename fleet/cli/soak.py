@@ -3,16 +3,13 @@ run dir stay bounded."""
 
 from __future__ import annotations
 
-import json
 import math
-import sys
-from datetime import datetime
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from fleet.cli.common import _fail
+from fleet.cli.common import _fail, print_result, progress_line, stamped_dir, world_file
 from fleet.cli.help_text import reflow
 from fleet.cli.options import BenchSpeedOpt, JsonOpt, SeedOpt, WorldOpt
 
@@ -58,7 +55,6 @@ def bench_soak(
     `fleet bench soak --robots 2 --world small --sim-s 300 --every 30 --warmup-s 60 --json`.
     """
     from fleet.bench.soak import Targets, run_soak, table_lines
-    from fleet.config import ConfigError, resolve_world
 
     if robots < 1:
         _fail("--robots must be >= 1")
@@ -69,24 +65,17 @@ def bench_soak(
         _fail(f"--speed must be a finite number >= 0, got {speed}")
     if not 0 <= warmup < sim_s:
         _fail(f"--warmup-s must be >= 0 and less than --sim-s, got {warmup}")
-    try:
-        world_path = str(resolve_world(world))
-    except ConfigError as e:
-        _fail(str(e))
-    run_dir = run_dir or Path("runs") / datetime.now().strftime("bench-soak-%Y%m%d-%H%M%S")
+    world_path = world_file(world)
+    run_dir = stamped_dir(run_dir, "bench-soak-%Y%m%d-%H%M%S")
     if (run_dir / "coordinator.sqlite").exists():
         _fail(f"--run-dir {run_dir} holds an earlier run; choose a new directory")
     run_dir.mkdir(parents=True, exist_ok=True)
 
-    def progress(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
     targets = Targets(warmup_s=warmup)
-    result = run_soak(run_dir, world_path, robots, seed, speed, sim_s, every, targets, progress)
-    if as_json:
-        print(json.dumps(result))
-    else:
-        typer.echo("\n".join(table_lines(result)))
+    result = run_soak(
+        run_dir, world_path, robots, seed, speed, sim_s, every, targets, progress_line
+    )
+    print_result(result, as_json, table_lines)
     if not result["verdict"]["ok"]:
         raise typer.Exit(1)
 

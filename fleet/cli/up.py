@@ -12,13 +12,12 @@ import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
-from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from fleet.cli.common import _check_deconfliction, _fail, _load
+from fleet.cli.common import _check_deconfliction, _fail, _load, stamped_dir
 from fleet.cli.options import (
     ConfigOpt,
     DeconflictionOpt,
@@ -176,14 +175,12 @@ def up(
     `fleet up --robots 2 --world small --headless --until-done --timeout 300`;
     `fleet up --robots 3 --map runs/home-map/map.yaml --headless --until-done`.
     """
-    run = RunRequest(robots, world, speed, seed, config, run_dir or _dated_dir(), timeout, headless)
+    run = RunRequest(
+        robots, world, speed, seed, config, stamped_dir(run_dir, "%Y%m%d-%H%M%S"), timeout, headless
+    )
     request = UpRequest(run, until_done, deconfliction, loop, floor_map, explore_first)
     status, report_failed, floor_map = _clean(request)
     _exit_up(request, status, report_failed, floor_map)
-
-
-def _dated_dir() -> Path:
-    return Path("runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
 
 
 def _check_run(run: RunRequest) -> None:
@@ -389,7 +386,9 @@ def explore(
     from fleet.report.exploration import EXPLORE_REPORT, MAP_PNG
     from fleet.report.explore_figure import EXPLORE_FIGURE
 
-    run = RunRequest(robots, world, speed, seed, config, run_dir or _dated_dir(), timeout, headless)
+    run = RunRequest(
+        robots, world, speed, seed, config, stamped_dir(run_dir, "%Y%m%d-%H%M%S"), timeout, headless
+    )
     _check_run(run)
     if unknown_start >= robots:
         _fail(
