@@ -168,20 +168,7 @@ def agent(
         _fail(f"--id {robot_id!r}: a robot id must be non-empty without '/' or '*'")
     if respawn and state_dir is None:
         _fail("--respawn needs --state-dir: the directory the robot saved its map and pose to")
-    if start is not None:
-        try:
-            pose = tuple(float(v) for v in start.split(","))
-        except ValueError:
-            pose = ()
-        if len(pose) != 3:
-            _fail(f"--start {start!r}: expected x,y,theta, e.g. --start 1.0,0.5,1.57")
-        cfg, _ = _load(config)
-    else:
-        cfg, w = _load(config, world)
-        try:
-            pose = w.start_poses(start_index + 1, cfg.robot.radius)[start_index]
-        except ValueError as e:
-            _fail(f"--start-index {start_index}: {e}")
+    pose, cfg = _spawn_pose(start, start_index, world, config)
     if unknown_start and cfg.agent.pose_source != "slam":
         _fail(
             "--unknown-start needs agent.pose_source slam: only a robot's own map can be "
@@ -197,6 +184,26 @@ def agent(
         _fail(f"{robot_id}: {e}")
     finally:
         bus.close()
+
+
+def _spawn_pose(start: str | None, start_index: int, world: str, config: Path | None):
+    """Where the robot spawns (``--start``, else the world's start pose number
+    ``--start-index``) and the parameters; exits naming a bad pose."""
+    if start is not None:
+        try:
+            pose = tuple(float(v) for v in start.split(","))
+        except ValueError:
+            pose = ()
+        if len(pose) != 3:
+            _fail(f"--start {start!r}: expected x,y,theta, e.g. --start 1.0,0.5,1.57")
+        cfg, _ = _load(config)
+    else:
+        cfg, w = _load(config, world)
+        try:
+            pose = w.start_poses(start_index + 1, cfg.robot.radius)[start_index]
+        except ValueError as e:
+            _fail(f"--start-index {start_index}: {e}")
+    return pose, cfg
 
 
 def coordinator(
@@ -248,23 +255,54 @@ def coordinator(
     re-auctions the work of a robot that is lost, and sends each robot its plans. With
     --explore it auctions the frontiers of the robots' merged maps instead; with --map it
     plans on a stored map instead of the world's floor plan."""
-    import sqlite3
-
-    from fleet.config import ConfigError
-    from fleet.coordinator.charging_service import ChargingCoordinator
-    from fleet.coordinator.explore_service import ExploringCoordinator
-    from fleet.coordinator.exploring import Explorer, MapPlanner
     from fleet.coordinator.map_watch import MapWatch
-    from fleet.coordinator.planning import TaskPlanner
-    from fleet.coordinator.service import Coordinator
-    from fleet.coordinator.store import JobStore, StoreError
-    from fleet.coordinator.transits import TransitPlanner
-    from fleet.plausible import Bounds
-    from fleet.world import on_stored_map
 
     if robots < 1:
         _fail("--robots must be >= 1")
     _setup_logging("coordinator")
+    cfg, w, planner, transits, store = _coordinator_job(
+        robots, world, fleet, config, state, deconfliction, explore, floor_map
+    )
+    if explore is not None and loop:
+        _fail("--loop and --explore do not go together: exploring ends when no frontier is left")
+    bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
+    c = _coordinator_service(bus, cfg, w, planner, transits, store, robots, explore)
+    watch = None
+    if floor_map is not None and w.map_grid is not None:
+        watch = MapWatch(bus, c, w.map_grid, w.source, cfg)
+        watch.start()
+    _stop_on_signals(c.stop)
+    try:
+        c.run(cfg.coordinator.expected_robots_grace_s, loop)
+    finally:
+        c.close()
+        bus.close()
+    if watch is not None and watch.refusal is not None:
+        typer.secho(f"error: {watch.refusal}", fg="red", err=True)
+        raise typer.Exit(WRONG_MAP_EXIT)
+
+
+def _coordinator_job(
+    robots: int,
+    world: str,
+    fleet: str,
+    config: Path | None,
+    state: Path | None,
+    deconfliction: str | None,
+    explore: Path | None,
+    floor_map: Path | None,
+):
+    """The coordinator's parameters, world (on the stored map of --map), task planner and
+    transit planner (none exploring) and job store (none without --state); exits naming what
+    is wrong."""
+    import sqlite3
+
+    from fleet.config import ConfigError
+    from fleet.coordinator.planning import TaskPlanner
+    from fleet.coordinator.store import JobStore, StoreError
+    from fleet.coordinator.transits import TransitPlanner
+    from fleet.world import on_stored_map
+
     # exploring, the world file is not even opened: the robots' maps are all it knows
     cfg, w = _load(config, world if explore is None else None)
     mode = deconfliction or cfg.coordinator.deconfliction
@@ -277,7 +315,7 @@ def coordinator(
             w = on_stored_map(w, floor_map)
         except ConfigError as e:
             _fail(str(e))
-    transits = None
+    planner = transits = None
     try:
         if explore is None:
             planner = TaskPlanner(w, cfg)
@@ -294,14 +332,23 @@ def coordinator(
         _fail(str(e))
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
-    if explore is not None and loop:
-        _fail("--loop and --explore do not go together: exploring ends when no frontier is left")
-    bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
+    return cfg, w, planner, transits, store
+
+
+def _coordinator_service(bus, cfg, w, planner, transits, store, robots: int, explore: Path | None):
+    """The coordinator on ``bus``: exploring (--explore), with batteries (robot.battery on),
+    or plain."""
+    from fleet.coordinator.charging_service import ChargingCoordinator
+    from fleet.coordinator.explore_service import ExploringCoordinator
+    from fleet.coordinator.exploring import Explorer, MapPlanner
+    from fleet.coordinator.service import Coordinator
+    from fleet.plausible import Bounds
+
     bounds = Bounds.of(cfg)
     if explore is None and cfg.robot.battery.enabled:
         if not w.docks:
             _fail(f"{w.source}: robot.battery is on, but the world has no dock (dock: or docks:)")
-        c = ChargingCoordinator(
+        return ChargingCoordinator(
             bus,
             planner,
             robots,
@@ -312,24 +359,10 @@ def coordinator(
             battery=cfg.robot.battery,
             docks=w.docks,
         )
-    elif explore is None:
-        c = Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=bounds)
-    else:
-        explorer = Explorer(cfg, MapPlanner(cfg), explore)
-        c = ExploringCoordinator(bus, explorer, robots, cfg.coordinator, store, bounds=bounds)
-    watch = None
-    if floor_map is not None and w.map_grid is not None:
-        watch = MapWatch(bus, c, w.map_grid, w.source, cfg)
-        watch.start()
-    _stop_on_signals(c.stop)
-    try:
-        c.run(cfg.coordinator.expected_robots_grace_s, loop)
-    finally:
-        c.close()
-        bus.close()
-    if watch is not None and watch.refusal is not None:
-        typer.secho(f"error: {watch.refusal}", fg="red", err=True)
-        raise typer.Exit(WRONG_MAP_EXIT)
+    if explore is None:
+        return Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=bounds)
+    explorer = Explorer(cfg, MapPlanner(cfg), explore)
+    return ExploringCoordinator(bus, explorer, robots, cfg.coordinator, store, bounds=bounds)
 
 
 def register(
