@@ -13,7 +13,9 @@ ast (nothing is imported; imports inside functions count too):
   ``fleet/cli/help_text.py`` and ``fleet/cli/options.py``);
 - no import circle anywhere;
 - no function in ``fleet/coordinator/``, ``agents/`` or ``planners/`` is longer than
-  ``MAX_FUNCTION_LINES`` lines, and no class there longer than ``MAX_CLASS_LINES``.
+  ``MAX_FUNCTION_LINES`` lines, and no class there longer than ``MAX_CLASS_LINES``;
+- no function in ``fleet/cli/`` (nested ones included) is longer than ``MAX_FUNCTION_LINES``:
+  a command parses its options and calls the room that does the work.
 
 Each rule is checked by a function that takes the import graph, and each is shown to catch a
 breach on a graph with one bad arrow added."""
@@ -269,6 +271,23 @@ def test_the_size_check_sees_a_long_function(tmp_path: Path) -> None:
     assert _oversized([long], tmp_path) == [f"long.py:1 f {MAX_FUNCTION_LINES + 1} lines"]
     long.write_text(f"def f():\n{body[: body.rindex(chr(10))]}\n")
     assert _oversized([long], tmp_path) == []
+
+
+def test_the_size_check_sees_nested_and_async_functions(tmp_path: Path) -> None:
+    long = tmp_path / "long.py"
+    body = "\n".join(f"        x{i} = {i}" for i in range(MAX_FUNCTION_LINES))
+    long.write_text(f"def outer():\n    async def inner():\n{body}\n")
+    assert _oversized([long], tmp_path) == [
+        f"long.py:1 outer {MAX_FUNCTION_LINES + 2} lines",
+        f"long.py:2 inner {MAX_FUNCTION_LINES + 1} lines",
+    ]
+
+
+def test_the_cli_commands_stay_small() -> None:
+    paths = sorted((ROOT / "fleet" / "cli").glob("*.py"))
+    assert {"up.py", "processes.py"} <= {p.name for p in paths}
+    found = _oversized(paths)
+    assert not found, "; ".join(found)
 
 
 def test_params_reach_no_robot_or_simulator_software() -> None:
