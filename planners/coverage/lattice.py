@@ -25,6 +25,11 @@ lane, as close to the missed floor as the cell allows and only as long as it, sw
 of at least ``SHOULDER_CELLS`` missed cells; shoulder lanes are tasks of their own, so the tour
 reaches them from whichever lane end is nearest. What is left (mostly single cells at lane ends)
 is for targeted fill-in passes.
+
+A room of many cells proposes many phases, most of which lay the lattice lanes between the same
+rows as another (they differ by fractions of a row): a phase is priced only when its lattice
+decisions (``_decisions``) are new, and each cell's clamp and shoulder lanes are looked for in
+the box of the floor it owns, not in the whole room.
 """
 
 from __future__ import annotations
@@ -86,14 +91,44 @@ def room_lanes(
     if not cells:
         return RoomLanes((), (), (), 0.0, spacing)
     owner = extend_labels(cell_labels_rot, clean_rot)
+    # each cell's floor in the bounding box of what it owns: a room's phases × cells work on
+    # cell-sized arrays, not room-sized ones
+    boxes = ndimage.find_objects(owner, max_label=len(cells))
+    owned = [
+        _Owned((0, 0), np.zeros((0, 0), dtype=bool))
+        if box is None
+        else _Owned((box[0].start, box[1].start), clean_rot[box] & (owner[box] == k))
+        for k, box in enumerate(boxes, start=1)
+    ]
     best: tuple[float, RoomLanes] | None = None
+    seen: set[tuple] = set()
     for phase in _phases(cells, spacing):
-        lanes = _lanes_for_phase(cells, rot, clean_rot, owner, phase, spacing, half_width)
+        lattice = [_lattice_lanes(cell, rot, phase, spacing) for cell in cells]
+        decisions = _decisions(lattice, rot.shape, half_width)
+        if decisions in seen:
+            # the same lanes as an earlier phase's, but for where they lie between their rows,
+            # and the same cost: that earlier phase keeps the tie
+            continue
+        seen.add(decisions)
+        lanes = _lanes_for_phase(cells, lattice, owned, phase, spacing, half_width, rot.shape)
         cost = _cost(lanes.shoulders, TASK_COST_CELLS) + _cost(lanes.lanes(), 1)
         if best is None or cost < best[0] - 1e-9:
             best = (cost, lanes)
     assert best is not None
     return best[1]
+
+
+@dataclass(frozen=True)
+class _Owned:
+    """The cleanable floor a cell owns, cropped to its bounding box at ``origin`` (row, col)."""
+
+    origin: tuple[int, int]
+    floor: np.ndarray
+
+    def window(self, img: np.ndarray) -> np.ndarray:
+        """``img`` (room-sized) over this box."""
+        (r, c), (h, w) = self.origin, self.floor.shape
+        return img[r : r + h, c : c + w]
 
 
 def _cost(lanes: Sequence[np.ndarray], per_lane: float) -> float:
@@ -125,36 +160,35 @@ def _phases(cells: list[MonotoneCell], spacing: float) -> list[float]:
 
 def _lanes_for_phase(
     cells: list[MonotoneCell],
-    rot: np.ndarray,
-    clean_rot: np.ndarray,
-    owner: np.ndarray,
+    lattice: list[list[tuple[float, int, int]]],
+    owned: list[_Owned],
     phase: float,
     spacing: float,
     hw: float,
+    shape: tuple[int, int],
 ) -> RoomLanes:
-    lattice: list[list[tuple[float, int, int]]] = []
-    covered = np.zeros(rot.shape, dtype=bool)
-    for cell in cells:
-        lanes = _lattice_lanes(cell, rot, phase, spacing)
+    """The room's lanes given its ``lattice`` lanes at ``phase``: the clamp and shoulder lanes
+    for the floor they leave."""
+    covered = np.zeros(shape, dtype=bool)
+    for lanes in lattice:
         for y, lo, hi in lanes:
             _sweep(covered, y, lo, hi, hw)
-        lattice.append(lanes)
     clamps = []
-    for k, (cell, lanes) in enumerate(zip(cells, lattice, strict=True), start=1):
-        mine = clean_rot & (owner == k) & ~covered
+    for cell, lanes, own in zip(cells, lattice, owned, strict=True):
+        mine = own.floor & ~own.window(covered)
         extra: list[tuple[float, int, int]] = []
         for below in (True, False):
             ys = [ln[0] for ln in lanes + extra]
-            lane = _clamp_lane(cell, mine, ys, below, hw)
+            lane = _clamp_lane(cell, mine, own.origin, ys, below, hw)
             if lane is not None:
                 _sweep(covered, *lane, hw)
-                mine &= ~covered
+                mine &= ~own.window(covered)
                 extra.append(lane)
         clamps.append(extra)
     shoulders = []
-    for k, cell in enumerate(cells, start=1):
-        mine = clean_rot & (owner == k) & ~covered
-        extra = _shoulder_lanes(cell, mine, hw)
+    for cell, own in zip(cells, owned, strict=True):
+        mine = own.floor & ~own.window(covered)
+        extra = _shoulder_lanes(cell, mine, own.origin, covered.shape, hw)
         for lane in extra:
             _sweep(covered, *lane, hw)
         shoulders.append(extra)
@@ -167,6 +201,31 @@ def _lanes_for_phase(
     )
 
 
+def _decisions(lattice: list[list[tuple[float, int, int]]], shape: tuple[int, int], hw: float):
+    """All that the clamp and shoulder lanes and the cost take from a phase's lattice lanes:
+    per lane its columns, the rows either side of it, the rows its swath covers and the last
+    rows a clamp lane beyond it may take (``_clamp_lane``). Phases alike in all of it differ
+    only in where their lattice lanes lie between the same rows."""
+    out = []
+    for lanes in lattice:
+        for y, lo, hi in lanes:
+            rows, _ = _band(shape, y, lo, hi, hw)
+            out.append(
+                (
+                    lo,
+                    hi,
+                    math.floor(y),
+                    math.ceil(y),
+                    rows.start,
+                    rows.stop,
+                    math.floor(y - hw + 1e-9),
+                    math.ceil(y + hw - 1e-9),
+                )
+            )
+        out.append(())
+    return tuple(out)
+
+
 def _array(lanes: list[tuple[float, int, int]]) -> np.ndarray:
     return np.array(sorted(lanes), dtype=float).reshape(-1, 3)
 
@@ -176,8 +235,15 @@ def _centre_band(cell: MonotoneCell) -> tuple[float, float]:
     return float(cell.row0), float(cell.row0 + cell.rows - 1)
 
 
-def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
-    """Short lanes sweeping the patches of ``mine`` (the cell's missed floor) of at least
+def _shoulder_lanes(
+    cell: MonotoneCell,
+    mine: np.ndarray,
+    origin: tuple[int, int],
+    shape: tuple[int, int],
+    hw: float,
+) -> list:
+    """Short lanes sweeping the patches of ``mine`` (the cell's missed floor, a window at
+    ``origin`` of the room's ``shape``) of at least
     ``SHOULDER_CELLS`` cells, largest first: each at the row where the cell's lane sweeps most
     of it (ties to rows within two of touching the patch's lower or upper edge), as long as
     the patch."""
@@ -197,7 +263,7 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
         rr, cc = np.nonzero((labels[box] == lab) & left[box])
         if len(rr) < SHOULDER_CELLS:
             continue
-        rr, cc = rr + box[0].start, cc + box[1].start
+        rr, cc = rr + box[0].start + origin[0], cc + box[1].start + origin[1]
         best = None
         edges = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
         # then every row that reaches the patch: a strip along a wall joined to the floor of a
@@ -217,7 +283,9 @@ def _shoulder_lanes(cell: MonotoneCell, mine: np.ndarray, hw: float) -> list:
         if best is None or best[0] < SHOULDER_CELLS:
             continue
         out.append(best[1])
-        left[_band(left.shape, *best[1], hw)] = False
+        rows, cols = _band(shape, *best[1], hw)
+        r0, c0 = origin
+        left[_shift(rows, r0), _shift(cols, c0)] = False
     return out
 
 
@@ -263,11 +331,20 @@ def _single_run(row: np.ndarray, lo: int, hi: int) -> tuple[int, int] | None:
     return lo + int(starts[0]), lo + int(ends[0])
 
 
-def _clamp_lane(cell: MonotoneCell, mine: np.ndarray, ys: list[float], below: bool, hw: float):
-    """A lane covering the cell's uncovered floor below its first lane (or above its last)."""
+def _clamp_lane(
+    cell: MonotoneCell,
+    mine: np.ndarray,
+    origin: tuple[int, int],
+    ys: list[float],
+    below: bool,
+    hw: float,
+):
+    """A lane covering the cell's uncovered floor (``mine``, a window at ``origin``) below its
+    first lane (or above its last)."""
     rr, cc = np.nonzero(mine)
     if len(rr) == 0:
         return None
+    rr, cc = rr + origin[0], cc + origin[1]
     reach = hw - 0.5
     if ys:
         # the rows the nearest lane leaves: at least hw away from it
@@ -306,3 +383,8 @@ def _band(shape: tuple[int, int], y: float, lo: int, hi: int, hw: float) -> tupl
     if not len(band):
         return slice(0, 0), slice(0, 0)
     return slice(band[0], band[-1] + 1), slice(max(0, lo - n), min(cols, hi + n + 1))
+
+
+def _shift(s: slice, by: int) -> slice:
+    """A room-frame slice in a window starting at ``by`` (clipped at the window's start)."""
+    return slice(max(0, s.start - by), max(0, s.stop - by))

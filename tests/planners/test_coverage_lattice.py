@@ -140,3 +140,61 @@ def test_a_wall_strip_beside_a_doorway_is_swept_at_the_coordinators_resolution()
     starts = [p[:2] for p in w.start_poses(1, 0.17)]
     plan = plan_coverage(g, starts, CoverageParams(fill_in=False), ROBOT, wall_clearance=0.0)
     assert plan.metrics.total.coverage >= 0.975
+
+
+def _cluttered_room(rng, shape=(90, 110)):
+    """A room with a stepped wall and a few boxes in it: many cells, many candidate phases."""
+    mask = np.zeros(shape, dtype=bool)
+    mask[4:-4, 4:-4] = True
+    for r in range(4, shape[0] - 4, 7):  # a staircase wall, as a turned wall rasterizes
+        mask[r : r + 7, 4 : 4 + int(rng.integers(0, 9))] = False
+    for _ in range(4):
+        r, c = rng.integers(10, shape[0] - 20), rng.integers(15, shape[1] - 25)
+        mask[r : r + rng.integers(4, 14), c : c + rng.integers(4, 18)] = False
+    labels, cells = decompose(mask, max_step=max(mask.shape))
+    return mask, labels, cells, dilate(mask, 3.0, 1.0)
+
+
+def test_phases_alike_in_their_decisions_cost_the_same_and_the_first_best_phase_wins():
+    # room_lanes evaluates one phase per set of lattice decisions (lattice._decisions): the
+    # others must cost exactly what it costs, or it might pass over the cheapest phase
+    from planners.coverage import lattice as lat
+
+    rng = np.random.default_rng(3)
+    skipped = 0
+    for spacing, hw in ((9.9996, 6.0), (6.7, 4.4), (10.8, 6.4)):
+        mask, labels, cells, clean = _cluttered_room(rng)
+        owner = lat.extend_labels(labels, clean)
+        boxes = lat.ndimage.find_objects(owner, max_label=len(cells))
+        owned = [
+            lat._Owned((b[0].start, b[1].start), clean[b] & (owner[b] == k))
+            for k, b in enumerate(boxes, start=1)
+        ]
+        by_decision: dict = {}
+        costs = []
+        for phase in lat._phases(cells, spacing):
+            lattice = [lat._lattice_lanes(c, mask, phase, spacing) for c in cells]
+            placed = lat._lanes_for_phase(cells, lattice, owned, phase, spacing, hw, mask.shape)
+            cost = lat._cost(placed.shoulders, lat.TASK_COST_CELLS) + lat._cost(placed.lanes(), 1)
+            # all but the lattice lanes' row coordinates, which are the phase's own
+            made = (
+                cost,
+                tuple(ln[:, 1:].tobytes() for ln in placed.lattice),
+                tuple(ln.tobytes() for ln in (*placed.clamps, *placed.shoulders)),
+            )
+            by_decision.setdefault(lat._decisions(lattice, mask.shape, hw), set()).add(made)
+            costs.append((cost, phase))
+        skipped += len(costs) - len(by_decision)
+        assert all(len(m) == 1 for m in by_decision.values())
+        best = min(costs, key=lambda cp: cp[0])  # first of the cheapest, as room_lanes takes
+        assert room_lanes(cells, mask, clean, labels, spacing, hw).phase == best[1]
+    assert skipped > 0  # the dedupe had something to do (at the near-whole spacing)
+    # between the same two rows a lane's swath (half-width 4.4 rows) covers rows 6–14 at 10.3
+    # and 7–15 at 10.7; a clamp lane below it may take row 5 at 10.3 but row 6 at 10.7
+    shape = (40, 40)
+    assert lat._decisions([[(10.3, 0, 5)]], shape, 4.4) != lat._decisions(
+        [[(10.7, 0, 5)]], shape, 4.4
+    )
+    assert lat._decisions([[(10.2, 0, 5)]], shape, 4.4) == lat._decisions(
+        [[(10.3, 0, 5)]], shape, 4.4
+    )
