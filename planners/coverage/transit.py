@@ -27,8 +27,10 @@ class Transit:
         self.free = free
         _, idx = ndimage.distance_transform_edt(~free, return_indices=True)
         self._nearest = idx
-        # A* reads single cells: Python lists are several times faster at that than numpy
-        self._free_rows = free.tolist()
+        # A* reads single cells by flat index into the grid padded by one blocked cell all
+        # round (no bounds checks); Python lists are several times faster at that than numpy
+        self._width = free.shape[1] + 2
+        self._free_flat = np.pad(free, 1).ravel().tolist()
         # the tour is driven several times (fill-in rounds, pruning), mostly over the same hops
         self._planned: dict[tuple[float, ...], np.ndarray] = {}
 
@@ -78,41 +80,53 @@ class Transit:
         return self._pull(pts)
 
     def astar(self, s: tuple[int, int], g: tuple[int, int]) -> list[tuple[int, int]] | None:
-        free = self._free_rows
-        rows, cols = self.free.shape
+        """The cell path from ``s`` to ``g`` (both included), or None when none is free.
 
-        def h(r: int, c: int) -> float:
-            dr, dc = abs(r - g[0]), abs(c - g[1])
-            return max(dr, dc) + (_SQRT2 - 1) * min(dr, dc)
+        Cells are flat indices into the padded grid, which order as (row, col) pairs do, so the
+        heap breaks ties as it would on the pairs."""
+        free = self._free_flat
+        w = self._width
+        gr, gc = g[0] + 1, g[1] + 1
+        goal = gr * w + gc
+        # (index step, cost, the two side cells a diagonal step must not cut between)
+        moves = [(dr * w + dc, _SQRT2 if dr and dc else 1.0, dc, dr * w) for dr, dc in _MOVES]
+        diag = _SQRT2 - 1
 
-        best = {s: 0.0}
-        parent: dict[tuple[int, int], tuple[int, int]] = {}
-        heap = [(h(*s), 0.0, s)]
+        def h(i: int) -> float:
+            r, c = divmod(i, w)
+            dr, dc = abs(r - gr), abs(c - gc)
+            return dr + diag * dc if dr > dc else dc + diag * dr
+
+        first = (s[0] + 1) * w + s[1] + 1
+        best = {first: 0.0}
+        parent: dict[int, int] = {}
+        heap = [(h(first), 0.0, first)]
         closed = set()
+        push, pop, inf = heapq.heappush, heapq.heappop, math.inf
         while heap:
-            _, cost, cur = heapq.heappop(heap)
-            if cur == g:
+            _, cost, cur = pop(heap)
+            if cur == goal:
                 out = [cur]
                 while out[-1] in parent:
                     out.append(parent[out[-1]])
-                return out[::-1]
+                return [((i // w) - 1, (i % w) - 1) for i in reversed(out)]
             if cur in closed:
                 continue
             closed.add(cur)
-            r, c = cur
-            for dr, dc in _MOVES:
-                nr, nc = r + dr, c + dc
-                if not (0 <= nr < rows and 0 <= nc < cols) or not free[nr][nc]:
+            for step, length, side_c, side_r in moves:
+                nxt = cur + step
+                if not free[nxt]:
                     continue
-                if dr and dc and not (free[r][nc] and free[nr][c]):
+                if side_r and side_c and not (free[cur + side_c] and free[cur + side_r]):
                     continue
-                nxt = (nr, nc)
-                step = _SQRT2 if dr and dc else 1.0
-                ncost = cost + step
-                if ncost < best.get(nxt, math.inf):
+                ncost = cost + length
+                if ncost < best.get(nxt, inf):
                     best[nxt] = ncost
                     parent[nxt] = cur
-                    heapq.heappush(heap, (ncost + h(nr, nc), ncost, nxt))
+                    r, c = divmod(nxt, w)
+                    dr, dc = abs(r - gr), abs(c - gc)
+                    est = dr + diag * dc if dr > dc else dc + diag * dr
+                    push(heap, (ncost + est, ncost, nxt))
         return None
 
     def _pull(self, pts: np.ndarray) -> np.ndarray:
