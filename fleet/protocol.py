@@ -502,8 +502,9 @@ class OpsReply(Message):
 
 @dataclass(frozen=True, eq=False)
 class FleetState(Message):
-    """The coordinator's view of the job: its phase (gathering, auction, cleaning, done, or
-    incomplete: finished with work no robot could reach), the robots it plans for, those with
+    """The coordinator's view of the job: its phase (planning: making the first plan, which
+    the simulator's clock waits for; gathering, auction, cleaning, done, or incomplete:
+    finished with work no robot could reach), the robots it plans for, those with
     no work left, those lost, and how many tasks are open (not held by a live robot),
     assigned, done and left out (blocked by a lost robot's body, or unreachable); and how many
     messages it has dropped as malformed (``decode_errors``) and as implausible."""

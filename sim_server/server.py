@@ -2,7 +2,10 @@
 
 Time: sim time advances at ``speed`` × wall time (``speed`` 0: as fast as the live agents
 answer; in real time while none is live), but never more than ``max_lag_s`` past the newest
-sensor stamp each live agent has answered with a cmd_vel. An agent whose liveliness token
+sensor stamp each live agent has answered with a cmd_vel; and not at all while the
+coordinator's newest state says it is making its first plan (phase ``planning``, until it
+publishes another or its liveliness token goes), so the robots start from rest when the plan
+is ready and no sim time passes before it. An agent whose liveliness token
 disappears, or that has been silent for ``agent_timeout_s`` of wall time
 (``first_answer_timeout_s`` before its first answer, while it starts up), no longer holds the
 clock back; its robot stops and stays in the world as an obstacle until it respawns.
@@ -31,6 +34,7 @@ from fleet.protocol import (
     CoverageImage,
     CoverageSummary,
     FleetEvent,
+    FleetState,
     Request,
     SpawnReply,
     SpawnRequest,
@@ -94,6 +98,10 @@ class SimServer:
         bus.serve(self.keys.coverage_image(), Request, lambda _req: self.coverage_image())
         bus.watch_alive("agent", lambda _rid: None, self._on_agent_left)
         bus.subscribe(self.keys.events(), FleetEvent, self._on_event)
+        # while the coordinator makes its first plan the world waits for it
+        self.planning = False
+        bus.subscribe(self.keys.coord_state(), FleetState, self._on_state)
+        bus.watch_alive("coordinator", lambda _ident: None, lambda _ident: self._planned())
 
     # ---- bus callbacks (zenoh threads) --------------------------------------------------
 
@@ -162,6 +170,24 @@ class SimServer:
         # The coordinator's heartbeat watch notices a hung agent long before agent_timeout_s.
         if msg.kind == "lost":
             self._release(msg.robot, "was lost to the coordinator")
+
+    def _on_state(self, _key: str, msg: FleetState) -> None:
+        if msg.phase == "planning":
+            with self.lock:
+                self.planning = True
+        else:
+            self._planned()
+
+    def _planned(self) -> None:
+        """The coordinator has its plan (or is gone): the clock runs again, and the agents'
+        silence is counted from now, since they had no scan to answer while it waited."""
+        with self.lock:
+            if not self.planning:
+                return
+            self.planning = False
+            now = time.monotonic()
+            for link in self.links.values():
+                link.last_wall = max(link.last_wall, now)
 
     def _release(self, rid: str, why: str) -> None:
         """Stop waiting for ``rid``'s agent; its robot stops and stays where it is."""
@@ -245,13 +271,15 @@ class SimServer:
         while not self.stop.is_set():
             now = time.monotonic()
             with self.lock:
-                held = self._held_back(now)
+                planning = self.planning
+                held = planning or self._held_back(now)
                 live = any(link.alive and r in self.core.robots for r, link in self.links.items())
             if held:
                 if not waiting:
                     self.bus.publish(self.keys.clock(), Clock(self.core.t, self.speed, True))
                     waiting = True
-                time.sleep(0.0005)
+                # the coordinator's plan takes seconds and wants the CPU; an agent answers fast
+                time.sleep(0.01 if planning else 0.0005)
                 pace_wall, pace_sim = time.monotonic(), self.core.t
                 continue
             waiting = False

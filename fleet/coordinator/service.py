@@ -329,7 +329,7 @@ class Coordinator:
     def run(self, grace_s: float, loop: bool = False) -> None:
         """Plan the tasks (unless resumed), then run the job; with ``loop``, job after job."""
         if not self.job.tasks:
-            self._plan_tasks()
+            self._plan_first()
         gather_start = time.monotonic()
         last_state = last_robots = 0.0
         while not self.stop.is_set():
@@ -422,6 +422,29 @@ class Coordinator:
         return malformed, implausible + rejected.get("malformed", 0) + rejected.get(
             "not in the market", 0
         )
+
+    def _plan_first(self) -> None:
+        """Plan the tasks, saying so in the state all along (the simulator holds its clock
+        while the newest state says planning: no sim time passes before the first plan, and a
+        simulator that subscribes late still hears it)."""
+        self.phase = "planning"
+        planned = threading.Event()
+
+        def announce() -> None:
+            while True:
+                with self.lock:
+                    self._publish_state()
+                if planned.wait(STATE_PERIOD_S):
+                    return
+
+        thread = threading.Thread(target=announce, name="planning-state", daemon=True)
+        thread.start()
+        try:
+            self._plan_tasks()
+        finally:
+            planned.set()
+            thread.join()
+        self.phase = "gathering"
 
     def _plan_tasks(self) -> None:
         plan_tour(self.planner, self.lock, self._take_tasks)
