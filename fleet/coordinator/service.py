@@ -36,6 +36,7 @@ and to the store's meta (``dropped``).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -329,7 +330,10 @@ class Coordinator:
     def run(self, grace_s: float, loop: bool = False) -> None:
         """Plan the tasks (unless resumed), then run the job; with ``loop``, job after job."""
         if not self.job.tasks:
-            self._plan_first()
+            self.phase = "planning"  # the simulator's clock waits while the state says so
+            with repeating(self._publish_state, self.lock, STATE_PERIOD_S):
+                self._plan_tasks()
+            self.phase = "gathering"
         gather_start = time.monotonic()
         last_state = last_robots = 0.0
         while not self.stop.is_set():
@@ -423,29 +427,6 @@ class Coordinator:
             "not in the market", 0
         )
 
-    def _plan_first(self) -> None:
-        """Plan the tasks, saying so in the state all along (the simulator holds its clock
-        while the newest state says planning: no sim time passes before the first plan, and a
-        simulator that subscribes late still hears it)."""
-        self.phase = "planning"
-        planned = threading.Event()
-
-        def announce() -> None:
-            while True:
-                with self.lock:
-                    self._publish_state()
-                if planned.wait(STATE_PERIOD_S):
-                    return
-
-        thread = threading.Thread(target=announce, name="planning-state", daemon=True)
-        thread.start()
-        try:
-            self._plan_tasks()
-        finally:
-            planned.set()
-            thread.join()
-        self.phase = "gathering"
-
     def _plan_tasks(self) -> None:
         plan_tour(self.planner, self.lock, self._take_tasks)
 
@@ -515,6 +496,29 @@ def gathered(ready: int, expected: int, waited: float, grace_s: float) -> bool:
             log.warning("only %d of %d robots are ready; starting with them", ready, expected)
         return True
     return False
+
+
+@contextlib.contextmanager
+def repeating(publish: Callable[[], None], lock: AbstractContextManager, period_s: float):
+    """``publish`` (with ``lock`` held) now and every ``period_s`` until the block ends, on a
+    thread of its own: a state the block's long work is in reaches a process that subscribes
+    late, or missed it."""
+    done = threading.Event()
+
+    def loop() -> None:
+        while True:
+            with lock:
+                publish()
+            if done.wait(period_s):
+                return
+
+    thread = threading.Thread(target=loop, name="repeating", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
 
 
 def plan_tour(
