@@ -151,11 +151,14 @@ def travel_times(
 
 def _graph(free: np.ndarray) -> csr_matrix:
     """The 16-connected graph of the free blocks (node = row · cols + col), each edge once: a
-    step is an edge when every block of the rectangle spanned by its two ends is free."""
+    step is an edge when every block of the rectangle spanned by its two ends is free (none
+    longer than the grid: an exploring fleet's map starts a block wide)."""
     rows, cols = free.shape
     ids = np.arange(rows * cols).reshape(rows, cols)
-    heads, tails, weights = [], [], []
+    heads, tails, weights = [np.zeros(0, int)], [np.zeros(0, int)], [np.zeros(0)]
     for dr, dc in _STEPS:
+        if dr >= rows or abs(dc) >= cols:
+            continue
         span = np.ones((rows - dr, cols - abs(dc)), dtype=bool)
         for i in range(dr + 1):
             for j in range(abs(dc) + 1):

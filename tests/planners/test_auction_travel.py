@@ -109,3 +109,13 @@ def test_a_travel_grid_answers_like_the_function_and_again_from_its_cache():
 def test_a_speed_that_is_not_positive_is_named(speed):
     with pytest.raises(ValueError, match="speed"):
         travel_times(_room(), RES, ORIGIN, _p(1, 1), _p(2, 2)[None, :], speed)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5), (2, 2), (5, 1)])
+def test_a_grid_narrower_than_a_step_is_priced_too(shape):
+    """An exploring fleet's merged map starts a block wide: the steps that do not fit in it are
+    no edges, and a target on it is priced as on any floor."""
+    free = np.ones(shape, dtype=bool)
+    start, target = np.array(ORIGIN), np.array(ORIGIN) + 0.01
+    got = travel_times(free, 0.1, ORIGIN, start, target[None, :], 0.5)
+    assert np.isfinite(got).all() and got[0] < 1.0
