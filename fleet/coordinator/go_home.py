@@ -15,8 +15,9 @@ from planners.battery import BatterySpec, GoHome, go_home_points
 Pose = tuple[float, float, float]
 
 
-class Docking(Protocol):
-    """What the go-home rule reads of the docks (``fleet.coordinator.charging.Docking``)."""
+class DockView(Protocol):
+    """What the go-home rule reads of the docks: the coordinator's
+    (``fleet.coordinator.charging.Docking``)."""
 
     job: Job
     spec: BatterySpec
@@ -41,14 +42,14 @@ def at_work(job: Job) -> list[str]:
     ]
 
 
-def trips_s(docking: Docking, xy: tuple[float, float]) -> tuple[float, ...]:
+def trips_s(docking: DockView, xy: tuple[float, float]) -> tuple[float, ...]:
     """Travel time from ``xy`` to each dock, inf to a dock no robot can drive onto."""
     return tuple(
         docking.trip_to(k, xy) if docking.usable(k) else math.inf for k in range(len(docking.docks))
     )
 
 
-def points(docking: Docking) -> dict[str, tuple[int | None, float]]:
+def points(docking: DockView) -> dict[str, tuple[int | None, float]]:
     """Per robot at work, in the order they fall due, the dock it would charge at on falling
     due and its go-home point, counting the robots bound for each dock and the robots at work
     that fall due before it and will still be there."""
@@ -59,7 +60,7 @@ def points(docking: Docking) -> dict[str, tuple[int | None, float]]:
     return {rids[i]: (k, p) for i, k, p in go_home_points(docking.spec, users, ahead)}
 
 
-def alone(docking: Docking, rid: str) -> tuple[int | None, float]:
+def alone(docking: DockView, rid: str) -> tuple[int | None, float]:
     """The dock ``rid`` would charge at and its go-home point with the docks as they stand (the
     robots bound for each counted, no robot at work)."""
     r = docking.job.robots[rid]
@@ -70,7 +71,7 @@ def alone(docking: Docking, rid: str) -> tuple[int | None, float]:
     return k, p
 
 
-def nearest_first(docking: Docking, rids: list[str]) -> list[str]:
+def nearest_first(docking: DockView, rids: list[str]) -> list[str]:
     """``rids`` in the order to send them home so that each free dock goes to the robot nearest
     it (greedy matching over robot–dock pairs by travel time, the nearest pair first), then the
     robots left over (they wait) in the given order. Sent one by one in id order, the first
@@ -99,7 +100,7 @@ def nearest_pairs_first(pairs: Iterable[tuple[float, str, int]]) -> list[str]:
     return first
 
 
-def _xy(docking: Docking, rid: str) -> tuple[float, float]:
+def _xy(docking: DockView, rid: str) -> tuple[float, float]:
     xy = docking.job.robots[rid].xy
     assert xy is not None
     return xy
