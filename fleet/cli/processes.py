@@ -255,30 +255,42 @@ def coordinator(
     re-auctions the work of a robot that is lost, and sends each robot its plans. With
     --explore it auctions the frontiers of the robots' merged maps instead; with --map it
     plans on a stored map instead of the world's floor plan."""
-    from fleet.coordinator.map_watch import MapWatch
+    from fleet.coordinator.build import build_coordinator
+    from fleet.plausible import Bounds
 
     if robots < 1:
         _fail("--robots must be >= 1")
     _setup_logging("coordinator")
-    cfg, w, planner, transits, store = _coordinator_job(
+    cfg, w, docks, planner, transits, store = _coordinator_job(
         robots, world, fleet, config, state, deconfliction, explore, floor_map
     )
     if explore is not None and loop:
         _fail("--loop and --explore do not go together: exploring ends when no frontier is left")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
-    c = _coordinator_service(bus, cfg, w, planner, transits, store, robots, explore)
-    watch = None
-    if floor_map is not None and w.map_grid is not None:
-        watch = MapWatch(bus, c, w.map_grid, w.source, cfg)
-        watch.start()
+    stored = (w.map_grid, w.source) if floor_map is not None and w.map_grid is not None else None
+    try:
+        c = build_coordinator(
+            bus,
+            cfg,
+            robots,
+            store,
+            bounds=Bounds.of(cfg),
+            planner=planner,
+            transits=transits,
+            explore=explore,
+            docks=docks,
+            stored_map=stored,
+        )
+    except ValueError as e:
+        _fail(f"{w.source if w is not None else world}: {e}")
     _stop_on_signals(c.stop)
     try:
         c.run(cfg.coordinator.expected_robots_grace_s, loop)
     finally:
         c.close()
         bus.close()
-    if watch is not None and watch.refusal is not None:
-        typer.secho(f"error: {watch.refusal}", fg="red", err=True)
+    if (refusal := c.parts.refusal()) is not None:
+        typer.secho(f"error: {refusal}", fg="red", err=True)
         raise typer.Exit(WRONG_MAP_EXIT)
 
 
@@ -292,9 +304,10 @@ def _coordinator_job(
     explore: Path | None,
     floor_map: Path | None,
 ):
-    """The coordinator's parameters, world (on the stored map of --map), task planner and
-    transit planner (none exploring) and job store (none without --state); exits naming what
-    is wrong."""
+    """The coordinator's parameters, world (on the stored map of --map; none exploring), docks
+    (the world file's, read exploring too when batteries are on), task planner and transit
+    planner (none exploring) and job store (none without --state); exits naming what is
+    wrong."""
     import sqlite3
 
     from fleet.config import ConfigError
@@ -303,8 +316,12 @@ def _coordinator_job(
     from fleet.coordinator.transits import TransitPlanner
     from fleet.world import on_stored_map
 
-    # exploring, the world file is not even opened: the robots' maps are all it knows
+    # exploring, the world file is not even opened (but for its docks, with batteries): the
+    # robots' maps are all it knows
     cfg, w = _load(config, world if explore is None else None)
+    docks = w.docks if w is not None else ()
+    if explore is not None and cfg.robot.battery.enabled:
+        docks = _load(config, world)[1].docks
     mode = deconfliction or cfg.coordinator.deconfliction
     if explore is not None and mode != "local":
         _fail("--explore plans local transits only; leave out --deconfliction")
@@ -332,37 +349,7 @@ def _coordinator_job(
         _fail(str(e))
     except (sqlite3.Error, OSError) as e:
         _fail(f"--state {state}: {e}")
-    return cfg, w, planner, transits, store
-
-
-def _coordinator_service(bus, cfg, w, planner, transits, store, robots: int, explore: Path | None):
-    """The coordinator on ``bus``: exploring (--explore), with batteries (robot.battery on),
-    or plain."""
-    from fleet.coordinator.charging_service import ChargingCoordinator
-    from fleet.coordinator.explore_service import ExploringCoordinator
-    from fleet.coordinator.exploring import Explorer, MapPlanner
-    from fleet.coordinator.service import Coordinator
-    from fleet.plausible import Bounds
-
-    bounds = Bounds.of(cfg)
-    if explore is None and cfg.robot.battery.enabled:
-        if not w.docks:
-            _fail(f"{w.source}: robot.battery is on, but the world has no dock (dock: or docks:)")
-        return ChargingCoordinator(
-            bus,
-            planner,
-            robots,
-            cfg.coordinator,
-            store,
-            transits,
-            bounds=bounds,
-            battery=cfg.robot.battery,
-            docks=w.docks,
-        )
-    if explore is None:
-        return Coordinator(bus, planner, robots, cfg.coordinator, store, transits, bounds=bounds)
-    explorer = Explorer(cfg, MapPlanner(cfg), explore)
-    return ExploringCoordinator(bus, explorer, robots, cfg.coordinator, store, bounds=bounds)
+    return cfg, w, docks, planner, transits, store
 
 
 def register(

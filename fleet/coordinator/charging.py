@@ -40,7 +40,7 @@ from fleet.coordinator.journal import Journal
 from fleet.coordinator.planning import TaskPlanner
 from fleet.protocol import Plan, RobotStatus
 from planners.battery import BatterySpec, DockUser, pick_dock
-from planners.grid import clearance
+from planners.grid import GridMap, clearance
 
 # the names of errand plans (their kind says what they are): dock-0, dock-1, ... onto a dock;
 # wait-0, ... to the waiting spot by a taken dock
@@ -106,9 +106,19 @@ class Docking:
         self.spec = spec
         self.docks = docks
         self.trips: dict[str, Trip] = {}
-        self.spots = [waiting_spots(planner, d, docks) for d in docks]
-        self.travel = planner.travel()
+        self._floor: GridMap | None = None
+        self._follow_floor()
         dispatcher.on_errand = self._replanned
+
+    def _follow_floor(self) -> None:
+        """The waiting spots and the travel times on the floor the planner plans on now: an
+        exploring fleet's merged map grows at every update, a stored map takes the furniture
+        found moved."""
+        if self.planner.grid is self._floor:
+            return
+        self._floor = self.planner.grid
+        self.spots = [waiting_spots(self.planner, d, self.docks) for d in self.docks]
+        self.travel = self.planner.travel()
 
     # ---- who holds what ---------------------------------------------------------------------
 
@@ -137,6 +147,7 @@ class Docking:
     def trip_to(self, k: int, xy: tuple[float, float]) -> float:
         """Travel time on the floor plan from ``xy`` to dock ``k`` (inf where there is no way):
         the dock in the next room may be nearer as the crow flies than this room's."""
+        self._follow_floor()
         return float(self.travel(np.array(self.docks[k][:2]), np.array([xy]))[0])
 
     def _nearest(self, xy: tuple[float, float], free_only: bool) -> int | None:
@@ -188,6 +199,7 @@ class Docking:
         the floor plan at the transit speed (0 with no dock reached)."""
         if not self.docks or not len(points):
             return 0.0
+        self._follow_floor()
         each = np.min([self.travel(np.array(d[:2]), points) for d in self.docks], axis=0)
         each = each[np.isfinite(each)]
         return float(each.mean()) if len(each) else 0.0
@@ -237,6 +249,7 @@ class Docking:
         """Plan ``rid``'s trip from where it stands to dock ``k`` or, ``waiting``, to the
         first waiting spot by it no other robot is bound for (nor ``avoid``), and send it."""
         dock = self.docks[k]
+        self._follow_floor()
         if waiting:
             taken = {
                 t.plan.waypoints[-1].tobytes()
@@ -400,7 +413,7 @@ class Docking:
     def empty(self, rid: str) -> None:
         """``rid``'s battery ran out away from a dock: it stands for good, holds no dock and
         counts as home (its work taken back, its body planned round:
-        ``ChargingMarket.run_flat``)."""
+        ``ChargingPart.run_flat``)."""
         t = self.trips.get(rid)
         self._drop(rid)
         self.job.robots[rid].docking = EMPTY

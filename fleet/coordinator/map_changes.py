@@ -41,7 +41,7 @@ import numpy as np
 
 from fleet.coordinator.job import FREED_PREFIX
 from fleet.coordinator.market import plan_around
-from fleet.coordinator.service import Coordinator
+from fleet.coordinator.parts import Host
 from fleet.params import CoordinatorParams
 from planners.bodies import Rerouted
 from planners.coverage.metrics import swath
@@ -79,7 +79,7 @@ class MapChanges:
 
     def __init__(
         self,
-        coordinator: Coordinator,
+        coordinator: Host,
         stored: GridMap,
         params: MapChangeParams,
         sweep_freed: bool = False,

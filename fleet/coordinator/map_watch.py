@@ -24,7 +24,7 @@ from pathlib import Path
 from fleet.bus import Bus
 from fleet.coordinator.exploring import RobotMaps, fetch_whole_maps, logit
 from fleet.coordinator.map_changes import MapChanges, map_change_params
-from fleet.coordinator.service import Coordinator
+from fleet.coordinator.parts import Host, Part
 from fleet.params import FleetConfig
 from fleet.protocol import MapPatches
 from planners.grid import GridMap
@@ -57,38 +57,49 @@ def map_check_params(cfg: FleetConfig) -> MapCheckParams:
     )
 
 
-class MapWatch:
-    """The robots' maps against the stored map ``stored`` read from ``source``."""
+class MapWatch(Part):
+    """The robots' maps against the stored map ``stored`` read from ``source``: a part of the
+    coordinator on a stored map (wired to it by :meth:`wire`, its thread started with the
+    coordinator's main loop)."""
 
-    def __init__(
-        self, bus: Bus, coordinator: Coordinator, stored: GridMap, source: Path, cfg: FleetConfig
-    ) -> None:
+    coordinator: Host
+
+    def __init__(self, bus: Bus, stored: GridMap, source: Path, cfg: FleetConfig) -> None:
         self.bus = bus
-        self.coordinator = coordinator
         self.stored = stored
         self.source = source
+        self.cfg = cfg
         self.params = map_check_params(cfg)
         self.every_s = cfg.coordinator.map_check_every_s
         self.limits = (logit(cfg.slam.p_min), logit(cfg.slam.p_max))
-        self.robots = coordinator.expected
         self.maps = RobotMaps()
         self.checks: dict[str, MapCheck] = {}
         # why the map was refused (None while it is not)
-        self.refusal: str | None = None
+        self.refused: str | None = None
         self._lock = threading.Lock()
         self._looked_at = -float("inf")
-        # after the check: the furniture moved since the map was made (coordinator.map_changes)
-        params = cfg.coordinator
-        self.changes = (
-            MapChanges(coordinator, stored, map_change_params(params), params.sweep_freed_floor)
-            if params.map_changes
-            else None
-        )
+        self.changes: MapChanges | None = None
         self._thread = threading.Thread(target=self._run, name="map-watch", daemon=True)
-        bus.subscribe(bus.keys.all_robots("map"), MapPatches, self._on_map)
+
+    def wire(self, host: Host) -> None:
+        """The coordinator it checks for (and stops), and, with ``coordinator.map_changes``,
+        the watch for furniture moved since the map was made, which it keeps true after the
+        check."""
+        self.coordinator = host
+        self.robots = host.expected
+        params = self.cfg.coordinator
+        if params.map_changes:
+            sweep = params.sweep_freed_floor
+            self.changes = MapChanges(host, self.stored, map_change_params(params), sweep)
+
+    def serve(self) -> None:
+        self.bus.subscribe(self.bus.keys.all_robots("map"), MapPatches, self._on_map)
 
     def start(self) -> None:
         self._thread.start()
+
+    def refusal(self) -> str | None:
+        return self.refused
 
     def _on_map(self, key: str, msg: MapPatches) -> None:
         c = self.coordinator
@@ -126,13 +137,13 @@ class MapWatch:
                 )
                 return True
             if verdict == DIFFERS:
-                self.refusal = (
+                self.refused = (
                     f"{self.source}: the robots' scans do not match this stored map (another "
                     f"building, or not in the world's frame); stopped instead of driving on it: "
                     + self._summary()
                 )
-                self._tell("wrong map", self.refusal)
-                log.error("%s", self.refusal)
+                self._tell("wrong map", self.refused)
+                log.error("%s", self.refused)
                 self.coordinator.stop.set()
                 return False
         return False

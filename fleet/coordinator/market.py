@@ -45,6 +45,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -61,6 +62,8 @@ from planners.bodies import Rerouted
 log = logging.getLogger("coordinator")
 # called with the market's lock held
 Hook = Callable[[], None]
+# how the regions of an auction are cut (outside the market's lock)
+Cut = Callable[[], tuple[auction.Lot, ...]]
 # robot states in which reaching no waypoint is no sign of being stuck
 WAITING_STATES = ("holding", "done", "waiting", "localizing", "unlocalized")
 # how often the auction looks whether the last winner has acknowledged its award (wall s)
@@ -85,6 +88,21 @@ class Progress:
     since: float
 
 
+class MarketParts(Protocol):
+    """What the coordinator's parts add to the market (:class:`fleet.coordinator.parts.Parts`:
+    each hook of :class:`fleet.coordinator.parts.Part` on every part, the answers combined)."""
+
+    def regions(self, first: bool, cut: Cut) -> tuple[bool, Cut]: ...
+
+    def lots(self) -> dict[str, auction.Lot] | None: ...
+
+    def may_win(self, lot: auction.Lot, robot: str) -> bool: ...
+
+    def estimate_first(self, committed: list[float]) -> bool: ...
+
+    def after_auction(self, sold: int) -> None: ...
+
+
 class Market:
     """The job's changes the market makes; each method but :meth:`auction` is called with
     ``lock`` held, and :meth:`sell` by the auctioneer, under ``lock`` too."""
@@ -97,9 +115,12 @@ class Market:
         lock: threading.RLock,
         wake: threading.Event,
         stop: threading.Event,
+        parts: MarketParts | None = None,
     ) -> None:
         """``wake`` is set when the job changed and the main loop should look again; ``stop``
-        ends an auction between rounds."""
+        ends an auction between rounds; ``parts``: what the coordinator's parts add (none
+        without)."""
+        self.parts = parts
         self.journal = journal
         self.job = journal.job
         self.awards = awards
@@ -163,9 +184,15 @@ class Market:
             log.info("auction: %d lots sold in %.0f ms", len(committed), ms)
             with self.lock:
                 self.journal.event("auction", "", "", f"{len(committed)} lots in {ms:.0f} ms")
+        if self.parts is not None:
+            with self.lock:
+                self.parts.after_auction(len(committed))
 
     def estimate_first(self, committed: list[float]) -> None:
-        """The job's estimate: the longest of the winners' ``committed`` times, if all sold."""
+        """The job's estimate: the longest of the winners' ``committed`` times, if all sold
+        (unless a part tells it)."""
+        if self.parts is not None and self.parts.estimate_first(committed):
+            return
         if committed and not self.job.open_tasks():
             estimate(self.journal, max(committed))
 
@@ -208,15 +235,18 @@ class Market:
         if first:
             self.region_sale = list(self.job.tasks)
         sale, self.region_sale = self.region_sale, []
-        return first, region_lots(self.job, sale)
+        cut = region_lots(self.job, sale)
+        return (first, cut) if self.parts is None else self.parts.regions(first, cut)
 
     def _bidders(self) -> list[str]:
         """The robots called to bid: those in the market."""
         return self.job.market()
 
     def _untried(self, lot: auction.Lot, robot: str) -> bool:
-        """Whether ``robot`` may win ``lot``: untried by it."""
-        return not any(robot in self.job.tasks[t].tried for t in lot.tasks)
+        """Whether ``robot`` may win ``lot``: untried by it (and as the parts allow)."""
+        if any(robot in self.job.tasks[t].tried for t in lot.tasks):
+            return False
+        return self.parts is None or self.parts.may_win(lot, robot)
 
     def _settle(self) -> None:
         """Open tasks every robot in the market has tried are unreachable, and said so."""
@@ -233,7 +263,10 @@ class Market:
 
     def _lots(self, regions: tuple[auction.Lot, ...]) -> dict[str, auction.Lot]:
         """What the next round sells: the regions none of whose tasks is sold yet, then every
-        open task on its own."""
+        open task on its own (unless a part tells what)."""
+        told = None if self.parts is None else self.parts.lots()
+        if told is not None:
+            return told
         open_ids = {r.task.id for r in self.job.open_tasks()}
         unsold = {lot.id: lot for lot in regions if set(lot.tasks) <= open_ids}
         if unsold:

@@ -15,7 +15,10 @@ part has one job:
 - :class:`fleet.coordinator.market.Market`: what goes on sale, and what a sale, a swept task,
   a lost robot or an idle one changes;
 - :class:`fleet.coordinator.awards.Awards`: each robot's queue, sent until acknowledged;
-- :class:`fleet.coordinator.dispatcher.Dispatcher`: plans and transits.
+- :class:`fleet.coordinator.dispatcher.Dispatcher`: plans and transits;
+- its features, each a :class:`fleet.coordinator.parts.Part` handed in (batteries, exploring,
+  a stored map's check and changes: :func:`fleet.coordinator.build.build_coordinator` picks
+  them), whose hooks this loop and the market call, so any combination of them runs.
 
 A robot is lost when its liveliness token goes (a dead process) or its wall-clock heartbeat is
 silent for ``coordinator.heartbeat_timeout_s`` (a hung one; checked in the main loop and before
@@ -40,7 +43,7 @@ import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 
 from fleet.bus import Bus
@@ -61,6 +64,7 @@ from fleet.coordinator.job import (
 from fleet.coordinator.journal import Journal
 from fleet.coordinator.looping import next_job
 from fleet.coordinator.market import Market
+from fleet.coordinator.parts import Part, Parts
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
 from fleet.coordinator.transits import TransitPlanner
@@ -92,9 +96,6 @@ PERSIST_ROBOTS_S = 1.0
 class Coordinator:
     """The coordinator's parts, wired to the bus, and its main loop."""
 
-    market_class: type[Market] = Market
-    working = "cleaning"  # the phase once the first allocation is sold
-
     def __init__(
         self,
         bus: Bus,
@@ -105,7 +106,10 @@ class Coordinator:
         transits: TransitPlanner | None = None,
         *,
         bounds: Bounds,
+        parts: Sequence[Part] = (),
     ) -> None:
+        """``parts``: its features (:mod:`fleet.coordinator.parts`), wired before any message
+        is heard."""
         self.bus = bus
         self.keys = bus.keys
         self.planner = planner
@@ -127,13 +131,14 @@ class Coordinator:
         self.dispatcher = Dispatcher(
             self.journal, planner, transits, params, self.keys, bus.publish
         )
-        self.market = self.market_class(
-            self.journal, self.awards, self.dispatcher, self.lock, self.wake, self.stop
+        self.parts = Parts(parts)
+        self.market = Market(
+            self.journal, self.awards, self.dispatcher, self.lock, self.wake, self.stop, self.parts
         )
         self.market.stall_s = params.stall_s
         self.market.stall_progress_m = params.stall_progress_m
         self.dispatcher.on_unreachable = self.market.cannot_reach
-        self._wire()
+        self.parts.wire(self)
         self.auctioneer = Auctioneer(
             self.keys,
             bus.publish,
@@ -165,16 +170,11 @@ class Coordinator:
         bus.subscribe(self.keys.all_bids(), Bid, self.auctioneer.on_bid)
         bus.subscribe(self.keys.ack("*"), AwardAck, self._on_ack)
         bus.serve(self.keys.plan("*"), Request, self._on_plan_query)
-        self._serve_floor()
-
-    def _wire(self) -> None:
-        """What a kind of coordinator adds to its market, before any message is heard (none
-        here)."""
-
-    def _serve_floor(self) -> None:
-        """Serve the floor plan the tasks are cut from on ``coord/map``: robots price on it."""
-        floor = pack_grid(self.planner.grid)
-        self.bus.serve(self.keys.floor_map(), Request, lambda _req: floor)
+        if self.parts.floor_plan:
+            # the floor plan the tasks are cut from: robots price on it
+            floor = pack_grid(planner.grid)
+            bus.serve(self.keys.floor_map(), Request, lambda _req: floor)
+        self.parts.serve()
 
     # ---- restart ------------------------------------------------------------------------
 
@@ -290,6 +290,7 @@ class Coordinator:
                 log.warning("%s has given up %d waypoint(s)", rid, self.given_up.by_robot[rid])
             self.market.swept(rid, msg, self.dispatcher.plans.get(rid))
             self.market.observe(rid, msg)
+            self.parts.observe(rid, msg)
 
     def _on_ack(self, key: str, msg: AwardAck) -> None:
         rid = self.keys.robot_of(key)
@@ -329,6 +330,7 @@ class Coordinator:
 
     def run(self, grace_s: float, loop: bool = False) -> None:
         """Plan the tasks (unless resumed), then run the job; with ``loop``, job after job."""
+        self.parts.start()
         if not self.job.tasks:
             self.phase = "planning"  # the simulator's clock waits while the state says so
             with repeating(self._publish_state, self.lock, STATE_PERIOD_S):
@@ -351,10 +353,11 @@ class Coordinator:
                 else:
                     self._check_heartbeats()
                     self.market.check_stalls()
-                    self._tick()
+                    self.parts.check_stalls()
+                    self.parts.tick()
                     auction_due = self.market.serve_idle()
                 auction_due = auction_due or self.market.need_auction
-            self._unlocked()
+            self.parts.unlocked()
             if loop and self.phase in FINISHED:
                 self.phase = next_job(self.market, self.planner, self.lock)
             elif self.phase != "gathering" and auction_due:
@@ -369,12 +372,6 @@ class Coordinator:
                 if now - last_state > STATE_PERIOD_S:
                     last_state = now
                     self._publish_state()
-
-    def _tick(self) -> None:
-        """What the job does each loop besides the market's own (with the lock held)."""
-
-    def _unlocked(self) -> None:
-        """What the job does each loop without the lock (work heartbeats must not wait for)."""
 
     def _send_due(self) -> None:
         """Send the awards and plans due, and move the phase on."""
@@ -394,10 +391,16 @@ class Coordinator:
             self.journal.event("finished", "", "", detail)
             self.journal.set_meta(phase=self.phase)
         elif self.phase == "auction" and not self.job.open_tasks():
-            self.phase = self.working
+            self.phase = self.parts.working
+
+    def work_over(self) -> bool:
+        """Whether the job's work is over: every task done or left out, unless a part decides
+        (an exploring one: no frontier left)."""
+        return self.parts.work_over(self.job)
 
     def _finished(self) -> bool:
-        return self.job.finished
+        """The job ends once its work is over and every part lets it (robots home)."""
+        return self.work_over() and self.parts.settled()
 
     def _persist(self, store: JobStore) -> None:
         """What changes too often to save at each change: the robots, the counters."""
@@ -428,7 +431,9 @@ class Coordinator:
         )
 
     def _plan_tasks(self) -> None:
-        plan_tour(self.planner, self.lock, self._take_tasks)
+        """The floor's tour cut into tasks, unless a part makes the job's tasks."""
+        if not self.parts.make_tasks():
+            plan_tour(self.planner, self.lock, self._take_tasks)
 
     def _take_tasks(self, tasks: tuple[Task, ...]) -> None:
         self.job.add_tasks(tasks)

@@ -1,8 +1,9 @@
 """Robots that go to charge, without a bus: one below the threshold is sent to a dock and its
 work goes back on sale, a dock is never held by two robots (the second waits by it and goes on
 once it is free), a robot that declines all open work on its charge goes to charge, and at the
-end of the job every robot is sent home. The parts are wired as the charging coordinator wires
-them, to a publish stand-in that records what goes out and bids for the robots."""
+end of the job every robot is sent home. The market and its charging part are wired as the
+coordinator wires them, to a publish stand-in that records what goes out and bids for the
+robots."""
 
 from __future__ import annotations
 
@@ -17,17 +18,14 @@ from robots import ROBOT
 from fleet.config import resolve_world
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
-from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M, Docking
-from fleet.coordinator.charging_service import (
-    ChargingMarket,
-    charging_early,
-    going_home,
-    homeward,
-)
+from fleet.coordinator.charging import APPROACH_M, SPOT_FROM_DOCK_M
+from fleet.coordinator.charging_part import ChargingPart, charging_early, going_home, homeward
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.go_home import nearest_first
 from fleet.coordinator.job import DONE, EMPTY, OPEN, STRANDED, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
+from fleet.coordinator.market import Market
+from fleet.coordinator.parts import Parts
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import _left_out
 from fleet.coordinator.store import JobStore
@@ -92,17 +90,32 @@ class Fleet:
         self.journal = Journal(self.job, None, KEYS, self.publish)
         self.awards = Awards(self.journal, KEYS, self.publish)
         self.dispatcher = Dispatcher(self.journal, planner, transits, params, KEYS, self.publish)
-        self.market = ChargingMarket(
+        self.charging = ChargingPart(SPEC, world.docks)
+        self.market = Market(
             self.journal,
             self.awards,
             self.dispatcher,
             threading.RLock(),
             threading.Event(),
             threading.Event(),
+            Parts([self.charging]),
         )
-        self.docking = Docking(self.journal, planner, self.dispatcher, SPEC, world.docks)
-        self.market.docking, self.market.battery = self.docking, SPEC
+        self.planner = planner
+        self.charging.wire(self)  # type: ignore[arg-type]
+        self.docking = self.charging.docking
         self.auctioneer = Auctioneer(KEYS, self.publish, params, self.market.sell)
+
+    def work_over(self) -> bool:
+        return self.job.finished
+
+    def check_stalls(self) -> None:
+        """The market's stall watch, then the charging part's (as the coordinator's loop)."""
+        self.market.check_stalls()
+        self.charging.check_stalls()
+
+    def going_home(self) -> list[tuple[str, str, bool]]:
+        """The robots to send home now, with why and whether to park (:func:`going_home`)."""
+        return going_home(self.job, self.docking.go_home_below, self.work_over())
 
     def publish(self, key: str, msg: Message, _control: bool) -> None:
         self.sent.append((key, msg))
@@ -131,7 +144,13 @@ class Fleet:
             0.0, "done" if done else "driving", plan.task, 1.0, waypoint, n, 0.0,
             plan_id=plan.plan_id, charge=charge, charging=charging,
         )  # fmt: skip
+        self.observe(rid, msg)
+
+    def observe(self, rid: str, msg: RobotStatus) -> None:
+        """A status heard, as the coordinator takes it: the market's stall watch, then the
+        charging part (the robot's battery)."""
         self.market.observe(rid, msg)
+        self.charging.observe(rid, msg)
 
 
 def test_a_robot_below_the_threshold_goes_to_a_dock_and_its_work_is_sold_again(
@@ -144,10 +163,10 @@ def test_a_robot_below_the_threshold_goes_to_a_dock_and_its_work_is_sold_again(
     f.awards.send()
     job.progress("robot-0", "t00", np.array([1, 1, 0, 0], dtype=np.uint8))
     job.robots["robot-0"].charge = 0.19
-    ((rid, why, parking),) = going_home(job, f.docking.go_home_below)
+    ((rid, why, parking),) = f.going_home()
     assert rid == "robot-0" and why.startswith("charge 0.190 below 0.") and not parking
-    for rid, why, parking in going_home(job, f.docking.go_home_below):
-        f.market.send_home(rid, why, parking)
+    for rid, why, parking in f.going_home():
+        f.charging.send_home(rid, why, parking)
     r = job.robots["robot-0"]
     assert r.docking == "docking" and "robot-0" not in job.market()
     # the unswept half of t00 and the unstarted t01 are open, not tried by it
@@ -174,8 +193,8 @@ def test_a_dock_holds_one_robot_and_the_next_waits_by_it_until_it_is_free(
     f = Fleet(planner, world, ["robot-0", "robot-1"])
     for rid in ("robot-0", "robot-1"):
         f.job.robots[rid].charge = 0.15
-    for rid, why, parking in going_home(f.job, f.docking.go_home_below):
-        f.market.send_home(rid, why, parking)
+    for rid, why, parking in f.going_home():
+        f.charging.send_home(rid, why, parking)
     (to_dock,), (to_wait,) = f.plans("robot-0"), f.plans("robot-1")
     assert (to_dock.task, to_dock.kind) == ("dock-0", "dock")
     assert (to_wait.task, to_wait.kind) == ("wait-0", "wait")
@@ -208,22 +227,22 @@ def test_a_robot_that_stands_still_on_its_dock_trip_is_planned_again_then_sent_t
     f.market.stall_s = 30.0
     r = f.job.robots["robot-0"]
     r.charge = 0.15
-    f.market.send_home("robot-0", "low", False)
+    f.charging.send_home("robot-0", "low", False)
     (first,) = f.plans("robot-0")
     r.xy = (1.3, 2.2)
     f.status("robot-0", 0.15, False, first, done=False)
     f.journal.clock = 29.0
-    f.market.check_stalls()
+    f.check_stalls()
     assert len(f.plans("robot-0")) == 1
     f.journal.clock = 31.0
-    f.market.check_stalls()
+    f.check_stalls()
     (_, again) = f.plans("robot-0")
     assert again.task == "dock-0" and again.plan_id != first.plan_id
     assert np.allclose(again.waypoints[0], r.xy) and r.docking == "docking"
     assert np.allclose(again.waypoints[-1], first.waypoints[-1])
     f.status("robot-0", 0.14, False, again, done=False)
     f.journal.clock = 62.0
-    f.market.check_stalls()
+    f.check_stalls()
     (*_, wait) = f.plans("robot-0")
     assert wait.task == "wait-0" and r.docking == "waiting"
     assert [e[0] for e in f.events()].count("dock") == 3, f.events()
@@ -246,12 +265,12 @@ def test_a_robot_goes_to_charge_earlier_by_its_trip_and_the_queue_ahead_at_the_d
     assert SPEC.recharge_threshold < alone < SPEC.recharge_threshold + 0.2  # the trip
     f.job.robots["robot-2"].charge = alone + 0.04
     assert f.docking.go_home_below("robot-2") == pytest.approx(alone)  # the others far from due
-    assert going_home(f.job, f.docking.go_home_below) == []
+    assert f.going_home() == []
     for rid in ("robot-0", "robot-1"):
         f.job.robots[rid].charge = 0.1
-        f.market.send_home(rid, "low", False)
+        f.charging.send_home(rid, "low", False)
     assert f.docking.go_home_below("robot-2") == pytest.approx(alone + 0.08, abs=1e-9)
-    assert [rid for rid, _, _ in going_home(f.job, f.docking.go_home_below)] == ["robot-2"]
+    assert [rid for rid, _, _ in f.going_home()] == ["robot-2"]
 
 
 def test_a_robot_out_of_charge_by_the_dock_is_a_body_and_the_job_ends_instead_of_hanging(
@@ -269,7 +288,7 @@ def test_a_robot_out_of_charge_by_the_dock_is_a_body_and_the_job_ends_instead_of
     f.awards.send()
     for rid in ("robot-0", "robot-1"):
         job.robots[rid].charge = 0.1
-        f.market.send_home(rid, "low", False)
+        f.charging.send_home(rid, "low", False)
     assert job.robots["robot-1"].docking == "waiting"
     dock = world.docks[0]
     on_the_line = (
@@ -277,18 +296,18 @@ def test_a_robot_out_of_charge_by_the_dock_is_a_body_and_the_job_ends_instead_of
         dock[1] + 0.5 * APPROACH_M * math.sin(dock[2]),
     )
     job.robots["robot-0"].xy, job.robots["robot-0"].charge = on_the_line, 0.0
-    f.market.check_flat()
+    f.charging.check_flat()
     assert job.robots["robot-0"].docking == EMPTY and "robot-0" in f.market.bodies
     assert not f.docking.usable(0)
     assert f.docking.tick(False) == ["robot-1"]
     assert job.robots["robot-1"].docking == "" and "robot-1" in job.market()
-    assert going_home(job, f.docking.go_home_below) == []
+    assert f.going_home() == []
     job.robots["robot-2"].charge = 0.0
-    f.market.check_flat()
+    f.charging.check_flat()
     assert job.robots["robot-2"].docking == EMPTY and job.tasks["t00"].state == OPEN
     assert not job.finished
     job.robots["robot-1"].charge = 0.0
-    f.market.check_flat()
+    f.charging.check_flat()
     assert job.finished and all(r.state == STRANDED for r in job.tasks.values())
     assert [r.task.id for r in job.left_out()] == ["t00", "t01", "t02", "t03"]
     assert [e for e in f.events() if e[0] == "stranded"], f.events()
@@ -334,7 +353,7 @@ def test_the_first_allocation_estimates_the_makespan_with_the_charges_in_it(
         f.job.robots[rid].charge = 0.25
     f.declined = declined
     f.market.auction(f.auctioneer)
-    regions = sorted(f.market.first_regions, key=lambda r: -r[0])
+    regions = sorted(f.charging.first_regions, key=lambda r: -r[0])
     work, trips = [w for w, _ in regions], [t for _, t in regions]
     assert len(work) == 2 and all(w > 10.0 for w in work)
     assert all(t > 0.5 for t in trips)  # the small room's dock is a few metres from the lanes
@@ -369,16 +388,16 @@ def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world
     f = Fleet(planner, world, ["robot-0", "robot-1"])
     for rec in f.job.tasks.values():
         rec.state = DONE
-    assert [(rid, parking) for rid, _, parking in going_home(f.job, f.docking.go_home_below)] == [
+    assert [(rid, parking) for rid, _, parking in f.going_home()] == [
         ("robot-0", True),
         ("robot-1", True),
     ]
-    for rid, why, parking in going_home(f.job, f.docking.go_home_below):
-        f.market.send_home(rid, why, parking)
+    for rid, why, parking in f.going_home():
+        f.charging.send_home(rid, why, parking)
     assert not f.docking.home()
     f.status("robot-0", 0.5, True, f.plans("robot-0")[-1], done=True)
     f.status("robot-1", 0.5, False, f.plans("robot-1")[-1], done=True)
-    assert f.docking.home() and going_home(f.job, f.docking.go_home_below) == []
+    assert f.docking.home() and f.going_home() == []
     # charged at the end of the job, a robot stays on its dock
     f.status("robot-0", 0.95, True, f.plans("robot-0")[-1], done=True)
     assert f.docking.tick(True) == [] and f.job.robots["robot-0"].docking == "charging"
@@ -387,7 +406,7 @@ def test_at_the_end_of_the_job_every_robot_goes_home(planner: TaskPlanner, world
 def test_batteries_off_send_no_one_home(planner: TaskPlanner, world: World) -> None:
     f = Fleet(planner, world, ["robot-0"])
     f.job.robots["robot-0"].charge = -1.0  # no battery heard
-    assert going_home(f.job, lambda _rid: 0.5) == []
+    assert going_home(f.job, lambda _rid: 0.5, f.job.finished) == []
 
 
 @pytest.fixture(scope="module")
@@ -407,9 +426,9 @@ def test_at_the_end_of_the_job_each_dock_goes_to_the_robot_nearest_it(corridor: 
         r.ready, r.xy, r.charge = True, xy, 0.5
     for rec in f.job.tasks.values():
         rec.state = DONE
-    home = {rid: (why, p) for rid, why, p in going_home(f.job, f.docking.go_home_below)}
+    home = {rid: (why, p) for rid, why, p in f.going_home()}
     for rid in nearest_first(f.docking, list(home)):
-        f.market.send_home(rid, *home[rid])
+        f.charging.send_home(rid, *home[rid])
     tasks = {rid: f.plans(rid)[-1].task for rid in where}
     assert tasks == {"robot-0": "wait-1", "robot-1": "dock-1", "robot-2": "dock-0"}, tasks
     assert all(f.plans(rid)[-1].waypoints[:, 0].min() > 5.0 for rid in ("robot-0", "robot-1"))
@@ -423,15 +442,15 @@ def test_a_robot_sent_to_a_dock_by_its_number_goes_there_and_waits_by_it_when_he
     sent to the same dock waits by it."""
     f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
     f.job.robots["robot-0"].xy, f.job.robots["robot-1"].xy = (7.0, 2.6), (6.5, 2.6)
-    f.market.send_home("robot-0", "sent home by cli", False)
+    f.charging.send_home("robot-0", "sent home by cli", False)
     assert f.plans("robot-0")[-1].task == "dock-1"  # its own room's, by default
-    f.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    f.charging.send_home("robot-1", "sent home by cli", False, dock=0)
     assert f.plans("robot-1")[-1].task == "dock-0"
     assert f.plans("robot-1")[-1].waypoints[-1][0] < 3.0  # across the corridor
     g = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
     g.job.robots["robot-0"].xy, g.job.robots["robot-1"].xy = (7.0, 2.6), (6.5, 2.6)
-    g.market.send_home("robot-0", "sent home by cli", False, dock=0)
-    g.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    g.charging.send_home("robot-0", "sent home by cli", False, dock=0)
+    g.charging.send_home("robot-1", "sent home by cli", False, dock=0)
     assert g.plans("robot-1")[-1].task == "wait-0"
     assert ("dock", "robot-1", "sent home by cli: to wait by dock 0") in g.events()
 
@@ -449,9 +468,9 @@ def test_trips_to_docks_through_the_corridor_both_ways_are_planned_in_one_round(
     transits = TransitPlanner(corridor, cfg, "prioritized", planner.transit.clear)
     f = Fleet(planner, corridor, ["robot-0", "robot-1"], transits)
     f.job.robots["robot-0"].xy, f.job.robots["robot-1"].xy = (1.2, 1.5), (6.8, 2.6)
-    f.market.send_home("robot-0", "sent home by cli", False, dock=1)
+    f.charging.send_home("robot-0", "sent home by cli", False, dock=1)
     first = f.plans("robot-0")[-1]
-    f.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    f.charging.send_home("robot-1", "sent home by cli", False, dock=0)
     again, other = f.plans("robot-0")[-1], f.plans("robot-1")[-1]
     assert (again.task, other.task) == ("dock-1", "dock-0")
     assert again.plan_id > first.plan_id and f.docking.trips["robot-0"].plan is again
@@ -470,8 +489,8 @@ def test_trips_to_docks_through_the_corridor_both_ways_are_planned_in_one_round(
         assert len(inside) and np.all(np.abs(inside[:, 1] - 1.45) < 0.08), plan.waypoints
     g = Fleet(planner, corridor, ["robot-0", "robot-1"])
     g.job.robots["robot-0"].xy, g.job.robots["robot-1"].xy = (1.2, 1.5), (6.8, 2.6)
-    g.market.send_home("robot-0", "sent home by cli", False, dock=1)
-    g.market.send_home("robot-1", "sent home by cli", False, dock=0)
+    g.charging.send_home("robot-0", "sent home by cli", False, dock=1)
+    g.charging.send_home("robot-1", "sent home by cli", False, dock=0)
     assert not any(g.plans(rid)[-1].wait_for for rid in ("robot-0", "robot-1"))
 
 
@@ -484,7 +503,7 @@ def test_a_robot_at_work_passing_over_a_dock_does_not_hold_it(corridor: World) -
     assert f.job.queue("robot-0")
     worker.xy, other.xy, other.charge = (7.5, 1.05), (7.0, 2.6), 0.1
     assert f.docking.holder(1) is None
-    f.market.send_home("robot-1", "charge low", False)
+    f.charging.send_home("robot-1", "charge low", False)
     assert f.plans("robot-1")[-1].task == "dock-1"
     g = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
     g.job.robots["robot-0"].xy = (7.5, 1.05)
@@ -498,16 +517,16 @@ def test_a_robot_passing_over_another_dock_on_its_way_is_not_charging_on_its_own
     room's dock that passes over the left one is still on its way, not charging on its dock."""
     f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0", "robot-1"])
     f.job.robots["robot-0"].xy = (1.0, 0.6)
-    f.market.send_home("robot-0", "charge low", False)  # it takes the left dock
+    f.charging.send_home("robot-0", "charge low", False)  # it takes the left dock
     f.job.robots["robot-1"].xy = (1.2, 2.2)
-    f.market.send_home("robot-1", "the job is done", True)  # to the free dock
+    f.charging.send_home("robot-1", "the job is done", True)  # to the free dock
     (trip,) = f.plans("robot-1")
     assert trip.task == "dock-1"
     f.job.robots["robot-1"].xy = (0.5, 1.5)  # over the left dock
     status = RobotStatus(
         0.0, "driving", trip.task, 0.5, 1, 4, 0.0, plan_id=trip.plan_id, charge=0.3, charging=True
     )
-    f.market.observe("robot-1", status)
+    f.observe("robot-1", status)
     assert f.job.robots["robot-1"].docking == "docking"
     assert not [e for e in f.events() if e[0] == "charging" and e[1] == "robot-1"]
 
@@ -522,7 +541,7 @@ def test_of_two_robots_falling_due_together_the_first_is_sent_to_the_free_dock_e
     on 0.5 or more, never)."""
     f = Fleet(planner, world, ["robot-0", "robot-1", "robot-2"])
     spec = BatterySpec(enabled=True, capacity_s=40.0)
-    f.docking.spec = f.market.battery = spec
+    f.docking.spec = f.charging.battery = spec
     for i, rid in enumerate(("robot-0", "robot-1")):
         for tid in (f"t{2 * i:02d}", f"t{2 * i + 1:02d}"):
             f.job.award(tid, rid, False)
@@ -530,17 +549,17 @@ def test_of_two_robots_falling_due_together_the_first_is_sent_to_the_free_dock_e
         found = f.docking.dock_user(rid)
         assert found is not None
         f.job.robots[rid].charge = 0.2 + found[1].trip_s / spec.capacity_s + ahead
-    assert going_home(f.job, f.docking.go_home_below) == []  # none at its go-home point
+    assert f.going_home() == []  # none at its go-home point
     assert f.docking.send("robot-2", "sent by hand", False)
-    assert charging_early(f.job, f.docking) == []  # the dock is taken
+    assert charging_early(f.job, f.docking, f.job.finished) == []  # the dock is taken
     f.docking._drop("robot-2")
-    ((rid, why),) = charging_early(f.job, f.docking)
+    ((rid, why),) = charging_early(f.job, f.docking, f.job.finished)
     assert rid == "robot-1" and "charging early" in why
     for tid in ("t02", "t03"):
         f.job.tasks[tid].swept[:] = True  # robot-1 has swept all it holds: its charge covers it
-    assert charging_early(f.job, f.docking) == []
+    assert charging_early(f.job, f.docking, f.job.finished) == []
     f.job.add_tasks(tuple(_task(i) for i in range(4, 8)))  # unless much work is still on sale
-    assert [rid for rid, _ in charging_early(f.job, f.docking)] == ["robot-1"]
+    assert [rid for rid, _ in charging_early(f.job, f.docking, f.job.finished)] == ["robot-1"]
 
 
 def test_of_two_robots_falling_due_in_one_tick_by_one_dock_the_second_waits_on_a_reserve_for_it(
@@ -553,7 +572,7 @@ def test_of_two_robots_falling_due_in_one_tick_by_one_dock_the_second_waits_on_a
     reserve for where it is actually sent: its trip there and the robot ahead of it."""
     f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
     spec = BatterySpec(enabled=True, capacity_s=120.0)
-    f.docking.spec = f.market.battery = spec
+    f.docking.spec = f.charging.battery = spec
     where = {"robot-0": (1.2, 2.2), "robot-1": (6.2, 0.6), "robot-2": (6.0, 2.5)}
     for rid, xy in where.items():
         r = f.job.robot(rid)
@@ -561,11 +580,11 @@ def test_of_two_robots_falling_due_in_one_tick_by_one_dock_the_second_waits_on_a
     for _ in range(3):  # each a step below its go-home point, counting the other's charge
         for rid in ("robot-1", "robot-2"):
             f.job.robots[rid].charge = f.docking.go_home_below(rid) - 0.001
-    home = homeward(f.job, f.docking)
+    home = homeward(f.job, f.docking, f.job.finished)
     assert sorted(rid for rid, _, _ in home) == ["robot-1", "robot-2"]
     ahead: dict[int, list[float]] = {}
     for rid, why, parking in home:
-        f.market.send_home(rid, why, parking)
+        f.charging.send_home(rid, why, parking)
         trip = f.plans(rid)[-1]
         k = int(trip.task.split("-")[1])
         r = f.job.robots[rid]
@@ -586,13 +605,13 @@ def test_a_charged_robot_without_work_on_the_dock_is_sent_off_it_for_a_waiting_r
     the market once at its spot. Below ``recharge_to`` it stays and charges."""
     f = Fleet(TaskPlanner(corridor, load_fleet_config()), corridor, ["robot-0"])
     spec = BatterySpec(enabled=True, capacity_s=120.0)
-    f.docking.spec = f.market.battery = spec
+    f.docking.spec = f.charging.battery = spec
     on_dock = (corridor.docks[1][0] - 0.04, corridor.docks[1][1])
     for rid, xy, charge in (("robot-0", (6.2, 0.6), 0.3), ("robot-2", on_dock, 0.92)):
         r = f.job.robot(rid)
         r.ready, r.xy, r.charge, r.charging = True, xy, charge, rid == "robot-2"
     assert f.docking.holder(1) == "robot-2"
-    f.market.send_home("robot-0", "charge low", False)
+    f.charging.send_home("robot-0", "charge low", False)
     (wait,) = f.plans("robot-0")
     assert wait.task == "wait-1"
     f.docking.tick(False)
@@ -619,7 +638,7 @@ def test_a_robot_that_stops_charging_off_its_dock_docks_again(
     drives onto the dock again instead of standing there until it runs out."""
     f = Fleet(planner, world, ["robot-0"])
     f.job.robots["robot-0"].charge = 0.15
-    f.market.send_home("robot-0", "low", False)
+    f.charging.send_home("robot-0", "low", False)
     (trip,) = f.plans("robot-0")
     f.status("robot-0", 0.15, True, trip, done=True)
     assert f.job.robots["robot-0"].docking == "charging"

@@ -6,14 +6,17 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from fleet.coordinator.explore_service import ExploringMarket
+from fleet.coordinator.explore_part import ExplorePart
 from fleet.coordinator.exploring import Explorer, MapPlanner, RobotMaps, write_ros_map
 from fleet.coordinator.job import ASSIGNED, GONE, OPEN, UNREACHABLE, Job
 from fleet.coordinator.journal import Journal
+from fleet.coordinator.market import Market
+from fleet.coordinator.parts import Parts
 from fleet.floor_map import apply_patches
 from fleet.params import load_fleet_config
 from fleet.protocol import Keys, MapPatches
@@ -202,11 +205,12 @@ def test_the_exploring_market_sells_only_to_robots_without_work():
     job = _job("robot-0", "robot-1", "robot-2")
     journal = Journal(job, None, Keys("test"), lambda *_: None, 0.0)
     lock, wake, stop = threading.RLock(), threading.Event(), threading.Event()
-    market = ExploringMarket(journal, None, None, lock, wake, stop)  # type: ignore[arg-type]
     explorer = Explorer(CFG, MapPlanner(CFG), None)
+    part = ExplorePart(explorer)
+    market = Market(journal, None, None, lock, wake, stop, Parts([part]))  # type: ignore[arg-type]
+    part.wire(SimpleNamespace(job=job, journal=journal))  # type: ignore[arg-type]
     explorer.maps.hear("robot-0", patches(room(door=True), 1))
     explorer.update(job)
-    market.explorer = explorer
     (tid,) = job.tasks
     lot = market._lots(())[tid]
     assert all(market._untried(lot, rid) for rid in ("robot-0", "robot-1", "robot-2"))

@@ -14,9 +14,10 @@ from waits import wait_until
 
 import fleet.coordinator.exploring as exploring
 from fleet.bus import Bus
-from fleet.coordinator.explore_service import ExploringCoordinator
+from fleet.coordinator.explore_part import ExplorePart
 from fleet.coordinator.exploring import Explorer, MapPlanner
 from fleet.coordinator.job import ALIVE
+from fleet.coordinator.service import Coordinator
 from fleet.params import load_fleet_config
 from fleet.plausible import Bounds
 from fleet.protocol import Clock, Heartbeat, PoseEstimate
@@ -58,7 +59,10 @@ def test_a_slow_map_merge_loses_no_robot(
 
     monkeypatch.setattr(exploring, "merge_maps", slow_merge)
     explorer = Explorer(CFG, MapPlanner(CFG), None)
-    service = ExploringCoordinator(cbus, explorer, 1, CFG.coordinator, bounds=Bounds.of(CFG))
+    parts = [ExplorePart(explorer)]
+    service = Coordinator(
+        cbus, explorer.planner, 1, CFG.coordinator, bounds=Bounds.of(CFG), parts=parts
+    )
     stop = threading.Event()
     feeder = threading.Thread(target=_robot_and_clock, args=(sim, agent, stop), daemon=True)
     feeder.start()

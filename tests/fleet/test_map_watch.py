@@ -34,8 +34,8 @@ def seen(segments, seed):
 
 
 def watch(*floors):
-    coordinator = SimpleNamespace(expected=3, keys=NoBus.keys)
-    w = MapWatch(NoBus(), coordinator, stored(), "stored/map.yaml", CFG)  # type: ignore[arg-type]
+    w = MapWatch(NoBus(), stored(), "stored/map.yaml", CFG)  # type: ignore[arg-type]
+    w.wire(SimpleNamespace(expected=3, keys=NoBus.keys))  # type: ignore[arg-type]
     for i, segments in enumerate(floors):
         w.maps.hear(f"robot-{i}", pack_grid(seen(segments, i)))
     return w

@@ -1,5 +1,6 @@
-"""The coordinator of an exploring fleet: the cleaning coordinator's market, loop and store,
+"""Exploring, a part of the coordinator: the cleaning coordinator's market, loop and store,
 with the robots' merged maps in place of the floor plan (:mod:`fleet.coordinator.exploring`).
+It composes with the others: with batteries, robots go to charge while they explore.
 
 What changes: no floor plan is served on ``coord/map`` (a robot prices travel on its own SLAM
 map, unknown cells counted as free), the merged map as it grows is served on
@@ -10,7 +11,7 @@ a robot that started with no known pose sends its map in its own frame until tha
 placed on the merged one, and is then sent the placement (``coord/placement/<robot>``; events
 ``placed`` and ``unplaced``); the market sells only to robots without work, so each holds one
 frontier at a time (Burgard et al. 2005 assign one target per robot), and sells the open
-frontier tasks, each worth its discounted information gain; the job is finished when the
+frontier tasks, each worth its discounted information gain; the job's work is over when the
 explorer finds no new frontier with no task open or assigned.
 """
 
@@ -18,16 +19,12 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable
 
-from fleet.bus import Bus
 from fleet.coordinator.exploring import Change, Explorer, Snapshot, fetch_whole_maps
-from fleet.coordinator.market import Market
-from fleet.coordinator.service import Coordinator
-from fleet.coordinator.store import JobStore
+from fleet.coordinator.job import Job
+from fleet.coordinator.market import Cut
+from fleet.coordinator.parts import Host, Part
 from fleet.floor_map import pack_grid
-from fleet.params import CoordinatorParams
-from fleet.plausible import Bounds
 from fleet.protocol import MapPatches, Placement, Request
 from planners import auction
 from planners.map_match import MapMatch
@@ -36,39 +33,14 @@ from planners.map_match import MapMatch
 UNPLACED_EVERY_S = 10.0
 
 
-class ExploringMarket(Market):
-    """The market selling frontier tasks, one to each robot without work."""
+class ExplorePart(Part):
+    """The robots' merged maps, their frontiers sold as tasks, one to each robot without
+    work."""
 
-    explorer: Explorer
-
-    def _regions(self) -> tuple[bool, Callable[[], tuple[auction.Lot, ...]]]:
-        return False, tuple
-
-    def _untried(self, lot: auction.Lot, robot: str) -> bool:
-        """Only a robot without work may win: each drives to one frontier at a time (a robot
-        with work bids all the same; its bid shows what it would pay)."""
-        return super()._untried(lot, robot) and self.job.current(robot) is None
-
-    def _lots(self, regions: tuple[auction.Lot, ...]) -> dict[str, auction.Lot]:
-        return self.explorer.lots(self.job)
-
-
-class ExploringCoordinator(Coordinator):
-    """The coordinator's loop and market on the robots' merged maps."""
-
-    market_class = ExploringMarket
     working = "exploring"
+    floor_plan = False
 
-    def __init__(
-        self,
-        bus: Bus,
-        explorer: Explorer,
-        expected: int,
-        params: CoordinatorParams,
-        store: JobStore | None = None,
-        *,
-        bounds: Bounds,
-    ) -> None:
+    def __init__(self, explorer: Explorer) -> None:
         self.explorer = explorer
         self.explored_at = -float("inf")
         self._fetching: threading.Thread | None = None
@@ -79,14 +51,34 @@ class ExploringCoordinator(Coordinator):
         # robots placed on the merged map (told once), and when each refusal was last told
         self._placed: set[str] = set()
         self._unplaced_told: dict[str, float] = {}
-        super().__init__(bus, explorer.planner, expected, params, store, None, bounds=bounds)
-        self.market.explorer = explorer  # type: ignore[attr-defined]
-        bus.subscribe(self.keys.all_robots("map"), MapPatches, self._on_map)
 
-    def _serve_floor(self) -> None:
-        """No floor plan: the robots price travel on their own maps. The merged map of the
-        last update is served on ``coord/explored`` (an error reply before the first)."""
-        self.bus.serve(self.keys.explored_map(), Request, self._on_explored_query)
+    def wire(self, host: Host) -> None:
+        self.host = host
+        self.job, self.journal = host.job, host.journal
+
+    # ---- the market's hooks -----------------------------------------------------------------
+
+    def regions(self, first: bool, cut: Cut) -> tuple[bool, Cut]:
+        """No regions, and no first allocation: frontiers are sold one at a time."""
+        return False, tuple
+
+    def may_win(self, lot: auction.Lot, robot: str) -> bool:
+        """Only a robot without work may win: each drives to one frontier at a time (a robot
+        with work bids all the same; its bid shows what it would pay)."""
+        return self.job.current(robot) is None
+
+    def lots(self) -> dict[str, auction.Lot]:
+        return self.explorer.lots(self.job)
+
+    # ---- the service's hooks ----------------------------------------------------------------
+
+    def serve(self) -> None:
+        """The robots' maps heard; no floor plan served (the robots price travel on their own
+        maps), the merged map of the last update served on ``coord/explored`` instead (an
+        error reply before the first)."""
+        bus = self.host.bus
+        bus.subscribe(bus.keys.all_robots("map"), MapPatches, self._on_map)
+        bus.serve(bus.keys.explored_map(), Request, self._on_explored_query)
 
     def _on_explored_query(self, _req: Request) -> MapPatches:
         explored = self._explored
@@ -94,40 +86,44 @@ class ExploringCoordinator(Coordinator):
             raise LookupError("no robot has sent its map yet")
         return explored
 
-    def _plan_tasks(self) -> None:
-        with self.lock:
-            self.journal.set_meta(expected_robots=self.expected, exploring=True)
+    def make_tasks(self) -> bool:
+        """No tour: the tasks are the frontiers the updates find."""
+        with self.host.lock:
+            self.journal.set_meta(expected_robots=self.host.expected, exploring=True)
+        return True
 
     def _on_map(self, key: str, msg: MapPatches) -> None:
-        rid = self.keys.robot_of(key)
-        with self.lock:
-            if self.implausible(key, rid, msg.stamp):
+        host = self.host
+        rid = host.keys.robot_of(key)
+        with host.lock:
+            if host.implausible(key, rid, msg.stamp):
                 return
             self.explorer.maps.hear(rid, msg)
 
-    def _tick(self) -> None:
+    def tick(self) -> None:
         """Every ``explore_every_s`` sim seconds: take what the update reads (it runs in
-        :meth:`_unlocked`)."""
+        :meth:`unlocked`)."""
+        host = self.host
         if self.explorer.maps.missing and not (self._fetching and self._fetching.is_alive()):
             # on a thread of its own: the main loop holds the lock
             self._fetching = threading.Thread(
                 target=fetch_whole_maps,
-                args=(self.bus, self.explorer.maps, self.lock),
+                args=(host.bus, self.explorer.maps, host.lock),
                 daemon=True,
             )
             self._fetching.start()
-        if self.journal.clock - self.explored_at < self.params.explore_every_s:
+        if self.journal.clock - self.explored_at < host.params.explore_every_s:
             return
         self.explored_at = self.journal.clock
         self._snapshot = self.explorer.snapshot(self.job)
 
-    def _unlocked(self) -> None:
+    def unlocked(self) -> None:
         """The update due: the maps merged and the frontiers found without the lock, taken
         into the job with it."""
         snap, self._snapshot = self._snapshot, None
         survey = None if snap is None else self.explorer.survey(snap)
         if survey is not None:
-            with self.lock:
+            with self.host.lock:
                 self._take(self.explorer.apply(self.job, survey))
 
     def _take(self, change: Change) -> None:
@@ -138,12 +134,13 @@ class ExploringCoordinator(Coordinator):
             self.journal.event("withdrawn", owner or "", tid, "its frontier vanished")
             self.journal.save_tasks(tid)
         gone = [tid for tid, _ in change.gone]
-        self.dispatcher.cut(gone)
-        self.awards.send()
+        host = self.host
+        host.dispatcher.cut(gone)
+        host.awards.send()
         if change.added or gone:
-            self.market.version += 1
-            self.market.need_auction = True
-            self.wake.set()
+            host.market.version += 1
+            host.market.need_auction = True
+            host.wake.set()
         goals = ", ".join(
             f"{rid} → {rec.task.id} ({rec.task.entry[0]:.1f}, {rec.task.entry[1]:.1f})"
             for rid in sorted(self.job.robots)
@@ -168,7 +165,7 @@ class ExploringCoordinator(Coordinator):
         clock = self.journal.clock
         if match.confident:
             msg = Placement(clock, rid, t.x, t.y, t.theta, match.score, match.overlap_m2)
-            self.bus.publish(self.keys.placement(rid), msg, control=True)
+            self.host.bus.publish(self.host.keys.placement(rid), msg, control=True)
             if rid not in self._placed:
                 self._placed.add(rid)
                 self.journal.event(
@@ -182,5 +179,7 @@ class ExploringCoordinator(Coordinator):
             self._unplaced_told[rid] = clock
             self.journal.event("unplaced", rid, "", f"its map is not placed: {match.reason}")
 
-    def _finished(self) -> bool:
-        return self.explorer.finished(self.job)
+    def work_over(self, job: Job) -> bool:
+        """No task open or assigned, and the last update, with every robot's map in and floor
+        on the merged map, found no new frontier (``Explorer.finished``)."""
+        return self.explorer.finished(job)

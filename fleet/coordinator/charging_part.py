@@ -1,5 +1,6 @@
-"""The coordinator of a fleet with batteries (``robot.battery.enabled``): the job and the
-market as without them, and the robots' trips to charge (:mod:`fleet.coordinator.charging`).
+"""Batteries (``robot.battery.enabled``), a part of the coordinator: the job and the market as
+without them, and the robots' trips to charge (:mod:`fleet.coordinator.charging`). It composes
+with the others: exploring, it sends robots to charge on the merged map as it grows.
 
 - It serves the world's docks on ``coord/docks``: robots price the way home from each task.
 - A robot whose status reports a charge below ``recharge_threshold`` plus what its trip to a
@@ -20,8 +21,9 @@ market as without them, and the robots' trips to charge (:mod:`fleet.coordinator
   worked from each robot's charge, the trips to a dock and back (each region's mean travel to
   its nearest dock on the floor plan), queueing at the docks for the charges they need, and
   the trip home at the end.
-- When every task is done, every robot is sent home; the job is finished once each is on a
-  dock or at its waiting spot.
+- When the job's work is over (``Coordinator.work_over``: every task done, or exploring, no
+  frontier left), every robot is sent home; the job ends once each is on a dock or at its
+  waiting spot.
 """
 
 from __future__ import annotations
@@ -31,18 +33,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fleet.bus import Bus
 from fleet.coordinator import go_home
-from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.coordinator.charging import Docking, Pose
 from fleet.coordinator.job import ASSIGNED, EMPTY, LOST, OPEN, Job, TaskRecord
-from fleet.coordinator.market import Hook, Market, estimate
-from fleet.coordinator.planning import TaskPlanner
-from fleet.coordinator.service import Coordinator
-from fleet.coordinator.store import JobStore
-from fleet.coordinator.transits import TransitPlanner
-from fleet.params import CoordinatorParams
-from fleet.plausible import Bounds
+from fleet.coordinator.market import Cut, estimate
+from fleet.coordinator.parts import Host, Part
 from fleet.protocol import Docks, OpsReply, OpsRequest, Request, RobotStatus
 from planners import auction
 from planners.battery import BatterySpec, DockUser, can_take, charge_early, makespan_with_charging
@@ -50,41 +45,49 @@ from planners.battery import BatterySpec, DockUser, can_take, charge_early, make
 log = logging.getLogger("coordinator")
 
 
-class ChargingMarket(Market):
-    """The market, with robots that leave it to charge."""
+class ChargingPart(Part):
+    """The robots' trips to charge: out of the market and back, the docks served, the job's
+    end held until every robot is home."""
 
     docking: Docking
-    battery: BatterySpec
-    sold = 0
     # the first allocation's regions, one per robot: each one's work (s) and its mean trip to a
     # dock (s)
     first_regions: tuple[tuple[float, float], ...] = ()
 
-    @property
-    def first_regions_s(self) -> tuple[float, ...]:
-        return tuple(work for work, _ in self.first_regions)
+    def __init__(self, battery: BatterySpec, docks: tuple[Pose, ...]) -> None:
+        self.battery = battery
+        self.docks = docks
 
-    def sell(self, sale: Sale) -> None:
-        self.sold += 1
-        super().sell(sale)
+    def wire(self, host: Host) -> None:
+        """The docks and the trips to them, before the first status is heard (a status handled
+        without them was dropped with an error at the start of a run)."""
+        self.host = host
+        self.job, self.journal, self.market = host.job, host.journal, host.market
+        self.docking = Docking(
+            host.journal, host.planner, host.dispatcher, self.battery, self.docks
+        )
 
-    def auction(self, auctioneer: Auctioneer, each_round: Hook = lambda: None) -> None:
-        """The auction; when it sells nothing while work is open, the idle robots it could not
+    def serve(self) -> None:
+        bus, keys = self.host.bus, self.host.keys
+        poses = np.array(self.docks, dtype=float).reshape(-1, 3)
+        bus.serve(keys.docks(), Request, lambda _req: Docks(self.journal.clock, poses))
+        bus.serve(keys.ops("dock"), OpsRequest, self._on_dock)
+
+    # ---- the market's hooks -----------------------------------------------------------------
+
+    def after_auction(self, sold: int) -> None:
+        """When an auction sold nothing while work is open, the idle robots it could not
         interest (they declined on their charge) and that are not full go to charge."""
-        self.sold = 0
-        super().auction(auctioneer, each_round)
-        with self.lock:
-            if self.sold or not self.job.open_tasks():
-                return
-            for rid in self.job.market():
-                r = self.job.robots[rid]
-                idle = self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to
-                if idle and self.docking.go_home_below(rid) > 0:  # a dock it can charge on
-                    self.send_home(rid, f"can do none of the open work on {r.charge:.2f}")
+        if sold or not self.job.open_tasks():
+            return
+        for rid in self.job.market():
+            r = self.job.robots[rid]
+            idle = self.job.current(rid) is None and 0 <= r.charge < self.battery.recharge_to
+            if idle and self.docking.go_home_below(rid) > 0:  # a dock it can charge on
+                self.send_home(rid, f"can do none of the open work on {r.charge:.2f}")
 
-    def _regions(self) -> tuple[bool, Callable[[], tuple[auction.Lot, ...]]]:
+    def regions(self, first: bool, cut: Cut) -> tuple[bool, Cut]:
         """The market's regions, none unless every robot's charge covers the longest."""
-        first, cut = super()._regions()
         charges = [self.job.robots[rid].charge for rid in self.job.market()]
         reach_s = min(charges, default=1.0) * self.battery.capacity_s
 
@@ -102,43 +105,85 @@ class ChargingMarket(Market):
         starts = [self.job.tasks[tid].task.path[0] for tid in lot.tasks if tid in self.job.tasks]
         return self.docking.trip_s(np.array(starts, dtype=float).reshape(-1, 2))
 
-    def estimate_first(self, committed: list[float]) -> None:
+    def estimate_first(self, committed: list[float]) -> bool:
         """The job's estimate with the charges in it, whether or not the first allocation sold
         everything (robots decline what their charge cannot cover): the first allocation's
         regions, one per robot, each worked from its robot's charge with the trips to a dock
         and back and the charges it needs at the docks in turn, and the trip home at the end
-        (``planners.battery.makespan_with_charging``)."""
+        (``planners.battery.makespan_with_charging``); not without one region per robot."""
         regions = sorted(self.first_regions, key=lambda r: -r[0])
         market = self.job.market()
         if not regions or len(regions) != len(market):
-            super().estimate_first(committed)
-            return
+            return False
         charges = sorted((self._charge(rid) for rid in market), reverse=True)
         work = [w for w, _ in regions]
         trips = [t for _, t in regions]
         docks = len(self.docking.docks)
         estimate(self.journal, makespan_with_charging(self.battery, work, charges, docks, trips))
+        return True
 
     def _charge(self, rid: str) -> float:
         charge = self.job.robots[rid].charge
         return 1.0 if charge < 0 else charge
 
+    # ---- the service's hooks ----------------------------------------------------------------
+
     def check_stalls(self) -> None:
-        """Robots with work as without batteries; and robots on a trip to a dock or a waiting
-        spot that have made no progress on it for ``stall_s`` (:meth:`Docking.stalled`)."""
-        super().check_stalls()
+        """Robots on a trip to a dock or a waiting spot that have made no progress on it for
+        ``stall_s`` (:meth:`Docking.stalled`; robots with work are the market's)."""
         now = self.journal.clock
-        for rid, p in list(self.progress.items()):
+        progress = self.market.progress
+        for rid, p in list(progress.items()):
             t = self.docking.trips.get(rid)
             if t is None or self.job.robots[rid].charging or t.plan.plan_id != p.plan_id:
                 continue
-            if now - p.since >= self.stall_s:
-                self.progress.pop(rid)
+            if now - p.since >= self.market.stall_s:
+                progress.pop(rid)
                 self.docking.stalled(rid, f"no progress on its trip for {now - p.since:.0f} s")
 
     def observe(self, rid: str, msg: RobotStatus) -> None:
-        super().observe(rid, msg)
         self.docking.heard(rid, msg)
+
+    def tick(self) -> None:
+        """Trips on; robots below the threshold to charge; once the work is over, all home."""
+        over = self.host.work_over()
+        if self.docking.tick(over):
+            self.market.need_auction = True
+        for rid, why, parking in homeward(self.job, self.docking, over):
+            self.send_home(rid, why, parking)
+        for rid, why in charging_early(self.job, self.docking, over):
+            self.send_home(rid, why)
+        self.check_flat()
+
+    def settled(self) -> bool:
+        """Every robot not lost is home (on a dock, at its waiting spot, or out of charge)."""
+        return self.docking.home()
+
+    def _on_dock(self, req: OpsRequest) -> OpsReply:
+        """`fleet dock ROBOT [--dock K]`: send it home now (to dock K)."""
+        with self.host.lock:
+            r = self.job.robots.get(req.name)
+            if req.verb != "dock" or r is None:
+                return OpsReply(False, f"no robot {req.name!r} in the job")
+            if r.liveness == LOST or r.xy is None:
+                return OpsReply(False, f"{req.name} is lost, or has not said where it is")
+            dock = None if req.dock < 0 else req.dock
+            if dock is not None and dock >= len(self.docks):
+                count = f"{len(self.docks)} dock{'s' if len(self.docks) != 1 else ''}"
+                return OpsReply(False, f"no dock {dock}: the world has {count}, from 0")
+            if dock is not None and not self.docking.usable(dock):
+                return OpsReply(False, f"dock {dock} cannot be reached: a body stands on it")
+            if r.docking:
+                trip = self.docking.trips.get(req.name)
+                if dock is None or trip is None or trip.dock == dock:
+                    return OpsReply(True, "")
+                return OpsReply(False, f"{req.name} is already bound for dock {trip.dock}")
+            why = f"sent home by {req.sender}"
+            self.send_home(req.name, why, parking=self.host.work_over(), dock=dock)
+            ok = bool(r.docking)
+        return OpsReply(ok, "" if ok else f"no way home for {req.name}")
+
+    # ---- the job's changes ------------------------------------------------------------------
 
     def send_home(self, rid: str, why: str, parking: bool = False, dock: int | None = None) -> None:
         """Take ``rid``'s work back (the unswept remainder of the task it drives and its
@@ -147,7 +192,7 @@ class ChargingMarket(Market):
         self._take_back(rid, "its robot went to charge")
         if not self.docking.send(rid, why, parking, dock):
             log.warning("%s: no way home (%s)", rid, why)
-        self.wake.set()
+        self.market.wake.set()
 
     def run_flat(self, rid: str) -> None:
         """``rid``'s battery ran out off a dock: it stands for good. Its work goes back to the
@@ -156,13 +201,14 @@ class ChargingMarket(Market):
         self._take_back(rid, "its robot ran out of charge")
         self.docking.empty(rid)
         xy = self.job.robots[rid].xy
+        market = self.market
         if xy is not None:
-            self.bodies[rid] = xy
+            market.bodies[rid] = xy
             where = f"({xy[0]:.2f}, {xy[1]:.2f})"
             self.journal.event("body", rid, "", f"out of charge at {where}; planned around")
-            self.plan_around_bodies(rid)
-        self.need_auction = True
-        self.wake.set()
+            market.plan_around_bodies(rid)
+        market.need_auction = True
+        market.wake.set()
 
     def check_flat(self) -> None:
         """Robots whose status reports 0 % off a dock stand for good (:meth:`run_flat`); when
@@ -183,138 +229,59 @@ class ChargingMarket(Market):
             self.journal.save_tasks(*left)
 
     def _take_back(self, rid: str, why: str) -> None:
+        market = self.market
         queue = [rec.task.id for rec in self.job.queue(rid)]
         opened = self.job.take_back(queue[0]) if queue else []
         for tid in opened:
             self.journal.event("reopened", rid, tid, why)
         self.journal.save_tasks(*queue, *opened)
-        self.dispatcher.forget(rid)
-        self.progress.pop(rid, None)
-        self.version += 1
-        self.awards.send()
-        self.need_auction = self.need_auction or bool(opened)
+        market.dispatcher.forget(rid)
+        market.progress.pop(rid, None)
+        market.version += 1
+        market.awards.send()
+        market.need_auction = market.need_auction or bool(opened)
 
 
-class ChargingCoordinator(Coordinator):
-    """The coordinator's loop with the robots' trips to charge."""
-
-    market_class = ChargingMarket
-
-    def __init__(
-        self,
-        bus: Bus,
-        planner: TaskPlanner,
-        expected: int,
-        params: CoordinatorParams,
-        store: JobStore | None = None,
-        transits: TransitPlanner | None = None,
-        *,
-        bounds: Bounds,
-        battery: BatterySpec,
-        docks: tuple[Pose, ...],
-    ) -> None:
-        self.docks = docks
-        self.battery = battery
-        super().__init__(bus, planner, expected, params, store, transits, bounds=bounds)
-
-    def _wire(self) -> None:
-        """The docks and the trips to them, before the first status is heard (a status handled
-        without them was dropped with an error at the start of a run)."""
-        self.docking = Docking(
-            self.journal, self.planner, self.dispatcher, self.battery, self.docks
-        )
-        market = self.market
-        assert isinstance(market, ChargingMarket)
-        market.docking, market.battery = self.docking, self.battery
-
-    def _serve_floor(self) -> None:
-        super()._serve_floor()
-        poses = np.array(self.docks, dtype=float).reshape(-1, 3)
-        self.bus.serve(self.keys.docks(), Request, lambda _req: Docks(self.journal.clock, poses))
-        self.bus.serve(self.keys.ops("dock"), OpsRequest, self._on_dock)
-
-    def _on_dock(self, req: OpsRequest) -> OpsReply:
-        """`fleet dock ROBOT [--dock K]`: send it home now (to dock K)."""
-        with self.lock:
-            r = self.job.robots.get(req.name)
-            if req.verb != "dock" or r is None:
-                return OpsReply(False, f"no robot {req.name!r} in the job")
-            if r.liveness == LOST or r.xy is None:
-                return OpsReply(False, f"{req.name} is lost, or has not said where it is")
-            dock = None if req.dock < 0 else req.dock
-            if dock is not None and dock >= len(self.docks):
-                count = f"{len(self.docks)} dock{'s' if len(self.docks) != 1 else ''}"
-                return OpsReply(False, f"no dock {dock}: the world has {count}, from 0")
-            if dock is not None and not self.docking.usable(dock):
-                return OpsReply(False, f"dock {dock} cannot be reached: a body stands on it")
-            if r.docking:
-                trip = self.docking.trips.get(req.name)
-                if dock is None or trip is None or trip.dock == dock:
-                    return OpsReply(True, "")
-                return OpsReply(False, f"{req.name} is already bound for dock {trip.dock}")
-            market = self.market
-            assert isinstance(market, ChargingMarket)
-            why = f"sent home by {req.sender}"
-            market.send_home(req.name, why, parking=self.job.finished, dock=dock)
-            ok = bool(r.docking)
-        return OpsReply(ok, "" if ok else f"no way home for {req.name}")
-
-    def _tick(self) -> None:
-        """Trips on; robots below the threshold to charge; at the job's end, all home."""
-        market = self.market
-        assert isinstance(market, ChargingMarket)
-        if self.docking.tick(self.job.finished):
-            market.need_auction = True
-        for rid, why, parking in homeward(self.job, self.docking):
-            market.send_home(rid, why, parking)
-        for rid, why in charging_early(self.job, self.docking):
-            market.send_home(rid, why)
-        market.check_flat()
-
-    def _finished(self) -> bool:
-        return self.job.finished and self.docking.home()
-
-
-def going_home(job: Job, below: Callable[[str], float]) -> list[tuple[str, str, bool]]:
-    """The robots to send home now, each with why and whether to park: at the job's end every
-    robot not yet on its way home; before it, each robot in the market whose charge has fallen
-    below what it needs to get to a dock and wait there (``below(robot)``)."""
+def going_home(job: Job, below: Callable[[str], float], over: bool) -> list[tuple[str, str, bool]]:
+    """The robots to send home now, each with why and whether to park: once the job's work is
+    ``over``, every robot not yet on its way home; before, each robot in the market whose
+    charge has fallen below what it needs to get to a dock and wait there (``below(robot)``)."""
     out = []
     for rid, r in sorted(job.robots.items()):
         if r.liveness == LOST or r.docking or r.xy is None:
             continue
-        if job.finished:
+        if over:
             out.append((rid, "the job is done", True))
         elif r.in_market and r.charge >= 0 and r.charge < (need := below(rid)):
             out.append((rid, f"charge {r.charge:.3f} below {need:.3f}", False))
     return out
 
 
-def homeward(job: Job, docking: Docking) -> list[tuple[str, str, bool]]:
-    """:func:`going_home` in the order to send them: at the job's end so that each free dock
-    goes to the robot nearest it (``go_home.nearest_first``); before it in the order they
-    fall due, the order their go-home points were counted in (``go_home.points``),
-    so each robot finds the docks as its go-home point counted them."""
+def homeward(job: Job, docking: Docking, over: bool) -> list[tuple[str, str, bool]]:
+    """:func:`going_home` in the order to send them: once the work is ``over`` so that each
+    free dock goes to the robot nearest it (``go_home.nearest_first``); before, in the order
+    they fall due, the order their go-home points were counted in (``go_home.points``), so
+    each robot finds the docks as its go-home point counted them."""
     points = go_home.points(docking)
 
     def below(rid: str) -> float:
         return points[rid][1] if rid in points else go_home.alone(docking, rid)[1]
 
-    home = {rid: (why, parking) for rid, why, parking in going_home(job, below)}
-    if job.finished:
+    home = {rid: (why, parking) for rid, why, parking in going_home(job, below, over)}
+    if over:
         order = go_home.nearest_first(docking, list(home))
     else:
         order = [rid for rid in points if rid in home] + [r for r in home if r not in points]
     return [(rid, *home[rid]) for rid in order]
 
 
-def charging_early(job: Job, docking: Docking) -> list[tuple[str, str]]:
+def charging_early(job: Job, docking: Docking, over: bool) -> list[tuple[str, str]]:
     """The robots to send to charge before their go-home point, each with why: per free dock,
     the one the stagger rule picks (``planners.battery.charge_early``) among the robots at
     work that would charge there and need to before the job ends (their charge does not cover
     the work they hold, nor their share of the work left, and the trip home). None once the
-    job is done."""
-    if job.finished:
+    job's work is ``over``."""
+    if over:
         return []
     left = [rec for rec in job.tasks.values() if rec.state in (OPEN, ASSIGNED)]
     working = [r for r in job.robots.values() if r.liveness != LOST and r.docking != EMPTY]
