@@ -325,6 +325,10 @@ class Agent:
             if not self._told_no_floor:  # an exploring fleet's coordinator has none
                 log.warning("%s: no floor plan (%s); pricing on its own map", self.rid, e)
             self._told_no_floor = True
+            if not len(self.market.docks):  # exploring with batteries, it serves the docks
+                docks = fetch_docks(self.bus, self.rid)
+                with self.lock:
+                    self.market.docks = docks
             return
         with self.lock:
             self.market.use_floor(floor)

@@ -13,7 +13,7 @@ from agents.follow.state import FollowState
 from agents.market import MarketClient, swept_pieces
 from agents.pose_source import OdometryPose
 from fleet.params import load_fleet_config
-from fleet.protocol import Award, BatteryState, Bid, Keys, Message, TaskCall
+from fleet.protocol import Award, BatteryState, Bid, Docks, Keys, Message, TaskCall
 from planners.battery import BatterySpec
 from planners.grid import GridMap
 
@@ -198,3 +198,36 @@ def test_the_battery_the_agent_hears_is_what_it_bids_on() -> None:
     agent._on_battery(key, BatteryState(0.0, 1.0, False))
     agent._bid([dataclasses.replace(call, round=call.round + 1)])
     assert [(b.task, b.declined) for b in bus.bids] == [("t01", False)]
+
+
+class _DocksOnlyBus(_NoFloorBus):
+    """An exploring coordinator's with batteries: no floor plan, but the docks."""
+
+    def __init__(self, docks: np.ndarray) -> None:
+        super().__init__()
+        self.docks = docks
+
+    def request(self, key: str, *_args: object, **_kwargs: object) -> Message:
+        if key == self.keys.docks():
+            return Docks(0.0, self.docks)
+        raise TimeoutError("no floor plan served")
+
+
+@pytest.mark.parametrize(("dock_x", "declined"), [(-20.0, True), (3.0, False)])
+def test_with_no_floor_plan_the_agent_still_prices_the_way_home_to_the_docks_served(
+    dock_x: float, declined: bool
+) -> None:
+    """Exploring with batteries, the coordinator serves docks and no floor plan: the agent
+    prices each call with the trip home from its end (a call it could finish but not get home
+    from is declined), pricing travel on its own map."""
+    cfg = load_fleet_config()
+    battery = dataclasses.replace(cfg.robot.battery, enabled=True, capacity_s=100.0)
+    cfg = dataclasses.replace(cfg, robot=dataclasses.replace(cfg.robot, battery=battery))
+    bus = _DocksOnlyBus(np.array([[dock_x, 0.0, 0.0]]))
+    agent = Agent(bus, "robot-0", cfg)  # type: ignore[arg-type]
+    agent.pose_source = OdometryPose((0.0, 0.0, 0.0))
+    agent._on_battery(bus.keys.robot("robot-0", "battery"), BatteryState(0.0, 0.5, False))
+    agent._bid([_call("t01", (1.0, 0.0), (2.0, 0.0), 5.0)])
+    assert agent.market.docks.tolist() == [[dock_x, 0.0]]
+    # 5 s of work on half a charge, and 22 m home at the transit speed (declined) or 1 m
+    assert [(b.task, b.declined) for b in bus.bids] == [("t01", declined)]
