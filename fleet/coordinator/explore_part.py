@@ -51,6 +51,8 @@ class ExplorePart(Part):
         # robots placed on the merged map (told once), and when each refusal was last told
         self._placed: set[str] = set()
         self._unplaced_told: dict[str, float] = {}
+        # the exploring is over (:meth:`work_over`): no update after it
+        self.over = False
 
     def wire(self, host: Host) -> None:
         self.host = host
@@ -102,8 +104,10 @@ class ExplorePart(Part):
 
     def tick(self) -> None:
         """Every ``explore_every_s`` sim seconds: take what the update reads (it runs in
-        :meth:`unlocked`)."""
+        :meth:`unlocked`); none once the exploring is over."""
         host = self.host
+        if self.over:
+            return
         if self.explorer.maps.missing and not (self._fetching and self._fetching.is_alive()):
             # on a thread of its own: the main loop holds the lock
             self._fetching = threading.Thread(
@@ -181,5 +185,8 @@ class ExplorePart(Part):
 
     def work_over(self, job: Job) -> bool:
         """No task open or assigned, and the last update, with every robot's map in and floor
-        on the merged map, found no new frontier (``Explorer.finished``)."""
-        return self.explorer.finished(job)
+        on the merged map, found no new frontier (``Explorer.finished``); once so, for good:
+        the exploring ends there, as the job does without batteries (with them, the robots'
+        trips home after it explore nothing more, and call no robot back)."""
+        self.over = self.over or self.explorer.finished(job)
+        return self.over

@@ -167,12 +167,24 @@ def test_exploring_the_work_is_over_when_no_frontier_is_left_not_when_no_task_is
     )
     exploring = c.parts.of(ExplorePart)
     assert exploring is not None
+
+    def update(at: float, door: bool, north: bool = False) -> None:
+        """An update of the explorer at sim time ``at`` on robot-0's map of the room (with an
+        opening in its east wall, ``door``, or in its north wall, ``north``)."""
+        cells = room(door)
+        if north:
+            cells[55, 22:42] = 0
+        c.journal.heard(at)
+        with c.lock:
+            exploring.explorer.maps.hear("robot-0", patches(cells, round(at)))
+            exploring.tick()
+        exploring.unlocked()
+
     with c.lock:
         robot = c.job.robot("robot-0")
         robot.ready, robot.xy, robot.charge = True, (1.6, 1.6), 0.9
-        # the merged map of the room is the floor planned on; its door is a frontier
-        exploring.explorer.maps.hear("robot-0", patches(room(door=True), 1))
-        exploring.explorer.update(c.job)
+    update(1.0, door=True)  # the merged map is the floor planned on; its door is a frontier
+    with c.lock:
         assert c.job.tasks
         for tid in list(c.job.tasks):
             c.job.award(tid, "robot-0", False)
@@ -180,11 +192,15 @@ def test_exploring_the_work_is_over_when_no_frontier_is_left_not_when_no_task_is
         assert c.job.finished and not c.work_over()
         c.parts.tick()
         assert robot.docking == ""  # not parked between two updates
-        exploring.explorer.exhausted = True  # an update found no frontier left
+    update(5.0, door=False)  # the door is a wall: no frontier left
+    with c.lock:
         assert c.work_over() and not c._finished()
         c.parts.tick()
         assert robot.docking == "docking"  # the work is over: home, to park
         assert not c._finished()  # until it is there
+    update(9.0, door=False, north=True)  # over for good: no update after it finds work
+    with c.lock:
+        assert c.work_over() and not c.job.open_tasks()
 
 
 def _robot(sim: Bus, agent: Bus, stop: threading.Event, plans: list[Plan], charge: float) -> None:
