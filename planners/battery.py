@@ -56,7 +56,9 @@ class BatterySpec:
     sweeping a dock puts back per second; ``recharge_threshold``: below this fraction the
     robot goes to charge; ``recharge_to``: it charges up to this fraction before it works
     again; ``dock_tolerance`` (m) and ``dock_align`` (rad): how near the dock's pose its centre
-    and how near the docking heading (facing the dock) its heading must be for it to charge."""
+    and how near the docking heading (facing the dock) its heading must be for it to charge;
+    ``start_charge``: the fraction of a full charge a robot starts with (the simulator's: the
+    coordinator and the agent learn it from the battery's readings)."""
 
     enabled: bool = False
     capacity_s: float = 3600.0
@@ -68,6 +70,7 @@ class BatterySpec:
     recharge_to: float = 0.9
     dock_tolerance: float = 0.12
     dock_align: float = 0.8
+    start_charge: float = 1.0
 
     def validate(self) -> None:
         require_positive(self, "capacity_s", "charge_rate", "dock_tolerance", "dock_align")
@@ -85,6 +88,8 @@ class BatterySpec:
                 f"recharge_to ({self.recharge_to}) must be in (recharge_threshold, 1]: a robot "
                 "charges to above the level that sends it to charge"
             )
+        if not 0 < self.start_charge <= 1:
+            raise ValueError(f"start_charge ({self.start_charge}) must be in (0, 1]")
         if self.dock_align > math.pi:
             raise ValueError(f"dock_align ({self.dock_align}) must be at most pi")
 

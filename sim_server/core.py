@@ -185,7 +185,7 @@ class SimCore:
         if why:
             raise ValueError(why)
         self.physics.add_robot(rid, pose, self.cfg.robot.radius, self.cfg.robot.mass)
-        state = self.departed.pop(rid, None) or RobotState(rid)
+        state = self.departed.pop(rid, None) or self._new_robot(rid)
         state.trajectory.append(pose[0], pose[1])
         self.robots[rid] = state
         self._reindex()
@@ -200,6 +200,11 @@ class SimCore:
             self.batteries.add(state.battery)
         self.cleaning.update([rid], placed)
         return pose
+
+    def _new_robot(self, rid: str) -> RobotState:
+        """A robot new to the world, its battery at ``robot.battery.start_charge``."""
+        start = self.cfg.robot.battery.start_charge
+        return RobotState(rid, battery=BatteryLog(charge=start, min_charge=start))
 
     def remove_robot(self, rid: str) -> None:
         state = self.robots.get(rid)

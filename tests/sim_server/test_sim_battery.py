@@ -138,3 +138,23 @@ def test_the_report_gives_each_robot_its_battery_block(world: World) -> None:
     block = battery_of(summary, off)["battery"]
     assert block["parked"] is False and block["charges"] == 0 and block["min_charge"] < 1.0
     assert battery_of(SimCore(world, load_fleet_config()).summary(0.0), 0) == {}
+
+
+def test_a_robot_starts_with_the_configured_charge_and_keeps_its_own_when_it_comes_back(
+    world: World,
+) -> None:
+    sim = SimCore(world, _cfg(capacity_s=100.0, start_charge=0.4))
+    sim.add_robot("a", (1.0, 2.3, 0.0))
+    assert _charge(sim, "a") == pytest.approx(0.4)
+    _run(sim, 1.0)
+    left = _charge(sim, "a")
+    assert left < 0.4
+    sim.remove_robot("a")
+    sim.add_robot("a", (1.0, 2.3, 0.0))  # respawned: the battery it had, not a new one
+    assert _charge(sim, "a") == pytest.approx(left)
+
+
+@pytest.mark.parametrize("start", [0.0, 1.5])
+def test_a_start_charge_outside_0_to_1_is_refused(start: float) -> None:
+    with pytest.raises(ValueError, match="start_charge"):
+        _cfg(start_charge=start).robot.battery.validate()
