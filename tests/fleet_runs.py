@@ -7,6 +7,9 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
+import yaml
+
+from fleet.params import default_config_path
 from fleet.supervisor.runner import RunningFleet
 
 WORLDS = Path(__file__).resolve().parents[1] / "configs" / "worlds"
@@ -61,3 +64,12 @@ class FleetRun(RunningFleet):
         ]
         text = report.read_text() if report.exists() else "(no report)"
         return "\n".join([text, *events, *warnings, self.output])
+
+
+def battery_config(path: Path, **battery: float) -> Path:
+    """The default configuration with ``robot.battery`` on and ``battery``'s fields set,
+    written to ``path`` (for ``--config``)."""
+    data = yaml.safe_load(default_config_path().read_text())
+    data["robot"]["battery"].update(enabled=True, **battery)
+    path.write_text(yaml.safe_dump(data))
+    return path

@@ -11,10 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import yaml
-from fleet_runs import FleetRun
+from fleet_runs import FleetRun, battery_config
 
-from fleet.params import default_config_path
 from fleet.supervisor.runner import RunningFleet
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(900)]
@@ -22,17 +20,10 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(900
 DOCK_AFTER_AWARD_S = 10.0
 
 
-def _config(path: Path) -> Path:
-    data = yaml.safe_load(default_config_path().read_text())
-    data["robot"]["battery"].update(
-        enabled=True, capacity_s=100.0, charge_rate=8.0, recharge_threshold=0.35
-    )
-    path.write_text(yaml.safe_dump(data))
-    return path
-
-
 def test_robots_run_down_charge_and_the_job_still_finishes(tmp_path: Path) -> None:
-    config = _config(tmp_path / "fleet.yaml")
+    config = battery_config(
+        tmp_path / "fleet.yaml", capacity_s=100.0, charge_rate=8.0, recharge_threshold=0.35
+    )
     run = FleetRun(tmp_path / "run", robots=2, timeout_s=600.0, options=("--config", str(config)))
     clock = run.clock()
     try:

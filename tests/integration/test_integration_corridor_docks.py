@@ -23,9 +23,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from fleet_runs import WORLDS, FleetRun
-
-from fleet.params import default_config_path
+from fleet_runs import WORLDS, FleetRun, battery_config
 
 # the corridor runs from x = 3 to x = 5 m; a passage is counted from and to 0.5 m beyond its
 # ends, so a robot waiting at a mouth for another to come out is in its passage
@@ -86,19 +84,13 @@ def _world(path: Path) -> Path:
     return path
 
 
-def _config(path: Path) -> Path:
-    data = yaml.safe_load(default_config_path().read_text())
-    data["robot"]["battery"].update(enabled=True, capacity_s=300.0, charge_rate=8.0)
-    path.write_text(yaml.safe_dump(data))
-    return path
-
-
 @pytest.mark.integration
 @pytest.mark.slow
 @pytest.mark.long
 @pytest.mark.timeout(900)
 def test_robots_sent_to_each_others_docks_cross_the_corridor_both_ways(tmp_path: Path) -> None:
-    options = ("--config", str(_config(tmp_path / "fleet.yaml")), "--deconfliction", "prioritized")
+    config = battery_config(tmp_path / "fleet.yaml", capacity_s=300.0, charge_rate=8.0)
+    options = ("--config", str(config), "--deconfliction", "prioritized")
     world = str(_world(tmp_path / "corridor.yaml"))
     run = FleetRun(tmp_path / "run", robots=3, world=world, timeout_s=600.0, options=options)
     tracks = tmp_path / "run" / "tracks.csv"
