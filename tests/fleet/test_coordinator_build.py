@@ -10,12 +10,13 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 from bus_stand_in import NoBus
 from test_coordinator_exploring import patches, room
+from test_explore_service import robot_and_clock
 from waits import wait_until
 
 from fleet.bus import Bus
@@ -28,13 +29,10 @@ from fleet.coordinator.planning import TaskPlanner
 from fleet.params import FleetConfig, load_fleet_config
 from fleet.plausible import Bounds
 from fleet.protocol import (
-    Clock,
     Docks,
     FleetEvent,
-    Heartbeat,
     Message,
     Plan,
-    PoseEstimate,
     Request,
     RobotStatus,
 )
@@ -203,29 +201,20 @@ def test_exploring_the_work_is_over_when_no_frontier_is_left_not_when_no_task_is
         assert c.work_over() and not c.job.open_tasks()
 
 
-def _robot(sim: Bus, agent: Bus, stop: threading.Event, plans: list[Plan], charge: float) -> None:
-    """robot-0 as a live agent that never moves, and the simulator's clock at 4× real time:
-    a heartbeat, its pose, its map of the room and a status reporting ``charge`` at 10 Hz of
-    wall time; the status says it drives the last plan it was sent (``plans``) and is still at
-    its first waypoint."""
-    k = agent.keys
-    t, seq = 0.0, 0
-    while not stop.is_set():
-        seq += 1
-        t += 0.4
-        sim.publish(k.clock(), Clock(t, 4.0))
-        agent.publish(k.robot("robot-0", "heartbeat"), Heartbeat(t, seq, True))
-        agent.publish(k.robot("robot-0", "pose"), PoseEstimate(t, 1.6, 1.6, 0.0))
-        cells = patches(room(door=True), seq)
-        agent.publish(k.robot("robot-0", "map"), dataclasses.replace(cells, stamp=t))
+def _status(agent: Bus, plans: list[Plan], charge: float) -> Callable[[float], None]:
+    """robot-0's status at sim time ``t``, reporting ``charge``: it drives the last plan it
+    was sent (``plans``) and is still at its first waypoint (it never moves)."""
+
+    def send(t: float) -> None:
         plan = plans[-1] if plans else None
         status = RobotStatus(
             t, "driving" if plan else "waiting", plan.task if plan else "", 0.0, 0,
             len(plan.waypoints) if plan else 0, 0.0, plan_id=plan.plan_id if plan else -1,
             charge=charge,
         )  # fmt: skip
-        agent.publish(k.robot("robot-0", "status"), status, control=True)
-        time.sleep(0.1)
+        agent.publish(agent.keys.robot("robot-0", "status"), status, control=True)
+
+    return send
 
 
 def test_exploring_with_batteries_a_robot_that_falls_due_is_sent_to_a_dock_and_its_trip_watched(
@@ -248,7 +237,8 @@ def test_exploring_with_batteries_a_robot_that_falls_due_is_sent_to_a_dock_and_i
     agent.subscribe(agent.keys.events(), FleetEvent, lambda _key, e: events.append(e))
     stop = threading.Event()
     low = cfg.robot.battery.recharge_threshold / 2
-    feeder = threading.Thread(target=_robot, args=(sim, agent, stop, plans, low), daemon=True)
+    also = _status(agent, plans, low)
+    feeder = threading.Thread(target=robot_and_clock, args=(sim, agent, stop, also), daemon=True)
     runner = threading.Thread(target=c.run, args=(0.5,), daemon=True)
 
     def trips() -> list[Plan]:

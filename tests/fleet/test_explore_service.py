@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 
 import pytest
@@ -28,9 +29,12 @@ CFG = load_fleet_config()
 SLOW_MERGE_S = 2.5 * CFG.coordinator.heartbeat_timeout_s
 
 
-def _robot_and_clock(sim: Bus, agent: Bus, stop: threading.Event) -> None:
+def robot_and_clock(
+    sim: Bus, agent: Bus, stop: threading.Event, also: Callable[[float], None] = lambda _t: None
+) -> None:
     """robot-0 as a live agent sends them (heartbeat, pose and map at 10 Hz of wall time), and
-    the simulator's clock at 4× real time."""
+    the simulator's clock at 4× real time; ``also(t)`` sends whatever else the test wants at
+    each sim time ``t``."""
     k = agent.keys
     t, seq = 0.0, 0
     while not stop.is_set():
@@ -42,6 +46,7 @@ def _robot_and_clock(sim: Bus, agent: Bus, stop: threading.Event) -> None:
         # stamped with the clock, as an agent stamps its map: one stamped ahead of the clock
         # by more than the lag a receiver allows is dropped as implausible
         agent.publish(k.robot("robot-0", "map"), replace(patches(room(door=True), seq), stamp=t))
+        also(t)
         time.sleep(0.1)
 
 
@@ -64,7 +69,7 @@ def test_a_slow_map_merge_loses_no_robot(
         cbus, explorer.planner, 1, CFG.coordinator, bounds=Bounds.of(CFG), parts=parts
     )
     stop = threading.Event()
-    feeder = threading.Thread(target=_robot_and_clock, args=(sim, agent, stop), daemon=True)
+    feeder = threading.Thread(target=robot_and_clock, args=(sim, agent, stop), daemon=True)
     feeder.start()
     runner = threading.Thread(target=service.run, args=(0.5,), daemon=True)
     try:
