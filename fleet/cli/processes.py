@@ -255,9 +255,6 @@ def coordinator(
     re-auctions the work of a robot that is lost, and sends each robot its plans. With
     --explore it auctions the frontiers of the robots' merged maps instead; with --map it
     plans on a stored map instead of the world's floor plan."""
-    from fleet.coordinator.build import build_coordinator
-    from fleet.plausible import Bounds
-
     if robots < 1:
         _fail("--robots must be >= 1")
     _setup_logging("coordinator")
@@ -268,8 +265,31 @@ def coordinator(
         _fail("--loop and --explore do not go together: exploring ends when no frontier is left")
     bus = _bus("coordinator", "coordinator", connect, fleet, zenoh_config)
     stored = (w.map_grid, w.source) if floor_map is not None and w.map_grid is not None else None
+    source = w.source if w is not None else world
+    c = _coordinator_service(
+        bus, cfg, robots, store, planner, transits, explore, docks, stored, source
+    )
+    _stop_on_signals(c.stop)
     try:
-        c = build_coordinator(
+        c.run(cfg.coordinator.expected_robots_grace_s, loop)
+    finally:
+        c.close()
+        bus.close()
+    if (refusal := c.parts.refusal()) is not None:
+        typer.secho(f"error: {refusal}", fg="red", err=True)
+        raise typer.Exit(WRONG_MAP_EXIT)
+
+
+def _coordinator_service(
+    bus, cfg, robots, store, planner, transits, explore, docks, stored, source: str
+):
+    """The coordinator on ``bus`` with the parts the options and the config ask for
+    (:func:`fleet.coordinator.build.build_coordinator`); exits naming what is wrong."""
+    from fleet.coordinator.build import build_coordinator
+    from fleet.plausible import Bounds
+
+    try:
+        return build_coordinator(
             bus,
             cfg,
             robots,
@@ -282,16 +302,7 @@ def coordinator(
             stored_map=stored,
         )
     except ValueError as e:
-        _fail(f"{w.source if w is not None else world}: {e}")
-    _stop_on_signals(c.stop)
-    try:
-        c.run(cfg.coordinator.expected_robots_grace_s, loop)
-    finally:
-        c.close()
-        bus.close()
-    if (refusal := c.parts.refusal()) is not None:
-        typer.secho(f"error: {refusal}", fg="red", err=True)
-        raise typer.Exit(WRONG_MAP_EXIT)
+        _fail(f"{source}: {e}")
 
 
 def _coordinator_job(

@@ -50,6 +50,7 @@ from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
+from fleet.coordinator.dropped import Dropped
 from fleet.coordinator.job import (
     ASSIGNED,
     BLOCKED,
@@ -157,7 +158,7 @@ class Coordinator:
         )
         self.strangers = Strangers(STRANGER_GRACE_S, bus.drop_implausible)
         self.tracks: dict[str, PoseTrack] = {}
-        self.dropped_before = dropped_before(meta)
+        self.drops = Dropped.resumed(bus, meta)
         if resumed is not None:
             assert store is not None
             self._resume(store, resumed)
@@ -405,29 +406,13 @@ class Coordinator:
     def _persist(self, store: JobStore) -> None:
         """What changes too often to save at each change: the robots, the counters."""
         store.save_robots(list(self.job.robots.values()))
-        malformed, implausible = self._bus_dropped()
+        malformed, implausible = self.drops.on_bus()
         store.set_meta(
             phase=self.phase,
             clock=self.journal.clock,
             rejected_bids=self.auctioneer.rejected(),
             given_up_waypoints=self.given_up.to_json(),
             dropped={"malformed": malformed, "implausible": implausible},
-        )
-
-    def _bus_dropped(self) -> tuple[int, int]:
-        """(malformed, implausible) messages dropped on the bus in this job, by this process
-        and the coordinators before it."""
-        malformed, implausible = self.bus.dropped()
-        return malformed + self.dropped_before[0], implausible + self.dropped_before[1]
-
-    def _dropped(self) -> tuple[int, int]:
-        """(malformed, implausible) messages dropped in this job: those dropped on the bus, and
-        the bids the auctioneer refused as malformed or from a robot not in the market (late
-        and duplicate bids are no one's fault)."""
-        malformed, implausible = self._bus_dropped()
-        rejected = self.auctioneer.rejected()
-        return malformed, implausible + rejected.get("malformed", 0) + rejected.get(
-            "not in the market", 0
         )
 
     def _plan_tasks(self) -> None:
@@ -442,7 +427,9 @@ class Coordinator:
         self.journal.event("planned", "", "", f"{len(tasks)} tasks")
 
     def _publish_state(self) -> None:
-        state = fleet_state(self.job, self.journal.clock, self.phase, self._dropped())
+        state = fleet_state(
+            self.job, self.journal.clock, self.phase, self.drops.in_job(self.auctioneer.rejected())
+        )
         self.bus.publish(self.keys.coord_state(), state, control=True)
 
 
@@ -483,14 +470,6 @@ def _left_out(rec: TaskRecord) -> str:
     else:
         why = f"tried by {', '.join(sorted(rec.tried))}: every robot that could still work"
     return f"{rec.task.id} ({rec.task.area_m2:.2f} m² at ({x:.1f}, {y:.1f}), {why})"
-
-
-def dropped_before(meta: dict[str, object]) -> tuple[int, int]:
-    """(malformed, implausible): the messages the coordinators before this one dropped on the
-    bus in this job, from a resumed job's counters."""
-    before = meta.get("dropped")
-    before = before if isinstance(before, dict) else {}
-    return int(before.get("malformed", 0)), int(before.get("implausible", 0))
 
 
 def gathered(ready: int, expected: int, waited: float, grace_s: float) -> bool:

@@ -97,7 +97,7 @@ def test_a_pose_stamped_far_ahead_moves_neither_the_clock_nor_the_robot(
     assert robot.heartbeat_wall > 0.0 and robot.acked_seq == robot.award_seq
     assert coord.journal.clock == 5.05
     assert cbus.implausible == {"robot/*/pose": 1, "sim/clock": 1, "robot/*/status": 1}
-    assert coord._dropped() == (0, 3)
+    assert coord.drops.in_job(coord.auctioneer.rejected()) == (0, 3)
 
 
 def test_a_coordinator_believes_no_stamp_before_its_clock_has_synced(
@@ -268,7 +268,7 @@ def test_the_counts_survive_a_restart(
     again = JobStore(tmp_path / "job.sqlite")
     restarted = Coordinator(cbus, planner, 1, CFG.coordinator, again, bounds=Bounds.of(CFG))
     # one pose from robot-9 dropped by each
-    assert restarted._dropped() == (0, 2)
+    assert restarted.drops.in_job(restarted.auctioneer.rejected()) == (0, 2)
     again.close()
 
 
