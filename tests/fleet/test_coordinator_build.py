@@ -31,6 +31,7 @@ from fleet.plausible import Bounds
 from fleet.protocol import (
     Docks,
     FleetEvent,
+    FleetState,
     Message,
     Plan,
     Request,
@@ -235,6 +236,8 @@ def test_exploring_with_batteries_a_robot_that_falls_due_is_sent_to_a_dock_and_i
     events: list[FleetEvent] = []
     agent.subscribe(agent.keys.plan("robot-0"), Plan, lambda _key, plan: plans.append(plan))
     agent.subscribe(agent.keys.events(), FleetEvent, lambda _key, e: events.append(e))
+    states: list[FleetState] = []
+    agent.subscribe(agent.keys.coord_state(), FleetState, lambda _key, s: states.append(s))
     stop = threading.Event()
     low = cfg.robot.battery.recharge_threshold / 2
     also = _status(agent, plans, low)
@@ -246,8 +249,11 @@ def test_exploring_with_batteries_a_robot_that_falls_due_is_sent_to_a_dock_and_i
 
     try:
         assert wait_until(lambda: "robot-0" in c.job.robots), "robot-0's token not heard"
-        feeder.start()
         runner.start()
+        # the coordinator's state heard, the events subscription declared with it is in
+        # effect too: the first dock event, sent once the robot reports its charge, is not lost
+        assert wait_until(lambda: states, timeout=10), "no coordinator state heard"
+        feeder.start()
         assert wait_until(lambda: trips(), timeout=20), (plans, events)
         docks = agent.request(agent.keys.docks(), Request("robot-0"), Docks, 2.0)
         assert docks.poses.tolist() == [list(DOCK)]
