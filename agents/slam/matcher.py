@@ -74,15 +74,14 @@ class LikelihoodField:
     def bilinear(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """F and its gradient (dF/dx, dF/dy) at local points, interpolated between cell centres."""
         rows, cols = self.shape
-        u = (x - self.origin[0]) / self.resolution - 0.5
-        v = (y - self.origin[1]) / self.resolution - 0.5
-        u = np.clip(u, 0.0, cols - 1.001)
-        v = np.clip(v, 0.0, rows - 1.001)
-        j = np.floor(u).astype(np.int64)
-        i = np.floor(v).astype(np.int64)
+        u = np.clip((x - self.origin[0]) / self.resolution - 0.5, 0.0, cols - 1.001)
+        v = np.clip((y - self.origin[1]) / self.resolution - 0.5, 0.0, rows - 1.001)
+        j = u.astype(np.int64)  # u, v ≥ 0: truncation is the floor
+        i = v.astype(np.int64)
         fu, fv = u - j, v - i
-        f = self.values
-        f00, f01, f10, f11 = f[i, j], f[i, j + 1], f[i + 1, j], f[i + 1, j + 1]
+        at = i * cols + j
+        f = self.values.reshape(-1)
+        f00, f01, f10, f11 = f[at], f[at + 1], f[at + cols], f[at + cols + 1]
         value = (1 - fv) * ((1 - fu) * f00 + fu * f01) + fv * ((1 - fu) * f10 + fu * f11)
         d_du = (1 - fv) * (f01 - f00) + fv * (f11 - f10)
         d_dv = (1 - fu) * (f10 - f00) + fu * (f11 - f01)

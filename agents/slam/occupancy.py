@@ -60,7 +60,8 @@ class LogOddsGrid:
         if endpoints.shape[0] == 0 and misses.shape[0] == 0:
             return
         rows, cols = self.shape
-        delta = np.concatenate([endpoints, misses]) - sensor_xy
+        ends = np.concatenate([endpoints, misses])
+        delta = ends - sensor_xy
         length = np.hypot(delta[:, 0], delta[:, 1])
         step = 0.75 * self.resolution
         # a return's ray stops a cell short of its hit; a missing ray is free to its end
@@ -68,24 +69,27 @@ class LogOddsGrid:
         counts = np.ceil(np.maximum(free, 0.0) / step).astype(np.int64)
         beam = np.repeat(np.arange(counts.size), counts)
         first = np.repeat(np.cumsum(counts) - counts, counts)
-        frac = (np.arange(beam.size) - first) * step / np.maximum(length[beam], 1e-9)
-        samples = sensor_xy + frac[:, None] * delta[beam]
-        miss_rc = np.floor(self.to_cells(samples)).astype(np.int64)
+        frac = (np.arange(beam.size) - first) * step / np.maximum(length, 1e-9)[beam]
+        # the samples' cells, row and column apart (no (S, 2) temporaries)
+        res, (ox, oy) = self.resolution, self.origin
+        miss_r = np.floor((sensor_xy[1] + frac * delta[beam, 1] - oy) / res).astype(np.int64)
+        miss_c = np.floor((sensor_xy[0] + frac * delta[beam, 0] - ox) / res).astype(np.int64)
         hit_rc = np.floor(self.to_cells(endpoints)).astype(np.int64)
-        miss_ok = (
-            (miss_rc[:, 0] >= 0)
-            & (miss_rc[:, 0] < rows)
-            & (miss_rc[:, 1] >= 0)
-            & (miss_rc[:, 1] < cols)
-        )
-        hit_ok = (
-            (hit_rc[:, 0] >= 0)
-            & (hit_rc[:, 0] < rows)
-            & (hit_rc[:, 1] >= 0)
-            & (hit_rc[:, 1] < cols)
-        )
-        miss_flat = miss_rc[miss_ok, 0] * cols + miss_rc[miss_ok, 1]
-        hit_flat = np.unique(hit_rc[hit_ok, 0] * cols + hit_rc[hit_ok, 1])
+        if hit_rc.size and (hit_rc.min() < 0 or (hit_rc >= (rows, cols)).any()):
+            hit_rc = hit_rc[((hit_rc >= 0) & (hit_rc < (rows, cols))).all(axis=1)]
+        # the samples of a ray run monotonically in row and column: its first and last
+        # bound its cells (the sensor's is every ray's first)
+        last = (np.cumsum(counts) - 1)[counts > 0]
+        ends_rc = np.stack([miss_r[last], miss_c[last]], axis=1)
+        if last.size:
+            ends_rc = np.vstack([ends_rc, [(miss_r[0], miss_c[0])]])
+        if ends_rc.size and (ends_rc.min() < 0 or (ends_rc >= (rows, cols)).any()):
+            ok = (miss_r >= 0) & (miss_r < rows) & (miss_c >= 0) & (miss_c < cols)
+            miss_r, miss_c = miss_r[ok], miss_c[ok]
+            ends_rc = np.stack([miss_r, miss_c], axis=1)
+        bound = np.concatenate([ends_rc, hit_rc])
+        miss_flat = miss_r * cols + miss_c
+        hit_flat = np.unique(hit_rc[:, 0] * cols + hit_rc[:, 1])
         flat = self.log_odds.reshape(-1)
         mark = self._mark
         mark[miss_flat] = True
@@ -95,9 +99,8 @@ class LogOddsGrid:
         flat[miss_cells] = np.maximum(flat[miss_cells] + self.l_miss, self.l_min)
         flat[hit_flat] = np.minimum(flat[hit_flat] + self.l_hit, self.l_max)
         if miss_flat.size or hit_flat.size:
-            touched_rc = np.concatenate([miss_rc[miss_ok], hit_rc[hit_ok]])
-            r0, c0 = touched_rc.min(axis=0)
-            r1, c1 = touched_rc.max(axis=0) + 1
+            r0, c0 = bound.min(axis=0)
+            r1, c1 = bound.max(axis=0) + 1
             if self.touched is not None:
                 r0, r1 = min(r0, self.touched[0]), max(r1, self.touched[1])
                 c0, c1 = min(c0, self.touched[2]), max(c1, self.touched[3])
