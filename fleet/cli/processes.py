@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -22,6 +22,16 @@ from fleet.cli.options import (
 )
 from fleet.protocol import DEFAULT_FLEET
 from fleet.supervisor.fleet_processes import WRONG_MAP_EXIT
+
+if TYPE_CHECKING:  # imported where they run: `fleet` starts without them
+    from fleet.bus import Bus
+    from fleet.coordinator.charging import Pose
+    from fleet.coordinator.planning import TaskPlanner
+    from fleet.coordinator.service import Coordinator
+    from fleet.coordinator.store import JobStore
+    from fleet.coordinator.transits import TransitPlanner
+    from fleet.params import FleetConfig
+    from planners.grid import GridMap
 
 
 def router(
@@ -281,8 +291,17 @@ def coordinator(
 
 
 def _coordinator_service(
-    bus, cfg, robots, store, planner, transits, explore, docks, stored, source: str
-):
+    bus: Bus,
+    cfg: FleetConfig,
+    robots: int,
+    store: JobStore | None,
+    planner: TaskPlanner | None,
+    transits: TransitPlanner | None,
+    explore: Path | None,
+    docks: tuple[Pose, ...],
+    stored: tuple[GridMap, Path] | None,
+    source: str,
+) -> Coordinator:
     """The coordinator on ``bus`` with the parts the options and the config ask for
     (:func:`fleet.coordinator.build.build_coordinator`); exits naming what is wrong."""
     from fleet.coordinator.build import build_coordinator
