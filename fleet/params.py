@@ -229,7 +229,14 @@ REMOVED: dict[str, tuple[str, ...]] = {
     "coordinator": ("first_regions", "objective"),
     "tracker": ("gain_heading",),
     "dwa": ("path_aggregation",),
-    "coverage": ("method", "edge_pass", "max_task_area", "skip_order", "neighbour_cuts"),
+    "coverage": (
+        "method",
+        "edge_pass",
+        "max_task_area",
+        "skip_order",
+        "neighbour_cuts",
+        "return_strips",
+    ),
 }
 
 

@@ -18,22 +18,21 @@ class CoverageParams:
     cells per metre first, until the sweeps and passes cover a little more than
     ``fill_in_target`` of the cleanable area; the final pruning then drops the tasks that cost
     the most driving per cell while at least ``fill_in_target`` stays covered (1.0: every pass,
-    nothing lost). With ``return_strips`` a dead-end room may get a lane along the wall where
-    its lanes end (and lanes across its usual axis), so the way back to its door is sweeping
-    rather than a transit. Rooms are separated at openings narrower than ``door_width``; a room
-    smaller than ``min_room_area`` joins its largest neighbour. Every lane of a boustrophedon
-    cell is a task of its own, cut into pieces of at most ``max_lane_length``, so the tour
-    chooses the order and direction of every lane, can leave a cell part-swept to visit a
-    neighbour and come back, and k robots can balance the work finely. Time estimates use the
-    robot's top speed ``max_vel_x`` plus ``turn_cost_s`` per turn (a heading change over
-    ``turn_angle_deg``); the market's tasks (``planners.auction.split_tour``) are timed by the
-    robot's kinematics instead: a stop and a turn in place at each such turn (``max_vel_theta``,
-    ``acc_lim_theta``) and rest-to-rest runs between them (``max_vel_x``, ``acc_lim_x``).
+    nothing lost). A dead-end room may get a lane along the wall where its lanes end (and lanes
+    across its usual axis), so the way back to its door is sweeping rather than a transit. Rooms
+    are separated at openings narrower than ``door_width``; a room smaller than
+    ``min_room_area`` joins its largest neighbour. Every lane of a boustrophedon cell is a task
+    of its own, cut into pieces of at most ``max_lane_length``, so the tour chooses the order
+    and direction of every lane, can leave a cell part-swept to visit a neighbour and come back,
+    and k robots can balance the work finely. Time estimates use the robot's top speed
+    ``max_vel_x`` plus ``turn_cost_s`` per turn (a heading change over ``turn_angle_deg``); the
+    market's tasks (``planners.auction.split_tour``) are timed by the robot's kinematics
+    instead: a stop and a turn in place at each such turn (``max_vel_theta``, ``acc_lim_theta``)
+    and rest-to-rest runs between them (``max_vel_x``, ``acc_lim_x``).
     """
 
     overlap: float = 0.0
     fill_in: bool = True
-    return_strips: bool = True
     fill_in_target: float = 0.995
     turn_cost_s: float = 2.0
     turn_angle_deg: float = 45.0

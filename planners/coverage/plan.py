@@ -105,19 +105,19 @@ def plan_coverage(
     Steps: robot-centre cells (clearance ≥ radius + ``wall_clearance``) 4-connected to a start;
     rooms by distance-transform segmentation; per room the dominant wall direction, a frame
     rotated to it and the boustrophedon decomposition (Choset 2000) of the room in that frame;
-    lanes on one lattice per room (``lattice.room_lanes``); in a dead-end room with
-    ``params.return_strips``, lanes along either axis, with a return strip
-    (``strips.return_strips``) on either lane-end side or none, whichever gives the shortest
-    tour of the room alone from its door and back; sweep tasks per cell (its boustrophedon
-    lanes, each cut into pieces); one tour over all tasks of a connected part of the floor
-    (``tour.plan_tour``: task order, direction and variant by path-cost estimates between task
-    ends, ``geodesic.PathCosts``); with ``params.fill_in``, targeted passes for the floor the
-    sweeps miss (``fill_in.fill_in_tasks``) inserted into the tour where they cost least; for k
-    robots the tour is cut into contiguous pieces balancing estimated time, each re-ordered from
-    its robot's start; last, the tasks whose floor the rest of the driven path cleans anyway go,
-    and the fill-in's surplus over ``params.fill_in_target`` is traded for the tasks that cost
-    the most driving per cell (``prune.prune_driven``). Transits are straight when clear, A* on
-    the inflated grid otherwise.
+    lanes on one lattice per room (``lattice.room_lanes``); in a dead-end room, lanes along
+    either axis, with a return strip (``strips.return_strips``) on either lane-end side or none,
+    whichever gives the shortest tour of the room alone from its door and back; sweep tasks per
+    cell (its boustrophedon lanes, each cut into pieces); one tour over all tasks of a connected
+    part of the floor (``tour.plan_tour``: task order, direction and variant by path-cost
+    estimates between task ends, ``geodesic.PathCosts``); with ``params.fill_in``, targeted
+    passes for the floor the sweeps miss (``fill_in.fill_in_tasks``) inserted into the tour
+    where they cost least; for k robots the tour is cut into contiguous pieces balancing
+    estimated time, each re-ordered from its robot's start; last, the tasks whose floor the rest
+    of the driven path cleans anyway go, and the fill-in's surplus over
+    ``params.fill_in_target`` is traded for the tasks that cost the most driving per cell
+    (``prune.prune_driven``). Transits are straight when clear, A* on the inflated grid
+    otherwise.
     """
     t0 = time.perf_counter()
     params.validate()
@@ -218,7 +218,7 @@ def _room_sweeps(
     """Rooms by distance-transform segmentation; per room the dominant wall direction
     (``_sweep_angle``), a frame rotated to it and the boustrophedon decomposition (Choset
     2000) of the room in that frame, its lanes and its cells' sweep tasks (``_room_options``);
-    in a dead-end room with ``params.return_strips``, the option ``_choose_option`` picks."""
+    in a dead-end room, the option ``_choose_option`` picks."""
     res = grid.resolution
     rooms = segment_rooms(floor.reach, floor.clear, res, params.door_width, params.min_room_area)
     doors = _dead_end_doors(grid, rooms)
@@ -235,7 +235,7 @@ def _room_sweeps(
         room_mask = room_img == room
         angle = _sweep_angle(mask, res)
         base = len(cell_room)
-        strips = room in doors and params.return_strips
+        strips = room in doors
         options = []
         for a in (angle, angle + math.pi / 2) if strips else (angle,):
             options.extend(

@@ -191,6 +191,7 @@ def test_an_old_config_with_a_copy_of_the_robot_is_refused(
         ("agent", "peer_margin", 0.0),
         ("coordinator", "first_regions", "tour"),
         ("coverage", "method", "bcd"),
+        ("coverage", "return_strips", True),
     ],
 )
 def test_an_old_config_with_a_removed_option_is_refused_naming_it(
