@@ -173,7 +173,6 @@ class CoordinatorParams:
     map_change_min_size_m: float = 0.2
     map_change_wall_margin_m: float = 0.15
     map_change_robot_clear_m: float = 0.25
-    sweep_freed_floor: bool = False
 
     def validate(self) -> None:
         require_non_negative(self, "explore_gain_s_per_m2", "explore_min_gain_m2")
@@ -226,7 +225,7 @@ MOVED_TO_ROBOT: dict[str, dict[str, str]] = {
 # than told it is unknown and offered a near name; git and BENCHMARKS.md keep why each went.
 REMOVED: dict[str, tuple[str, ...]] = {
     "agent": ("edge_pass", "peer_margin", "swept_within"),
-    "coordinator": ("first_regions", "objective"),
+    "coordinator": ("first_regions", "objective", "sweep_freed_floor"),
     "tracker": ("gain_heading",),
     "dwa": ("path_aggregation",),
     "coverage": (

@@ -43,9 +43,6 @@ LEFT_OUT = (BLOCKED, UNREACHABLE, STRANDED)
 ALIVE, LOST, REJOINED = "alive", "lost", "rejoined"
 # a robot whose battery ran out away from a dock: it stands for good (RobotRecord.docking)
 EMPTY = "empty"
-# the tasks added to a job after its tour was cut, to sweep floor that furniture taken away
-# freed (fleet.coordinator.map_changes): "m01", "m02", ...; not pieces of the tour
-FREED_PREFIX = "m"
 # an exploring job's frontier tasks (fleet.coordinator.exploring): "f001", "f002", ...
 FRONTIER_PREFIX = "f"
 

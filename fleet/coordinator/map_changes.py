@@ -18,33 +18,23 @@ change found:
   its owner (what the owner swept of it stays swept: its remainder is what is taken back), cut
   where it runs into the furniture and joined round it where a transit gets round
   (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again;
-- for furniture taken away, with ``coordinator.sweep_freed_floor`` (off by default: on home it
-  cost more time than the floor it gained, BENCHMARKS.md, "Options off by default"): the floor
-  the brush reaches now and did not reach before (under it, and the band round it that robot
-  centres kept clear of) waits
-  until no more of it has been found for ``SETTLE_S`` (the robots see a piece's floor free a
-  part at a time, seconds apart: each part a task of its own was a trip of its own), then,
-  less what a task of the job sweeps already (the same change found again by a restarted
-  coordinator), is swept by one new task, "m01", "m02", ... (lanes over the patch, then
-  fill-in passes: ``TaskPlanner.task_over``), told in an ``added`` event and sold; under
-  ``MIN_TASK_M2`` of it is not worth a trip. Without the switch, the freed floor is on the
-  planning map (transits may cross it) and no task sweeps it.
+- for furniture taken away: the freed floor is on the planning map (transits may cross it, and
+  a tour planned after it sweeps what robot centres reach there) and no task is made for it (a
+  task of its own cost more time than the floor it gained: BENCHMARKS.md, "Options off by
+  default").
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Mapping
 
 import numpy as np
 
-from fleet.coordinator.job import FREED_PREFIX
 from fleet.coordinator.market import plan_around
 from fleet.coordinator.parts import Host
 from fleet.params import CoordinatorParams
 from planners.bodies import Rerouted
-from planners.coverage.metrics import swath
 from planners.grid import GridMap, clearance
 from planners.map_change import (
     ADDED,
@@ -57,11 +47,6 @@ from planners.map_change import (
 from planners.map_merge import LogOddsMap, Transform2D, merge_maps
 
 MAP_CHANGED = "map changed"
-ADDED_TASK = "added"
-# freed floor is swept once none has been found for this long (sim s; the map is looked at
-# every coordinator.map_check_every_s), and only when a task would sweep this much of it (m²)
-SETTLE_S = 10.0
-MIN_TASK_M2 = 0.05
 
 
 def map_change_params(params: CoordinatorParams) -> MapChangeParams:
@@ -77,16 +62,8 @@ def map_change_params(params: CoordinatorParams) -> MapChangeParams:
 class MapChanges:
     """The stored map as the robots have shown it changed, and what each change re-plans."""
 
-    def __init__(
-        self,
-        coordinator: Host,
-        stored: GridMap,
-        params: MapChangeParams,
-        sweep_freed: bool = False,
-    ) -> None:
+    def __init__(self, coordinator: Host, stored: GridMap, params: MapChangeParams) -> None:
         self.coordinator = coordinator
-        # floor furniture taken away frees gets a task (coordinator.sweep_freed_floor)
-        self.sweep_freed = sweep_freed
         self.stored = stored
         # the wall margin is kept from the map as it was stored, not from the furniture found
         # since: a piece's faces are seen one side at a time, and the side seen later (its far
@@ -96,9 +73,6 @@ class MapChanges:
         self.params = params
         # the furniture moved in so far, each piece the cells of its box (world centres)
         self.obstacles: list[np.ndarray] = []
-        # floor freed that no task sweeps yet (on the planning grid), and when it last grew
-        self.freed: np.ndarray | None = None
-        self.freed_at = 0.0
 
     def look(
         self, maps: Mapping[str, LogOddsMap], limits: tuple[float, float]
@@ -114,29 +88,12 @@ class MapChanges:
         found = find_changes(
             fused, self.stored, self.params, np.array(robots, float), self._stored_clearance
         )
-        taken = tuple(change for change in found if self.take(change))
-        self.sweep_settled()
-        return taken
-
-    def sweep_settled(self) -> bool:
-        """Sell a task for the floor freed so far once none more has been found for
-        ``SETTLE_S``; whether it did."""
-        c = self.coordinator
-        with c.lock:
-            if self.freed is None or c.journal.clock - self.freed_at < SETTLE_S:
-                return False
-            freed, self.freed = self.freed, None
-            if not self._sweep(freed):
-                return False
-            c.market.awards.send()
-            c.market.need_auction = True
-            c.market.wake.set()
-        return True
+        return tuple(change for change in found if self.take(change))
 
     def take(self, change: MapChange) -> bool:
         """Put ``change`` on the stored map and the planning map, tell it, and re-plan the
-        tasks new furniture lies in the way of, or sweep the floor it frees; whether it was
-        taken: not while the tour is being planned (the next look finds it again)."""
+        tasks new furniture lies in the way of; whether it was taken: not while the tour is
+        being planned (the next look finds it again)."""
         c = self.coordinator
         with c.lock:
             planner = c.planner
@@ -153,17 +110,12 @@ class MapChanges:
             if not added:
                 self._base = with_cells(self._base, cells, size, added)
                 self._stored_clearance = clearance(self._base)
-            before = planner.brushable
             planner.change_floor(with_cells(planner.grid, cells, size, added))
             c.journal.event(MAP_CHANGED, "", "", change.describe() + _planned(cells, size, added))
             if not added:
-                # before the tour is cut, the tour is planned on the changed floor (it sweeps
-                # what robot centres reach there; a rim the blob left keeps them out:
-                # docs/notes/stored-maps.md)
-                if c.job.tasks and self.sweep_freed:
-                    gained = planner.brushable & ~before
-                    self.freed = gained if self.freed is None else self.freed | gained
-                    self.freed_at = c.journal.clock
+                # freed floor is only put on the map: a tour planned after it sweeps what robot
+                # centres reach there (a rim the blob left keeps them out:
+                # docs/notes/stored-maps.md); after the tour is cut, no task sweeps it
                 return True
             self._plan_round(cells, size)
             c.market.awards.send()
@@ -197,29 +149,6 @@ class MapChanges:
             reroute,
         )
 
-    def _sweep(self, freed: np.ndarray) -> bool:
-        """Add and save a task that sweeps the cells ``freed`` (on the planning grid) that no
-        task of the job sweeps yet, when it sweeps at least ``MIN_TASK_M2``; whether it did."""
-        c = self.coordinator
-        planner, job = c.planner, c.job
-        half = planner.robot.cleaning_width / 2
-        if freed.any():
-            cells = planner.grid.cell_to_world(np.argwhere(freed))
-            lo, hi = cells.min(axis=0) - half, cells.max(axis=0) + half
-            for rec in job.tasks.values():
-                path = rec.task.path
-                if (path.min(axis=0) <= hi).all() and (path.max(axis=0) >= lo).all():
-                    freed &= ~swath(planner.grid, path, half)[0]
-        task = planner.task_over(freed, _fresh_id(job.tasks))
-        if task is None or task.area_m2 < MIN_TASK_M2:
-            return False
-        job.add_tasks((task,))
-        what = f"sweeps {task.area_m2:.2f} m² of floor that furniture taken away freed"
-        c.journal.event(ADDED_TASK, "", task.id, what)
-        c.journal.save_tasks(task.id)
-        c.market.version += 1
-        return True
-
 
 def _planned(cells: np.ndarray, size: float, added: bool) -> str:
     """What goes on the planning map, in words: the box of new furniture."""
@@ -227,10 +156,3 @@ def _planned(cells: np.ndarray, size: float, added: bool) -> str:
         return ""
     (x0, y0), (x1, y1) = cells.min(axis=0) - size / 2, cells.max(axis=0) + size / 2
     return f"; planned round as x {x0:.2f}–{x1:.2f}, y {y0:.2f}–{y1:.2f}"
-
-
-def _fresh_id(taken: Mapping[str, object]) -> str:
-    """The first task id "m01", "m02", ... that none of ``taken`` (nor a remainder of one)
-    has."""
-    bases = {tid.partition(".")[0] for tid in taken}
-    return next(t for k in itertools.count(1) if (t := f"{FREED_PREFIX}{k:02d}") not in bases)

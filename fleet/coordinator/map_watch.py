@@ -89,8 +89,7 @@ class MapWatch(Part):
         self.robots = host.expected
         params = self.cfg.coordinator
         if params.map_changes:
-            sweep = params.sweep_freed_floor
-            self.changes = MapChanges(host, self.stored, map_change_params(params), sweep)
+            self.changes = MapChanges(host, self.stored, map_change_params(params))
 
     def serve(self) -> None:
         self.bus.subscribe(self.bus.keys.all_robots("map"), MapPatches, self._on_map)

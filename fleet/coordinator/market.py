@@ -559,6 +559,5 @@ def region_lots(job: Job, sale: list[str]) -> Callable[[], tuple[auction.Lot, ..
 
 
 def _tour_key(task: auction.Task) -> tuple[int, ...]:
-    """Where a task lies along the tour: "t07" → (0, 7), its remainder "t07.1" → (0, 7, 1); a
-    task not of the tour (kind ``freed``: "m01") after all of it, (1, 1)."""
-    return (int(task.kind != "tour"), *(int(n) for n in re.findall(r"\d+", task.id)))
+    """Where a task lies along the tour: "t07" → (7,), its remainder "t07.1" → (7, 1)."""
+    return tuple(int(n) for n in re.findall(r"\d+", task.id))

@@ -30,11 +30,9 @@ import numpy as np
 from fleet.params import FleetConfig
 from fleet.world import World
 from planners.auction import Task, TravelGrid, split_tour
-from planners.auction.tasks import task_time
 from planners.bodies import Rerouted, reroute, with_bodies
 from planners.coverage import CoverageParams, CoveragePlan, plan_coverage
 from planners.coverage.metrics import swath
-from planners.coverage.patch import patch_sweep
 from planners.coverage.transit import Transit
 from planners.grid import GridMap, clearance, dilate, reachable
 from planners.polyline import densify, ending_at, without_straight_vertices
@@ -183,26 +181,6 @@ class TaskPlanner:
             self.target_s,
         )
         return tasks
-
-    def task_over(self, floor: np.ndarray, task_id: str) -> Task | None:
-        """The task ``task_id`` (kind ``freed``) that sweeps the cells ``floor`` (on
-        :attr:`grid`) the brush reaches (``planners.coverage.patch.patch_sweep``: lanes over the
-        patch, then fill-in passes up to ``coverage.fill_in_target``), priced as the tour's
-        tasks are (``planners.auction.tasks.task_time``); None when the brush reaches none of
-        it."""
-        sweep = patch_sweep(
-            self.grid,
-            floor & self.brushable,
-            self.reachable,
-            self.robot.cleaning_width / 2,
-            self.params.lane_spacing(self.robot),
-            self.transit,
-            self.params.fill_in_target,
-        )
-        if sweep is None:
-            return None
-        path, area = sweep
-        return Task(task_id, path, area, task_time(path, self.params, self.robot), (), "freed")
 
     def travel(self) -> TravelGrid:
         """Travel times on the floor plan as the robots' bids price them: obstacles grown by the

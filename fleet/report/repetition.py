@@ -14,8 +14,7 @@ each cell's entries in time order, and charges every entry but the first to:
   and what that stretch is in the coordinator's one-robot tour (its elements from the job's
   store, ``planners.tour_elements``): a lane, a turn inside a lane group, another pass (fill-in,
   strips), a hop between passes (by its length), the transit to the plan's first task, a
-  detour round a lost robot's body or a task added for freed floor (a sweep that is not on
-  the tour), or no plan at all. A
+  detour round a lost robot's body (a sweep that is not on the tour), or no plan at all. A
   position more than half a swath from its plan is *off the planned path*.
 
 The headline **cause** of a re-entry is the first of:
@@ -155,7 +154,7 @@ CAUSE_LABELS = {
     "hop_mid": f"hops {SHORT_HOP_M:g}-{LONG_HOP_M:g} m",
     "hop_short": f"hops <= {SHORT_HOP_M:g} m (U-turns)",
     "transit": "transits to a plan's first task",
-    "detour": "sweeps off the tour (round a body, freed floor)",
+    "detour": "detours round a body",
     "off_path": "off the planned path",
     "no_plan": "no plan",
     "turn_in_place": "turning in place",
@@ -298,10 +297,8 @@ def read_tour(path: Path) -> Tour:
         db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
         try:
             meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
-            # the tour's own tasks: not their remainders, nor floor added after it was cut
-            rows = db.execute(
-                "SELECT id, path FROM tasks WHERE parent IS NULL AND kind = 'tour'"
-            ).fetchall()
+            # the tour's own tasks, not their remainders
+            rows = db.execute("SELECT id, path FROM tasks WHERE parent IS NULL").fetchall()
         finally:
             db.close()
     except sqlite3.Error as e:

@@ -46,7 +46,7 @@ HOP_M = 0.5
 
 
 # what a Task is for (see Task)
-TASK_KINDS = ("tour", "freed", "frontier")
+TASK_KINDS = ("tour", "frontier")
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,9 +59,8 @@ class Task:
     rest-to-rest runs, see the module docstring), ``cells`` the ids of the boustrophedon cells
     whose floor it sweeps (sorted, unique). A remainder of ``"t07"`` is ``"t07.1"``, then
     ``"t07.2"``, of the same ``kind`` (``TASK_KINDS``): ``tour``, a piece of the coverage tour;
-    ``freed``, floor added after the tour was cut (furniture taken away); ``frontier``, an
-    exploring job's drive to a frontier. What a task is for is read from its kind, never from
-    its id.
+    ``frontier``, an exploring job's drive to a frontier. What a task is for is read from its
+    kind, never from its id.
     """
 
     id: str

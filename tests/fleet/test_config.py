@@ -190,6 +190,7 @@ def test_an_old_config_with_a_copy_of_the_robot_is_refused(
     [
         ("agent", "peer_margin", 0.0),
         ("coordinator", "first_regions", "tour"),
+        ("coordinator", "sweep_freed_floor", True),
         ("coverage", "method", "bcd"),
         ("coverage", "return_strips", True),
     ],

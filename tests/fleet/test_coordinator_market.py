@@ -580,22 +580,6 @@ def test_a_new_job_sells_the_whole_floor_again_as_a_first_allocation(
     store.close()
 
 
-def test_a_task_added_for_freed_floor_before_the_first_sale_is_sold_after_the_tour(
-    planner: TaskPlanner,
-) -> None:
-    """A freed-floor task (m01) that joined the job before its first allocation is sold with
-    the tour's tasks, placed after them in the regions' order."""
-    c = Coordinator(planner, ["robot-0", "robot-1"])
-    freed = Task("m01", np.array([[30.0, 0.0], [31.0, 0.0]]), 0.3, 2.0, (), "freed")
-    c.job.add_tasks((freed,))
-    c.bidding = {"robot-0": 1.0, "robot-1": 2.0}
-    c.market.auction(c.auctioneer)
-    assert not c.job.open_tasks()
-    owner = c.job.tasks["m01"].owner
-    assert owner is not None
-    assert [r.task.id for r in c.job.queue(owner)][-2:] == ["t05", "m01"]
-
-
 def _stall(c: Coordinator, start: float, peer_xy: tuple[float, float]) -> None:
     """robot-0 reports plan 7 on t00 every 5 s from ``start`` without getting anywhere while
     robot-1 stands at ``peer_xy``, until stall_s has passed."""

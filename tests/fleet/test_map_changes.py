@@ -2,7 +2,8 @@
 change found on the robots' maps is told, put on the planning map, and the task whose lane
 runs through the new furniture is taken back from its owner and replaced by what can be
 driven round it, what the owner swept staying swept; a lane clear of it is left alone, and a
-change is told once."""
+change is told once. Floor that furniture taken away frees goes on the planning map, and no
+task is made for it."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from fleet.coordinator.awards import Awards
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.job import ASSIGNED, BLOCKED, OPEN, REPLACED, Job
 from fleet.coordinator.journal import Journal
-from fleet.coordinator.map_changes import MAP_CHANGED, SETTLE_S, MapChanges
+from fleet.coordinator.map_changes import MAP_CHANGED, MapChanges
 from fleet.coordinator.market import Market
 from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.service import plan_tour
@@ -29,7 +30,7 @@ from planners.auction import Task
 from planners.bodies import Rerouted
 from planners.coverage.metrics import swath
 from planners.coverage.params import CoverageParams
-from planners.grid import GridMap, clearance
+from planners.grid import GridMap
 from planners.map_change import ADDED, REMOVED, MapChange, MapChangeParams
 from planners.map_merge import LogOddsMap
 from planners.polyline import densify
@@ -190,57 +191,6 @@ def table_cells(grid: GridMap) -> np.ndarray:
     return xy[near & (xy[:, 1] > y0 - 0.05) & (xy[:, 1] < y1 + 0.05)]
 
 
-def _swept(stand: Stand, tids: list[str]) -> np.ndarray:
-    g = stand.planner.grid
-    out = np.zeros(g.shape, dtype=bool)
-    for tid in tids:
-        out |= swath(g, stand.job.tasks[tid].task.path, CFG.robot.cleaning_width / 2)[0]
-    return out
-
-
-def test_floor_a_table_taken_away_frees_is_swept_by_a_new_task(stand: Stand) -> None:
-    before, stored = stand.planner.brushable.copy(), stand.stored
-    changes = MapChanges(stand, stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
-    # the robots see the table's floor free a half at a time, 4 s apart
-    cells = table_cells(stored)
-    west = cells[:, 0] < 2.4
-    changes.take(MapChange(REMOVED, cells[west], stored.resolution))
-    stand.journal.clock += 4.0
-    changes.take(MapChange(REMOVED, cells[~west], stored.resolution))
-    g = stand.planner.grid
-    middle = g.world_to_cell(np.array([2.4, 1.6]))
-    assert g.free[middle[0], middle[1]]
-    # no task until no more of it has been found for SETTLE_S: then one for both halves
-    stand.journal.clock += SETTLE_S - 0.5
-    assert not changes.sweep_settled() and not stand.events("added")
-    stand.journal.clock += 0.5
-    assert changes.sweep_settled()
-    new = [tid for tid in stand.job.tasks if tid.startswith("m")]
-    assert new == ["m01"] and stand.job.tasks["m01"].state == OPEN, new
-    assert [e.task for e in stand.events("added")] == new
-    # the new task sweeps all of the floor the brush did not reach with the table there
-    freed = stand.planner.brushable & ~before
-    assert freed.sum() * g.resolution**2 > 0.48  # the table's 0.8 × 0.6 m and the band round it
-    assert not (freed & ~_swept(stand, new)).any()
-    area = sum(stand.job.tasks[t].task.area_m2 for t in new)
-    assert area == pytest.approx(freed.sum() * g.resolution**2, rel=0.01)
-    # robot centres keep their clearance from what is still there: walls and the other lanes
-    clear = clearance(g) >= ROBOT.radius + CFG.coordinator.wall_clearance - 1e-9
-    for tid in new:
-        rc = g.world_to_cell(densify(stand.job.tasks[tid].task.path, g.resolution))
-        assert clear[rc[:, 0], rc[:, 1]].all(), tid
-        assert stand.job.tasks[tid].task.time_s > 0
-    assert stand.market.need_auction
-    # the same change found again by a restarted coordinator (planning on the stored map as it
-    # was, with the job's tasks) adds nothing: tasks of the job sweep that floor already
-    stand.planner.change_floor(stored)
-    again = MapChanges(stand, stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
-    again.take(MapChange(REMOVED, table_cells(stored), stored.resolution))
-    stand.journal.clock += SETTLE_S
-    assert not again.sweep_settled()
-    assert [tid for tid in stand.job.tasks if tid.startswith("m")] == new
-
-
 def test_a_lane_through_new_furniture_is_rerouted_once(stand: Stand) -> None:
     calls: list[int] = []
     planner = stand.planner
@@ -261,13 +211,11 @@ def test_a_lane_through_new_furniture_is_rerouted_once(stand: Stand) -> None:
 
 def test_before_the_tour_is_cut_freed_floor_is_left_to_the_tour() -> None:
     stand = Stand()
-    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
+    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
     changes.take(MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution))
     g = stand.planner.grid
     middle = g.world_to_cell(np.array([2.4, 1.6]))
     assert g.free[middle[0], middle[1]] and not stand.job.tasks
-    stand.journal.clock += SETTLE_S
-    assert not changes.sweep_settled() and not stand.events("added")
     # the tour planned now sweeps where the table stood
     tour = stand.planner.tasks()
     swept = np.zeros(g.shape, dtype=bool)
@@ -278,7 +226,7 @@ def test_before_the_tour_is_cut_freed_floor_is_left_to_the_tour() -> None:
 
 def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
     stand = Stand()
-    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
+    changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
     table = MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution)
     planner, plan = stand.planner, stand.planner.tasks
     floor = planner.grid
@@ -294,28 +242,25 @@ def test_a_change_found_while_the_tour_is_planned_waits_for_the_tasks() -> None:
     plan_tour(planner, stand.lock, stand.job.add_tasks)
     assert taken == [False] and planner.grid is floor and not planner.planning
     assert not stand.events(MAP_CHANGED) and stand.job.tasks
-    # the next look, the tour cut: the change is taken and its floor gets a task of its own
-    assert changes.take(table)
-    stand.journal.clock += SETTLE_S
-    assert changes.sweep_settled()
-    assert [e.task for e in stand.events("added")] == ["m01"]
+    # the next look, the tour cut: the change is taken
+    tasks = set(stand.job.tasks)
+    assert changes.take(table) and len(stand.events(MAP_CHANGED)) == 1
+    assert planner.grid is not floor and set(stand.job.tasks) == tasks
 
 
-def test_without_the_switch_freed_floor_is_on_the_map_and_in_no_task(stand: Stand) -> None:
+def test_floor_a_table_taken_away_frees_is_on_the_map_and_in_no_task(stand: Stand) -> None:
+    before, tasks = stand.planner.brushable.copy(), set(stand.job.tasks)
     changes = MapChanges(stand, stand.stored, MapChangeParams())  # type: ignore[arg-type]
     assert changes.take(MapChange(REMOVED, table_cells(stand.stored), stand.stored.resolution))
+    assert len(stand.events(MAP_CHANGED)) == 1
     g = stand.planner.grid
     middle = g.world_to_cell(np.array([2.4, 1.6]))
     assert g.free[middle[0], middle[1]]
-    stand.journal.clock += SETTLE_S
-    assert not changes.sweep_settled() and not stand.events("added")
-
-
-def test_freed_floor_too_small_for_a_trip_gets_no_task(stand: Stand) -> None:
-    changes = MapChanges(stand, stand.stored, MapChangeParams(), sweep_freed=True)  # type: ignore[arg-type]
-    # a sliver of the table's west face seen free (what the map drew a cell too thick)
-    cells = table_cells(stand.stored)
-    sliver = cells[cells[:, 0] < cells[:, 0].min() + 0.01]
-    assert changes.take(MapChange(REMOVED, sliver, stand.stored.resolution))
-    stand.journal.clock += SETTLE_S
-    assert not changes.sweep_settled() and not stand.events("added")
+    # the brush reaches the table's floor now, and transits may cross it
+    freed = stand.planner.brushable & ~before
+    assert freed.sum() * g.resolution**2 > 0.48  # the table's 0.8 × 0.6 m and the band round it
+    way = stand.planner.transit.path(np.array([2.4, 1.0]), np.array([2.4, 2.2]))
+    assert np.allclose(way[:, 0], 2.4), way
+    # no task sweeps it, nothing is taken back, nothing is sold
+    assert set(stand.job.tasks) == tasks and not stand.market.need_auction
+    assert stand.job.tasks["t00"].state == ASSIGNED and stand.job.tasks["t01"].state == ASSIGNED

@@ -172,19 +172,6 @@ def test_a_hop_driven_over_swept_floor_is_charged_to_hops_not_lanes(tmp_path: Pa
         assert part["hop_side_by_side"] > 0 and part["lane_over_hop"] > 0
 
 
-def test_a_task_added_for_freed_floor_is_no_piece_of_the_tour(tmp_path: Path) -> None:
-    sim = _make_run(tmp_path / "run")
-    before = breakdown(tmp_path / "run")
-    db = sqlite3.connect(tmp_path / "run" / "coordinator.sqlite")
-    freed = np.array([[0.5, 0.8], [1.5, 0.8]], dtype="<f8")
-    db.execute("INSERT INTO tasks VALUES ('m01', NULL, ?, 'freed')", (freed.tobytes(),))
-    db.commit()
-    db.close()
-    r = breakdown(tmp_path / "run")
-    assert r["causes"] == before["causes"]
-    assert r["tour"]["repetition"] == pytest.approx(100 * sim["repetition"], abs=1e-3)
-
-
 def test_a_run_dir_without_the_status_file_names_it_and_the_format(tmp_path: Path) -> None:
     _make_run(tmp_path / "run")
     (tmp_path / "run" / "status.csv").unlink()

@@ -3,21 +3,20 @@ with a chest moved in (configs/worlds/small_moved.yaml) on a stored map of the s
 it was, with a stool since taken away, over real processes and a real Zenoh router. The
 coordinator finds the chest on the robots' maps, says where in a `map changed` event, and
 re-plans the lanes that ran through it, so the job ends `done`; it finds the stool's floor
-free and, with `coordinator.sweep_freed_floor` on, has it swept by a task of its own. With
+free and puts it on the map it plans on, and makes no task of its own for it. With
 `coordinator.map_changes: false` the same run ends `incomplete` (exit 4): the lanes through
 the chest are tried by every robot in vain (BENCHMARKS.md, "Stored maps: fleet up --map")."""
 
 from __future__ import annotations
 
 import re
+import sqlite3
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from fleet.coordinator.exploring import write_ros_map
-from fleet.params import default_config_path
 from fleet.report.exploration import true_floor
 from fleet.supervisor.runner import RunningFleet
 from fleet.world import load_world
@@ -66,17 +65,16 @@ def _within(box: tuple[float, float, float, float], of: tuple[float, ...]) -> bo
     )
 
 
-def test_a_chest_moved_in_is_planned_round_and_a_stool_taken_away_swept(tmp_path: Path) -> None:
+def test_a_chest_moved_in_is_planned_round_and_a_stool_taken_away_put_on_the_map(
+    tmp_path: Path,
+) -> None:
     map_yaml = stored_map_of_small(tmp_path / "map")
-    config = yaml.safe_load(default_config_path().read_text())
-    config["coordinator"]["sweep_freed_floor"] = True
-    (tmp_path / "fleet.yaml").write_text(yaml.safe_dump(config))
     fleet = RunningFleet(
         tmp_path / "run",
         str(WORLDS / "small_moved.yaml"),
         3,
         timeout_s=200.0,
-        options=("--map", str(map_yaml), "--config", str(tmp_path / "fleet.yaml")),
+        options=("--map", str(map_yaml)),
     )
     try:
         report = fleet.finish(240.0)
@@ -95,11 +93,14 @@ def test_a_chest_moved_in_is_planned_round_and_a_stool_taken_away_swept(tmp_path
     assert added and freed, fleet.output
     assert all(_within(_box(e), CHEST) for e in added), added
     assert all(_within(_box(e), STOOL) for e in freed), freed
-    # the stool's floor was swept by a task of its own, done with the job
-    new = [e["task"] for e in fleet.events("added")]
-    assert new, fleet.output
-    done = {e["task"].partition(".")[0] for e in fleet.events("done")}
-    assert set(new) <= done, (new, done)
+    # no task of its own sweeps the stool's floor: the job's tasks are the tour's and their parts
+    (planned,) = fleet.events("planned")
+    db = sqlite3.connect(f"file:{fleet.dir / 'coordinator.sqlite'}?mode=ro", uri=True)
+    try:
+        kinds = db.execute("SELECT kind FROM tasks WHERE parent IS NULL").fetchall()
+    finally:
+        db.close()
+    assert planned["detail"] == f"{len(kinds)} tasks" and set(kinds) == {("tour",)}, kinds
     # the lanes through the chest were taken back and sold again round it
     assert fleet.events("rerouted"), fleet.output
     assert report["coverage"] >= 0.9, fleet.output
