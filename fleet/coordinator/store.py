@@ -290,14 +290,17 @@ class JobStore:
                 by,
                 kind,
             ) = row
-            task = Task(
-                tid,
-                np.frombuffer(path, dtype="<f8").reshape(-1, 2).copy(),
-                float(area),
-                float(t_s),
-                tuple(json.loads(cells)),
-                kind,
-            )
+            try:
+                task = Task(
+                    tid,
+                    np.frombuffer(path, dtype="<f8").reshape(-1, 2).copy(),
+                    float(area),
+                    float(t_s),
+                    tuple(json.loads(cells)),
+                    kind,
+                )
+            except ValueError as e:  # e.g. a kind this version no longer has
+                raise StoreError(f"{self.path}: cannot resume its job: {e}") from e
             job.tasks[tid] = TaskRecord(
                 task,
                 state,

@@ -297,8 +297,10 @@ def read_tour(path: Path) -> Tour:
         db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
         try:
             meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
-            # the tour's own tasks, not their remainders
-            rows = db.execute("SELECT id, path FROM tasks WHERE parent IS NULL").fetchall()
+            # the tour's own tasks: not their remainders, nor an exploring job's frontiers
+            rows = db.execute(
+                "SELECT id, path FROM tasks WHERE parent IS NULL AND kind = 'tour'"
+            ).fetchall()
         finally:
             db.close()
     except sqlite3.Error as e:

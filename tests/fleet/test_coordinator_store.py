@@ -59,6 +59,25 @@ def test_the_fleets_own_file_is_resumed(tmp_path: Path) -> None:
     store.close()
 
 
+def test_a_task_of_a_kind_this_version_does_not_have_is_refused_naming_the_file(
+    tmp_path: Path,
+) -> None:
+    """A job saved by a version with another task kind (``freed``, the floor furniture taken
+    away freed, swept by a task of its own until that option went) is not resumed: the store
+    says which file and why, as it does for every file it cannot resume."""
+    path = tmp_path / "coordinator.sqlite"
+    _job_file(path, **OURS)
+    db = sqlite3.connect(path)
+    db.execute("UPDATE tasks SET kind = 'freed' WHERE id = 't007'")
+    db.commit()
+    db.close()
+    store = JobStore(path, **OURS)  # type: ignore[arg-type]
+    with pytest.raises(StoreError, match="t007: kind 'freed' is not one of") as e:
+        store.load_job(Job(CoverageParams(), ROBOT, 0.0))
+    store.close()
+    assert str(path) in str(e.value)
+
+
 @pytest.mark.parametrize("share", [0.9, 0.5, 0.02])
 def test_a_file_cut_short_is_refused(tmp_path: Path, share: float) -> None:
     path = tmp_path / "coordinator.sqlite"
