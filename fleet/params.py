@@ -168,7 +168,6 @@ class CoordinatorParams:
     explore_match_m: float = 0.5
     explore_step_m: float = 0.05
     map_check_every_s: float = 2.0
-    map_changes: bool = True
     map_change_confidence: float = 0.85
     map_change_min_size_m: float = 0.2
     map_change_wall_margin_m: float = 0.15
@@ -225,7 +224,7 @@ MOVED_TO_ROBOT: dict[str, dict[str, str]] = {
 # than told it is unknown and offered a near name; git and BENCHMARKS.md keep why each went.
 REMOVED: dict[str, tuple[str, ...]] = {
     "agent": ("edge_pass", "peer_margin", "swept_within"),
-    "coordinator": ("first_regions", "objective", "sweep_freed_floor"),
+    "coordinator": ("first_regions", "objective", "sweep_freed_floor", "map_changes"),
     "tracker": ("gain_heading",),
     "dwa": ("path_aggregation",),
     "coverage": (

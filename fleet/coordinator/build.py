@@ -6,7 +6,7 @@ with the parts (:mod:`fleet.coordinator.parts`) its features need, in any combin
 - exploring (``coordinator --explore DIR``): :class:`fleet.coordinator.explore_part.
   ExplorePart`, planning on the robots' merged map instead of a floor plan;
 - a stored map (``coordinator --map MAP.yaml``): :class:`fleet.coordinator.map_watch.MapWatch`,
-  its check against the robots' maps and, with ``coordinator.map_changes``, its changes.
+  its check against the robots' maps and its changes.
 """
 
 from __future__ import annotations

@@ -10,9 +10,8 @@ or more, which the market's lock should not wait for). Once more than half of th
 robots agree with the map the watch ends, saying so in a ``map checked`` event; once more than
 half differ, it tells why in a ``wrong map`` event that names the map file and stops the
 coordinator, whose process then exits with
-:data:`fleet.supervisor.fleet_processes.WRONG_MAP_EXIT`. A map accepted is watched on, with
-``coordinator.map_changes``, for furniture moved since it was made
-(:mod:`fleet.coordinator.map_changes`).
+:data:`fleet.supervisor.fleet_processes.WRONG_MAP_EXIT`. A map accepted is watched on for furniture
+moved since it was made (:mod:`fleet.coordinator.map_changes`).
 """
 
 from __future__ import annotations
@@ -63,6 +62,7 @@ class MapWatch(Part):
     coordinator's main loop)."""
 
     coordinator: Host
+    changes: MapChanges  # set by wire, with the coordinator
 
     def __init__(self, bus: Bus, stored: GridMap, source: Path, cfg: FleetConfig) -> None:
         self.bus = bus
@@ -78,18 +78,14 @@ class MapWatch(Part):
         self.refused: str | None = None
         self._lock = threading.Lock()
         self._looked_at = -float("inf")
-        self.changes: MapChanges | None = None
         self._thread = threading.Thread(target=self._run, name="map-watch", daemon=True)
 
     def wire(self, host: Host) -> None:
-        """The coordinator it checks for (and stops), and, with ``coordinator.map_changes``,
-        the watch for furniture moved since the map was made, which it keeps true after the
-        check."""
+        """The coordinator it checks for (and stops), and the watch for furniture moved since
+        the map was made, which it keeps true after the check."""
         self.coordinator = host
         self.robots = host.expected
-        params = self.cfg.coordinator
-        if params.map_changes:
-            self.changes = MapChanges(host, self.stored, map_change_params(params))
+        self.changes = MapChanges(host, self.stored, map_change_params(self.cfg.coordinator))
 
     def serve(self) -> None:
         self.bus.subscribe(self.bus.keys.all_robots("map"), MapPatches, self._on_map)
@@ -110,7 +106,7 @@ class MapWatch(Part):
             self.maps.hear(rid, msg)
 
     def _run(self) -> None:
-        if self._check_map() and self.changes is not None:
+        if self._check_map():
             self._watch_changes(self.changes)
 
     def _due(self) -> bool:

@@ -191,6 +191,7 @@ def test_an_old_config_with_a_copy_of_the_robot_is_refused(
         ("agent", "peer_margin", 0.0),
         ("coordinator", "first_regions", "tour"),
         ("coordinator", "sweep_freed_floor", True),
+        ("coordinator", "map_changes", True),
         ("coverage", "method", "bcd"),
         ("coverage", "return_strips", True),
     ],
@@ -226,7 +227,6 @@ def test_dwa_may_not_sample_faster_than_the_robot_drives(tmp_path: Path) -> None
         ("map_change_min_size_m", 0.0, "must be > 0"),
         ("map_change_wall_margin_m", -0.1, "must be > 0"),
         ("map_change_robot_clear_m", 0.0, "must be > 0"),
-        ("map_changes", "yes", "expected"),
     ],
 )
 def test_what_counts_as_furniture_moved_is_checked_naming_the_field(

@@ -132,8 +132,7 @@ def test_the_factory_gives_the_coordinator_the_parts_asked_for_each_wired_to_it(
     watch = c.parts.of(MapWatch)
     if watch is not None:
         assert watch.coordinator is c and watch.robots == 2
-        assert (watch.changes is not None) == cfg.coordinator.map_changes
-        assert watch.changes is None or watch.changes.coordinator is c
+        assert watch.changes.coordinator is c
 
 
 def test_the_factory_refuses_batteries_without_a_dock(planner: TaskPlanner) -> None:

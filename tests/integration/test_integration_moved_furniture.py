@@ -3,9 +3,9 @@ with a chest moved in (configs/worlds/small_moved.yaml) on a stored map of the s
 it was, with a stool since taken away, over real processes and a real Zenoh router. The
 coordinator finds the chest on the robots' maps, says where in a `map changed` event, and
 re-plans the lanes that ran through it, so the job ends `done`; it finds the stool's floor
-free and puts it on the map it plans on, and makes no task of its own for it. With
-`coordinator.map_changes: false` the same run ends `incomplete` (exit 4): the lanes through
-the chest are tried by every robot in vain (BENCHMARKS.md, "Stored maps: fleet up --map")."""
+free and puts it on the map it plans on, and makes no task of its own for it. Without
+the change the same run ended `incomplete` (exit 4): the lanes through the chest were tried by
+every robot in vain (BENCHMARKS.md, "Stored maps: fleet up --map")."""
 
 from __future__ import annotations
 
