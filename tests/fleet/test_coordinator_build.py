@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from bus_stand_in import NoBus
 from test_coordinator_exploring import patches, room
-from test_explore_service import robot_and_clock
+from test_explore_part import robot_and_clock
 from waits import wait_until
 
 from fleet.bus import Bus
