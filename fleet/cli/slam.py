@@ -159,6 +159,14 @@ def bench_slam(
         str, typer.Option(help="With --log: noise seeds, 0,1,2 or 0-4 or a mix.")
     ] = "0,1,2",
     shift: ShiftOpt = 0.0,
+    every: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="With --log: keep one scan in this many, odometry made between the kept "
+            "ones (a sparse log: Freiburg 079's scans are 0.1 m apart, --every 9 makes 0.9 m).",
+        ),
+    ] = 1,
 ) -> None:
     """Drive one simulated robot around every room of a world, then score SLAM against truth;
     with --log, score SLAM on a real robot's log against the log's reference trajectory.
@@ -184,9 +192,10 @@ def bench_slam(
     Example: fleet bench slam --seconds 120 --out /tmp/slam-bench
     Example: fleet bench slam --shift 0.025   # the home's walls off the map's cell lattice
     Example: fleet bench slam --log aces-corrected.log.gz --seeds 0,1,2 --out /tmp/aces
+    Example: fleet bench slam --log freiburg-079-corrected.log.gz --every 9   # sparse scans
     """
     if log is not None:
-        _bench_log(log, seeds, out or Path("slam-bench"), config, as_json)
+        _bench_log(log, seeds, out or Path("slam-bench"), config, as_json, every)
         return
 
     from fleet.bench.slam import DEFAULT_ODOM_NOISE_SCALE, bench_route
@@ -246,7 +255,9 @@ def _route_world(config: Path | None, world: str, shift: float) -> tuple[Any, An
     return cfg, w
 
 
-def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: bool) -> None:
+def _bench_log(
+    log: Path, seeds: str, out: Path, config: Path | None, as_json: bool, every: int = 1
+) -> None:
     """``fleet bench slam --log``: run :func:`fleet.bench.slam_log.bench_log` with a progress
     bar per seed on stderr, then print JSON or the tables."""
     from fleet.bench.slam_log import bench_log
@@ -258,7 +269,7 @@ def _bench_log(log: Path, seeds: str, out: Path, config: Path | None, as_json: b
     try:
         cfg = load_fleet_config(config)
         with _log_progress(log) as progress:
-            summary = bench_log(log, cfg, seed_list, out, progress)
+            summary = bench_log(log, cfg, seed_list, out, progress, every)
     except (CarmenParseError, ConfigError) as e:
         typer.echo(f"error: {e}", err=True)
         raise typer.Exit(2) from None

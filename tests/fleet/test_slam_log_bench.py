@@ -90,6 +90,25 @@ def test_bench_log_writes_scores_and_maps_per_seed(tmp_path):
     assert json.loads((out / "bench.json").read_text())["seeds"] == [0, 1]
 
 
+def test_bench_log_every_keeps_one_scan_in_k_and_makes_odometry_between_them(tmp_path):
+    from fleet.cli import app
+
+    log = tmp_path / "room.log.gz"
+    truth = _write_room_log(log)
+    out = tmp_path / "bench"
+    args = ["bench", "slam", "--log", str(log), "--seeds", "0", "--out", str(out), "--json"]
+    result = CliRunner().invoke(app, [*args, "--every", "4"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["every"] == 4 and summary["scans"] == len(truth[::4])
+    steps = relative(truth[::4][:-1], truth[::4][1:])
+    assert summary["step_m_median"] == pytest.approx(np.median(np.hypot(*steps[:, :2].T)))
+    live = np.loadtxt(out / "seed-0" / "live.csv", delimiter=",", skiprows=1)
+    assert len(live) == len(truth[::4])
+    bad = CliRunner().invoke(app, [*args, "--every", "0"])
+    assert bad.exit_code == 2 and "--every" in bad.output
+
+
 def test_bench_log_rejects_bad_seeds(tmp_path):
     from fleet.cli import app
 
