@@ -18,6 +18,7 @@ from agents.slam.persistence import SavedState
 from agents.slam.relocalize import map_field, relocalize
 from agents.slam.slam import Slam
 from agents.slam.slam_map import SlamMap
+from agents.slam.submaps import map_lattice
 from fleet.protocol import LaserScan, Odometry
 from fleet.slam_params import SlamParams
 
@@ -148,8 +149,15 @@ class SlamPose:
     reason = ""
     own_frame = False
 
-    def __init__(self, params: SlamParams, start: Pose, range_min: float, range_max: float) -> None:
-        self._slam = Slam(params, start, range_min=range_min, range_max=range_max)
+    def __init__(
+        self,
+        params: SlamParams,
+        start: Pose,
+        range_min: float,
+        range_max: float,
+        lattice: tuple[float, float] | None = None,
+    ) -> None:
+        self._slam = Slam(params, start, range_min=range_min, range_max=range_max, lattice=lattice)
         self._odom: Pose | None = None
         self._history: deque[tuple[float, Pose]] = deque(maxlen=ODOM_HISTORY)
         self._odom_at_scan: Pose | None = None
@@ -182,12 +190,13 @@ class SlamPose:
         range_max: float,
         history: Sequence[Odometry],
         scan: LaserScan,
+        lattice: tuple[float, float] | None = None,
     ) -> SlamPose:
         """SLAM started at ``start``, the pose at ``scan``'s stamp, and given the recent
         odometry and that scan: its pose is tied to the odometry at the scan's stamp, and later
         odometry increments apply from there (a robot found in its saved map, or placed on the
-        fleet's)."""
-        slam = cls(params, start, range_min, range_max)
+        fleet's). ``lattice``: the map's cell boundaries (``Slam``), e.g. the saved map's."""
+        slam = cls(params, start, range_min, range_max, lattice)
         for odom in history:
             slam.on_odometry(odom)
         slam.on_scan(scan)
@@ -312,8 +321,16 @@ class RelocalizingSlamPose:
             self._reason = f"attempt {self._attempts}: {'; '.join(reasons)}"
             self._failed = self._attempts >= p.reloc_max_scans
             return
+        saved = self._saved.occupancy
         self._slam = SlamPose.found_at(
-            p, result.pose, self._range_min, self._range_max, self._history, msg
+            p,
+            result.pose,
+            self._range_min,
+            self._range_max,
+            self._history,
+            msg,
+            # on the saved map's lattice, so the new map can be laid over it (overlay)
+            tuple(map_lattice(saved.origin, saved.resolution)),
         )
         self._field = None
         self._reason = ""

@@ -22,14 +22,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.slam.geometry import compose, missing_rays, relative, scan_to_points
+from agents.slam.geometry import (
+    compose,
+    missing_rays,
+    relative,
+    scan_to_points,
+    transform_points,
+)
 from agents.slam.loop_closure import LoopCloser
 from agents.slam.matcher import CorrelativeMatcher
 from agents.slam.motion import prior_penalties, tracking_window
 from agents.slam.occupancy import log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
-from agents.slam.submaps import Submap, Submaps
+from agents.slam.submaps import Submap, Submaps, wall_lattice
 from agents.slam.trimmer import cover, fold
 from fleet.slam_params import SlamParams
 
@@ -68,7 +74,9 @@ class Slam:
     (and beyond ``params.max_range``) are treated as "no return": no hit, and free space only
     along the first ``params.missing_ray_length`` of a beam that saw nothing within the range.
     With ``keep_trajectory`` every scan's pose is remembered relative to its node, and
-    ``trajectory()`` returns them all as corrected by the latest optimization.
+    ``trajectory()`` returns them all as corrected by the latest optimization. The map's cell
+    boundaries lie at ``lattice`` (x, y offsets, e.g. a saved map's, ``map_lattice``), by
+    default where the first scan's walls fall on cell centres (``wall_lattice``).
     """
 
     def __init__(
@@ -78,8 +86,10 @@ class Slam:
         range_min: float = 0.0,
         range_max: float = math.inf,
         keep_trajectory: bool = False,
+        lattice: tuple[float, float] | None = None,
     ) -> None:
         self.params = params
+        self._lattice = lattice
         self._keep_trajectory = keep_trajectory
         self._anchor_ids: list[int] = []
         self._anchor_offsets: list[np.ndarray] = []
@@ -208,6 +218,10 @@ class Slam:
         p = self.params
         pose = self._pose
         if not self._submaps.all:
+            if self._lattice is not None:
+                self._submaps.lattice = np.mod(np.asarray(self._lattice, float), p.resolution)
+            elif points.shape[0] >= 3:
+                self._submaps.lattice = wall_lattice(transform_points(pose, points), p.resolution)
             self._submaps.start(pose)
         node_id = self._graph.add_pose(pose)
         if self._last_node_id is not None:

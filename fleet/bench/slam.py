@@ -116,9 +116,9 @@ def drive_command(
 
 def shift_world(world: World, dx: float, dy: float) -> World:
     """``world`` moved by (dx, dy) metres: walls, furniture, dock, start poses, bounds (and the
-    occupancy image's origin of a map world). The SLAM map's cell lattice is fixed in the
-    map frame, which starts at the robot's start pose, so moving the world by a fraction of a
-    cell puts its walls off the lattice, as real walls are."""
+    occupancy image's origin of a map world). Moving the world by a fraction of a cell puts
+    its walls off round coordinates, as real walls are; the SLAM map's cell lattice then has
+    to follow them (``agents.slam.submaps.wall_lattice``)."""
     d = np.array([dx, dy])
     x0, y0, x1, y1 = world.bounds
     grid = world.map_grid

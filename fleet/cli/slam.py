@@ -134,7 +134,8 @@ ShiftOpt = Annotated[
     float,
     typer.Option(
         help="Move the world by this many metres along x and y before driving (e.g. 0.025: "
-        "walls off the SLAM map's cell lattice, as real walls are; 0 keeps the world's own "
+        "walls on cell borders of a lattice on round numbers, as real walls are off any "
+        "lattice; the SLAM must put its lattice on them; 0 keeps the world's own "
         "coordinates, where home.yaml's walls sit on round numbers)."
     ),
 ]
@@ -190,7 +191,7 @@ def bench_slam(
     seeds): RPE over 20 scans ≤ 0.10 m, ATE ≤ 0.30 m, ≤ 10 ms median and ≤ 15 ms p95 per scan.
 
     Example: fleet bench slam --seconds 120 --out /tmp/slam-bench
-    Example: fleet bench slam --shift 0.025   # the home's walls off the map's cell lattice
+    Example: fleet bench slam --shift 0.025   # the home's walls off round coordinates
     Example: fleet bench slam --log aces-corrected.log.gz --seeds 0,1,2 --out /tmp/aces
     Example: fleet bench slam --log freiburg-079-corrected.log.gz --every 9   # sparse scans
     """

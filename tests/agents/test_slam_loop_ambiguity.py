@@ -55,7 +55,9 @@ def _drive(params: SlamParams) -> tuple[np.ndarray, Slam]:
     segments = _staircase(-8.0, 20.0)
     route = _route()
     rng = np.random.default_rng(0)
-    slam = Slam(params, tuple(route[0]), range_min=0.1, range_max=6.0)
+    # the map's cells are the raster the staircase was drawn on: its steps one cell each
+    half = 0.5 * params.resolution
+    slam = Slam(params, tuple(route[0]), range_min=0.1, range_max=6.0, lattice=(half, half))
     errors = []
     for k, pose in enumerate(route):
         est = slam.process(*scan(segments, pose, rng=rng), tuple(pose), 0.1 * k)

@@ -291,6 +291,11 @@ def test_relocalizing_pose_source_localizes_then_tracks_the_robot(
     assert travelled > 3.0 and math.dist(core.truth()["r"][:2], start_xy) > 1.0
     xy, theta = _error(source.pose(), core.truth()["r"])
     assert worst < 0.06 and xy < 0.05 and theta < math.radians(2.0)
+    # the new SLAM is on the saved map's lattice, so its map is laid over the saved one
+    merged = source.occupancy()
+    assert np.count_nonzero(merged.log_odds) > np.count_nonzero(saved.occupancy.log_odds)
+    shift = (np.asarray(saved.occupancy.origin) - np.asarray(merged.origin)) / 0.05
+    assert np.abs(shift - np.rint(shift)).max() < 1e-3
 
 
 def test_relocalizing_pose_source_fails_after_max_scans_with_the_last_reason(
