@@ -35,7 +35,7 @@ from agents.slam.motion import prior_penalties, tracking_window
 from agents.slam.occupancy import log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
-from agents.slam.submaps import Submap, Submaps, wall_lattice
+from agents.slam.submaps import Submap, Submaps, map_lattice, wall_lattice
 from agents.slam.trimmer import cover, fold
 from fleet.slam_params import SlamParams
 
@@ -219,7 +219,7 @@ class Slam:
         pose = self._pose
         if not self._submaps.all:
             if self._lattice is not None:
-                self._submaps.lattice = np.mod(np.asarray(self._lattice, float), p.resolution)
+                self._submaps.lattice = map_lattice(self._lattice, p.resolution)
             elif points.shape[0] >= 3:
                 self._submaps.lattice = wall_lattice(transform_points(pose, points), p.resolution)
             self._submaps.start(pose)
