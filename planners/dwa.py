@@ -23,11 +23,12 @@ from planners.robot import RobotSpec
 # Smallest body-to-obstacle gap used in the 1/gap obstacle cost: keeps the cost finite when a
 # robot that already is closer than robot_radius + safety_margin (sensor noise) moves away.
 _MIN_GAP = 1e-3
-# How much nearer than it starts a robot already within robot_radius + safety_margin may come on
-# its way out (m): the noise of the 5-beam median's nearest point. Down to the bare radius, as it
-# was, a rollout passing a convex corner tangentially (nearer, then farther) was admitted on a
-# scan that read the corner a few mm wide, and creeping past step by step touched it.
-_SLIDE_NOISE = 0.005
+# The noise of the agent's 5-beam median's nearest point (m): how much nearer than it starts a
+# robot already within robot_radius + safety_margin may come on its way out (the path tracker's
+# check allows its commands the same). Down to the bare radius, as it was, a rollout passing a
+# convex corner tangentially (nearer, then farther) was admitted on a scan that read the corner
+# a few mm wide, and creeping past step by step touched it.
+MEDIAN_NOISE_M = 0.005
 
 
 @dataclass(frozen=True)
@@ -315,7 +316,7 @@ def _obstacle_terms(
     A rollout is inadmissible if any of its points has clearance (distance from the robot
     centre to the nearest obstacle point) below ``robot_radius + safety_margin``. A robot that
     already is that close (lidar noise biases the nearest point low; a pushed robot) may also
-    take trajectories that come at most ``_SLIDE_NOISE`` nearer than it starts (never under
+    take trajectories that come at most ``MEDIAN_NOISE_M`` nearer than it starts (never under
     robot_radius) and end at least as far from obstacles as it starts, so it can slide out
     instead of freezing.
     """
@@ -329,7 +330,7 @@ def _obstacle_terms(
     start_clear = float(tree.query(np.asarray(pose[:2], dtype=float))[0])
     ok = min_clear >= threshold
     if start_clear < threshold:
-        floor = max(robot_radius, start_clear - _SLIDE_NOISE)
+        floor = max(robot_radius, start_clear - MEDIAN_NOISE_M)
         ok |= (min_clear >= floor) & (clearance[:, -1] >= start_clear)
     return ok, params.occdist_scale / np.maximum(min_clear - robot_radius, _MIN_GAP)
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from agents.follow.primitives import gaps, held
 from agents.follow.state import FollowParams, FollowState, Pose, Situation
-from planners.dwa import DWAResult, rollout
+from planners.dwa import MEDIAN_NOISE_M, DWAResult, rollout
 from planners.polyline import densify
 from planners.tracking import (
     Frenet,
@@ -36,9 +36,6 @@ from planners.tracking import (
 PATH_NOISE_M = 0.01
 # the braking arc is checked at points this far apart (m)
 CHECK_SPACING_M = 0.02
-# a command may bring the body this much (m) nearer an obstacle it is already within
-# tracker.check_margin of: the 5-beam median's noise
-NOISE_M = 0.005
 
 
 def tracked(waypoints: np.ndarray, sweep_from: int, params: FollowParams) -> FollowState:
@@ -159,15 +156,18 @@ def clear(
     corner of a table), along the arc the robot brakes along from the command, and of the
     peers' discs along DWA's own rollout
     (the command held for ``dwa.sim_time``, as far ahead as the peers' intents are judged);
-    where the robot is nearer already, it may come no more than ``NOISE_M`` nearer, and never
-    nearer than ``NOISE_M`` (step by step that allowance let a robot 1.2 cm off its line creep
-    onto a table's edge)."""
+    where the robot is nearer already, it may come no more than ``MEDIAN_NOISE_M`` nearer, and
+    never nearer than ``MEDIAN_NOISE_M`` (step by step that allowance let a robot 1.2 cm off its
+    line creep onto a table's edge)."""
     radius, margin = params.robot.radius, params.tracker.check_margin
     tracked_path, plan = ahead
     if len(tracked_path) and len(now.obstacles):
         walls, _ = gaps(tracked_path, now.obstacles, np.zeros((0, 2)), radius)
         planned, _ = gaps(plan, now.obstacles, np.zeros((0, 2)), radius)
-        if walls.min() - radius < margin - PATH_NOISE_M or walls.min() < planned.min() - NOISE_M:
+        if (
+            walls.min() - radius < margin - PATH_NOISE_M
+            or walls.min() < planned.min() - MEDIAN_NOISE_M
+        ):
             return False
     here = np.asarray(now.pose[:2], dtype=float)[None, :]
     arc = braking_arc(
@@ -176,7 +176,7 @@ def clear(
     if len(arc) and len(now.obstacles):
         walls, _ = gaps(np.vstack([here, arc]), now.obstacles, np.zeros((0, 2)), radius)
         walls = walls - radius
-        if walls[1:].min() < max(NOISE_M, min(margin, walls[0] - NOISE_M)):
+        if walls[1:].min() < max(MEDIAN_NOISE_M, min(margin, walls[0] - MEDIAN_NOISE_M)):
             return False
     if not len(now.peers) or v <= 0:
         return True
@@ -186,7 +186,9 @@ def clear(
     )
     _, robots = gaps(np.column_stack([xs[0], ys[0]]), np.zeros((0, 2)), now.peers, radius)
     robots = robots - radius
-    return bool(robots[1:].min() >= min(margin + params.dwa.safety_margin, robots[0] - NOISE_M))
+    return bool(
+        robots[1:].min() >= min(margin + params.dwa.safety_margin, robots[0] - MEDIAN_NOISE_M)
+    )
 
 
 def track_step(
