@@ -41,7 +41,10 @@ def test_robots_run_down_charge_and_the_job_still_finishes(tmp_path: Path) -> No
     )
     events = run.events()
     homes = [(e["robot"], e["detail"]) for e in events if e["kind"] == "dock"]
-    assert ("robot-1", "sent home by cli: to dock 0") in homes, run.explained()
+    # to the dock, or to wait by it when robot-0 stands on it without work at that moment
+    # (between its awards, as in one CI run): either way sent home, and charged below
+    sent = {"sent home by cli: to dock 0", "sent home by cli: to wait by dock 0"}
+    assert any(rid == "robot-1" and why in sent for rid, why in homes), run.explained()
     low = {rid for rid, why in homes if "below" in why}
     assert low, run.explained()  # the threshold sent a robot to charge
     charged = {e["robot"] for e in events if e["kind"] == "charged"}
