@@ -89,7 +89,8 @@ def test_exploring_with_batteries_charges_each_robot_when_due_and_the_fleet_clea
     for rid in ROBOTS:
         due = [e["sim"] for e in explored if e["robot"] == rid and _due(e)]
         charging = [e["sim"] for e in explored if e["kind"] == "charging" and e["robot"] == rid]
-        assert due and charging and due[0] < charging[0] < finished, f"{rid}\n{told}"
+        # (charging may come on the very step the exploring finishes: the log has it first)
+        assert due and charging and due[0] < charging[0] <= finished, f"{rid}\n{told}"
     wrong = _due_and_charged(explored, "exploring") + _due_and_charged(run.events(), "cleaning")
     assert not wrong, f"{wrong}\n{told}\n{run.explained()}"
     batteries = {rid: r["battery"] for rid, r in report["robots"].items()}
