@@ -212,6 +212,40 @@ def on_stored_map(world: World, map_path: str | Path) -> World:
     return World(world.name, path, (), (), grid, world.docks, world.starts, bounds)
 
 
+def turned_world(world: World, degrees: float) -> World:
+    """``world`` turned by ``degrees`` (counter-clockwise) about the centre of its bounds:
+    walls, furniture, docks and start poses, its bounds the box round its turned bounds; named
+    ``NAME-turnedD``. A robot maps a real home in the frame it started in, so its walls run
+    along no axis of the map: a turned world is how that is tried on a known plan. Vector worlds
+    only; a ConfigError names a map world's file."""
+    if world.map_grid is not None:
+        raise ConfigError(f"{world.source}: a map image cannot be turned; only a vector world")
+    a = math.radians(degrees)
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    x0, y0, x1, y1 = world.bounds
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+
+    def turn(points: np.ndarray) -> np.ndarray:
+        return (np.asarray(points, dtype=float) - centre) @ rot.T + centre
+
+    def turn_pose(pose: Pose) -> Pose:
+        x, y = turn(np.array(pose[:2]))
+        return (float(x), float(y), math.remainder(pose[2] + a, 2 * math.pi))
+
+    corners = turn(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    return World(
+        f"{world.name}-turned{degrees:g}",
+        world.source,
+        tuple(turn(w) for w in world.walls),
+        tuple(Furniture(f.name, turn(f.polygon)) for f in world.furniture),
+        None,
+        tuple(turn_pose(d) for d in world.docks),
+        tuple(turn_pose(p) for p in world.starts),
+        (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+    )
+
+
 def _number(value: Any, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ConfigError(f"{where}: expected a finite number, got {value!r}")

@@ -24,7 +24,9 @@ happened (edge: the wall follower's).
 
 from __future__ import annotations
 
+import contextlib
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -41,6 +43,7 @@ from fleet.protocol import TIME_KINDS
 from fleet.world import World
 from planners.tour_elements import LANE, TourElements
 from sim_server.core import SimCore
+from sim_server.recorder import CarmenRecorder
 
 ROBOT = "robot-0"
 
@@ -99,9 +102,12 @@ def follow_tour(
     pose_source: str = "slam",
     latency_s: float = 0.0,
     time_factor: float = 4.0,
+    record: Path | None = None,
 ) -> dict[str, Any]:
     """Drive the whole tour once; stops when the plan is done or after ``time_factor`` times
-    the plan's estimate (plus a minute)."""
+    the plan's estimate (plus a minute). With ``record``, the run's scans and odometry are
+    written there as a CARMEN log, the true poses beside it (:mod:`sim_server.recorder`), so
+    that ``fleet slam replay`` scores the SLAM on the coverage tour itself."""
     if pose_source not in ("slam", "truth"):
         raise ValueError(f"pose source must be slam or truth, not {pose_source!r}")
     wall0 = time.perf_counter()
@@ -134,48 +140,56 @@ def follow_tour(
     limit = time_factor * estimate + 60.0
     finished_at = None
     kind = "idle"
-    while core.t < limit:
-        out = core.step()
-        contacts += [
-            (round(c.stamp, 1), round(c.x, 3), round(c.y, 3), kind) for c in out.collisions
-        ]
-        while pending and pending[0][0] <= core.t + 1e-9:
-            _, v, w = pending.pop(0)
-            core.set_cmd(ROBOT, v, w)
-        for _, odom in out.odometry:
-            velocity = (odom.v, odom.w)
-            if slam is not None:
-                slam.on_odometry(odom)
-        for _, scan in out.scans:
-            if slam is not None:
-                slam.on_scan(scan)
-                pose = slam.pose()
-            else:
-                pose = core.truth()[ROBOT]
-            obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
-            before = follow
-            ahead = predict(pose, command, latency_s)
-            follow, result = follow_step(
-                follow, Situation(ahead, velocity, obstacles, np.zeros((0, 2))), params
-            )
-            kind = step_kind(before, follow, sweep_from)
-            time_use[kind] += dt
-            if follow.skipped > before.skipped:
-                wp = before.waypoints[before.index]
-                given_up.append((round(float(wp[0]), 3), round(float(wp[1]), 3)))
-            if kind == "sweep" and 0 < follow.index < len(waypoints):
-                truth_xy = np.array(core.truth()[ROBOT][:2])
-                a, b = waypoints[follow.index - 1], waypoints[follow.index]
-                tracking.append(_segment_distance(truth_xy, a, b))
-                across = _cross_track(truth_xy, a, b) if on_lane[follow.index - 1] else None
-                if across is not None:
-                    cross.append(across)
-            command = (0.0, 0.0) if result is None else (result.v, result.w)
-            pending.append((scan.stamp + latency_s, *command))
-            if result is None and finished_at is None:
-                finished_at = core.t
-        if finished_at is not None:
-            break
+    with contextlib.ExitStack() as stack:
+        recorder = (
+            stack.enter_context(CarmenRecorder(record, ROBOT, f"fleet bench follow: {world.name}"))
+            if record is not None
+            else None
+        )
+        while core.t < limit:
+            out = core.step()
+            if recorder is not None:
+                recorder.record(out.odometry, out.scans, core.truth)
+            contacts += [
+                (round(c.stamp, 1), round(c.x, 3), round(c.y, 3), kind) for c in out.collisions
+            ]
+            while pending and pending[0][0] <= core.t + 1e-9:
+                _, v, w = pending.pop(0)
+                core.set_cmd(ROBOT, v, w)
+            for _, odom in out.odometry:
+                velocity = (odom.v, odom.w)
+                if slam is not None:
+                    slam.on_odometry(odom)
+            for _, scan in out.scans:
+                if slam is not None:
+                    slam.on_scan(scan)
+                    pose = slam.pose()
+                else:
+                    pose = core.truth()[ROBOT]
+                obstacles = scan_points(pose, scan.ranges, scan.angle_min, scan.angle_increment)
+                before = follow
+                ahead = predict(pose, command, latency_s)
+                follow, result = follow_step(
+                    follow, Situation(ahead, velocity, obstacles, np.zeros((0, 2))), params
+                )
+                kind = step_kind(before, follow, sweep_from)
+                time_use[kind] += dt
+                if follow.skipped > before.skipped:
+                    wp = before.waypoints[before.index]
+                    given_up.append((round(float(wp[0]), 3), round(float(wp[1]), 3)))
+                if kind == "sweep" and 0 < follow.index < len(waypoints):
+                    truth_xy = np.array(core.truth()[ROBOT][:2])
+                    a, b = waypoints[follow.index - 1], waypoints[follow.index]
+                    tracking.append(_segment_distance(truth_xy, a, b))
+                    across = _cross_track(truth_xy, a, b) if on_lane[follow.index - 1] else None
+                    if across is not None:
+                        cross.append(across)
+                command = (0.0, 0.0) if result is None else (result.v, result.w)
+                pending.append((scan.stamp + latency_s, *command))
+                if result is None and finished_at is None:
+                    finished_at = core.t
+            if finished_at is not None:
+                break
     summary = core.summary(time.perf_counter() - wall0)
     return {
         "world": world.name,

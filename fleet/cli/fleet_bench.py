@@ -8,7 +8,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -30,6 +30,10 @@ from fleet.cli.options import (
     RunTimeoutOpt,
     WorldOpt,
 )
+
+if TYPE_CHECKING:
+    from fleet.params import FleetConfig
+    from fleet.world import World
 
 WorldsOpt = Annotated[
     str,
@@ -99,6 +103,53 @@ def bench_fleet(
     print_result(result, as_json, table_lines)
 
 
+TurnOpt = Annotated[
+    float,
+    typer.Option(
+        "--turn",
+        help="Turn every world by this many degrees about its centre first, so that its walls "
+        "run along no axis of the map, as in a home mapped from wherever a robot started "
+        "(vector worlds only).",
+    ),
+]
+RecordOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--record",
+        help="Write each run's scans and odometry into this directory as a CARMEN log, "
+        "WORLD-seedS.log with its true poses beside it: `fleet slam replay` scores the SLAM on "
+        "the coverage tour.",
+    ),
+]
+
+
+def _follow_worlds(
+    worlds: str, turn: float, config: Path | None
+) -> tuple[FleetConfig, list[World]]:
+    """The fleet config and the worlds of `fleet bench follow`, turned by ``turn`` degrees;
+    a bad argument ends the command with its message."""
+    from fleet.config import ConfigError, resolve_world
+    from fleet.params import load_fleet_config
+    from fleet.world import load_world, turned_world
+
+    if not math.isfinite(turn):
+        _fail(f"--turn must be a finite number of degrees, got {turn}")
+    try:
+        cfg = load_fleet_config(config)
+        chosen = [
+            load_world(resolve_world(w.strip()), cfg.robot.radius)
+            for w in worlds.split(",")
+            if w.strip()
+        ]
+        if turn:
+            chosen = [turned_world(w, turn) for w in chosen]
+    except ConfigError as e:
+        _fail(str(e))
+    if not chosen:
+        _fail("--worlds: no world given")
+    return cfg, chosen
+
+
 def bench_follow(
     worlds: WorldsOpt = "small,home",
     seeds: SeedsOpt = "0-4",
@@ -119,6 +170,8 @@ def bench_follow(
     config: Annotated[
         Path | None, typer.Option("--config", help="fleet.yaml to use instead of the default.")
     ] = None,
+    turn: TurnOpt = 0.0,
+    record: RecordOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """One robot drives the coordinator's whole coverage tour with the real path follower on
@@ -134,32 +187,27 @@ def bench_follow(
     seeds and maps.
 
     Examples: `fleet bench follow`; `fleet bench follow --worlds home --seeds 0-9 --json`;
-    `fleet bench follow --worlds ../shared/data/maps/cob_ipa_apartment.yaml --pose truth`.
+    `fleet bench follow --worlds ../shared/data/maps/cob_ipa_apartment.yaml --pose truth`;
+    `fleet bench follow --worlds home --turn 20 --pose truth --record /tmp/tours`, then
+    `fleet slam replay /tmp/tours/home-turned20-seed0.log`.
     """
     from fleet.bench.follow import follow_tour, run_line, summarize
-    from fleet.config import ConfigError, resolve_world
-    from fleet.params import load_fleet_config
-    from fleet.world import load_world
 
     if pose not in ("slam", "truth"):
         _fail(f"--pose must be slam or truth, not {pose!r}")
     if latency < 0 or not math.isfinite(latency):
         _fail(f"--latency must be a finite number >= 0, got {latency}")
-    try:
-        cfg = load_fleet_config(config)
-        chosen = [
-            load_world(resolve_world(w.strip()), cfg.robot.radius)
-            for w in worlds.split(",")
-            if w.strip()
-        ]
-    except ConfigError as e:
-        _fail(str(e))
-    if not chosen:
-        _fail("--worlds: no world given")
+    cfg, chosen = _follow_worlds(worlds, turn, config)
+    if record is not None:
+        try:
+            record.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            _fail(f"--record {record}: {e.strerror}")
     runs = []
     for world in chosen:
         for seed in parse_seeds(seeds):
-            runs.append(follow_tour(world, cfg, seed, pose, latency))
+            log = None if record is None else record / f"{world.name}-seed{seed}.log"
+            runs.append(follow_tour(world, cfg, seed, pose, latency, record=log))
             print(run_line(runs[-1]), file=sys.stderr, flush=True)
     result = {"pose": pose, "latency_s": latency, "runs": runs, "worlds": summarize(runs)}
     if as_json:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -102,16 +103,18 @@ def test_bad_arguments_are_refused_before_any_run(args: list[str], message: str)
     assert out.returncode != 0 and message in out.stderr, out.stderr
 
 
-def test_one_robot_drives_the_small_worlds_whole_tour_in_process() -> None:
+def test_one_robot_drives_the_small_worlds_whole_tour_in_process(tmp_path: Path) -> None:
     from agents.follow.state import FollowParams
     from fleet.bench.follow import follow_tour
+    from fleet.carmen import read_log
     from fleet.config import resolve_world
     from fleet.params import load_fleet_config
     from fleet.world import load_world
 
     cfg = load_fleet_config()
     world = load_world(resolve_world("small"), cfg.robot.radius)
-    r = follow_tour(world, cfg, seed=0, pose_source="truth")
+    log = tmp_path / "tour.log"
+    r = follow_tour(world, cfg, seed=0, pose_source="truth", record=log)
     assert r["finished"] and r["contacts"] == 0
     assert r["coverage"] > 0.95 and 0.0 < r["repetition"] < 0.6
     # every control step is put somewhere, and the run took longer than the plan's estimate
@@ -125,6 +128,13 @@ def test_one_robot_drives_the_small_worlds_whole_tour_in_process() -> None:
     assert lane["steps"] > 0.25 * r["time_s"]["sweep"] / FollowParams.of(cfg).dt
     assert 0 < lane["mean"] < lane["p95"] <= lane["max"] <= r["tracking_m"]["max"]
     assert len(r["given_up_points"]) == r["given_up"]
+    # the recording holds every scan the follower answered, the true pose beside each
+    scans = read_log(log).front_scans
+    steps = sum(r["time_s"].values()) / FollowParams.of(cfg).dt
+    assert abs(len(scans) - steps) <= 2
+    truth = np.loadtxt(f"{log}.truth.csv", delimiter=",", skiprows=1)
+    assert len(truth) == len(scans)
+    assert np.allclose(truth[:, 0], [s.timestamp for s in scans], atol=1e-6)
 
 
 def test_the_missed_floor_is_split_by_clearance_in_the_report_and_the_bench() -> None:

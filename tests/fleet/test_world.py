@@ -13,7 +13,7 @@ from PIL import Image
 
 from fleet.config import ConfigError, configs_dir
 from fleet.params import default_config_path, load_fleet_config
-from fleet.world import load_ros_map, load_world
+from fleet.world import load_ros_map, load_world, turned_world
 from planners.grid import clearance, reachable
 
 RADIUS = 0.17
@@ -403,3 +403,44 @@ def test_fleet_config_edge_pass_fields_are_checked(tmp_path: Path, text: str, fi
     with pytest.raises(ConfigError) as info:
         load_fleet_config(path)
     assert str(path) in str(info.value) and field in str(info.value), str(info.value)
+
+
+def test_a_turned_world_keeps_its_floor_and_turns_its_walls_poses_and_bounds() -> None:
+    home = load_world(WORLDS / "home.yaml", RADIUS)
+    turned = turned_world(home, 20.0)
+    assert turned.name == "home-turned20"
+    x0, y0, x1, y1 = home.bounds
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    a = math.radians(20.0)
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    # the sofa's corners and the first start pose, turned about the centre of the bounds
+    sofa = turned.furniture[0].polygon
+    assert np.allclose(sofa, (home.furniture[0].polygon - centre) @ rot.T + centre)
+    (sx, sy, st), (tx, ty, tt) = home.starts[0], turned.starts[0]
+    assert np.allclose([tx, ty], rot @ (np.array([sx, sy]) - centre) + centre)
+    assert math.isclose(math.remainder(tt - st - a, 2 * math.pi), 0.0, abs_tol=1e-12)
+    # every wall lies within the new bounds, and the floor is as large (within the raster)
+    bx0, by0, bx1, by1 = turned.bounds
+    corners = np.vstack(turned.walls)
+    assert corners[:, 0].min() >= bx0 - 1e-9 and corners[:, 0].max() <= bx1 + 1e-9
+    assert corners[:, 1].min() >= by0 - 1e-9 and corners[:, 1].max() <= by1 + 1e-9
+
+    def floor(world) -> float:
+        grid = world.grid(0.025)
+        start = grid.world_to_cell(np.array(world.starts[0][:2]))
+        return float(reachable(grid.free, start[None, :]).sum()) * 0.025**2
+
+    assert floor(turned) == pytest.approx(floor(home), rel=0.02)
+    # no wall runs along an axis any more
+    edges = np.diff(np.vstack([home.walls[0], home.walls[0][:1]]), axis=0)
+    turned_edges = np.diff(np.vstack([turned.walls[0], turned.walls[0][:1]]), axis=0)
+    assert np.any(np.abs(edges).min(axis=1) < 1e-9)
+    assert np.all(np.abs(turned_edges).min(axis=1) > 0.01 * np.hypot(*turned_edges.T))
+
+
+def test_a_map_world_is_not_turned_and_the_error_names_its_file() -> None:
+    if not APARTMENT.exists():
+        pytest.skip(f"{APARTMENT} is absent (../shared holds the recorded apartment)")
+    world = load_world(APARTMENT, RADIUS)
+    with pytest.raises(ConfigError, match="cob_ipa_apartment"):
+        turned_world(world, 20.0)
