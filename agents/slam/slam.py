@@ -35,7 +35,7 @@ from agents.slam.motion import prior_penalties, tracking_window
 from agents.slam.occupancy import log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
-from agents.slam.submaps import Submap, Submaps, map_lattice, wall_lattice
+from agents.slam.submaps import Submap, Submaps, map_lattice, wall_heading, wall_lattice
 from agents.slam.trimmer import cover, fold
 from fleet.slam_params import SlamParams
 
@@ -76,7 +76,8 @@ class Slam:
     With ``keep_trajectory`` every scan's pose is remembered relative to its node, and
     ``trajectory()`` returns them all as corrected by the latest optimization. The map's cell
     boundaries lie at ``lattice`` (x, y offsets, e.g. a saved map's, ``map_lattice``), by
-    default where the first scan's walls fall on cell centres (``wall_lattice``).
+    default turned to the walls the first scan sees and where those fall on cell centres
+    (``wall_heading``, ``wall_lattice``).
     """
 
     def __init__(
@@ -221,7 +222,11 @@ class Slam:
             if self._lattice is not None:
                 self._submaps.lattice = map_lattice(self._lattice, p.resolution)
             elif points.shape[0] >= 3:
-                self._submaps.lattice = wall_lattice(transform_points(pose, points), p.resolution)
+                seen = transform_points(pose, points)
+                heading = wall_heading(seen)
+                turned = transform_points(np.array([0.0, 0.0, -heading]), seen)
+                self._submaps.heading = heading
+                self._submaps.lattice = wall_lattice(turned, p.resolution)
             self._submaps.start(pose)
         node_id = self._graph.add_pose(pose)
         if self._last_node_id is not None:
