@@ -16,7 +16,7 @@ Every error is a :class:`fleet.config.ConfigError` naming the file and the field
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -212,6 +212,19 @@ def on_stored_map(world: World, map_path: str | Path) -> World:
     return World(world.name, path, (), (), grid, world.docks, world.starts, bounds)
 
 
+def shift_world(world: World, dx: float, dy: float) -> World:
+    """``world`` moved by (dx, dy) metres: walls, furniture, dock, start poses, bounds (and the
+    occupancy image's origin of a map world). Moving the world by a fraction of a cell puts
+    its walls off round coordinates, as real walls are; the SLAM map's cell lattice then has
+    to follow them (``agents.slam.submaps.wall_lattice``)."""
+    grid = world.map_grid
+    if grid is not None:
+        grid = replace(grid, origin=(grid.origin[0] + dx, grid.origin[1] + dy))
+    x0, y0, x1, y1 = world.bounds
+    bounds = (x0 + dx, y0 + dy, x1 + dx, y1 + dy)
+    return _rigid(world, 0.0, np.array([dx, dy]), world.name, grid, bounds)
+
+
 def turned_world(world: World, degrees: float) -> World:
     """``world`` turned by ``degrees`` (counter-clockwise) about the centre of its bounds:
     walls, furniture, docks and start poses, its bounds the box round its turned bounds; named
@@ -221,28 +234,45 @@ def turned_world(world: World, degrees: float) -> World:
     if world.map_grid is not None:
         raise ConfigError(f"{world.source}: a map image cannot be turned; only a vector world")
     a = math.radians(degrees)
-    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
     x0, y0, x1, y1 = world.bounds
     centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
-
-    def turn(points: np.ndarray) -> np.ndarray:
-        return (np.asarray(points, dtype=float) - centre) @ rot.T + centre
-
-    def turn_pose(pose: Pose) -> Pose:
-        x, y = turn(np.array(pose[:2]))
-        return (float(x), float(y), math.remainder(pose[2] + a, 2 * math.pi))
-
-    corners = turn(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    corners = (np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]) - centre) @ rot.T + centre
     lo, hi = corners.min(axis=0), corners.max(axis=0)
+    bounds = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    name = f"{world.name}-turned{degrees:g}"
+    return _rigid(world, a, centre - rot @ centre, name, None, bounds)
+
+
+def _rigid(
+    world: World,
+    angle: float,
+    offset: np.ndarray,
+    name: str,
+    map_grid: GridMap | None,
+    bounds: tuple[float, float, float, float],
+) -> World:
+    """``world``'s walls, furniture, docks and start poses turned by ``angle`` (rad) about the
+    origin and moved by ``offset``, with the name, map image and bounds given."""
+    rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+
+    def move(points: np.ndarray) -> np.ndarray:
+        return np.asarray(points, dtype=float) @ rot.T + offset
+
+    def move_pose(pose: Pose) -> Pose:
+        x, y = move(np.array(pose[:2]))
+        heading = math.remainder(pose[2] + angle, 2 * math.pi) if angle else pose[2]
+        return (float(x), float(y), heading)
+
     return World(
-        f"{world.name}-turned{degrees:g}",
+        name,
         world.source,
-        tuple(turn(w) for w in world.walls),
-        tuple(Furniture(f.name, turn(f.polygon)) for f in world.furniture),
-        None,
-        tuple(turn_pose(d) for d in world.docks),
-        tuple(turn_pose(p) for p in world.starts),
-        (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+        tuple(move(w) for w in world.walls),
+        tuple(Furniture(f.name, move(f.polygon)) for f in world.furniture),
+        map_grid,
+        tuple(move_pose(d) for d in world.docks),
+        tuple(move_pose(p) for p in world.starts),
+        bounds,
     )
 
 

@@ -114,27 +114,6 @@ def drive_command(
     return min(params.speed, max(0.1, math.hypot(dx, dy))), w
 
 
-def shift_world(world: World, dx: float, dy: float) -> World:
-    """``world`` moved by (dx, dy) metres: walls, furniture, dock, start poses, bounds (and the
-    occupancy image's origin of a map world). Moving the world by a fraction of a cell puts
-    its walls off round coordinates, as real walls are; the SLAM map's cell lattice then has
-    to follow them (``agents.slam.submaps.wall_lattice``)."""
-    d = np.array([dx, dy])
-    x0, y0, x1, y1 = world.bounds
-    grid = world.map_grid
-    if grid is not None:
-        grid = replace(grid, origin=(grid.origin[0] + dx, grid.origin[1] + dy))
-    return replace(
-        world,
-        walls=tuple(w + d for w in world.walls),
-        furniture=tuple(replace(f, polygon=f.polygon + d) for f in world.furniture),
-        map_grid=grid,
-        docks=tuple((x + dx, y + dy, t) for x, y, t in world.docks),
-        starts=tuple((x + dx, y + dy, t) for x, y, t in world.starts),
-        bounds=(x0 + dx, y0 + dy, x1 + dx, y1 + dy),
-    )
-
-
 def scaled_odometry(cfg: FleetConfig, scale: float) -> FleetConfig:
     """``cfg`` with every odometry noise term (alphas and heading bias) multiplied by ``scale``.
 

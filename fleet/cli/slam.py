@@ -240,10 +240,9 @@ def _print_route_bench(summary: dict[str, Any], world: str) -> None:
 def _route_world(config: Path | None, world: str, shift: float) -> tuple[Any, Any]:
     """The parameters and the world to drive, moved by ``shift`` along x and y; exits naming
     what does not load."""
-    from fleet.bench.slam import shift_world
     from fleet.config import ConfigError, resolve_world
     from fleet.params import load_fleet_config
-    from fleet.world import load_world
+    from fleet.world import load_world, shift_world
 
     try:
         cfg = load_fleet_config(config)

@@ -161,9 +161,8 @@ def test_fleet_bench_slam_refuses_bad_options():
 
 
 def test_shift_world_moves_every_part_of_the_world():
-    from fleet.bench.slam import shift_world
     from fleet.config import resolve_world
-    from fleet.world import load_world
+    from fleet.world import load_world, shift_world
 
     world = load_world(resolve_world("home"))
     moved = shift_world(world, 0.025, -0.01)
