@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from slam_sim import loop_route, room_segments, scan
 
+from agents.slam.geometry import scan_to_points, transform_points
 from agents.slam.slam import Slam
 from agents.slam.submaps import map_lattice, wall_heading, wall_lattice
 from fleet.params import load_fleet_config
@@ -69,15 +70,10 @@ def _turned(points: np.ndarray, degrees: float, about: np.ndarray) -> np.ndarray
 def test_the_walls_heading_is_read_from_one_scan(degrees):
     rng = np.random.default_rng(3)
     centre = np.array([3.0, 2.0])
-    segments = room_segments().reshape(-1, 2, 2)
-    segments = _turned(segments.reshape(-1, 2), degrees, centre).reshape(-1, 4)
+    segments = _turned(room_segments().reshape(-1, 2), degrees, centre).reshape(-1, 4)
     pose = np.array([2.5, 2.0, 0.4])
     ranges, angle_min, inc = scan(segments, pose, rng=rng)
-    angles = angle_min + inc * np.arange(len(ranges))
-    ok = ranges < 5.9
-    points = pose[:2] + ranges[ok, None] * np.column_stack(
-        [np.cos(angles[ok] + pose[2]), np.sin(angles[ok] + pose[2])]
-    )
+    points = transform_points(pose, scan_to_points(ranges, angle_min, inc, 0.05, 5.9))
     expected = np.remainder(np.radians(degrees) + np.pi / 4, np.pi / 2) - np.pi / 4
     assert np.degrees(abs(wall_heading(points) - expected)) < 0.1
 
