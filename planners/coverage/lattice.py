@@ -247,9 +247,9 @@ def _shoulder_lanes(
     ``SHOULDER_CELLS`` cells, largest first: each at the row where the cell's lane sweeps most
     of it (ties to rows within two of touching the patch's lower or upper edge), as long as
     the patch."""
-    labels, n = ndimage.label(mine, structure=np.ones((3, 3)))
-    if n == 0:
+    if mine.sum() < SHOULDER_CELLS:
         return []
+    labels, _ = ndimage.label(mine, structure=np.ones((3, 3)))
     sizes = np.bincount(labels.ravel())[1:]
     boxes = ndimage.find_objects(labels)
     reach = hw - 0.5
@@ -264,29 +264,50 @@ def _shoulder_lanes(
         if len(rr) < SHOULDER_CELLS:
             continue
         rr, cc = rr + box[0].start + origin[0], cc + box[1].start + origin[1]
-        best = None
-        edges = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
-        # then every row that reaches the patch: a strip along a wall joined to the floor of a
-        # doorway above it is swept from below the doorway, where the lane runs the full length
-        wants = [*edges, *np.arange(rr.min() - reach, rr.max() + reach + 1).tolist()]
-        c_lo, c_hi = int(cc.min()) - 1, int(cc.max()) + 1
-        for want in wants:
-            y = float(min(max(want, bottom), top))
-            lo, hi = lane_extent(cell, y)
-            if lo > hi:
-                continue
-            first = min(max(c_lo, lo), hi)
-            last = min(max(c_hi, lo), hi)
-            got = (np.abs(rr - y) < hw - 1e-9) & (cc >= first - 2) & (cc <= last + 2)
-            if best is None or got.sum() > best[0]:
-                best = (int(got.sum()), (y, first, last))
-        if best is None or best[0] < SHOULDER_CELLS:
+        lane = _shoulder_lane(cell, rr, cc, bottom, top, reach, hw)
+        if lane is None:
             continue
-        out.append(best[1])
-        rows, cols = _band(shape, *best[1], hw)
+        out.append(lane)
+        rows, cols = _band(shape, *lane, hw)
         r0, c0 = origin
         left[_shift(rows, r0), _shift(cols, c0)] = False
     return out
+
+
+def _shoulder_lane(
+    cell: MonotoneCell,
+    rr: np.ndarray,
+    cc: np.ndarray,
+    bottom: float,
+    top: float,
+    reach: float,
+    hw: float,
+) -> tuple[float, int, int] | None:
+    """The lane of the cell sweeping most of the patch at rows ``rr``, columns ``cc`` (the
+    first such row of those tried, see :func:`_shoulder_lanes`), if it sweeps at least
+    ``SHOULDER_CELLS`` of it."""
+    edges = [w + d for w in (rr.min() + reach, rr.max() - reach) for d in (0, 1, -1, 2, -2)]
+    # then every row that reaches the patch: a strip along a wall joined to the floor of a
+    # doorway above it is swept from below the doorway, where the lane runs the full length
+    wants = np.array([*edges, *np.arange(rr.min() - reach, rr.max() + reach + 1).tolist()])
+    ys = np.minimum(np.maximum(wants, bottom), top)
+    a = np.floor(ys).astype(int) - cell.row0
+    b = np.ceil(ys).astype(int) - cell.row0
+    lo = np.maximum(cell.left[a], cell.left[b])
+    hi = np.minimum(cell.right[a], cell.right[b])
+    c_lo, c_hi = int(cc.min()) - 1, int(cc.max()) + 1
+    first = np.minimum(np.maximum(c_lo, lo), hi)
+    last = np.minimum(np.maximum(c_hi, lo), hi)
+    got = (
+        (np.abs(rr[None, :] - ys[:, None]) < hw - 1e-9)
+        & (cc[None, :] >= first[:, None] - 2)
+        & (cc[None, :] <= last[:, None] + 2)
+    ).sum(axis=1)
+    got = np.where(lo <= hi, got, -1)
+    k = int(np.argmax(got))
+    if got[k] < SHOULDER_CELLS:
+        return None
+    return float(ys[k]), int(first[k]), int(last[k])
 
 
 def _lattice_lanes(
