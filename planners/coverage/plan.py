@@ -312,10 +312,9 @@ def _robot_tours(
     fill-in passes (``_add_fill_in``); for a BCD plan, last, the pruning of the driven tours
     (``prune.prune_driven``)."""
     tasks = sweeps.tasks
-    tours = _component_tours(
-        grid, floor.comp, floor.robot_comp, tasks, costs, floor.start_xy, blocks=sweeps.blocks
-    )
-    pieces = _split(tasks, tours, floor.robot_comp, costs, floor.start_xy, robot)
+    ends = _ends(tasks, costs, floor.start_xy)
+    tours = _component_tours(grid, floor.comp, floor.robot_comp, tasks, ends, sweeps.blocks)
+    pieces = _split(tasks, tours, floor.robot_comp, ends, robot)
     prints = Footprints(grid, floor.clean, robot.cleaning_width / 2)
     if params.fill_in:
         goal = _fill_in_goal(params.fill_in_target)
@@ -529,16 +528,16 @@ def _component_tours(
     comp: np.ndarray,
     robot_comp: np.ndarray,
     tasks: Sequence[SweepTask],
-    costs: PathCosts,
-    start_xy: np.ndarray,
+    priced: tuple[TaskEnds, int],
     blocks: Sequence[list[tuple[int, int]]] = (),
 ) -> dict[int, list[tuple[int, int]]]:
     """Per connected part of the floor holding a start: one tour over its tasks from its first
     robot's start. Where several robots share the part the tour is priced as a loop back to
     that start, so that cut into pieces, the first and the last both begin near the starts.
     ``blocks`` are tours of dead-end rooms from their doors: the tour is first planned without
-    them, each is put in whole where it adds least, then the whole is improved."""
-    ends, n_pts = _ends(tasks, costs, start_xy)
+    them, each is put in whole where it adds least, then the whole is improved. ``priced``:
+    :func:`_ends` of the tasks."""
+    ends, n_pts = priced
     first = grid.world_to_cell(np.array([t.variants[0][0] for t in tasks]).reshape(-1, 2))
     task_comp = comp[first[:, 0], first[:, 1]]
     tours = {}
@@ -559,22 +558,19 @@ def _split(
     tasks: Sequence[SweepTask],
     tours: dict[int, list[tuple[int, int]]],
     robot_comp: np.ndarray,
-    costs: PathCosts,
-    start_xy: np.ndarray,
+    priced: tuple[TaskEnds, int],
     robot: RobotSpec,
 ) -> list[list[tuple[int, int]]]:
     """Each robot's (task, option) sequence: a part's tour is cut into pieces balancing the
     estimated time among the robots starting in it (``ordering.split_tour``), each piece then
-    re-ordered from its robot's start."""
-    pieces: list[list[tuple[int, int]]] = [[] for _ in range(len(start_xy))]
-    ends = None
+    re-ordered from its robot's start. ``priced``: :func:`_ends` of the tasks."""
+    ends, n_pts = priced
+    pieces: list[list[tuple[int, int]]] = [[] for _ in range(len(robot_comp))]
     for c, tour in tours.items():
         robots = np.flatnonzero(robot_comp == c)
         if len(robots) == 1:
             pieces[robots[0]] = tour
             continue
-        if ends is None:
-            ends, n_pts = _ends(tasks, costs, start_xy)
         opt = np.array([ends.offset[t] + o for t, o in tour], dtype=np.int64)
         entry, exit_ = ends.entry[opt], ends.exit[opt]
         starts = n_pts + robots
