@@ -35,7 +35,7 @@ from agents.slam.motion import prior_penalties, tracking_window
 from agents.slam.occupancy import log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
-from agents.slam.submaps import Submap, Submaps, map_lattice, wall_heading, wall_lattice
+from agents.slam.submaps import Submap, Submaps, cell_heading, map_lattice, wall_lattice
 from agents.slam.trimmer import cover, fold
 from fleet.slam_params import SlamParams
 
@@ -74,10 +74,11 @@ class Slam:
     (and beyond ``params.max_range``) are treated as "no return": no hit, and free space only
     along the first ``params.missing_ray_length`` of a beam that saw nothing within the range.
     With ``keep_trajectory`` every scan's pose is remembered relative to its node, and
-    ``trajectory()`` returns them all as corrected by the latest optimization. The map's cell
-    boundaries lie at ``lattice`` (x, y offsets, e.g. a saved map's, ``map_lattice``), by
-    default turned to the walls the first scan sees and where those fall on cell centres
-    (``wall_heading``, ``wall_lattice``).
+    ``trajectory()`` returns them all as corrected by the latest optimization. The submaps'
+    cells are turned to the walls the first scan sees and their boundaries put where those
+    walls fall on cell centres (``cell_heading``, ``wall_lattice``); a given ``lattice`` (x, y
+    offsets, e.g. a saved map's, ``map_lattice``) is where the composed map's cell boundaries
+    lie, and the submaps' too when the walls run along the map's axes.
     """
 
     def __init__(
@@ -215,19 +216,34 @@ class Slam:
         length = min(self.params.missing_ray_length, self.range_max)
         return missing_rays(ranges, angle_min, angle_increment, self.range_max, length)
 
+    def _first_submap(self, pose: np.ndarray, points: np.ndarray) -> None:
+        """Turn the submaps' cells to the walls of the first scan (``cell_heading``: unless the
+        walls are a raster's staircases) and put their lattice on those walls
+        (``wall_lattice``), then start the first submap. A given
+        ``lattice`` (a saved map's) keeps the composed map on its cells, so the new map can be
+        laid over the saved one; the submaps take it too when the walls run along the map's
+        axes, and keep their own turned lattice when they do not."""
+        p = self.params
+        heading, lattice = 0.0, None
+        if points.shape[0] >= 3:
+            seen = transform_points(pose, points)
+            heading = cell_heading(seen, p.resolution)
+            turned = transform_points(np.array([0.0, 0.0, -heading]), seen)
+            lattice = wall_lattice(turned, p.resolution)
+        if self._lattice is not None:
+            self._submaps.composed_lattice = map_lattice(self._lattice, p.resolution)
+            if heading == 0.0:
+                lattice = self._submaps.composed_lattice
+        if lattice is not None:
+            self._submaps.heading = heading
+            self._submaps.lattice = lattice
+        self._submaps.start(pose)
+
     def _add_node(self, points: np.ndarray, misses: np.ndarray, odom: np.ndarray, t: float) -> None:
         p = self.params
         pose = self._pose
         if not self._submaps.all:
-            if self._lattice is not None:
-                self._submaps.lattice = map_lattice(self._lattice, p.resolution)
-            elif points.shape[0] >= 3:
-                seen = transform_points(pose, points)
-                heading = wall_heading(seen)
-                turned = transform_points(np.array([0.0, 0.0, -heading]), seen)
-                self._submaps.heading = heading
-                self._submaps.lattice = wall_lattice(turned, p.resolution)
-            self._submaps.start(pose)
+            self._first_submap(pose, points)
         node_id = self._graph.add_pose(pose)
         if self._last_node_id is not None:
             step = relative(self._last_node_odom, odom)

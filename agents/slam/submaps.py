@@ -102,6 +102,37 @@ def wall_heading(points: np.ndarray) -> float:
     return 0.0 if abs(heading) < ON_AXES else heading
 
 
+def lattice_fit(points: np.ndarray, heading: float, resolution: float) -> float:
+    """How closely map-frame ``points`` (N, 2) lie on the lines of one lattice of cells of
+    ``resolution`` in the frame turned by ``heading``: per axis the mean resultant length of
+    the points' phases (their coordinate modulo the cell, as an angle), summed over both axes.
+    Points on lattice lines up to a range noise well under a cell score up to 1 an axis
+    (wrapped normal: exp(−2π²σ²/res²), 0.45 at 1 cm on 5 cm cells) in proportion to the share
+    of them on that axis's lines; points at random phases ≈ 1/√N."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(pts) == 0:
+        return 0.0
+    turned = transform_points(np.array([0.0, 0.0, -heading]), pts)
+    return float(np.abs(np.exp(2j * math.pi * turned / resolution).mean(axis=0)).sum())
+
+
+def cell_heading(points: np.ndarray, resolution: float) -> float:
+    """The heading to turn the map's cells by for a first scan's map-frame ``points``: the
+    walls' (:func:`wall_heading`), unless the points lie on the map's own lattice at least as
+    closely as on the walls' (:func:`lattice_fit`). That is a world drawn on a raster, as a
+    floor-plan image is: its walls off the axes are staircases of whole cells, which cells on
+    the raster hold exactly and cells turned to the walls blur by half a cell (on the recorded
+    apartment the turned cells' fit was 0.05–0.17 against 0.5–0.7 on the raster's, and the
+    slam bench's ATE 76 mm against 22 mm). A straight wall off the axes fits the turned
+    lattice (0.4–0.65 on the home turned by 20°) and not the map's (0.04–0.16)."""
+    heading = wall_heading(points)
+    if heading == 0.0 or lattice_fit(points, 0.0, resolution) >= lattice_fit(
+        points, heading, resolution
+    ):
+        return 0.0
+    return heading
+
+
 def map_lattice(origin: tuple[float, float], resolution: float) -> np.ndarray:
     """The cell-boundary offsets (x, y) of a map whose corner is ``origin``."""
     return np.mod(np.asarray(origin, dtype=float), resolution)
@@ -152,6 +183,9 @@ class Submaps:
         # (:func:`wall_heading`, :func:`wall_lattice`).
         self.lattice = np.full(2, 0.5 * params.resolution)
         self.heading = 0.0
+        # the composed map's cell boundaries (map frame): the submaps' lattice unless a saved
+        # map's is to be kept (``Slam``)
+        self.composed_lattice: np.ndarray | None = None
 
     def start(self, pose: np.ndarray) -> Submap | None:
         """Start a submap at ``pose``'s position, its grid turned by ``heading`` from the map
@@ -259,7 +293,7 @@ class Submaps:
             return SlamMap(
                 np.zeros((p.map_tile, p.map_tile), dtype=np.float32), p.resolution, position
             )
-        shift = self.lattice
+        shift = self.lattice if self.composed_lattice is None else self.composed_lattice
         lo = np.floor((np.min([b[0] for b in boxes], axis=0) - shift) / tile) * tile + shift
         hi = np.ceil((np.max([b[1] for b in boxes], axis=0) - shift) / tile) * tile + shift
         origin = (float(lo[0]), float(lo[1]))
