@@ -315,6 +315,8 @@ def _robot_tours(
     ends = _ends(tasks, costs, floor.start_xy)
     tours = _component_tours(grid, floor.comp, floor.robot_comp, tasks, ends, sweeps.blocks)
     pieces = _split(tasks, tours, floor.robot_comp, ends, robot)
+    # the fill-in prices its own tasks: one matrix over every task end alive at a time
+    del ends
     prints = Footprints(grid, floor.clean, robot.cleaning_width / 2)
     if params.fill_in:
         goal = _fill_in_goal(params.fill_in_target)
