@@ -8,8 +8,8 @@ filled. When a third starts, the oldest is finished: cropped to what it observed
 likelihood field built once for loop-closure searches.
 
 Every submap's grid runs along the walls: turned by the heading of the walls the first scan
-saw (:func:`wall_heading`) and with its cell lattice where they fall on cell centres
-(:func:`wall_lattice`). Matching a scan then snaps it back onto the walls the map already
+saw (:func:`cell_heading`: not where those walls are a raster's staircases of cells) and with
+its cell lattice where they fall on cell centres (:func:`wall_lattice`). Matching a scan then snaps it back onto the walls the map already
 holds, where with walls off the grid's axes each match's few millimetres and tenths of a
 degree were inserted into the map and carried on from submap to submap (docs/notes/slam.md,
 "Walls off the map's axes"). The composed map is in the map frame, sampled from the submaps
@@ -180,7 +180,7 @@ class Submaps:
         # turned by ``heading`` from the map's): by default (k + ½)·resolution along the map's
         # axes, so walls on round coordinates fall on cell centres; ``Slam`` turns them to the
         # walls its first scan sees and puts them where those fall on centres
-        # (:func:`wall_heading`, :func:`wall_lattice`).
+        # (:func:`cell_heading`, :func:`wall_lattice`).
         self.lattice = np.full(2, 0.5 * params.resolution)
         self.heading = 0.0
         # the composed map's cell boundaries (map frame): the submaps' lattice unless a saved
