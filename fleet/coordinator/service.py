@@ -49,6 +49,7 @@ from contextlib import AbstractContextManager
 from fleet.bus import Bus
 from fleet.coordinator.auctioneer import Auctioneer
 from fleet.coordinator.awards import Awards
+from fleet.coordinator.beats import Beats
 from fleet.coordinator.dispatcher import Dispatcher
 from fleet.coordinator.dropped import Dropped
 from fleet.coordinator.job import (
@@ -118,6 +119,7 @@ class Coordinator:
         self.params = params
         self.store = store
         self.lock = threading.RLock()
+        self.beats = Beats()
         self.stop = threading.Event()
         self.wake = threading.Event()
         self.job = Job(planner.params, planner.robot, planner.wall_clearance)
@@ -242,16 +244,25 @@ class Coordinator:
                 self.job.robots[rid].xy = (msg.x, msg.y)
 
     def _on_heartbeat(self, key: str, msg: Heartbeat) -> None:
-        rid = self.keys.robot_of(key)
-        with self.lock:
+        """Noted without the lock, applied if it is free (:mod:`fleet.coordinator.beats`)."""
+        self.beats.note(key, msg)
+        if self.lock.acquire(blocking=False):
+            try:
+                self._apply_beats()
+            finally:
+                self.lock.release()
+
+    def _apply_beats(self) -> None:
+        """The heartbeats heard since the last call, as they arrived (call with the lock)."""
+        for key, heard, msg in self.beats.take():
+            rid = self.keys.robot_of(key)
             # stamped with the agent's clock, which moves nothing here: a wrong one must not
             # turn a working robot into a lost one
             if self.implausible(key, rid):
-                return
+                continue
             r = self.job.robots[rid]
-            r.heartbeat_wall = time.time()
-            was_ready = r.ready
-            r.ready = msg.ready
+            r.heartbeat_wall = max(r.heartbeat_wall, heard)
+            was_ready, r.ready = r.ready, msg.ready
             if r.liveness == LOST:
                 r.liveness = REJOINED
                 self.journal.event("rejoined", rid, "", "heard from again; bids afresh")
@@ -313,6 +324,7 @@ class Coordinator:
     # ---- liveliness ---------------------------------------------------------------------
 
     def _check_heartbeats(self) -> None:
+        self._apply_beats()
         now = time.time()
         for rid, r in list(self.job.robots.items()):
             if r.liveness != LOST and now - r.heartbeat_wall > self.params.heartbeat_timeout_s:
@@ -345,6 +357,7 @@ class Coordinator:
             auction_due = False
             self.strangers.flush()
             with self.lock:
+                self._apply_beats()
                 if self.phase == "gathering":
                     waited = time.monotonic() - gather_start
                     if gathered(len(self.job.market()), self.expected, waited, grace_s):

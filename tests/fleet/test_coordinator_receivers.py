@@ -6,6 +6,7 @@ silent heartbeat gives its work back to the market."""
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
 from pathlib import Path
 
@@ -250,6 +251,35 @@ def test_a_robot_whose_heartbeat_goes_silent_is_lost_and_its_work_goes_back_on_s
         assert robot.liveness == LOST
         assert coord.job.queue("robot-0") == [] and coord.job.tasks["t01"].state == OPEN
         assert coord.market.need_auction
+
+
+def test_a_heartbeat_heard_while_the_lock_is_held_counts_from_its_arrival(
+    buses: tuple[Bus, Bus, Bus], planner: TaskPlanner
+) -> None:
+    """The main loop held the lock 1.1-4.2 s on the recorded apartment's first plans and a
+    lost robot's reopened tasks; heartbeats waiting for it counted as silence and every robot
+    was lost. A beat that arrives meanwhile neither waits nor is forgotten."""
+    cbus, _, _ = buses
+    coord = _coordinator(cbus, planner)
+    robot = coord.job.robots["robot-0"]
+    timeout = CFG.coordinator.heartbeat_timeout_s
+    done = threading.Event()
+    with coord.lock:
+        robot.heartbeat_wall = time.time() - 2 * timeout
+        beat = threading.Thread(
+            target=lambda: (
+                coord._on_heartbeat(
+                    cbus.keys.robot("robot-0", "heartbeat"), Heartbeat(0.0, 1, True)
+                ),
+                done.set(),
+            )
+        )
+        beat.start()
+        assert done.wait(1.0), "the heartbeat waited for the lock"
+        coord._check_heartbeats()
+        assert robot.liveness != LOST
+        assert time.time() - robot.heartbeat_wall < timeout
+    beat.join()
 
 
 def test_the_counts_survive_a_restart(
