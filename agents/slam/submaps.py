@@ -9,11 +9,11 @@ likelihood field built once for loop-closure searches.
 
 Every submap's grid runs along the walls: turned by the heading of the walls the first scan
 saw (:func:`cell_heading`: not where those walls are a raster's staircases of cells) and with
-its cell lattice where they fall on cell centres (:func:`wall_lattice`). Matching a scan then snaps it back onto the walls the map already
-holds, where with walls off the grid's axes each match's few millimetres and tenths of a
-degree were inserted into the map and carried on from submap to submap (docs/notes/slam.md,
-"Walls off the map's axes"). The composed map is in the map frame, sampled from the submaps
-at each of its cells' centres.
+its cell lattice where they fall on cell centres (:func:`wall_lattice`). Matching a scan then
+snaps it back onto the walls the map already holds, where with walls off the grid's axes
+each match's few millimetres and tenths of a degree were inserted into the map and carried
+on from submap to submap (docs/notes/slam.md, "Walls off the map's axes"). The composed map
+is in the map frame, sampled from the submaps at each of its cells' centres.
 """
 
 from __future__ import annotations
