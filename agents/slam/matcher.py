@@ -72,20 +72,26 @@ class LikelihoodField:
         return self._pooled[factor]
 
     def bilinear(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """F and its gradient (dF/dx, dF/dy) at local points, interpolated between cell centres."""
+        """F and its gradient (dF/dx, dF/dy) at local points, interpolated between cell centres:
+        F = f00 + a·fu + fv·(b + t·fu) with a = f01 − f00, b = f10 − f00, t = f11 − f10 − a."""
         rows, cols = self.shape
-        u = np.clip((x - self.origin[0]) / self.resolution - 0.5, 0.0, cols - 1.001)
-        v = np.clip((y - self.origin[1]) / self.resolution - 0.5, 0.0, rows - 1.001)
+        scale = 1.0 / self.resolution
+        u = (x - self.origin[0]) * scale - 0.5
+        v = (y - self.origin[1]) * scale - 0.5
+        np.minimum(np.maximum(u, 0.0, out=u), cols - 1.001, out=u)
+        np.minimum(np.maximum(v, 0.0, out=v), rows - 1.001, out=v)
         j = u.astype(np.int64)  # u, v ≥ 0: truncation is the floor
-        i = v.astype(np.int64)
-        fu, fv = u - j, v - i
-        at = i * cols + j
+        at = v.astype(np.int64)
+        fu, fv = u - j, v - at
+        at *= cols
+        at += j
         f = self.values.reshape(-1)
         f00, f01, f10, f11 = f[at], f[at + 1], f[at + cols], f[at + cols + 1]
-        value = (1 - fv) * ((1 - fu) * f00 + fu * f01) + fv * ((1 - fu) * f10 + fu * f11)
-        d_du = (1 - fv) * (f01 - f00) + fv * (f11 - f10)
-        d_dv = (1 - fu) * (f10 - f00) + fu * (f11 - f01)
-        return value, d_du / self.resolution, d_dv / self.resolution
+        a = f01 - f00
+        b = f10 - f00
+        t = f11 - f10 - a
+        value = f00 + fu * a + fv * (b + fu * t)
+        return value, (a + fv * t) * scale, (b + fu * t) * scale
 
 
 @dataclass(frozen=True)
@@ -163,17 +169,8 @@ class CorrelativeMatcher:
         top = cand[np.argmax(cand[:, 3])]
         covariance = self._covariance(cand, n_points, field.resolution)
         rival_gap = math.inf if distinct is None else _rival_gap(cand, top, distinct)
-        pose = self._refine(field, points, prior + top[:3], prior, t_pen, r_pen)
-        score = float(field.bilinear(*self._transform(pose, points))[0].mean())
+        pose, score = self._refine(field, points, prior + top[:3], prior, t_pen, r_pen)
         return MatchResult(pose=pose, score=score, covariance=covariance, rival_gap=rival_gap)
-
-    @staticmethod
-    def _transform(pose: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        return (
-            c * points[:, 0] - s * points[:, 1] + pose[0],
-            s * points[:, 0] + c * points[:, 1] + pose[1],
-        )
 
     def _covariance(self, cand: np.ndarray, n_points: int, res: float) -> np.ndarray:
         """Olson 2009 §IV: Σ = Σᵢ wᵢ xᵢxᵢᵀ / Σ w − μμᵀ with wᵢ from the candidate scores."""
@@ -193,56 +190,48 @@ class CorrelativeMatcher:
         prior: np.ndarray,
         t_pen: float,
         r_pen: float,
-    ) -> np.ndarray:
+    ) -> tuple[np.ndarray, float]:
         """Gauss–Newton on Σ(1 − F)/N + penalties (the search's own objective), kept within one
-        search cell of ``start``. The residuals are √(1 − F): near a wall 1 − F ≈ d²/2σ², so they
-        grow linearly with the distance d and the fit pulls like point-to-wall ICP; residuals
-        1 − F would be flat (quartic cost) near the optimum and let the prior penalty win."""
+        search cell of ``start``; returns the pose and its mean F. The residuals are √(1 − F):
+        near a wall 1 − F ≈ d²/2σ², so they grow linearly with the distance d and the fit pulls
+        like point-to-wall ICP; residuals 1 − F would be flat (quartic cost) near the optimum and
+        let the prior penalty win. The normal equations JᵀJ·δ = −Jᵀr are summed directly
+        (3 × 3), not formed from the stacked residuals."""
         p = self.params
         n = points.shape[0]
-        wt, wr = math.sqrt(t_pen), math.sqrt(r_pen)
+        sx, sy = points[:, 0], points[:, 1]
+        pen = np.array([t_pen, t_pen, r_pen])
         lo = start - np.array([field.resolution, field.resolution, p.angular_step])
         hi = start + np.array([field.resolution, field.resolution, p.angular_step])
 
-        def residuals(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            x, y = self._transform(pose, points)
-            value, gx, gy = field.bilinear(x, y)
+        def linearize(pose: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+            """The cost at ``pose``, JᵀJ and Jᵀr."""
             c, s = math.cos(pose[2]), math.sin(pose[2])
-            dx_dt = -s * points[:, 0] - c * points[:, 1]
-            dy_dt = c * points[:, 0] - s * points[:, 1]
-            scale = 1.0 / math.sqrt(n)
-            miss = np.sqrt(np.maximum(1.0 - value, 0.0))
-            d_miss = -0.5 / np.maximum(miss, 1e-4) * scale
-            r = np.concatenate(
-                [
-                    miss * scale,
-                    [
-                        wt * (pose[0] - prior[0]),
-                        wt * (pose[1] - prior[1]),
-                        wr * (pose[2] - prior[2]),
-                    ],
-                ]
-            )
-            jac = np.empty((n + 3, 3))
-            jac[:n, 0] = d_miss * gx
-            jac[:n, 1] = d_miss * gy
-            jac[:n, 2] = d_miss * (gx * dx_dt + gy * dy_dt)
-            jac[n:] = np.diag([wt, wt, wr])
-            return r, jac
+            dx = c * sx - s * sy  # the points turned, before the translation
+            dy = s * sx + c * sy
+            value, gx, gy = field.bilinear(dx + pose[0], dy + pose[1])
+            miss2 = np.maximum(1.0 - value, 0.0)
+            miss = np.sqrt(miss2)
+            d_miss = -0.5 / np.maximum(miss, 1e-4)
+            jac = np.stack([gx, gy, gx * -dy + gy * dx])
+            jac *= d_miss
+            off = pose - prior
+            h = (jac @ jac.T) / n
+            h[np.diag_indices(3)] += pen + 1e-9
+            grad = (jac @ miss) / n + pen * off
+            return float(miss2.sum()) / n + float(pen @ (off * off)), h, grad
 
         pose = start.copy()
-        r, jac = residuals(pose)
-        cost = float(r @ r)
+        cost, h, grad = linearize(pose)
         for _ in range(p.refine_iterations):
-            h = jac.T @ jac + 1e-9 * np.eye(3)
-            step = np.linalg.solve(h, -jac.T @ r)
-            trial = np.clip(pose + step, lo, hi)
-            r_new, jac_new = residuals(trial)
-            cost_new = float(r_new @ r_new)
+            step = np.linalg.solve(h, -grad)
+            trial = np.minimum(np.maximum(pose + step, lo), hi)
+            cost_new, h_new, grad_new = linearize(trial)
             if cost_new >= cost:
                 break
-            pose, r, jac, cost = trial, r_new, jac_new, cost_new
-        return pose
+            pose, cost, h, grad = trial, cost_new, h_new, grad_new
+        off = pose - prior
+        return pose, 1.0 - (cost - float(pen @ (off * off)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,6 +246,17 @@ class _Window:
     col0: np.ndarray  # (T, N)
     rot_penalty: np.ndarray  # (T,)
     pen_xy: float
+
+    def leaves(self, shape: tuple[int, int], f: int) -> bool:
+        """Whether a point shifted by −n_xy … n_xy + f − 1 cells (every shift the two levels
+        read) can leave a grid of ``shape``: only then are the cells clipped to its edge."""
+        lo, hi = -self.n_xy, self.n_xy + f - 1
+        return bool(
+            self.row0.min() + lo < 0
+            or self.col0.min() + lo < 0
+            or self.row0.max() + hi >= shape[0]
+            or self.col0.max() + hi >= shape[1]
+        )
 
     @classmethod
     def around(
@@ -294,7 +294,16 @@ def _coarse_bounds(
     starts = np.arange(-n_xy, n_xy + 1, f)
     ends = np.minimum(starts + f - 1, n_xy)
     nearest = np.where((starts <= 0) & (ends >= 0), 0, np.minimum(abs(starts), abs(ends)))
-    coarse = _scores(field.pooled(f), window.row0, window.col0, starts, starts)
+    table = field.pooled(f)
+    at = _cells(
+        window.row0,
+        window.col0,
+        starts[None],
+        starts[None],
+        table.shape,
+        window.leaves(table.shape, f),
+    )
+    coarse = table.reshape(-1)[at].mean(axis=-1)
     coarse -= window.rot_penalty[:, None, None]
     coarse -= window.pen_xy * (nearest[None, :, None] ** 2 + nearest[None, None, :] ** 2)
     return coarse, starts, f
@@ -313,11 +322,11 @@ def _branch_and_bound(
     block, best bound first, until a bound falls ``margin`` below the best fine score (or after
     ``max_coarse`` blocks). Returns every scored candidate as rows (dx, dy, dθ, score)."""
     res = field.resolution
-    rows, cols = field.shape
     n_xy = window.n_xy
     order = np.argsort(coarse, axis=None)[::-1]
     coarse_sorted = coarse.reshape(-1)[order]
     offs = np.arange(f)
+    clip = window.leaves(field.shape, f)
     samples: list[np.ndarray] = []
     best = -np.inf
     k, batch = 0, 4
@@ -335,10 +344,8 @@ def _branch_and_bound(
         ti, jy, jx = np.unravel_index(chunk, coarse.shape)
         ky = starts[jy][:, None] + offs  # (B, f)
         kx = starts[jx][:, None] + offs
-        r = np.clip(window.row0[ti][:, None, :] + ky[:, :, None], 0, rows - 1)  # (B, f, N)
-        cc = np.clip(window.col0[ti][:, None, :] + kx[:, :, None], 0, cols - 1)
-        flat = r[:, :, None, :] * cols + cc[:, None, :, :]  # (B, f, f, N)
-        score = field.values.reshape(-1)[flat].mean(axis=-1)
+        at = _cells(window.row0[ti], window.col0[ti], ky, kx, field.shape, clip)
+        score = field.values.reshape(-1)[at].mean(axis=-1)
         score -= window.rot_penalty[ti][:, None, None]
         score -= window.pen_xy * (ky[:, :, None] ** 2 + kx[:, None, :] ** 2)
         valid = (ky[:, :, None] <= n_xy) & (kx[:, None, :] <= n_xy)
@@ -362,12 +369,21 @@ def _rival_gap(cand: np.ndarray, top: np.ndarray, distinct: tuple[float, float])
     return float(top[3] - cand[far, 3].max())
 
 
-def _scores(
-    table: np.ndarray, row0: np.ndarray, col0: np.ndarray, dy: np.ndarray, dx: np.ndarray
+def _cells(
+    row0: np.ndarray,
+    col0: np.ndarray,
+    dy: np.ndarray,
+    dx: np.ndarray,
+    shape: tuple[int, int],
+    clip: bool,
 ) -> np.ndarray:
-    """Mean of ``table`` over points shifted by every (dy, dx) for every rotation: (T, Y, X)."""
-    rows, cols = table.shape
-    r = np.clip(row0[:, None, :] + dy[None, :, None], 0, rows - 1)
-    c = np.clip(col0[:, None, :] + dx[None, :, None], 0, cols - 1)
-    flat = r[:, :, None, :] * cols + c[:, None, :, :]
-    return table.reshape(-1)[flat].mean(axis=-1)
+    """Flat indices (B, Y, X, N) of the cells (B, N) shifted by every (dy, dx) of their row
+    ((B or 1, Y) and (B or 1, X) cells), clipped to the grid's edge with ``clip``."""
+    rows, cols = shape
+    r = row0[:, None, :] + dy[:, :, None]
+    c = col0[:, None, :] + dx[:, :, None]
+    if clip:
+        np.clip(r, 0, rows - 1, out=r)
+        np.clip(c, 0, cols - 1, out=c)
+    r *= cols
+    return r[:, :, None, :] + c[:, None, :, :]

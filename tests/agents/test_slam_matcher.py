@@ -9,7 +9,7 @@ import pytest
 from slam_sim import room_segments, scan
 
 from agents.slam.geometry import scan_to_points, transform_points, wrap_angle
-from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
+from agents.slam.matcher import CorrelativeMatcher, LikelihoodField, _coarse_bounds, _Window
 from agents.slam.occupancy import LogOddsGrid
 from fleet.slam_params import SlamParams
 
@@ -96,3 +96,21 @@ def test_covariance_is_long_along_a_corridor():
     var_x, var_y = result.covariance[0, 0], result.covariance[1, 1]
     assert var_x > 10 * var_y
     assert math.sqrt(var_y) < 0.02
+
+
+def test_the_search_reads_cells_beyond_the_grid_as_its_edge():
+    """Points that a shift puts off the grid are read at its edge (the field's forced-zero
+    ring, the pooled level's edge), whether or not the window needs the clip; a window wholly
+    inside needs none."""
+    field = _map_of(room_segments(), [(2.5, 2.0, 0.3)], 0)
+    rows, cols = field.shape
+    points = np.array([[0.5, 0.0], [0.0, 1.5], [-2.0, 0.3]])
+    for prior, leaves in (((0.0, 0.0, 0.1), False), ((-7.9, 7.9, 0.1), True)):
+        window = _Window.around(field, points, np.array(prior), 0.1, 0.05, 0.008, (0.0, 0.0))
+        assert window.leaves(field.shape, 4) is leaves
+        coarse, starts, f = _coarse_bounds(field, window, 4)
+        table = field.pooled(f)
+        r = np.clip(window.row0[:, None, :] + starts[None, :, None], 0, rows - 1)
+        c = np.clip(window.col0[:, None, :] + starts[None, :, None], 0, cols - 1)
+        expected = table[r[:, :, None, :], c[:, None, :, :]].mean(axis=-1)
+        np.testing.assert_allclose(coarse, expected - window.rot_penalty[:, None, None], atol=1e-6)
