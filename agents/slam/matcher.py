@@ -246,17 +246,14 @@ class _Window:
     col0: np.ndarray  # (T, N)
     rot_penalty: np.ndarray  # (T,)
     pen_xy: float
+    extent: tuple[int, int, int, int]  # the lowest and highest row, the lowest and highest col
 
     def leaves(self, shape: tuple[int, int], f: int) -> bool:
         """Whether a point shifted by −n_xy … n_xy + f − 1 cells (every shift the two levels
         read) can leave a grid of ``shape``: only then are the cells clipped to its edge."""
         lo, hi = -self.n_xy, self.n_xy + f - 1
-        return bool(
-            self.row0.min() + lo < 0
-            or self.col0.min() + lo < 0
-            or self.row0.max() + hi >= shape[0]
-            or self.col0.max() + hi >= shape[1]
-        )
+        r_min, r_max, c_min, c_max = self.extent
+        return r_min + lo < 0 or c_min + lo < 0 or r_max + hi >= shape[0] or c_max + hi >= shape[1]
 
     @classmethod
     def around(
@@ -279,7 +276,8 @@ class _Window:
         py = s[:, None] * points[:, 0] + c[:, None] * points[:, 1] + prior[1]
         col0 = np.floor((px - field.origin[0]) / res).astype(np.int64)
         row0 = np.floor((py - field.origin[1]) / res).astype(np.int64)
-        return cls(n_xy, d_theta, row0, col0, r_pen * d_theta**2, t_pen * res * res)
+        extent = (int(row0.min()), int(row0.max()), int(col0.min()), int(col0.max()))
+        return cls(n_xy, d_theta, row0, col0, r_pen * d_theta**2, t_pen * res * res, extent)
 
 
 def _coarse_bounds(
