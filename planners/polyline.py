@@ -7,27 +7,63 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# a straight segment of a planned path at least this long (m) is a line the plan means (a lane,
+# a hop round a door jamb), not a step of a grid's staircase: the simplification the tracker
+# drives and the plan's time estimates see moves such a line's ends by at most
+# LINE_TOLERANCE_M (m) (``simplify_indices``'s ``line``), which is what the tracker's check
+# allows a path ahead nearer a wall than the plan's own (planners.dwa.MEDIAN_NOISE_M) ...
+LINE_M = 0.2
+LINE_TOLERANCE_M = 0.005
+# ... unless the end's other segment is a grid step: shorter than twice the tolerance and
+# turning by at least this much (rad) from the line (a staircase's steps are square or
+# diagonal to its runs)
+STEP_TURN_RAD = math.radians(30.0)
 
-def simplify(points: np.ndarray, tolerance: float) -> np.ndarray:
-    """Ramer–Douglas–Peucker simplification (Douglas & Peucker 1973) of an (N, 2) polyline."""
+
+def simplify(points: np.ndarray, tolerance: float, line: float = math.inf) -> np.ndarray:
+    """Ramer–Douglas–Peucker simplification (Douglas & Peucker 1973) of an (N, 2) polyline,
+    its segments at least ``line`` long kept on their lines (see :func:`simplify_indices`)."""
     pts = np.asarray(points, dtype=float)
-    return pts[simplify_indices(pts, tolerance)]
+    return pts[simplify_indices(pts, tolerance, line)]
 
 
-def simplify_indices(points: np.ndarray, tolerance: float) -> np.ndarray:
+def simplify_indices(points: np.ndarray, tolerance: float, line: float = math.inf) -> np.ndarray:
     """The indices of the points :func:`simplify` keeps, in order (the first and the last
     among them). Iterative with an explicit stack; each split's point–line distances are one
-    numpy call."""
+    numpy call.
+
+    Plain RDP bounds only the dropped points' distance from the chord, so it may drive a line
+    of the plan up to ``tolerance`` off where the plan put it: a lane whose start lies within
+    it of the chord that skips the start runs on a slant, a hop that bends round a door jamb
+    is cut toward the jamb. So a vertex ending a segment at least ``line`` long is dropped only
+    within ``LINE_TOLERANCE_M`` of the chord, unless its other segment is a grid step
+    (``STEP_TURN_RAD``), which the simplification is there to absorb: each split is at the
+    point farthest beyond its own tolerance.
+    """
     pts = np.asarray(points, dtype=float)
     n = len(pts)
     if n < 3:
         return np.arange(n)
+    tol = np.full(n, float(tolerance))
+    if math.isfinite(line):
+        d = np.diff(pts, axis=0)
+        seg = np.hypot(d[:, 0], d[:, 1])
+        heading = np.arctan2(d[:, 1], d[:, 0])
+        turn = np.abs(np.remainder(heading[1:] - heading[:-1] + math.pi, 2 * math.pi) - math.pi)
+        # the other segment at a vertex is a grid step: short and square or diagonal to the
+        # line (a repeated point's turn is no measure: it is absorbed too)
+        short = seg < 2 * tolerance
+        squared = (turn >= STEP_TURN_RAD) | (seg[:-1] <= 1e-9) | (seg[1:] <= 1e-9)
+        ends_line_before = (seg[:-1] >= line) & ~(short[1:] & squared)
+        ends_line_after = (seg[1:] >= line) & ~(short[:-1] & squared)
+        end = ends_line_before | ends_line_after
+        tol[1:-1][end] = min(tolerance, LINE_TOLERANCE_M)
     keep = np.zeros(n, dtype=bool)
     keep[0] = keep[-1] = True
     stack = [(0, n - 1)]
     while stack:
         i, j = stack.pop()
-        m = rdp_split(pts, i, j, tolerance)
+        m = rdp_split(pts, i, j, tol)
         if m >= 0:
             keep[m] = True
             stack.append((i, m))
@@ -35,10 +71,11 @@ def simplify_indices(points: np.ndarray, tolerance: float) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def rdp_split(pts: np.ndarray, i: int, j: int, tolerance: float) -> int:
+def rdp_split(pts: np.ndarray, i: int, j: int, tolerance: float | np.ndarray) -> int:
     """Where the Ramer–Douglas–Peucker simplification splits the stretch ``pts[i..j]``: the
     interior point farthest from the chord (from ``pts[i]`` if the chord has no length), or -1
-    when none is farther than ``tolerance`` and only the ends are kept."""
+    when none is farther than ``tolerance`` and only the ends are kept. With a tolerance per
+    point (an array over ``pts``), the point farthest beyond its own."""
     if j - i < 2:
         return -1
     a, b = pts[i], pts[j]
@@ -49,6 +86,9 @@ def rdp_split(pts: np.ndarray, i: int, j: int, tolerance: float) -> int:
         dist = np.hypot(rel[:, 0], rel[:, 1])
     else:
         dist = np.abs(rel[:, 0] * seg[1] - rel[:, 1] * seg[0]) / length
+    if np.ndim(tolerance):
+        dist = dist - tolerance[i + 1 : j]
+        tolerance = 0.0
     k = int(np.argmax(dist))
     return i + 1 + k if dist[k] > tolerance else -1
 

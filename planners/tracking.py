@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planners.checks import require_non_negative, require_positive
-from planners.polyline import simplify_indices
+from planners.polyline import LINE_M, simplify_indices
 from planners.robot import RobotSpec
 
 
@@ -145,7 +145,8 @@ class Profile:
 
     The path is tracked as its Ramer–Douglas–Peucker simplification (the plan's
     ``coverage.simplify_tolerance``, as its time estimates see it: a staircase of grid steps
-    along a slanted wall is one line, not a dozen stops): ``kept`` (M) are the indices of the
+    along a slanted wall is one line, not a dozen stops; a line of the plan is not moved,
+    ``planners.polyline.LINE_M``): ``kept`` (M) are the indices of the
     waypoints it keeps, ``segment`` (N) for each waypoint i the simplified segment k (from
     vertex k − 1 to k) that the path's segment into i lies on (0 before ``kept[0]``). At each
     kept vertex: the rounding radius (:func:`corner_radii`), and the speed of the time-optimal
@@ -171,7 +172,7 @@ class Profile:
     ) -> Profile:
         pts = np.asarray(points, dtype=float)
         start = min(max(start, 0), max(len(pts) - 1, 0))
-        kept = start + simplify_indices(pts[start:], tolerance)
+        kept = start + simplify_indices(pts[start:], tolerance, LINE_M)
         segment = np.zeros(len(pts), dtype=np.int64)
         if len(kept) > 1:
             segment[start + 1 :] = np.searchsorted(kept, np.arange(start + 1, len(pts)))

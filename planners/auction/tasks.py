@@ -36,7 +36,7 @@ from planners.coverage.metrics import capsule, to_cells
 from planners.coverage.params import CoverageParams
 from planners.drive_time import profile_time, vertex_times
 from planners.grid import GridMap
-from planners.polyline import cut_start, heading_changes, simplify
+from planners.polyline import LINE_M, cut_start, heading_changes, simplify
 from planners.robot import RobotSpec
 
 # share of target_s a cut may fall before or after its target
@@ -274,7 +274,7 @@ def _elapsed(pts: np.ndarray, params: CoverageParams, robot: RobotSpec) -> np.nd
 def _turns(pts: np.ndarray, params: CoverageParams) -> tuple[np.ndarray, np.ndarray]:
     """The vertices ``path_time`` counts as turns (those of the simplified path whose heading
     changes by more than ``turn_angle_deg``) and the heading change at each vertex there."""
-    simple = simplify(pts, params.simplify_tolerance)
+    simple = simplify(pts, params.simplify_tolerance, LINE_M)
     idx = _subsequence_indices(pts, simple)
     moved = np.concatenate([[True], np.hypot(*np.diff(simple, axis=0).T) > 1e-9])
     idx, simple = idx[moved], simple[moved]

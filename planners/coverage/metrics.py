@@ -36,7 +36,7 @@ import numpy as np
 
 from planners.coverage.params import CoverageParams
 from planners.grid import GridMap, cleanable, inflate, reachable
-from planners.polyline import count_turns, path_length, simplify
+from planners.polyline import LINE_M, count_turns, path_length, simplify
 from planners.robot import RobotSpec
 
 _PIECE_CELLS = 24.0
@@ -145,7 +145,8 @@ def path_time(
     """(length m, turns, estimated seconds) of one path."""
     pts = np.asarray(path, dtype=float).reshape(-1, 2)
     length = path_length(pts)
-    turns = count_turns(simplify(pts, simplify_tolerance), turn_angle_deg) if len(pts) > 2 else 0
+    simple = simplify(pts, simplify_tolerance, LINE_M)
+    turns = count_turns(simple, turn_angle_deg) if len(pts) > 2 else 0
     return length, turns, length / max_speed + turns * turn_cost_s
 
 

@@ -15,6 +15,7 @@ from agents.follow.escape import ESCAPE_MARGIN_M, escape_heading, escape_step, s
 from agents.follow.motion import advance, follow_step, peer_in_the_way, stop_speed
 from agents.follow.primitives import rotate_in_place
 from agents.follow.state import FollowParams, FollowState, Situation
+from agents.follow.track import tracked
 from fleet.params import AgentParams
 from planners.dwa import DWAParams, DWAResult, rollout
 from sim_server.lidar import add_noise, cast_scans, polygon_edges
@@ -239,12 +240,21 @@ def test_a_waypoint_given_up_far_short_is_missed(at: float, missed: tuple[int, .
     assert state.missed == missed
 
 
+def _noisy_scan(pose: tuple[float, float, float], edges: np.ndarray, rng) -> np.ndarray:
+    """The scan's points as the agent sees them: 360 beams, σ 1 cm, the 5-beam median."""
+    beams = -math.pi + np.arange(360) * (2 * math.pi / 360)
+    ranges = cast_scans(
+        np.array([pose[:2]]), np.array([pose[2]]), beams, edges, np.zeros((0, 3)), 6.0
+    )[0]
+    return scan_points(pose, add_noise(ranges, 0.01, 0.1, 6.0, rng), -math.pi, beams[1] - beams[0])
+
+
 def _round_a_corner(seed: int) -> float:
     """The robot's least true clearance from a table's convex corner while it follows the
     stored-map plan that touched it: lanes 1.75 cm wider than the radius from the table's
     face, turning at its corner, on noisy scans through the agent's 5-beam median."""
     table = np.array([[2.0, 1.3], [2.8, 1.3], [2.8, 1.9], [2.0, 1.9]])
-    beams = -math.pi + np.arange(360) * (2 * math.pi / 360)
+    edges = polygon_edges([table])
     path = np.array(
         [[3.7125, 1.3125], [3.4125, 1.225], [3.2875, 1.225], [2.9875, 1.3125], [2.9875, 1.1875]]
     )
@@ -252,18 +262,7 @@ def _round_a_corner(seed: int) -> float:
     pose, velocity, state = (3.7125, 1.3125, math.pi), (0.0, 0.0), FollowState(path, index=1)
     least = math.inf
     for _ in range(200):
-        ranges = cast_scans(
-            np.array([pose[:2]]),
-            np.array([pose[2]]),
-            beams,
-            polygon_edges([table]),
-            np.zeros((0, 3)),
-            6.0,
-        )[0]
-        seen = scan_points(
-            pose, add_noise(ranges, 0.01, 0.1, 6.0, rng), -math.pi, beams[1] - beams[0]
-        )
-        state, result = _step(state, pose, velocity, seen)
+        state, result = _step(state, pose, velocity, _noisy_scan(pose, edges, rng))
         if result is None:
             break
         velocity = (result.v, result.w)
@@ -283,3 +282,42 @@ def test_a_convex_corner_is_passed_without_contact_on_noisy_scans() -> None:
     1.30) on the stored small map."""
     least = [_round_a_corner(seed) for seed in range(20)]
     assert min(least) >= ROBOT.radius, least
+
+
+def _under_the_bed(seed: int) -> np.ndarray:
+    """The true poses of a robot tracking home's lane along the bed's foot, 4.25 cm wider than
+    the radius from it, after a lane down the bed's side and a chamfer round its corner, on
+    noisy scans through the agent's 5-beam median (the bedroom's walls and the bed)."""
+    bed = np.array([[0.1, 4.45], [1.7, 4.45], [1.7, 6.45], [0.1, 6.45]])
+    wall = np.array([[0.0, 3.45], [4.0, 3.45], [4.0, 3.55], [0.0, 3.55]])
+    edges = polygon_edges([bed, wall])
+    path = np.array(
+        [[1.8875, 5.2], [1.8875, 4.3625], [1.8375, 4.2625], [1.7375, 4.2375], [0.2375, 4.2375]]
+    )
+    rng = np.random.default_rng(seed)
+    pose, velocity, state = (1.8875, 5.2, -math.pi / 2), (0.0, 0.0), tracked(path, 0, PARAMS)
+    poses = [pose]
+    for _ in range(400):
+        state, result = _step(state, pose, velocity, _noisy_scan(pose, edges, rng))
+        if result is None:
+            break
+        velocity = (result.v, result.w)
+        xs, ys, ths = rollout(pose, np.array([result.v]), np.array([result.w]), np.array([DT]))
+        pose = (float(xs[0, 0]), float(ys[0, 0]), float(ths[0, 0]))
+        poses.append(pose)
+    assert state.done
+    return np.array(poses)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_lane_beside_furniture_is_tracked_on_its_line_at_speed(seed: int) -> None:
+    """The lane's start lies 2.5 cm from the chord that skips it: a simplification that drops
+    it drives the lane on a slant, 1.2 cm nearer the bed at its middle, which the tracker's
+    check refuses (nearer than the plan's own path): DWA drives it instead, off the line, and
+    in the agent (with the wall follower beside furniture) at 0.2 m/s."""
+    poses = _under_the_bed(seed)
+    on = (poses[:, 0] > 0.4) & (poses[:, 0] < 1.6) & (poses[:, 1] < 4.3)
+    off = np.abs(poses[on, 1] - 4.2375)
+    # on the slant: 3.4-5.5 mm on average, 4-14 mm at most (seeds 0-4); on the line 0.1-1.7, 1-5
+    assert off.mean() < 0.0025 and off.max() < 0.006
+    assert on.sum() * DT <= 2.6  # 1.2 m: 2.4 s at the top speed

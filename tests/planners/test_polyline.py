@@ -8,11 +8,14 @@ import numpy as np
 from robots import ROBOT
 
 from planners.polyline import (
+    LINE_M,
+    LINE_TOLERANCE_M,
     TurnCounter,
     count_turns,
     heading_changes,
     path_length,
     simplify,
+    simplify_indices,
     without_straight_vertices,
 )
 
@@ -119,3 +122,44 @@ def test_turns_in_stretches_equal_the_stretches_simplified_apart_and_memory_stay
     assert largest_buffer <= 512 and largest_memo <= 2 * 500
     whole = count_turns(simplify(wander, 0.05))
     assert abs(counter.turns() - whole) <= len(wander) // 499 + 1
+
+
+def _off(path: np.ndarray, kept: np.ndarray) -> float:
+    """How far the dropped points of ``path`` lie from the simplified path (its chords)."""
+    simple = path[kept]
+    worst = 0.0
+    for a, b in itertools.pairwise(range(len(kept))):
+        p, q = simple[a], simple[b]
+        for x in path[kept[a] + 1 : kept[b]]:
+            ab = q - p
+            t = np.clip((x - p) @ ab / (ab @ ab), 0, 1)
+            worst = max(worst, float(np.hypot(*(x - (p + t * ab)))))
+    return worst
+
+
+def test_a_line_the_plan_means_stays_on_its_line() -> None:
+    """Three ways a 3 cm RDP moved the home tour's lines toward what they pass, as the
+    tracker drove them (the tracker refused the nearer path, and DWA drove 92 s of the tour):
+    a lane whose start lies 2.5 cm off the chord that skips it (the bed's foot), a hop that
+    bends 15° round a door jamb 1.8 cm off its chord, and a lane laid in pieces 1.25 cm apart
+    with a 5 cm piece between them (beside the sofa)."""
+    bed = np.array(
+        [[1.8875, 6.2375], [1.8875, 4.3625], [1.8375, 4.2625], [1.7375, 4.2375], [0.2375, 4.2375]]
+    )
+    jamb = np.array([[5.7375, 1.1125], [5.7875, 1.2125], [5.8834, 1.2375], [6.1375, 1.2375]])
+    sofa = np.array([[2.3625, 1.0875], [1.8625, 1.1], [1.8125, 1.1], [0.2375, 1.0875]])
+    for path in (bed, jamb, sofa):
+        assert _off(path, simplify_indices(path, 0.03)) > 0.01  # what plain RDP did
+        assert _off(path, simplify_indices(path, 0.03, LINE_M)) <= LINE_TOLERANCE_M
+
+
+def test_grid_steps_beside_long_runs_are_still_absorbed() -> None:
+    """A staircase's runs may be long (a wall 4° off the axes: 35 cm runs of 2.5 cm steps),
+    and a diagonal step is one cell's diagonal: the steps still go."""
+    for step in ([0.0, 0.025], [0.025, 0.025]):
+        pts = [[0.0, 0.0]]
+        for _ in range(4):
+            x, y = pts[-1]
+            pts += [[x + 0.35, y], [x + 0.35 + step[0], y + step[1]]]
+        path = np.array(pts)
+        assert simplify_indices(path, 0.03, LINE_M).tolist() == [0, len(path) - 1]

@@ -49,6 +49,33 @@ def test_a_staircase_of_grid_steps_is_tracked_as_one_line() -> None:
     assert profile.segment[1:].tolist() == [1] * 20
 
 
+def test_a_lane_is_tracked_on_its_own_line_not_on_a_chord_that_skips_its_start() -> None:
+    """Home's lane under the bed, as the plan gave it: a lane down the bed's side, a chamfer
+    round its corner, the 1.5 m lane along its foot. Its start lies 2.5 cm from the chord
+    from the chamfer's middle to its end: plain RDP (3 cm) dropped it, and the lane was driven
+    on a slant, 1.5 cm nearer the bed at its middle, which the tracker's check then refused."""
+    path = np.array(
+        [[1.8875, 6.2375], [1.8875, 4.3625], [1.8375, 4.2625], [1.7375, 4.2375], [0.2375, 4.2375]]
+    )
+    profile = Profile.of(path, 0, STOP, 0.03, PARAMS, ROBOT)
+    assert {1, 3, 4} <= set(profile.kept.tolist())
+    # every stretch of the simplified path lies on the lane where the lane is
+    simple = path[profile.kept]
+    k = profile.segment[4]
+    assert np.allclose(simple[k - 1 : k + 1], path[3:5])
+
+
+def test_a_staircase_of_long_runs_and_grid_steps_is_still_one_line() -> None:
+    """A wall 4° off the map's axes rasterized at 2.5 cm: runs of 35 cm, steps of one cell.
+    The runs are long enough to be lines, but a step is a grid step: the runs' ends go."""
+    pts = [[0.0, 0.0]]
+    for _ in range(4):
+        x, y = pts[-1]
+        pts += [[x + 0.35, y], [x + 0.35, y + 0.025]]
+    profile = Profile.of(np.array(pts), 0, STOP, 0.03, PARAMS, ROBOT)
+    assert profile.kept.tolist() == [0, len(pts) - 1]
+
+
 def test_the_stop_speed_brakes_onto_the_stop_within_the_acceleration_limit() -> None:
     """Driven by its own commands through a velocity ramp at acc_lim_x, the robot comes to
     rest within stop_tolerance of the stop, never past it, from full speed."""
