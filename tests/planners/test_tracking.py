@@ -65,17 +65,6 @@ def test_a_lane_is_tracked_on_its_own_line_not_on_a_chord_that_skips_its_start()
     assert np.allclose(simple[k - 1 : k + 1], path[3:5])
 
 
-def test_a_staircase_of_long_runs_and_grid_steps_is_still_one_line() -> None:
-    """A wall 4° off the map's axes rasterized at 2.5 cm: runs of 35 cm, steps of one cell.
-    The runs are long enough to be lines, but a step is a grid step: the runs' ends go."""
-    pts = [[0.0, 0.0]]
-    for _ in range(4):
-        x, y = pts[-1]
-        pts += [[x + 0.35, y], [x + 0.35, y + 0.025]]
-    profile = Profile.of(np.array(pts), 0, STOP, 0.03, PARAMS, ROBOT)
-    assert profile.kept.tolist() == [0, len(pts) - 1]
-
-
 def test_the_stop_speed_brakes_onto_the_stop_within_the_acceleration_limit() -> None:
     """Driven by its own commands through a velocity ramp at acc_lim_x, the robot comes to
     rest within stop_tolerance of the stop, never past it, from full speed."""
