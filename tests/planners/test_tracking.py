@@ -53,7 +53,7 @@ def test_a_lane_is_tracked_on_its_own_line_not_on_a_chord_that_skips_its_start()
     """Home's lane under the bed, as the plan gave it: a lane down the bed's side, a chamfer
     round its corner, the 1.5 m lane along its foot. Its start lies 2.5 cm from the chord
     from the chamfer's middle to its end: plain RDP (3 cm) dropped it, and the lane was driven
-    on a slant, 1.5 cm nearer the bed at its middle, which the tracker's check then refused."""
+    on a slant, 1.2 cm nearer the bed at its middle, which the tracker's check then refused."""
     path = np.array(
         [[1.8875, 6.2375], [1.8875, 4.3625], [1.8375, 4.2625], [1.7375, 4.2375], [0.2375, 4.2375]]
     )
