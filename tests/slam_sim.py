@@ -10,7 +10,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from agents.pose_source import PoseSource
-from agents.slam.geometry import compose, relative, wrap_angle
+from agents.slam.geometry import compose, relative, scan_to_points, transform_points, wrap_angle
+from agents.slam.occupancy import LogOddsGrid
+from fleet.slam_params import SlamParams
 from sim_server.core import SimCore
 
 
@@ -105,6 +107,28 @@ def scan(
     if rng is not None and noise > 0:
         r = r + rng.normal(0.0, noise, size=r.shape)
     return r, -math.pi, inc
+
+
+def mapped_grid(
+    segments: np.ndarray, poses: Sequence[tuple[float, float, float]], params: SlamParams
+) -> LogOddsGrid:
+    """A 20 m × 20 m grid about the origin holding one scan (1 cm noise, seeded) from each of
+    ``poses``, inserted at its true pose: a submap as the SLAM would fill it."""
+    n = 400
+    grid = LogOddsGrid(
+        (n, n),
+        (-10.0, -10.0),
+        params.resolution,
+        params.p_hit,
+        params.p_miss,
+        params.p_min,
+        params.p_max,
+    )
+    rng = np.random.default_rng(1)
+    for pose in poses:
+        pts = scan_to_points(*scan(segments, np.array(pose), rng=rng), 0.1, 6.0)
+        grid.insert(np.array(pose[:2]), transform_points(np.array(pose), pts))
+    return grid
 
 
 def occupancy_raster(

@@ -36,43 +36,97 @@ def _window_max(a: np.ndarray, f: int) -> np.ndarray:
     return out
 
 
+def _sided(occupied: np.ndarray, free: np.ndarray, sectors: int) -> list[np.ndarray]:
+    """Per beam direction k (grid-frame angle 2πk/``sectors``) the ``occupied`` cells such a
+    beam can hit: those with a ``free`` cell within two steps on the sensor's side, along
+    −u_k or 45° either side of it (8-neighbour steps). A face seen along its length still has
+    free cells beside it on that side; a face two cells deep, or whose ray stopped a cell
+    short, still has one two steps back; the far face of a wall 0.1 m thick has none."""
+    rows, cols = occupied.shape
+    reach = 2
+    padded = np.zeros((rows + 2 * reach, cols + 2 * reach), dtype=bool)
+    padded[reach:-reach, reach:-reach] = free
+    layers = []
+    for k in range(sectors):
+        back = 2.0 * math.pi * k / sectors + math.pi
+        near = np.zeros_like(occupied)
+        for turn in (-0.25 * math.pi, 0.0, 0.25 * math.pi):
+            dr, dc = round(math.sin(back + turn)), round(math.cos(back + turn))
+            for step in range(1, reach + 1):
+                r0, c0 = reach + step * dr, reach + step * dc
+                near |= padded[r0 : r0 + rows, c0 : c0 + cols]
+        layers.append(occupied & near)
+    return layers
+
+
 class LikelihoodField:
     """F = exp(−d²/2σ²) over a grid's occupied cells, with cached max-pooled levels.
 
     The outermost ring of cells is forced to zero, so lookups clipped into the array score
     points that fall outside the map as zero.
+
+    With ``sectors`` K > 1 the field has one layer per direction a beam can travel in (sector
+    k: within π/K of the grid-frame angle 2πk/K), stacked in ``values`` as K blocks of rows:
+    layer k holds only the occupied cells that such a beam can hit, those with a known free
+    cell beside them on the sensor's side (at −u_k or ±45° from it, ``_sided``). A wall's two
+    faces are then told apart: a scan that sees a wall from one room does not fit a submap
+    that saw only its other face from the next, one wall thickness away, which a field of
+    distances alone scores almost as well as the face it sees (the likelihood field "sees
+    through walls": it replaces ray casting by the nearest obstacle, Thrun et al.,
+    Probabilistic Robotics §6.4).
     """
 
-    def __init__(self, grid: LogOddsGrid, sigma: float) -> None:
+    def __init__(self, grid: LogOddsGrid, sigma: float, sectors: int = 1) -> None:
         self.resolution = grid.resolution
         self.origin = grid.origin
+        self.sectors = sectors
         rows, cols = grid.shape
-        values = np.zeros((rows, cols), dtype=np.float32)
+        values = np.zeros((sectors, rows, cols), dtype=np.float32)
         if grid.touched is not None:
             pad = math.ceil(3.0 * sigma / grid.resolution) + 1
             r0, r1, c0, c1 = grid.touched
             r0, c0 = max(r0 - pad, 0), max(c0 - pad, 0)
             r1, c1 = min(r1 + pad, rows), min(c1 + pad, cols)
-            occupied = grid.log_odds[r0:r1, c0:c1] > 0
-            if occupied.any():
-                d = distance_transform_edt(~occupied) * grid.resolution
-                values[r0:r1, c0:c1] = np.exp(-0.5 * (d / sigma) ** 2)
-        values[0, :] = values[-1, :] = 0.0
-        values[:, 0] = values[:, -1] = 0.0
-        self.values = values
-        self._pooled: dict[int, np.ndarray] = {1: values}
+            block = grid.log_odds[r0:r1, c0:c1]
+            occupied = block > 0
+            layers = [occupied] if sectors == 1 else _sided(occupied, block < 0, sectors)
+            for k, cells in enumerate(layers):
+                if cells.any():
+                    d = distance_transform_edt(~cells) * grid.resolution
+                    values[k, r0:r1, c0:c1] = np.exp(-0.5 * (d / sigma) ** 2)
+        values[:, 0, :] = values[:, -1, :] = 0.0
+        values[:, :, 0] = values[:, :, -1] = 0.0
+        self._shape = (rows, cols)
+        self.values = values.reshape(sectors * rows, cols)
+        self._pooled: dict[int, np.ndarray] = {1: self.values}
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.values.shape  # type: ignore[return-value]
+        """(rows, cols) of one layer."""
+        return self._shape
 
     def pooled(self, factor: int) -> np.ndarray:
+        """The layers max-pooled over ``factor``² cells, stacked as ``values`` is."""
         if factor not in self._pooled:
-            self._pooled[factor] = _window_max(self.values, factor)
+            rows, cols = self._shape
+            layers = self.values.reshape(self.sectors, rows, cols)
+            pooled = np.concatenate([_window_max(layer, factor) for layer in layers])
+            self._pooled[factor] = pooled
         return self._pooled[factor]
 
-    def bilinear(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """F and its gradient (dF/dx, dF/dy) at local points, interpolated between cell centres:
+    def layers(self, angles: np.ndarray) -> np.ndarray | None:
+        """The flat offset into ``values`` of the layer for beams travelling at ``angles``
+        (grid frame, radians); None for a field of one layer."""
+        if self.sectors == 1:
+            return None
+        k = np.rint(angles * (self.sectors / (2.0 * math.pi))).astype(np.int64) % self.sectors
+        return k * (self._shape[0] * self._shape[1])
+
+    def bilinear(
+        self, x: np.ndarray, y: np.ndarray, layer: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """F and its gradient (dF/dx, dF/dy) at local points (in the layers ``layer``, flat
+        offsets from ``layers``), interpolated between cell centres:
         F = f00 + a·fu + fv·(b + t·fu) with a = f01 − f00, b = f10 − f00, t = f11 − f10 − a."""
         rows, cols = self.shape
         scale = 1.0 / self.resolution
@@ -85,6 +139,8 @@ class LikelihoodField:
         fu, fv = u - j, v - at
         at *= cols
         at += j
+        if layer is not None:
+            at += layer
         f = self.values.reshape(-1)
         f00, f01, f10, f11 = f[at], f[at + 1], f[at + cols], f[at + cols + 1]
         a = f01 - f00
@@ -200,6 +256,7 @@ class CorrelativeMatcher:
         p = self.params
         n = points.shape[0]
         sx, sy = points[:, 0], points[:, 1]
+        layer = field.layers(start[2] + np.arctan2(sy, sx))
         pen = np.array([t_pen, t_pen, r_pen])
         lo = start - np.array([field.resolution, field.resolution, p.angular_step])
         hi = start + np.array([field.resolution, field.resolution, p.angular_step])
@@ -209,7 +266,7 @@ class CorrelativeMatcher:
             c, s = math.cos(pose[2]), math.sin(pose[2])
             dx = c * sx - s * sy  # the points turned, before the translation
             dy = s * sx + c * sy
-            value, gx, gy = field.bilinear(dx + pose[0], dy + pose[1])
+            value, gx, gy = field.bilinear(dx + pose[0], dy + pose[1], layer)
             miss2 = np.maximum(1.0 - value, 0.0)
             miss = np.sqrt(miss2)
             d_miss = -0.5 / np.maximum(miss, 1e-4)
@@ -247,6 +304,7 @@ class _Window:
     rot_penalty: np.ndarray  # (T,)
     pen_xy: float
     extent: tuple[int, int, int, int]  # the lowest and highest row, the lowest and highest col
+    layer: np.ndarray | None  # (T, N) flat offsets of each point's layer (a sided field)
 
     def leaves(self, shape: tuple[int, int], f: int) -> bool:
         """Whether a point shifted by −n_xy … n_xy + f − 1 cells (every shift the two levels
@@ -277,7 +335,11 @@ class _Window:
         col0 = np.floor((px - field.origin[0]) / res).astype(np.int64)
         row0 = np.floor((py - field.origin[1]) / res).astype(np.int64)
         extent = (int(row0.min()), int(row0.max()), int(col0.min()), int(col0.max()))
-        return cls(n_xy, d_theta, row0, col0, r_pen * d_theta**2, t_pen * res * res, extent)
+        layer = None
+        if field.sectors > 1:
+            bearing = np.arctan2(points[:, 1], points[:, 0])
+            layer = field.layers(prior[2] + d_theta[:, None] + bearing)
+        return cls(n_xy, d_theta, row0, col0, r_pen * d_theta**2, t_pen * res * res, extent, layer)
 
 
 def _coarse_bounds(
@@ -298,8 +360,9 @@ def _coarse_bounds(
         window.col0,
         starts[None],
         starts[None],
-        table.shape,
-        window.leaves(table.shape, f),
+        field.shape,
+        window.leaves(field.shape, f),
+        window.layer,
     )
     coarse = table.reshape(-1)[at].mean(axis=-1)
     coarse -= window.rot_penalty[:, None, None]
@@ -342,7 +405,8 @@ def _branch_and_bound(
         ti, jy, jx = np.unravel_index(chunk, coarse.shape)
         ky = starts[jy][:, None] + offs  # (B, f)
         kx = starts[jx][:, None] + offs
-        at = _cells(window.row0[ti], window.col0[ti], ky, kx, field.shape, clip)
+        layer = None if window.layer is None else window.layer[ti]
+        at = _cells(window.row0[ti], window.col0[ti], ky, kx, field.shape, clip, layer)
         score = field.values.reshape(-1)[at].mean(axis=-1)
         score -= window.rot_penalty[ti][:, None, None]
         score -= window.pen_xy * (ky[:, :, None] ** 2 + kx[:, None, :] ** 2)
@@ -374,9 +438,11 @@ def _cells(
     dx: np.ndarray,
     shape: tuple[int, int],
     clip: bool,
+    layer: np.ndarray | None = None,
 ) -> np.ndarray:
     """Flat indices (B, Y, X, N) of the cells (B, N) shifted by every (dy, dx) of their row
-    ((B or 1, Y) and (B or 1, X) cells), clipped to the grid's edge with ``clip``."""
+    ((B or 1, Y) and (B or 1, X) cells), clipped to the grid's edge with ``clip``, in the
+    layers ``layer`` ((B, N) flat offsets) of a sided field."""
     rows, cols = shape
     r = row0[:, None, :] + dy[:, :, None]
     c = col0[:, None, :] + dx[:, :, None]
@@ -384,4 +450,6 @@ def _cells(
         np.clip(r, 0, rows - 1, out=r)
         np.clip(c, 0, cols - 1, out=c)
     r *= cols
+    if layer is not None:
+        c = c + layer[:, None, :]
     return r[:, :, None, :] + c[:, None, :, :]

@@ -218,7 +218,7 @@ class Submaps:
         old.finished = True
         margin = math.ceil(max(p.loop_window_xy, 3.0 * p.match_sigma) / p.resolution) + 1
         old.grid = old.grid.cropped(margin)
-        old.field = LikelihoodField(old.grid, p.match_sigma)
+        old.field = LikelihoodField(old.grid, p.match_sigma, p.loop_field_sectors)
         old.field_nodes = old.nodes
         return old
 

@@ -16,11 +16,10 @@ import math
 
 import numpy as np
 import pytest
-from slam_sim import room_segments, scan
+from slam_sim import mapped_grid, room_segments, scan
 
-from agents.slam.geometry import scan_to_points, transform_points
+from agents.slam.geometry import scan_to_points
 from agents.slam.matcher import CorrelativeMatcher, LikelihoodField
-from agents.slam.occupancy import LogOddsGrid
 from agents.slam.slam import Slam
 from fleet.slam_params import SlamParams
 
@@ -66,21 +65,7 @@ def _drive(params: SlamParams) -> tuple[np.ndarray, Slam]:
 
 
 def _field(segments: np.ndarray, poses: list[tuple[float, float, float]]) -> LikelihoodField:
-    n = 400
-    grid = LogOddsGrid(
-        (n, n),
-        (-10.0, -10.0),
-        PARAMS.resolution,
-        PARAMS.p_hit,
-        PARAMS.p_miss,
-        PARAMS.p_min,
-        PARAMS.p_max,
-    )
-    rng = np.random.default_rng(1)
-    for pose in poses:
-        pts = scan_to_points(*scan(segments, np.array(pose), rng=rng), 0.1, 6.0)
-        grid.insert(np.array(pose[:2]), transform_points(np.array(pose), pts))
-    return LikelihoodField(grid, PARAMS.match_sigma)
+    return LikelihoodField(mapped_grid(segments, poses, PARAMS), PARAMS.match_sigma)
 
 
 def _rival_gap(segments: np.ndarray, pose: tuple[float, float, float]) -> float:
