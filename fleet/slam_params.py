@@ -71,11 +71,11 @@ class SlamParams:
     loop_window_xy: float = 0.8
     loop_window_theta: float = 0.35
     loop_coarse_factor: int = 8
-    # A finished submap's likelihood field has one layer per this many beam directions, each
-    # holding the wall faces a beam travelling that way can hit (the faces with free space on
-    # its side): a scan of a wall's far face, from the next room, does not close a loop one
-    # wall thickness off (agents.slam.matcher.LikelihoodField; 1: one layer, faces not told
-    # apart)
+    # A finished submap's likelihood field has this many layers, one per sector of beam
+    # directions, each holding the wall faces a beam travelling that way can hit (the faces
+    # with free space on its side): a scan of a wall's far face, from the next room, does not
+    # close a loop one wall thickness off (agents.slam.matcher.LikelihoodField; 1: one layer,
+    # faces not told apart)
     loop_field_sectors: int = 8
     loop_min_score: float = 0.6
     # A closure that moves the estimate by more than loop_agree_xy / _theta is kept only if

@@ -68,12 +68,13 @@ class LikelihoodField:
     With ``sectors`` K > 1 the field has one layer per direction a beam can travel in (sector
     k: within π/K of the grid-frame angle 2πk/K), stacked in ``values`` as K blocks of rows:
     layer k holds only the occupied cells that such a beam can hit, those with a known free
-    cell beside them on the sensor's side (at −u_k or ±45° from it, ``_sided``). A wall's two
-    faces are then told apart: a scan that sees a wall from one room does not fit a submap
-    that saw only its other face from the next, one wall thickness away, which a field of
-    distances alone scores almost as well as the face it sees (the likelihood field "sees
+    cell within two steps on the sensor's side (toward −u_k or ±45° from it, ``_sided``). A
+    wall's two faces are then told apart: a scan that sees a wall from one room does not fit
+    a submap that saw only its other face from the next, one wall thickness away, which a
+    field of distances alone scores almost as well as the face it sees (the likelihood field "sees
     through walls": it replaces ray casting by the nearest obstacle, Thrun et al.,
-    Probabilistic Robotics §6.4).
+    Probabilistic Robotics §6.4). It weighs K times the memory of one layer (with its pooled
+    level, about 2 MB for a finished submap of home's tour, 0.26 MB with one layer).
     """
 
     def __init__(self, grid: LogOddsGrid, sigma: float, sectors: int = 1) -> None:
