@@ -60,6 +60,19 @@ def _check_runs(
         _fail("--timeout must be > 0")
 
 
+def _checked_config(path: Path) -> Path:
+    """``path`` made absolute, once it loads as a fleet config; else the command ends with the
+    loader's message, which names the file and the field."""
+    from fleet.config import ConfigError
+    from fleet.params import load_fleet_config
+
+    try:
+        load_fleet_config(path)
+    except (ConfigError, OSError, ValueError) as e:
+        _fail(f"--config: {e}")
+    return path.resolve()
+
+
 def bench_fleet(
     worlds: WorldsOpt = "home",
     seeds: SeedsOpt = "0-4",
@@ -74,6 +87,14 @@ def bench_fleet(
     ] = None,
     as_json: JsonOpt = False,
     deconfliction: DeconflictionOpt = None,
+    config: Annotated[
+        Path | None,
+        typer.Option(
+            "--config",
+            help="Parameter file every run uses (its `fleet up --config`), checked before the "
+            "first run; default: the built-in configs/fleet.yaml.",
+        ),
+    ] = None,
 ) -> None:
     """Run `fleet up --headless --until-done` for every world and seed, and report what the
     fleet delivered on the floor, as the simulator measured it.
@@ -87,14 +108,17 @@ def bench_fleet(
 
     Examples: `fleet bench fleet --worlds home --seeds 0-4`;
     `fleet bench fleet --worlds small,home --seeds 0,1 --json`;
+    `fleet bench fleet --worlds small --seeds 0-2 --config my-fleet.yaml` (an A/B of a parameter);
     `fleet bench fleet --worlds ../shared/data/maps/cob_ipa_apartment.yaml --seeds 0-2`.
     """
     from fleet.bench.fleet import Scenario, run_bench, table_lines
 
     _check_runs(robots, speed, timeout, deconfliction)
+    options = ("--deconfliction", deconfliction) if deconfliction else ()
+    if config is not None:
+        options = (*options, "--config", str(_checked_config(config)))
     chosen = []
     for name in (w.strip() for w in worlds.split(",") if w.strip()):
-        options = ("--deconfliction", deconfliction) if deconfliction else ()
         chosen.append(Scenario(Path(name).stem, world_file(name, "--worlds"), robots, options))
     if not chosen:
         _fail("--worlds: no world given")

@@ -103,6 +103,39 @@ def test_bad_arguments_are_refused_before_any_run(args: list[str], message: str)
     assert out.returncode != 0 and message in out.stderr, out.stderr
 
 
+def test_a_bad_config_is_refused_naming_its_field_before_any_run(tmp_path: Path) -> None:
+    from fleet.params import default_config_path
+
+    bad = tmp_path / "fleet.yaml"
+    text = default_config_path().read_text()
+    bad.write_text(text.replace("  lane_overlap: ", "  lane_overlapp: ", 1))
+    args = ["--worlds", "small", "--config", str(bad), "--run-root", str(tmp_path / "runs")]
+    out = subprocess.run(
+        [sys.executable, "-m", "fleet.cli", "bench", "fleet", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode != 0, out.stderr
+    assert "--config" in out.stderr and "coordinator.lane_overlapp" in out.stderr, out.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_every_run_is_handed_the_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import fleet.bench.fleet as bench
+    import fleet.cli.fleet_bench as cli
+    from fleet.params import default_config_path
+
+    handed: list = []
+    monkeypatch.setattr(bench, "run_bench", lambda _root, scenarios, *_a: handed.extend(scenarios))
+    monkeypatch.setattr(cli, "print_result", lambda *_a: None)
+    mine = tmp_path / "mine.yaml"
+    mine.write_text(default_config_path().read_text())
+    cli.bench_fleet(worlds="small,home", seeds="0", run_root=tmp_path / "runs", config=mine)
+    assert [s.name for s in handed] == ["small", "home"]
+    assert all(s.options == ("--config", str(mine.resolve())) for s in handed)
+
+
 def test_one_robot_drives_the_small_worlds_whole_tour_in_process(tmp_path: Path) -> None:
     from agents.follow.state import FollowParams
     from fleet.bench.follow import follow_tour
