@@ -189,7 +189,10 @@ class CoordinatorParams:
             "stall_progress_m",
             "max_detour_m",
         )
-        require_non_negative(self, "body_margin")
+        require_non_negative(self, "body_margin", "wall_clearance")
+        if not 0.0 <= self.lane_overlap < 0.9:
+            # the coverage planner's own bound on the overlap it is given (CoverageParams)
+            raise ValueError(f"lane_overlap must be within [0, 0.9), got {self.lane_overlap}")
         if not 0.5 < self.map_change_confidence < 1.0:
             raise ValueError(
                 f"map_change_confidence must be within (0.5, 1), got {self.map_change_confidence}"

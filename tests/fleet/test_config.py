@@ -61,6 +61,17 @@ def test_a_tracking_window_floor_above_its_cap_is_refused(tmp_path: Path, field:
     assert str(path) in msg and field in msg and "floor above its cap" in msg, msg
 
 
+@pytest.mark.parametrize(("value", "why"), [(-0.1, "within [0, 0.9)"), (0.9, "within [0, 0.9)")])
+def test_a_lane_overlap_the_planner_cannot_plan_is_refused_at_load(
+    tmp_path: Path, value: float, why: str
+) -> None:
+    path = _with(tmp_path / "fleet.yaml", "coordinator", "lane_overlap", value)
+    msg = _config_error(path)
+    assert str(path) in msg and "lane_overlap" in msg and why in msg, msg
+    path = _with(tmp_path / "fleet.yaml", "coordinator", "wall_clearance", -0.01)
+    assert "wall_clearance must be >= 0" in _config_error(path)
+
+
 def test_a_misspelt_section_gets_a_hint(tmp_path: Path) -> None:
     path = _write(tmp_path / "fleet.yaml", yaml.safe_dump({"wall_folow": {"speed": 0.1}}))
     msg = _config_error(path)
