@@ -68,7 +68,7 @@ def _checked_config(path: Path) -> Path:
 
     try:
         load_fleet_config(path)
-    except (ConfigError, OSError, ValueError) as e:
+    except ConfigError as e:
         _fail(f"--config: {e}")
     return path.resolve()
 
