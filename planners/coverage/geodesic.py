@@ -106,6 +106,10 @@ class PathCosts:
         scale = self.f * self.grid.resolution / _OCTILE_BIAS
         rows = np.where(np.isfinite(rows), rows * scale, _UNREACHABLE)
         n_old = len(self._nodes)
+        # a search from each end sums the same path in another order: keep the costs exactly
+        # symmetric, as the tour's local search reads a hop from either end
+        fresh = rows[:, n_old:]
+        rows[:, n_old:] = np.minimum(fresh, fresh.T)
         geo = np.empty((len(nodes), len(nodes)))
         geo[:n_old, :n_old] = self._geo
         geo[n_old:, :] = rows

@@ -30,7 +30,8 @@ _CHUNK = 32
 @dataclass(frozen=True)
 class TaskEnds:
     """Entry/exit point and driven length of every option of every task, and the cost matrix
-    over all points, plus one last column: the cost of ending the tour at a point (set by
+    over all points (symmetric: the local search reads a hop from either end), plus one last
+    column: the cost of ending the tour at a point (set by
     :func:`plan_tour`). Option ``2·v + r`` of a task is its variant ``v``, reversed when
     ``r`` is 1; option ``o`` of task ``t`` is entry ``offset[t] + o`` of the flat arrays."""
 
@@ -187,6 +188,12 @@ def _reverse(run: np.ndarray) -> np.ndarray:
     return run[::-1] ^ 1
 
 
+def _block(c: np.ndarray, rows: np.ndarray | None, cols: np.ndarray) -> np.ndarray:
+    """``c[rows[r], cols[j]]`` as a (rows, cols) array (``rows`` None: every row of ``c``),
+    taken a whole row at a time, which reads memory in order."""
+    return np.take(c if rows is None else c[rows], cols, axis=1)
+
+
 def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
     """Reverse stretches ``seq[i..j]`` (each task driven backwards) while that shortens hops.
 
@@ -204,7 +211,7 @@ def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
         while i0 < n:
             i = np.arange(i0, min(i0 + _CHUNK, n))
             old = c[src[i], dst[i]][:, None] + after[None, :]
-            new = c[src[i][:, None], src[None, 1:]] + c[dst[i][:, None], dst[None, 1:]]
+            new = _block(c, src[i], src[1:]) + _block(c, dst[i], dst[1:])
             gain = np.where(np.arange(n)[None, :] >= i[:, None], old - new, -np.inf)
             j = np.argmax(gain, axis=1)
             hit = np.flatnonzero(gain[np.arange(len(i)), j] > _EPS)
@@ -242,8 +249,11 @@ def _or_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
                 a, b = src[i], dst[i + length]
                 s_in, s_out = dst[i], src[i + length]
                 removed = c[a, s_in] + c[s_out, b] - c[a, b]
-                fwd = c[src[None, :], s_in[:, None]] + c[s_out[:, None], dst[None, :]] - base
-                rev = c[src[None, :], s_out[:, None]] + c[s_in[:, None], dst[None, :]] - base
+                # hops from the tour's points into the run read from the run's end: the same
+                # cost (the matrix is symmetric) in rows rather than columns, several times faster
+                row_in, row_out = c[s_in], c[s_out]
+                fwd = _block(row_in, None, src) + _block(row_out, None, dst) - base
+                rev = _block(row_out, None, src) + _block(row_in, None, dst) - base
                 fwd[rows, i] = removed
                 rev[rows, i] = c[a, s_out] + c[s_in, b] - c[a, b]
                 cand = np.minimum(fwd, rev)
