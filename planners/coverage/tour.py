@@ -188,10 +188,9 @@ def _reverse(run: np.ndarray) -> np.ndarray:
     return run[::-1] ^ 1
 
 
-def _block(c: np.ndarray, rows: np.ndarray | None, cols: np.ndarray) -> np.ndarray:
-    """``c[rows[r], cols[j]]`` as a (rows, cols) array (``rows`` None: every row of ``c``),
-    taken a whole row at a time, which reads memory in order."""
-    return np.take(c if rows is None else c[rows], cols, axis=1)
+def _columns(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """``rows[:, cols]``, taken a whole row at a time, which reads memory in order."""
+    return np.take(rows, cols, axis=1)
 
 
 def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
@@ -211,7 +210,7 @@ def _two_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
         while i0 < n:
             i = np.arange(i0, min(i0 + _CHUNK, n))
             old = c[src[i], dst[i]][:, None] + after[None, :]
-            new = _block(c, src[i], src[1:]) + _block(c, dst[i], dst[1:])
+            new = _columns(c[src[i]], src[1:]) + _columns(c[dst[i]], dst[1:])
             gain = np.where(np.arange(n)[None, :] >= i[:, None], old - new, -np.inf)
             j = np.argmax(gain, axis=1)
             hit = np.flatnonzero(gain[np.arange(len(i)), j] > _EPS)
@@ -252,8 +251,8 @@ def _or_opt(seq: np.ndarray, start: int, ends: TaskEnds) -> np.ndarray:
                 # hops from the tour's points into the run read from the run's end: the same
                 # cost (the matrix is symmetric) in rows rather than columns, several times faster
                 row_in, row_out = c[s_in], c[s_out]
-                fwd = _block(row_in, None, src) + _block(row_out, None, dst) - base
-                rev = _block(row_out, None, src) + _block(row_in, None, dst) - base
+                fwd = _columns(row_in, src) + _columns(row_out, dst) - base
+                rev = _columns(row_out, src) + _columns(row_in, dst) - base
                 fwd[rows, i] = removed
                 rev[rows, i] = c[a, s_out] + c[s_in, b] - c[a, b]
                 cand = np.minimum(fwd, rev)
