@@ -64,6 +64,14 @@ class SlamParams:
     refine_iterations: int = 6  # Gauss–Newton steps on the interpolated field after the search
     score_information_gain: float = 0.1  # Olson §IV weights exp(gain·N·(score − best))
     covariance_margin: float = 0.02  # also refine coarse cells this close to the best
+    # Tracking between searches: the refinement alone from the odometry prior (Hess et al.
+    # 2016), the search run every this many scans, and whenever the fit ends on its one-cell
+    # bound or scores this much below the last matched scan (1: search every scan) ...
+    track_search_every: int = 10
+    track_score_drop: float = 0.02
+    # ... or the step's odometry error (search_window_sigmas σ) may exceed these (m, rad)
+    track_prior_xy: float = 0.05
+    track_prior_theta: float = 0.025
 
     # Loop closure: scan-to-submap matching against older submaps
     loop_every_nodes: int = 5
@@ -172,6 +180,9 @@ class SlamParams:
             "motion_xy_per_m",
             "motion_theta_per_rad",
             "motion_theta_per_m",
+            "track_score_drop",
+            "track_prior_xy",
+            "track_prior_theta",
         )
         if not 0 < self.p_min < self.p_miss < 0.5 < self.p_hit < self.p_max < 1:
             raise ValueError("need 0 < p_min < p_miss < 0.5 < p_hit < p_max < 1")
@@ -205,6 +216,7 @@ class SlamParams:
             "reloc_sectors",
             "reloc_min_points",
             "reloc_max_scans",
+            "track_search_every",
         )
         if self.search_window_theta > math.pi or self.loop_window_theta > math.pi:
             raise ValueError("angular search windows must be <= pi")

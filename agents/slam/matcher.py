@@ -229,6 +229,24 @@ class CorrelativeMatcher:
         pose, score = self._refine(field, points, prior + top[:3], prior, t_pen, r_pen)
         return MatchResult(pose=pose, score=score, covariance=covariance, rival_gap=rival_gap)
 
+    def track(
+        self,
+        field: LikelihoodField,
+        points: np.ndarray,
+        prior: np.ndarray,
+        penalties: tuple[float, float],
+    ) -> tuple[np.ndarray, float] | None:
+        """The Gauss–Newton refinement alone, from ``prior`` (no discrete search), as
+        Cartographer's 2D tracking does by default (Hess et al. 2016: the Ceres scan matcher
+        with the online correlative search off): the pose and its mean F, or None when the fit
+        ends on its bound one search cell from the prior (the optimum lies farther: search)."""
+        prior = np.asarray(prior, dtype=float)
+        pose, score = self._refine(field, points, prior, prior, *penalties)
+        bound = np.array([field.resolution, field.resolution, self.params.angular_step])
+        if (np.abs(pose - prior) >= bound * (1 - 1e-6)).any():
+            return None
+        return pose, score
+
     def _covariance(self, cand: np.ndarray, n_points: int, res: float) -> np.ndarray:
         """Olson 2009 §IV: Σ = Σᵢ wᵢ xᵢxᵢᵀ / Σ w − μμᵀ with wᵢ from the candidate scores."""
         w = np.exp(self.params.score_information_gain * n_points * (cand[:, 3] - cand[:, 3].max()))

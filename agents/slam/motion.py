@@ -47,3 +47,14 @@ def prior_penalties(params: SlamParams, step: np.ndarray) -> tuple[float, float]
     if sigma_theta > 0:
         r_pen = min(r_pen, params.prior_weight / sigma_theta**2)
     return t_pen, r_pen
+
+
+def within_refinement(params: SlamParams, step: np.ndarray) -> bool:
+    """Whether the odometry error of one ``step``, at ``search_window_sigmas`` standard
+    deviations, stays within ``track_prior_xy`` and ``track_prior_theta``: a prior that near
+    lies in the likelihood field's basin, and the refinement alone may place the scan; a
+    farther one (sparse scans, fast turns) may let the fit settle on a wrong wall, and the
+    scan is searched."""
+    sigma_xy, sigma_theta = step_sigmas(params, step)
+    k = params.search_window_sigmas
+    return k * sigma_xy <= params.track_prior_xy and k * sigma_theta <= params.track_prior_theta

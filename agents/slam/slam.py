@@ -31,7 +31,7 @@ from agents.slam.geometry import (
 )
 from agents.slam.loop_closure import LoopCloser
 from agents.slam.matcher import CorrelativeMatcher
-from agents.slam.motion import prior_penalties, tracking_window
+from agents.slam.motion import prior_penalties, tracking_window, within_refinement
 from agents.slam.occupancy import log_odds
 from agents.slam.pose_graph import PoseGraph
 from agents.slam.slam_map import SlamMap
@@ -59,12 +59,17 @@ class SlamEstimate:
 
 @dataclass(frozen=True)
 class SlamStats:
+    """Counts of the work done: scans processed, pose-graph nodes, submaps, loop closures,
+    optimizations, submaps trimmed, and scans placed by the correlative search (the others
+    matched were placed by the refinement alone)."""
+
     scans: int
     nodes: int
     submaps: int
     loop_closures: int
     optimizations: int
     trimmed: int = 0
+    searches: int = 0
 
 
 class Slam:
@@ -107,7 +112,10 @@ class Slam:
         self._last_node_odom: np.ndarray | None = None
         self._last_node_t = -math.inf
         self._covariance = np.zeros((3, 3))
+        self._since_search = 0
+        self._last_score: float | None = None
         self._scans = 0
+        self._searches = 0
         self._nodes = 0
         self._nodes_since_optimization = 0
         self._optimizations = 0
@@ -124,6 +132,7 @@ class Slam:
             self._loops.closures,
             self._optimizations,
             self._submaps.trimmed,
+            self._searches,
         )
 
     def process(
@@ -152,23 +161,9 @@ class Slam:
         submap = self._submaps.active[0]
         matched, score = False, 0.0
         if points.shape[0] >= 3 and submap.grid.touched is not None:
-            fld = self._submaps.field(submap)
-            sm_pose = self._graph.poses[submap.graph_id]
-            window_xy, window_theta = tracking_window(p, step)
-            result = self._matcher.match(
-                fld,
-                points,
-                relative(sm_pose, prior),
-                window_xy,
-                window_theta,
-                p.coarse_factor,
-                penalties=prior_penalties(p, step),
-            )
-            score = result.score
+            prior, score = self._track(submap, points, prior, step)
             matched = score >= p.min_match_score
-            if matched:
-                prior = compose(sm_pose, result.pose)
-                self._covariance = _rotate_covariance(result.covariance, sm_pose[2])
+            self._last_score = score if matched else None
         if not matched:
             self._covariance = np.diag(
                 [p.search_window_xy**2, p.search_window_xy**2, p.search_window_theta**2]
@@ -178,6 +173,41 @@ class Slam:
             self._add_node(points, self._misses(scan_ranges, angle_min, angle_increment), odom, t)
         self._remember_pose()
         return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
+
+    def _track(
+        self, submap: Submap, points: np.ndarray, prior: np.ndarray, step: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        """The scan's pose (map frame) and score against the matching ``submap``: the
+        refinement alone from the odometry ``prior`` (``CorrelativeMatcher.track``), or the
+        correlative search every ``track_search_every`` scans, for a step whose odometry may
+        err beyond the fit's basin (``within_refinement``), and whenever that fit ends on its
+        bound or scores ``track_score_drop`` below the last matched scan. A score under
+        ``min_match_score`` leaves the prior as it was. The covariance is the last search's."""
+        p = self.params
+        fld = self._submaps.field(submap)
+        sm_pose = self._graph.poses[submap.graph_id]
+        local = relative(sm_pose, prior)
+        penalties = prior_penalties(p, step)
+        if (
+            self._since_search < p.track_search_every - 1
+            and self._last_score is not None
+            and within_refinement(p, step)
+        ):
+            tracked = self._matcher.track(fld, points, local, penalties)
+            if tracked is not None and tracked[1] >= self._last_score - p.track_score_drop:
+                self._since_search += 1
+                pose, score = tracked
+                return (compose(sm_pose, pose) if score >= p.min_match_score else prior), score
+        window_xy, window_theta = tracking_window(p, step)
+        result = self._matcher.match(
+            fld, points, local, window_xy, window_theta, p.coarse_factor, penalties=penalties
+        )
+        self._since_search = 0
+        self._searches += 1
+        if result.score < p.min_match_score:
+            return prior, result.score
+        self._covariance = _rotate_covariance(result.covariance, sm_pose[2])
+        return compose(sm_pose, result.pose), result.score
 
     def trajectory(self) -> np.ndarray:
         """(scans, 3) poses of every processed scan after the latest graph optimization."""

@@ -245,6 +245,7 @@ def evaluate_replay(log_path: Path, cfg: FleetConfig, out: Path | None) -> dict:
         "replay_speedup_cpu": result.log_seconds / cpu if cpu > 0 else math.inf,
         "loop_closures": stats.loop_closures,
         "submaps": stats.submaps,
+        "searched_share": stats.searches / max(stats.scans, 1),
     }
 
 

@@ -129,6 +129,7 @@ def run_log_bench(
                 "loop_closures": stats.loop_closures,
                 "nodes": stats.nodes,
                 "submaps": stats.submaps,
+                "searched_share": stats.searches / max(stats.scans, 1),
                 "map_png": str(Path(timing["out"]) / "map.png"),
             }
         )
