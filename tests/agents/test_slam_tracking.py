@@ -132,7 +132,7 @@ def test_steps_whose_odometry_may_err_beyond_the_fits_basin_are_searched():
     """A step of a robot at 0.5 m/s or turning in place at 1 rad/s, scanned at 10 Hz, may be
     tracked; a step of a metre or a 30° turn may not. On scans 1 m and 30° apart (the sparse
     logs' spacing) every scan is searched: tracked, 3–5 % of such scans cost Freiburg 079 with
-    one scan in 18 and ACES with one in 2 a quarter more ATE on their worst seeds."""
+    one scan in 18 8 % and ACES with one in 2 30 % more ATE on their worst seeds."""
     p = PARAMS
     assert within_refinement(p, np.array([0.05, 0.0, 0.0]))
     assert within_refinement(p, np.array([0.0, 0.0, 0.1]))
