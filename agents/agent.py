@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.bidding import Bidder
 from agents.control import ControlParams, ControlState, Drive, Heard, control
 from agents.map_keeper import MapKeeper
 from agents.market import MarketClient
@@ -49,9 +50,11 @@ from fleet.bus import Bus
 from fleet.floor_map import unpack_grid
 from fleet.params import FleetConfig
 from fleet.protocol import (
+    AuctionCall,
     Award,
     AwardAck,
     BatteryState,
+    Bids,
     Clock,
     Docks,
     Heartbeat,
@@ -64,7 +67,6 @@ from fleet.protocol import (
     Request,
     SpawnReply,
     SpawnRequest,
-    TaskCall,
     Twist,
 )
 from planners.grid import GridMap
@@ -77,8 +79,6 @@ log = logging.getLogger("agent")
 LATENCY_GAIN = 0.2
 ODOM_WAIT_S = 0.02
 MAX_LATENCY_S = 0.5
-# task calls of one auction round arrive together: bid on them in one go
-BID_GATHER_S = 0.003
 # how long the end of the control loop waits for the heartbeat and bid loops to end (wall s)
 LOOPS_END_S = 2.0
 # a respawned robot's SLAM estimate of where it stood is itself this far off at most
@@ -129,9 +129,8 @@ class Agent:
             cfg.slam.free_threshold,
             cfg.robot.battery,
         )
-        self._calls: list[TaskCall] = []
         self._told_no_floor = False
-        self._calls_ready = threading.Condition()
+        self.bidder = Bidder(bus, rid, self._answer, self.stop)
 
     def spawn(
         self, start: tuple[float, float, float], respawn: bool = False, timeout: float = 30.0
@@ -171,7 +170,7 @@ class Agent:
         self.bus.subscribe(k.clock(), Clock, self._on_clock)
         self.bus.subscribe(k.plan(self.rid), Plan, self._on_plan)
         self.bus.subscribe(k.all_robots("intent"), Intent, self._on_intent)
-        self.bus.subscribe(k.task("*"), TaskCall, self._on_call)
+        self.bus.subscribe(k.call(), AuctionCall, self.bidder.on_call)
         self.bus.subscribe(k.award(self.rid), Award, self._on_award)
         self.bus.serve(k.robot(self.rid, "map"), Request, self._on_map_request)
         if self.unknown_start:
@@ -269,44 +268,21 @@ class Agent:
         if dropped:
             log.warning("%s: its task went to another robot; stopping it", self.rid)
 
-    def _on_call(self, _key: str, msg: TaskCall) -> None:
-        with self._calls_ready:
-            self._calls.append(msg)
-            self._calls_ready.notify()
-
     @property
     def ready(self) -> bool:
         """Whether the robot may take work: it knows where it is."""
         src = self.pose_source
         return src is not None and src.localized
 
-    def bid_loop(self) -> None:
-        """Answer the task calls of each auction round, all of a round's calls in one go; a
-        round whose bids fail to be made is lost, never the loop."""
-        while not self.stop.is_set():
-            with self._calls_ready:
-                if not self._calls:
-                    self._calls_ready.wait(0.1)
-                    continue
-            time.sleep(BID_GATHER_S)
-            with self._calls_ready:
-                calls, self._calls = self._calls, []
-            try:
-                self._bid(calls)
-            except Exception:
-                self.bus.handler_failed("coord/task/*")
-
-    def _bid(self, calls: list[TaskCall]) -> None:
-        if not self.ready:
-            return
+    def _answer(self, call: AuctionCall) -> Bids | None:
+        """This robot's bids on ``call`` (:class:`agents.bidding.Bidder` publishes them); None
+        before it knows where it is, or for a round that does not name it: one called before
+        the coordinator heard it was ready (just placed, or found in its saved map) would
+        refuse its bids as from a robot not in the market."""
+        if not self.ready or (call.bidders and self.rid not in call.bidders):
+            return None
         if not self.market.has_floor:
             self._fetch_floor()
-        latest = max(c.round for c in calls)
-        # a round called before the coordinator heard it was ready (one just placed, or found
-        # in its saved map) would refuse its bids as from a robot not in the market
-        calls = [c for c in calls if c.round == latest and (not c.bidders or self.rid in c.bidders)]
-        if not calls:
-            return
         with self.lock:
             assert self.pose_source is not None
             self.market.use_map(self.maps.snapshot)
@@ -314,9 +290,7 @@ class Agent:
             commitment = self.market.commitment(
                 self.pose_source.pose(), drive.follow, list(drive.chain), drive.chain_time_s
             )
-            bids = self.market.bids(calls, commitment, self.battery)
-        for b in bids:
-            self.bus.publish(self.keys.bid(b.task, self.rid), b, control=True)
+            return self.market.bids(call, commitment, self.battery)
 
     def _fetch_floor(self) -> None:
         try:
@@ -398,7 +372,7 @@ class Agent:
         sent as the session closed raised: a traceback in the agent's log at a run's end)."""
         loops = [
             threading.Thread(target=loop, name=loop.__name__, daemon=True)
-            for loop in (self.heartbeat_loop, self.bid_loop)
+            for loop in (self.heartbeat_loop, self.bidder.loop)
         ]
         for thread in loops:
             thread.start()

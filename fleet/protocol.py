@@ -24,7 +24,7 @@ from typing import Annotated, Any, ClassVar, TypeVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 DEFAULT_FLEET = "default"
 # what a robot's control steps were spent on, in the order of RobotStatus.time_s
 # (see agents.time_use.step_kind)
@@ -93,14 +93,14 @@ class Keys:
     def coord_state(self) -> str:
         return f"{self.root}/coord/state"
 
-    def task(self, task: str) -> str:
-        return f"{self.root}/coord/task/{task}"
+    def call(self) -> str:
+        return f"{self.root}/coord/call"
 
-    def bid(self, task: str, robot: str) -> str:
-        return f"{self.root}/coord/bid/{task}/{robot}"
+    def bids(self, robot: str) -> str:
+        return f"{self.root}/coord/bids/{robot}"
 
     def all_bids(self) -> str:
-        return f"{self.root}/coord/bid/*/*"
+        return f"{self.root}/coord/bids/*"
 
     def award(self, robot: str) -> str:
         return f"{self.root}/coord/award/{robot}"
@@ -137,7 +137,7 @@ class Keys:
 
     @staticmethod
     def robot_of(key: str) -> str:
-        """The robot id in ``fleet/<f>/robot/<id>/<topic>``, ``.../coord/bid/<task>/<id>``,
+        """The robot id in ``fleet/<f>/robot/<id>/<topic>``, ``.../coord/bids/<id>``,
         ``.../coord/award/<id>``, ``.../coord/ack/<id>`` or ``.../coord/placement/<id>``."""
         parts = str(key).split("/")
         if len(parts) > 3 and parts[2] == "robot":
@@ -147,14 +147,14 @@ class Keys:
         return ""
 
 
-_ROBOT_FAMILIES = ("bid", "award", "ack", "placement")
-_ID_KEYS = ("plan", "award", "ack", "task", "bid", "placement")
+_ROBOT_FAMILIES = ("bids", "award", "ack", "placement")
+_ID_KEYS = ("plan", "award", "ack", "bids", "placement")
 
 
 def key_class(key: str) -> str:
     """What kind of key ``key`` is, without its fleet and ids: ``fleet/<f>/robot/robot-3/truth``
-    → ``robot/*/truth``; an id after ``coord/plan/``, ``award/``, ``ack/``, ``task/``,
-    ``bid/`` or ``placement/`` becomes ``*`` too."""
+    → ``robot/*/truth``; an id after ``coord/plan/``, ``award/``, ``ack/``, ``bids/`` or
+    ``placement/`` becomes ``*`` too."""
     parts = str(key).split("/")[2:]
     if len(parts) >= 3 and parts[0] == "robot":
         parts[1] = "*"
@@ -384,45 +384,50 @@ class Plan(Message):
 
 
 @dataclass(frozen=True, eq=False)
-class TaskCall(Message):
-    """An auction call for one task (``coord/task/<task>``) in auction round ``round``: its
-    two ends, its estimated cleaning time and area, and what it is worth beyond its work in
-    seconds a bid takes off (``gain_s``: an exploring fleet's frontier, its expected
-    information; 0 for cleaning). ``bidders`` are the robots in the market when the round was
-    called (a bid from another is refused as from a robot not in the market; empty: anyone).
-    Agents answer with a :class:`Bid`."""
+class AuctionCall(Message):
+    """Auction round ``round`` (``coord/call``): every lot on sale, K of them, in one message —
+    each one's id, its two ends, its estimated cleaning time and area, and what it is worth
+    beyond its work in seconds a bid takes off (``gains_s``: an exploring fleet's frontier, its
+    expected information; 0 for cleaning). ``bidders`` are the robots in the market when the
+    round was called (a bid from another is refused as from a robot not in the market; empty:
+    anyone). Agents answer with one :class:`Bids`."""
 
-    TYPE: ClassVar[str] = "task_call"
+    TYPE: ClassVar[str] = "auction_call"
     stamp: float
     round: int
-    task: str
-    entry_x: float
-    entry_y: float
-    exit_x: float
-    exit_y: float
-    time_s: float
-    area_m2: float
-    gain_s: float = 0.0
+    lots: list[str]
+    entries: Annotated[np.ndarray, Arr("<f8", (2,))]
+    exits: Annotated[np.ndarray, Arr("<f8", (2,))]
+    times_s: Annotated[np.ndarray, Arr("<f8")]
+    areas_m2: Annotated[np.ndarray, Arr("<f8")]
+    gains_s: Annotated[np.ndarray, Arr("<f8")]
     bidders: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True, eq=False)
-class Bid(Message):
-    """A robot's price for a called task (``coord/bid/<task>/<robot>``): the marginal seconds
+class Bids(Message):
+    """A robot's prices for the lots of round ``round`` (``coord/bids/<robot>``), all in one
+    message, in the call's order less the lots it already holds: per lot, the marginal seconds
     of adding it to what the robot has won, its whole committed time with it, and which end it
-    would enter by (``reverse``: the task's exit). ``declined``: the robot cannot do it and then
-    get to a dock on its charge; it answers the call, so the round need not wait for it, but
-    never wins."""
+    would enter by (``reverse``: the lot's exit; 0/1). ``declined`` (0/1): the robot cannot do
+    the lot and then get to a dock on its charge; it answers, so the round need not wait for
+    it, but never wins that lot. A robot with nothing to offer answers with no lots."""
 
-    TYPE: ClassVar[str] = "bid"
+    TYPE: ClassVar[str] = "bids"
     stamp: float
     round: int
-    task: str
     robot: str
-    marginal_s: float
-    total_s: float
-    reverse: bool
-    declined: bool = False
+    lots: list[str]
+    marginal_s: Annotated[np.ndarray, Arr("<f8")]
+    total_s: Annotated[np.ndarray, Arr("<f8")]
+    reverse: Annotated[np.ndarray, Arr("<u1")]
+    declined: Annotated[np.ndarray, Arr("<u1")]
+
+    def consistent(self) -> bool:
+        """Whether every per-lot array has one entry per lot."""
+        k = len(self.lots)
+        arrays = (self.marginal_s, self.total_s, self.reverse, self.declined)
+        return all(len(a) == k for a in arrays)
 
 
 @dataclass(frozen=True, eq=False)
@@ -753,8 +758,8 @@ MESSAGES: dict[str, type[Message]] = {
         MapPatches,
         Placement,
         Heartbeat,
-        TaskCall,
-        Bid,
+        AuctionCall,
+        Bids,
         Docks,
         Award,
         AwardAck,
@@ -856,7 +861,8 @@ def _decode_value(cls: type[Message], spec: _FieldSpec, raw: Any) -> Any:
             raise DecodeError(f"{where}: expected a string, got {type(raw).__name__}")
         return raw
     if spec.kind == list[str]:
-        if not isinstance(raw, list) or not all(isinstance(s, str) for s in raw):
+        # the types of a long list at C speed: a call's 500 lot ids are decoded by every robot
+        if not isinstance(raw, list) or not set(map(type, raw)) <= {str}:
             raise DecodeError(f"{where}: expected a list of strings")
         return list(raw)
     raise DecodeError(f"{where}: unsupported field type")  # pragma: no cover - schema bug

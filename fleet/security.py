@@ -19,8 +19,8 @@ access-control list denies whatever it does not allow:
   it subscribed to, except the robots, which may neither subscribe to nor receive ``truth``;
 * only ``sim`` publishes scans, odometry, truth and ``sim/**``, and answers on ``sim/**``;
 * only robot ``R`` publishes ``robot/R/{cmd_vel,pose,intent,status,map,heartbeat}``, its bids
-  (``coord/bid/*/R``) and award acks (``coord/ack/R``), and answers for its map;
-* only ``coordinator`` publishes and answers task calls, plans, awards, placements, its state,
+  (``coord/bids/R``) and award acks (``coord/ack/R``), and answers for its map;
+* only ``coordinator`` publishes and answers auction calls, plans, awards, placements, its state,
   events and the floor map (``coord/**``, but bids and acks);
 * only ``dashboard`` answers on ``ops/**``.
 
@@ -67,8 +67,8 @@ ANSWER_MESSAGES = ("declare_queryable", "reply")
 ROBOT_TOPICS = ("cmd_vel", "pose", "intent", "status", "map", "heartbeat")
 SENSOR_TOPICS = ("scan", "odom", "truth")
 # the coordinator's keys: single ones, and families with one key per task or robot
-COORD_KEYS = ("state", "events", "map")
-COORD_FAMILIES = ("task", "plan", "award", "placement")
+COORD_KEYS = ("state", "events", "map", "call")
+COORD_FAMILIES = ("plan", "award", "placement")
 HEADER = (
     "// A secured fleet router: TLS, a user and password per process, and an access-control\n"
     "// list (fleet/security.py says who may do what). Written by `fleet certs`.\n"
@@ -173,7 +173,7 @@ def access_control(robots: int) -> dict[str, Any]:
                 PUBLISH_MESSAGES,
                 ["ingress"],
                 [f"{f}/robot/{rid}/{t}" for t in ROBOT_TOPICS]
-                + [f"{f}/coord/bid/*/{rid}", f"{f}/coord/ack/{rid}"],
+                + [f"{f}/coord/bids/{rid}", f"{f}/coord/ack/{rid}"],
             )
         )
         rules.append(

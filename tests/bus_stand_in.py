@@ -1,10 +1,29 @@
 """Stand-ins for a process's bus, for tests that drive a server's handlers or an agent's control
 step directly: :class:`NoBus` subscribes and serves nothing and records what the server drops
-as implausible; :class:`LoopbackBus` hands an agent's publications to the test."""
+as implausible; :class:`LoopbackBus` hands an agent's publications to the test; :func:`answer`
+is a robot's answer to an auction call at one price for every lot."""
 
 from __future__ import annotations
 
-from fleet.protocol import Keys, Message
+import numpy as np
+
+from fleet.protocol import AuctionCall, Bids, Keys, Message
+
+
+def answer(call: AuctionCall, robot: str, price: float, declined: bool = False) -> Bids:
+    """``robot``'s bids on every lot of ``call``: ``price`` seconds marginal and total, each
+    entered at its entry (and all ``declined``, when asked)."""
+    k = len(call.lots)
+    return Bids(
+        call.stamp,
+        call.round,
+        robot,
+        list(call.lots),
+        np.full(k, float(price)),
+        np.full(k, float(price)),
+        np.zeros(k, dtype=np.uint8),
+        np.full(k, int(declined), dtype=np.uint8),
+    )
 
 
 class NoBus:

@@ -49,7 +49,7 @@ from fleet.plausible import clock_step_s
 from fleet.protocol import (
     SCHEMA_VERSION,
     AwardAck,
-    Bid,
+    Bids,
     Clock,
     Heartbeat,
     Intent,
@@ -161,12 +161,13 @@ def implausible_messages(
             (keys.ack(rid), AwardAck(now, 10**6, GHOST)),
         ]
     ghost_points = np.array([[now, x, y], [now + 1.0, x, y]])
+    zero, no = np.zeros(1), np.zeros(1, dtype=np.uint8)
     out += [
         (keys.robot(GHOST, "intent"), Intent(now, ghost_points, 1, 1)),
         (keys.robot(GHOST, "pose"), PoseEstimate(now, x, y, 0.0)),
         (keys.robot(GHOST, "status"), RobotStatus(now, "driving", "t00", 0.5, 1, 2, 0.0)),
         (keys.robot(GHOST, "heartbeat"), Heartbeat(now, 1, True)),
-        (keys.bid("t00", GHOST), Bid(now, 1, "t00", GHOST, 0.0, 0.0, False)),
+        (keys.bids(GHOST), Bids(now, 1, GHOST, ["t00"], zero, zero, no, no)),
     ]
     return out
 
@@ -179,7 +180,7 @@ def every_key(keys: Keys, robots: Iterable[str]) -> list[tuple[str, str]]:
         (keys.collisions(), "collision"),
         (keys.coord_state(), "fleet_state"),
         (keys.events(), "event"),
-        (keys.task("t00"), "task_call"),
+        (keys.call(), "auction_call"),
     ]
     for rid in robots:
         out += [(keys.robot(rid, topic), topic) for topic in ROBOT_TOPICS]
@@ -187,7 +188,7 @@ def every_key(keys: Keys, robots: Iterable[str]) -> list[tuple[str, str]]:
             (keys.plan(rid), "plan"),
             (keys.award(rid), "award"),
             (keys.ack(rid), "award_ack"),
-            (keys.bid("t00", rid), "bid"),
+            (keys.bids(rid), "bids"),
         ]
     return out
 

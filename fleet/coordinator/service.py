@@ -75,7 +75,7 @@ from fleet.params import CoordinatorParams
 from fleet.plausible import STRANGER_GRACE_S, Bounds, PoseTrack, SimClock, Strangers
 from fleet.protocol import (
     AwardAck,
-    Bid,
+    Bids,
     Clock,
     FleetState,
     Heartbeat,
@@ -170,7 +170,7 @@ class Coordinator:
         bus.subscribe(self.keys.all_robots("pose"), PoseEstimate, self._on_pose)
         bus.subscribe(self.keys.all_robots("status"), RobotStatus, self._on_status)
         bus.subscribe(self.keys.all_robots("heartbeat"), Heartbeat, self._on_heartbeat)
-        bus.subscribe(self.keys.all_bids(), Bid, self.auctioneer.on_bid)
+        bus.subscribe(self.keys.all_bids(), Bids, self.auctioneer.on_bid)
         bus.subscribe(self.keys.ack("*"), AwardAck, self._on_ack)
         bus.serve(self.keys.plan("*"), Request, self._on_plan_query)
         if self.parts.floor_plan:

@@ -14,14 +14,15 @@ The model:
   single-item auctions for agent coordination", AAAI 2006): a robot bids on a task the
   marginal cost of appending it to its :class:`Commitment` — the travel from where its won
   work ends to the task's nearer end (a task may be driven backwards) plus the task's time
-  (:func:`make_bid`). Travel is priced on the robot's own map (:func:`travel_times`,
-  :class:`TravelGrid`: Dijkstra on a coarsened grid).
+  (:func:`make_bid`; a round's tasks all in one go, :func:`make_bids`). Travel is priced on
+  the robot's own map (:func:`travel_times`, :class:`TravelGrid`: Dijkstra on a coarsened
+  grid).
 * **Winner determination.** Each round every robot bids on every open task and one (task,
   robot) pair wins (:func:`winner`); only the winner's commitment changes. The team objective
   is MiniMax (Lagoudakis et al., "Auction-based multi-robot routing", RSS 2005): the lowest
   total committed time of the robot after the award (least makespan: what a cleaning job is
-  judged by). :func:`allocate` runs all
-  rounds in one process; :func:`makespan` judges the result.
+  judged by), in the order :func:`ranked` gives. :func:`allocate` runs all rounds in one
+  process; :func:`makespan` judges the result.
 * **Lots.** A call sells a :class:`Lot`: one task, or — in the first allocation — a region of
   consecutive tasks, one per robot (:func:`regions`), so each robot starts on a contiguous part
   of the floor.
@@ -37,8 +38,9 @@ Public API::
     Commitment(pose, current_s=0.0, current_end=None, queued=())
         .end .total_s .with_task(entry, exit_, time_s, travel_s) .won(bid, entry, exit_, time_s)
     Bid(task, robot, marginal_s, total_s, reverse)
+    make_bids(entries, exits, times_s, commitment, travel, gains_s=None) -> Prices
     make_bid(robot, task_id, entry, exit_, time_s, commitment, travel) -> Bid
-    winner(bids) -> Bid | None
+    ranked(total_s, marginal_s, robots, tasks) -> indices, best first; winner(bids) -> Bid | None
     allocate(tasks, robots, travel) -> {robot: [(task id, reverse)]}
     makespan(allocation, tasks, robots, travel) -> seconds
     Lot(id, tasks, entry, exit, time_s, area_m2, gain_s=0).driven(back)
@@ -46,7 +48,16 @@ Public API::
 """
 
 from planners.auction.allocation import allocate, makespan
-from planners.auction.bids import Bid, Commitment, Travel, make_bid, winner
+from planners.auction.bids import (
+    Bid,
+    Commitment,
+    Prices,
+    Travel,
+    make_bid,
+    make_bids,
+    ranked,
+    winner,
+)
 from planners.auction.lots import Lot, regions, task_lot
 from planners.auction.tasks import Task, ahead_of, remainder, split_tour
 from planners.auction.travel import UNREACHABLE_FACTOR, TravelGrid, travel_times
@@ -56,13 +67,16 @@ __all__ = [
     "Bid",
     "Commitment",
     "Lot",
+    "Prices",
     "Task",
     "Travel",
     "TravelGrid",
     "ahead_of",
     "allocate",
     "make_bid",
+    "make_bids",
     "makespan",
+    "ranked",
     "regions",
     "remainder",
     "split_tour",

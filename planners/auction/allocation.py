@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from planners.auction.bids import Bid, Commitment, Travel, make_bid, winner
+from planners.auction.bids import Bid, Commitment, Travel, make_bids, ranked
 from planners.auction.tasks import Task
 
 Allocation = dict[str, list[tuple[str, bool]]]
@@ -23,27 +23,42 @@ def allocate(
     travel: Travel,
 ) -> Allocation:
     """Sequential single-item auctions (Koenig et al. 2006): repeat {every robot bids on every
-    unallocated task; the MiniMax winner (:func:`planners.auction.bids.winner`) takes
-    it; only the winner's commitment changes} until all are allocated. Returns robot →
+    unallocated task; the MiniMax winner (:func:`planners.auction.bids.ranked`) takes it; only
+    the winner's commitment changes} until all are allocated. Returns robot →
     [(task id, reverse)] in allocation order, every robot of ``robots`` present.
 
-    Only the winner's bids change from one round to the next, so only they are priced again.
+    Only the winner's bids change from one round to the next, so only they are priced again
+    (:func:`planners.auction.bids.make_bids`, all its tasks in one travel call).
     """
     out: Allocation = {r: [] for r in robots}
-    by_id = {t.id: t for t in tasks}
-    if len(by_id) != len(tasks):
+    if len({t.id for t in tasks}) != len(tasks):
         raise ValueError("task ids must be unique")
+    if not tasks or not robots:
+        return out
+    entries = np.array([t.entry for t in tasks], dtype=float)
+    exits = np.array([t.exit for t in tasks], dtype=float)
+    times = np.array([t.time_s for t in tasks], dtype=float)
+    names = list(robots)
     held = dict(robots)
-    bids: dict[tuple[str, str], Bid] = {
-        (r, t.id): _bid(r, t, held[r], travel) for r in held for t in tasks
-    }
-    while (best := winner(bids.values())) is not None:
-        task = by_id.pop(best.task)
-        out[best.robot].append((best.task, best.reverse))
-        held[best.robot] = held[best.robot].won(best, task.entry, task.exit, task.time_s)
-        bids = {k: b for k, b in bids.items() if b.task != best.task}
-        for t in by_id.values():
-            bids[best.robot, t.id] = _bid(best.robot, t, held[best.robot], travel)
+    prices = {r: make_bids(entries, exits, times, held[r], travel) for r in names}
+    # every (robot, task) pair, robot-major
+    robot_of = np.repeat(np.array(names), len(tasks))
+    task_of = np.tile(np.array([t.id for t in tasks]), len(names))
+    open_ = np.ones(len(tasks), dtype=bool)
+    while open_.any():
+        live = np.flatnonzero(np.tile(open_, len(names)))
+        total = np.concatenate([prices[r].total_s for r in names])[live]
+        marginal = np.concatenate([prices[r].marginal_s for r in names])[live]
+        best = int(live[ranked(total, marginal, robot_of[live], task_of[live])[0]])
+        robot, i = names[best // len(tasks)], best % len(tasks)
+        p = prices[robot]
+        bid = Bid(
+            tasks[i].id, robot, float(p.marginal_s[i]), float(p.total_s[i]), bool(p.reverse[i])
+        )
+        out[robot].append((bid.task, bid.reverse))
+        held[robot] = held[robot].won(bid, tasks[i].entry, tasks[i].exit, tasks[i].time_s)
+        open_[i] = False
+        prices[robot] = make_bids(entries, exits, times, held[robot], travel)
     return out
 
 
@@ -67,7 +82,3 @@ def makespan(
             held = held.with_task(first, last, task.time_s, hop)
         worst = max(worst, held.total_s)
     return worst
-
-
-def _bid(robot: str, task: Task, held: Commitment, travel: Travel) -> Bid:
-    return make_bid(robot, task.id, task.entry, task.exit, task.time_s, held, travel)

@@ -76,6 +76,42 @@ class Bid:
     reverse: bool
 
 
+@dataclass(frozen=True, eq=False)
+class Prices:
+    """One robot's prices for K tasks at once (:func:`make_bids`), each as in :class:`Bid`:
+    ``marginal_s`` (K,), ``total_s`` (K,), ``reverse`` (K,) bool."""
+
+    marginal_s: np.ndarray
+    total_s: np.ndarray
+    reverse: np.ndarray
+
+
+def make_bids(
+    entries: np.ndarray,
+    exits: np.ndarray,
+    times_s: np.ndarray,
+    commitment: Commitment,
+    travel: Travel,
+    gains_s: np.ndarray | None = None,
+) -> Prices:
+    """The marginal cost of appending each of K tasks to ``commitment`` (Koenig et al. 2006
+    SSI bids), all in one ``travel`` call from the commitment's end to the tasks' 2K ends: each
+    bid takes the cheaper end (``reverse`` when that is the task's exit; the entry on a tie).
+    ``gains_s`` (K,) is what each task is worth beyond its work (a frontier's expected
+    information, in seconds of travel: Burgard et al. 2005's utility against cost, U − β·V, as
+    a cost), taken off its bid."""
+    entries = np.asarray(entries, dtype=float).reshape(-1, 2)
+    exits = np.asarray(exits, dtype=float).reshape(-1, 2)
+    k = len(entries)
+    ends = np.concatenate([entries, exits])
+    secs = np.asarray(travel(np.array(commitment.end, dtype=float), ends), dtype=float)
+    to_entry, to_exit = secs[:k], secs[k:]
+    reverse = to_exit < to_entry
+    gains = np.zeros(k) if gains_s is None else np.asarray(gains_s, dtype=float)
+    marginal = np.where(reverse, to_exit, to_entry) + np.asarray(times_s, dtype=float) - gains
+    return Prices(marginal, commitment.total_s + marginal, reverse)
+
+
 def make_bid(
     robot: str,
     task_id: str,
@@ -86,23 +122,32 @@ def make_bid(
     travel: Travel,
     gain_s: float = 0.0,
 ) -> Bid:
-    """The marginal cost of appending the task to ``commitment`` (Koenig et al. 2006 SSI bids):
-    ``travel(from_xy, targets (2, 2))`` gives the seconds to the task's entry and exit; the bid
-    takes the cheaper end (``reverse`` when that is the exit; the entry on a tie). ``gain_s``
-    is what the task is worth beyond its work (a frontier's expected information, in seconds of
-    travel: Burgard et al. 2005's utility against cost, U − β·V, as a cost) and is taken off."""
-    ends = np.array([entry, exit_], dtype=float).reshape(2, 2)
-    secs = np.asarray(travel(np.array(commitment.end, dtype=float), ends), dtype=float)
-    reverse = bool(secs[1] < secs[0])
-    marginal = float(secs[int(reverse)]) + float(time_s) - float(gain_s)
-    return Bid(task_id, robot, marginal, commitment.total_s + marginal, reverse)
+    """One task's bid (:func:`make_bids` of one)."""
+    p = make_bids(entry, exit_, np.array([time_s]), commitment, travel, np.array([gain_s]))
+    return Bid(task_id, robot, float(p.marginal_s[0]), float(p.total_s[0]), bool(p.reverse[0]))
+
+
+def ranked(
+    total_s: np.ndarray, marginal_s: np.ndarray, robots: np.ndarray, tasks: np.ndarray
+) -> np.ndarray:
+    """The order in which bids win, best first, by SSI winner determination (Lagoudakis et al.,
+    RSS 2005, MiniMax team objective): the lowest ``total_s``; ties broken by ``marginal_s``,
+    then robot id, then task id (all (N,); indices into them)."""
+    return np.lexsort((tasks, robots, marginal_s, total_s))
 
 
 def winner(bids: Iterable[Bid]) -> Bid | None:
-    """SSI winner determination over all (task, robot) bids of a round: the lowest
-    ``total_s`` (Lagoudakis et al., RSS 2005, MiniMax team objective); ties broken by
-    ``marginal_s``, then robot id, then task id. None for no bids."""
-    return min(bids, key=lambda b: (b.total_s, b.marginal_s, b.robot, b.task), default=None)
+    """The best of ``bids`` by :func:`ranked`; None for no bids."""
+    bids = list(bids)
+    if not bids:
+        return None
+    order = ranked(
+        np.array([b.total_s for b in bids]),
+        np.array([b.marginal_s for b in bids]),
+        np.array([b.robot for b in bids]),
+        np.array([b.task for b in bids]),
+    )
+    return bids[int(order[0])]
 
 
 def _point(xy: np.ndarray | Point) -> Point:

@@ -122,17 +122,21 @@ class TravelGrid:
 
     def _in_sight(self, start: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """Whether every block along the segment from ``start`` (2,) to each of ``targets``
-        (K, 2) is free (sampled every half block)."""
+        (K, 2) is free, each segment sampled every half block of its own length at most."""
+        if not len(targets):
+            return np.zeros(0, dtype=bool)
         length = np.hypot(*(targets - start).T)
-        n = max(2, math.ceil(float(length.max(initial=0.0)) / (self.cell / 2)) + 1)
-        frac = np.linspace(0.0, 1.0, n)
-        pts = start + frac[None, :, None] * (targets - start)[:, None, :]
-        rc = self._cell_of(pts.reshape(-1, 2))
+        n = np.maximum(2, np.ceil(length / (self.cell / 2)).astype(np.int64) + 1)
+        first = np.cumsum(n) - n
+        seg = np.repeat(np.arange(len(targets)), n)
+        frac = (np.arange(int(n.sum())) - first[seg]) / (n[seg] - 1)
+        pts = start + frac[:, None] * (targets - start)[seg]
+        rc = self._cell_of(pts)
         rows, cols = self.free.shape
         inside = (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)
         ok = np.zeros(len(rc), dtype=bool)
         ok[inside] = self.free[rc[inside, 0], rc[inside, 1]]
-        return ok.reshape(len(targets), n).all(axis=1)
+        return np.logical_and.reduceat(ok, first)
 
 
 def travel_times(

@@ -78,7 +78,7 @@ def test_the_rogue_covers_every_key_class_and_its_messages_are_well_formed() -> 
     classes = {key_class(k) for k, _ in every_key(keys, robots)}
     for topic in ("scan", "odom", "cmd_vel", "pose", "intent", "status", "heartbeat", "map"):
         assert f"robot/*/{topic}" in classes
-    for cls in ("sim/clock", "coord/plan/*", "coord/award/*", "coord/bid/*", "coord/task/*"):
+    for cls in ("sim/clock", "coord/plan/*", "coord/award/*", "coord/bids/*", "coord/call"):
         assert cls in classes
     msgs = implausible_messages(keys, robots, 50.0, CFG, np.random.default_rng(0))
     for key, msg in msgs:
@@ -86,7 +86,7 @@ def test_the_rogue_covers_every_key_class_and_its_messages_are_well_formed() -> 
         assert again.stamp == msg.stamp, key
     sent = {key_class(k) for k, _ in msgs}
     assert {"sim/clock", "robot/*/odom", "robot/*/scan", "robot/*/cmd_vel"} <= sent
-    assert {"robot/*/pose", "robot/*/intent", "robot/*/status", "coord/bid/*"} <= sent
+    assert {"robot/*/pose", "robot/*/intent", "robot/*/status", "coord/bids/*"} <= sent
 
 
 EVENTS = [

@@ -1,5 +1,6 @@
 """The auctioneer without a bus: its publish function is a stand-in that answers each call by
-handing the robots' bids to the auctioneer's bid handler, as the bus's thread would."""
+handing each robot's bids, one message a robot, to the auctioneer's bid handler, as the bus's
+thread would."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 
 from fleet.coordinator.auctioneer import Auctioneer, Sale
 from fleet.params import CoordinatorParams
-from fleet.protocol import Bid, Keys, Message, TaskCall
+from fleet.protocol import AuctionCall, Bids, Keys, Message
 from planners import auction
 
 KEYS = Keys("test")
@@ -20,29 +21,32 @@ Prices = dict[tuple[str, str], tuple[float, float]]  # (lot, robot) -> (marginal
 
 
 class Bidders:
-    """The bidders: each answers a call with its price for the lot, if it has one; then
-    ``also`` sees the call."""
+    """The bidders: each robot answers a call with its prices for the lots it has one for, in
+    one message (robots with none stay silent); then ``also`` sees the call."""
 
     def __init__(
         self,
         prices: Prices,
         timeout_s: float = 5.0,
-        also: Callable[[TaskCall], None] = lambda _call: None,
+        also: Callable[[AuctionCall], None] = lambda _call: None,
     ) -> None:
         self.prices = prices
         self.also = also
-        self.calls: list[tuple[str, TaskCall, bool]] = []
+        self.calls: list[tuple[str, AuctionCall, bool]] = []
         self.sales: list[Sale] = []
         params = CoordinatorParams(bid_timeout_s=timeout_s)
         self.auctioneer = Auctioneer(KEYS, self.publish, params, self.sales.append)
 
     def publish(self, key: str, msg: Message, control: bool) -> None:
-        assert isinstance(msg, TaskCall)
+        assert isinstance(msg, AuctionCall)
         self.calls.append((key, msg, control))
-        for (lot, robot), (marginal, total) in self.prices.items():
-            if lot == msg.task:
+        for robot in sorted({r for _, r in self.prices}):
+            mine = {lot: p for (lot, r), p in self.prices.items() if r == robot}
+            lots = [lot for lot in msg.lots if lot in mine]
+            if lots:
                 self.auctioneer.on_bid(
-                    KEYS.bid(lot, robot), Bid(0.0, msg.round, lot, robot, marginal, total, False)
+                    KEYS.bids(robot),
+                    _bids(robot, lots, msg.round, *zip(*(mine[lot] for lot in lots), strict=True)),
                 )
         self.also(msg)
 
@@ -57,8 +61,25 @@ def _lot(lot: str) -> auction.Lot:
     return auction.Lot(lot, (lot,), np.zeros(2), np.ones(2), 1.0, 1.0)
 
 
-def _bid(lot: str, robot: str, round_: int = 1, marginal: float = 1.0, total: float = 1.0) -> Bid:
-    return Bid(0.0, round_, lot, robot, marginal, total, False)
+def _bids(
+    robot: str,
+    lots: list[str],
+    round_: int = 1,
+    marginal: tuple[float, ...] | None = None,
+    total: tuple[float, ...] | None = None,
+    declined: tuple[int, ...] | None = None,
+) -> Bids:
+    k = len(lots)
+    return Bids(
+        0.0,
+        round_,
+        robot,
+        lots,
+        np.array(marginal if marginal is not None else [1.0] * k, dtype=float),
+        np.array(total if total is not None else [1.0] * k, dtype=float),
+        np.zeros(k, dtype=np.uint8),
+        np.array(declined if declined is not None else [0] * k, dtype=np.uint8),
+    )
 
 
 PRICES: Prices = {
@@ -80,11 +101,11 @@ def test_the_best_bid_by_minimax_wins_and_is_reported() -> None:
     assert (sale.best.task, sale.best.robot) == (lot, robot)
     assert (sale.best.marginal_s, sale.best.total_s) == PRICES[(lot, robot)]
     assert sale.lot.id == lot and sale.round == 1
-    assert len(sale.bids) == len(PRICES)
-    # every lot was called once, on its own key, as control traffic, in round 1
-    assert sorted((key, c.task, c.round, control) for key, c, control in m.calls) == [
-        (KEYS.task("t01"), "t01", 1, True),
-        (KEYS.task("t02"), "t02", 1, True),
+    # the auction log: every robot's bid on the lot sold
+    assert sorted((b.task, b.robot) for b in sale.bids) == sorted(k for k in PRICES if k[0] == lot)
+    # both lots were called in one message, as control traffic, in round 1
+    assert [(key, c.lots, c.round, control) for key, c, control in m.calls] == [
+        (KEYS.call(), ["t01", "t02"], 1, True)
     ]
 
 
@@ -118,32 +139,50 @@ def test_a_robot_that_left_the_market_during_the_round_does_not_win() -> None:
 
 
 def test_each_kind_of_bad_bid_is_counted_and_ignored() -> None:
-    def bad(msg: TaskCall) -> None:
-        """Bad bids arriving while the round is open, after robot-0's good one."""
-        bids: list[tuple[str, Bid]] = [
-            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-0")),  # sent under another's key
-            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1", marginal=math.nan)),
-            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1", total=-1.0)),
-            (KEYS.bid("t02", "robot-1"), _bid("t01", "robot-1")),  # key names another lot
-            (KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1", round_=msg.round - 1)),
-            (KEYS.bid("t09", "robot-1"), _bid("t09", "robot-1")),  # a lot not called
-            (KEYS.bid("t01", "robot-9"), _bid("t01", "robot-9", marginal=0.0, total=0.0)),
-            (KEYS.bid("t01", "robot-0"), _bid("t01", "robot-0", marginal=0.0, total=0.0)),
+    def bad(msg: AuctionCall) -> None:
+        """Bad answers arriving while the round is open, after robot-0's good one."""
+        nan, r = math.nan, msg.round
+        answers: list[tuple[str, Bids]] = [
+            (KEYS.bids("robot-1"), _bids("robot-0", ["t01"])),  # sent under another's key
+            (KEYS.bids("robot-1"), _bids("robot-1", ["t01"], marginal=(nan,))),
+            (KEYS.bids("robot-1"), _bids("robot-1", ["t01"], total=(-1.0,))),
+            (KEYS.bids("robot-1"), _bids("robot-1", ["t01"], marginal=(1.0, 2.0))),  # 2 for 1
+            (KEYS.bids("robot-1"), _bids("robot-1", ["t01", "t01"])),  # a lot twice
+            (KEYS.bids("robot-1"), _bids("robot-1", ["t01"], round_=r - 1)),
+            (KEYS.bids("robot-1"), _bids("robot-1", ["t09"])),  # a lot not called
+            (KEYS.bids("robot-9"), _bids("robot-9", ["t01"], marginal=(0.0,), total=(0.0,))),
+            (KEYS.bids("robot-0"), _bids("robot-0", ["t01"], marginal=(0.0,), total=(0.0,))),
         ]
-        for key, bid in bids:
-            m.auctioneer.on_bid(key, bid)
+        for key, bids in answers:
+            m.auctioneer.on_bid(key, bids)
 
     good = (4.0, 40.0)
     m = Bidders({("t01", "robot-0"): good}, timeout_s=0.2, also=bad)
     a = m.auctioneer
-    a.on_bid(KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1"))  # no round open
+    a.on_bid(KEYS.bids("robot-1"), _bids("robot-1", ["t01"]))  # no round open
     sale = m.sell(["t01"], {"robot-0", "robot-1"})
-    a.on_bid(KEYS.bid("t01", "robot-1"), _bid("t01", "robot-1"))  # the round has closed
-    assert a.rejected() == {"malformed": 4, "late": 4, "not in the market": 1, "duplicate": 1}
-    # the first bid of robot-0 stands, and robot-1's silence did not stop the round's sale
+    a.on_bid(KEYS.bids("robot-1"), _bids("robot-1", ["t01"]))  # the round has closed
+    assert a.rejected() == {"malformed": 5, "late": 4, "not in the market": 1, "duplicate": 1}
+    # the first answer of robot-0 stands, and robot-1's silence did not stop the round's sale
     assert sale is not None and sale.best.robot == "robot-0"
     assert (sale.best.marginal_s, sale.best.total_s) == good
     assert len(sale.bids) == 1
+
+
+def test_a_declined_bid_never_wins_and_an_empty_answer_closes_the_round() -> None:
+    def answer(msg: AuctionCall) -> None:
+        a.on_bid(KEYS.bids("robot-0"), _bids("robot-0", ["t01"], 1, (1.0,), (1.0,), (1,)))
+        a.on_bid(KEYS.bids("robot-1"), _bids("robot-1", ["t01"], 1, (9.0,), (90.0,)))
+        a.on_bid(KEYS.bids("robot-2"), _bids("robot-2", []))  # holds it, say: nothing to offer
+
+    m = Bidders({}, timeout_s=60.0, also=answer)
+    a = m.auctioneer
+    t0 = time.monotonic()
+    sale = m.sell(["t01"], {"robot-0", "robot-1", "robot-2"})
+    # every bidder answered: the round closed far short of its minute (loose on purpose)
+    assert time.monotonic() - t0 < 30.0
+    assert sale is not None and sale.best.robot == "robot-1"
+    assert [b.robot for b in sale.bids] == ["robot-1"]
 
 
 def test_a_bid_may_take_off_what_its_lot_is_worth_and_no_more() -> None:
@@ -155,9 +194,9 @@ def test_a_bid_may_take_off_what_its_lot_is_worth_and_no_more() -> None:
     sale = m.auctioneer.award(rnd, {"robot-0", "robot-1"})
     assert sale is not None and sale.best.robot == "robot-0"
     assert m.auctioneer.rejected() == {"malformed": 1}
-    assert m.calls[0][1].gain_s == 10.0
+    assert list(m.calls[0][1].gains_s) == [10.0]
     # a bid of another round is late, whatever it takes off
-    m.auctioneer.on_bid(KEYS.bid("f01", "robot-0"), _bid("f01", "robot-0", 0, -50.0, -50.0))
+    m.auctioneer.on_bid(KEYS.bids("robot-0"), _bids("robot-0", ["f01"], 0, (-50.0,), (-50.0,)))
     assert m.auctioneer.rejected() == {"malformed": 1, "late": 1}
 
 
@@ -178,6 +217,6 @@ def test_a_round_waits_for_a_silent_bidder_only_until_the_bid_timeout() -> None:
 def test_a_resumed_auctioneer_numbers_on_and_keeps_its_counts() -> None:
     params = CoordinatorParams(bid_timeout_s=0.05)
     a = Auctioneer(KEYS, lambda *_: None, params, lambda _: None, None, 41, {"late": 3})
-    a.on_bid(KEYS.bid("t01", "robot-0"), _bid("t01", "robot-0"))
+    a.on_bid(KEYS.bids("robot-0"), _bids("robot-0", ["t01"]))
     assert a.call(0.0, {"t01": _lot("t01")}, frozenset({"robot-0"})).number == 42
     assert a.rejected() == {"late": 4}

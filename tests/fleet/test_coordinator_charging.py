@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bus_stand_in import answer
 from robots import ROBOT
 
 from fleet.config import resolve_world
@@ -32,15 +33,14 @@ from fleet.coordinator.store import JobStore
 from fleet.coordinator.transits import TransitPlanner
 from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import (
+    AuctionCall,
     Award,
     AwardAck,
-    Bid,
     FleetEvent,
     Keys,
     Message,
     Plan,
     RobotStatus,
-    TaskCall,
 )
 from fleet.report.summary import job_report
 from fleet.report.up_report import left_out_line
@@ -121,10 +121,9 @@ class Fleet:
         self.sent.append((key, msg))
         if isinstance(msg, Award):
             self.awards.acked(msg.robot, AwardAck(0.0, msg.seq, msg.robot))
-        if isinstance(msg, TaskCall):
+        if isinstance(msg, AuctionCall):
             for rid in self.job.market():
-                bid = Bid(0.0, msg.round, msg.task, rid, 10.0, 10.0, False, self.declined)
-                self.auctioneer.on_bid(KEYS.bid(msg.task, rid), bid)
+                self.auctioneer.on_bid(KEYS.bids(rid), answer(msg, rid, 10.0, self.declined))
 
     def events(self) -> list[tuple[str, str, str]]:
         return [(m.kind, m.robot, m.detail) for _, m in self.sent if isinstance(m, FleetEvent)]

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from bus_stand_in import answer
 from robots import ROBOT
 
 from fleet.bench.recovery import to_reassign
@@ -27,15 +28,14 @@ from fleet.coordinator.planning import TaskPlanner
 from fleet.coordinator.store import JobStore
 from fleet.params import CoordinatorParams, load_fleet_config
 from fleet.protocol import (
+    AuctionCall,
     Award,
     AwardAck,
-    Bid,
     FleetEvent,
     Keys,
     Message,
     Plan,
     RobotStatus,
-    TaskCall,
 )
 from fleet.world import load_world
 from planners.auction import Task
@@ -75,7 +75,7 @@ class Coordinator:
         # at each auction call, the robots that had not acknowledged their last award
         self.unacked_at_call: list[list[str]] = []
         # called with each auction call before the robots bid on it
-        self.on_call: Callable[[TaskCall], None] = lambda _call: None
+        self.on_call: Callable[[AuctionCall], None] = lambda _call: None
         params = CoordinatorParams(bid_timeout_s=0.2)
         self.journal = Journal(self.job, None, KEYS, self.publish)
         self.awards = Awards(self.journal, KEYS, self.publish)
@@ -106,7 +106,7 @@ class Coordinator:
                 threading.Timer(self.ack_after_s, self._ack, (msg,)).start()
             else:
                 self._ack(msg)
-        if isinstance(msg, TaskCall):
+        if isinstance(msg, AuctionCall):
             self.on_call(msg)
             with self.market.lock:
                 robots = self.job.robots.values()
@@ -114,8 +114,7 @@ class Coordinator:
                     sorted(r.id for r in robots if r.acked_seq < r.award_seq)
                 )
             for rid, price in sorted(self.bidding.items()):
-                bid = Bid(0.0, msg.round, msg.task, rid, price, price, False)
-                self.auctioneer.on_bid(KEYS.bid(msg.task, rid), bid)
+                self.auctioneer.on_bid(KEYS.bids(rid), answer(msg, rid, price))
 
     def events(self, kind: str) -> list[tuple[str, str, str]]:
         return [
@@ -124,8 +123,8 @@ class Coordinator:
             if isinstance(m, FleetEvent) and m.kind == kind
         ]
 
-    def calls(self) -> list[TaskCall]:
-        return [m for _, m in self.sent if isinstance(m, TaskCall)]
+    def calls(self) -> list[AuctionCall]:
+        return [m for _, m in self.sent if isinstance(m, AuctionCall)]
 
 
 def test_a_round_is_called_only_once_the_last_winner_has_acknowledged_its_award(
@@ -138,7 +137,7 @@ def test_a_round_is_called_only_once_the_last_winner_has_acknowledged_its_award(
     c.bidding = {"robot-0": 1.0, "robot-1": 2.0, "robot-2": 3.0}
     c.ack_after_s = 0.05
     c.market.auction(c.auctioneer)
-    assert len(c.sales) == 3 and len(c.unacked_at_call) == 3 + 2 + 1
+    assert len(c.sales) == 3 and len(c.unacked_at_call) == 3
     assert all(unacked == [] for unacked in c.unacked_at_call), c.unacked_at_call
 
 
@@ -151,7 +150,7 @@ def test_a_lot_whose_task_went_while_its_round_was_called_is_not_sold(
     c = Coordinator(planner, ["robot-0", "robot-1"])
     c.bidding = {"robot-0": 1.0, "robot-1": 2.0}
 
-    def replace_t00(call: TaskCall) -> None:
+    def replace_t00(call: AuctionCall) -> None:
         if c.job.tasks["t00"].state == OPEN:
             c.job.tasks["t00"].state = REPLACED
 
@@ -366,7 +365,7 @@ def test_a_lot_replaced_round_a_body_while_its_round_runs_is_not_sold(
     answer = c.publish
 
     def publish(key: str, msg: Message, control: bool) -> None:
-        if isinstance(msg, TaskCall) and job.robots["robot-1"].liveness != LOST:
+        if isinstance(msg, AuctionCall) and job.robots["robot-1"].liveness != LOST:
             c.market.lose("robot-1", "its liveliness token is gone")
         answer(key, msg, control)
 
@@ -396,7 +395,7 @@ def test_work_lost_twice_is_on_the_next_region_sale_once(planner: TaskPlanner) -
     job.robots["robot-0"].xy = None  # no body to plan round
     c.bidding = {"robot-0": 1.0, "robot-1": 10.0, "robot-2": 20.0}
 
-    def lose_robot_0(_call: TaskCall) -> None:
+    def lose_robot_0(_call: AuctionCall) -> None:
         if job.robots["robot-0"].liveness != LOST:
             c.market.lose("robot-0", "its liveliness token is gone")
 

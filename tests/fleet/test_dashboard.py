@@ -181,7 +181,7 @@ def test_keys_from_a_terminal_and_key_patterns_for_the_rates() -> None:
     assert parse_keys(b"\x1b[A\x1b[Bk\x1bOBrq\x1b[Cx") == [UP, DOWN, KILL, DOWN, "respawn", QUIT]
     assert key_class("fleet/default/robot/robot-3/truth") == "robot/*/truth"
     assert key_class("fleet/default/coord/plan/robot-1") == "coord/plan/*"
-    assert key_class("fleet/default/coord/bid/t04/robot-1") == "coord/bid/*"
+    assert key_class("fleet/default/coord/bids/robot-1") == "coord/bids/*"
     assert key_class("fleet/default/sim/clock") == "sim/clock"
 
 

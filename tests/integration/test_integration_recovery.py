@@ -22,7 +22,7 @@ from fleet_runs import FleetRun
 
 from fleet.bench.recovery import events_after, to_reassign
 from fleet.bus import Bus
-from fleet.protocol import Award, Bid, Keys
+from fleet.protocol import Award, Bids, Keys
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(400)]
 
@@ -62,14 +62,15 @@ def _send_garbage(fleet: FleetRun) -> None:
         # coordinator's subscriptions can reach the router after a single send has passed
         deadline = time.monotonic() + 30.0
         while True:
-            for key in (keys.bid("t00", "robot-1"), keys.award("robot-0"), keys.ack("robot-2")):
+            for key in (keys.bids("robot-1"), keys.award("robot-0"), keys.ack("robot-2")):
                 bus.session.put(key, b"\x93not a message")
             time.sleep(0.5)
             if "dropped malformed payload" in log.read_text() or time.monotonic() > deadline:
                 break
         # well-formed but out of place: a round that is not running, a robot posing as another
-        bus.publish(keys.bid("t01", "robot-0"), Bid(0.0, 999, "t01", "robot-0", 1.0, 1.0, False))
-        bus.publish(keys.bid("t01", "robot-2"), Bid(0.0, 1, "t01", "robot-0", 1.0, 1.0, False))
+        one, no = np.ones(1), np.zeros(1, dtype=np.uint8)
+        bus.publish(keys.bids("robot-0"), Bids(0.0, 999, "robot-0", ["t01"], one, one, no, no))
+        bus.publish(keys.bids("robot-2"), Bids(0.0, 1, "robot-0", ["t01"], one, one, no, no))
         bus.publish(
             keys.award("robot-0"),
             Award(0.0, 1, "robot-0", ["t00"], np.zeros((2, 2)), np.zeros((1, 2)), np.ones(1)),
