@@ -18,18 +18,22 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
-    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
-    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    out[..., 1] = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    out[..., 2] = wrap_angle(a[..., 2] + b[..., 2])
+    return out
 
 
 def inverse(a: np.ndarray) -> np.ndarray:
     """a⁻¹, so that a ⊕ a⁻¹ is the identity."""
     a = np.asarray(a, dtype=float)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    x = -c * a[..., 0] - s * a[..., 1]
-    y = s * a[..., 0] - c * a[..., 1]
-    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+    out = np.empty(a.shape)
+    out[..., 0] = -c * a[..., 0] - s * a[..., 1]
+    out[..., 1] = s * a[..., 0] - c * a[..., 1]
+    out[..., 2] = wrap_angle(-a[..., 2])
+    return out
 
 
 def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:

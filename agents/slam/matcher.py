@@ -289,7 +289,8 @@ class CorrelativeMatcher:
             miss2 = np.maximum(1.0 - value, 0.0)
             miss = np.sqrt(miss2)
             d_miss = -0.5 / np.maximum(miss, 1e-4)
-            jac = np.stack([gx, gy, gx * -dy + gy * dx])
+            jac = np.empty((3, n))
+            jac[0], jac[1], jac[2] = gx, gy, gx * -dy + gy * dx
             jac *= d_miss
             off = pose - prior
             h = (jac @ jac.T) / n
