@@ -25,6 +25,7 @@ import statistics
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -328,7 +329,7 @@ def table_lines(result: dict[str, Any]) -> list[str]:
     """The bench's figures as lines for a terminal."""
     lot, bids = result["lot_ms"], result["bids_ms"]
     return [
-        f"{result['world']}: {result['robots']} robots, {result['lots']} tasks, "
+        f"{Path(result['world']).stem}: {result['robots']} robots, {result['lots']} tasks, "
         f"{result['lots_sold']} sold one lot a round (seed {result['seed']})",
         f"lot, call to acknowledgement: median {lot['median']:.1f} ms, p95 {lot['p95']:.1f}, "
         f"max {lot['max']:.1f}",
