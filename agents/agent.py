@@ -276,9 +276,15 @@ class Agent:
 
     def _answer(self, call: AuctionCall) -> Bids | None:
         """This robot's bids on ``call`` (:class:`agents.bidding.Bidder` publishes them); None
-        before it knows where it is, or for a round that does not name it: one called before
+        for a call whose lot arrays disagree in length (dropped as implausible), before it
+        knows where it is, or for a round that does not name it: one called before
         the coordinator heard it was ready (just placed, or found in its saved map) would
         refuse its bids as from a robot not in the market."""
+        if not call.consistent():
+            self.bus.drop_implausible(
+                self.keys.call(), "coordinator", "lot arrays of unequal length"
+            )
+            return None
         if not self.ready or (call.bidders and self.rid not in call.bidders):
             return None
         if not self.market.has_floor:

@@ -403,6 +403,12 @@ class AuctionCall(Message):
     gains_s: Annotated[np.ndarray, Arr("<f8")]
     bidders: list[str] = field(default_factory=list)
 
+    def consistent(self) -> bool:
+        """Whether every per-lot array has one entry per lot."""
+        k = len(self.lots)
+        arrays = (self.entries, self.exits, self.times_s, self.areas_m2, self.gains_s)
+        return all(len(a) == k for a in arrays)
+
 
 @dataclass(frozen=True, eq=False)
 class Bids(Message):

@@ -92,7 +92,8 @@ class Auctioneer:
         with self._cond:
             rnd = self._open
             why = _refused(msg, rid, key == self.keys.bids(msg.robot), rnd)
-            if why is None and rnd is not None:
+            if why is None:
+                assert rnd is not None  # with no round open an answer is late
                 rnd.bids[rid] = msg
                 self._cond.notify_all()
                 return

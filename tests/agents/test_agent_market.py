@@ -252,6 +252,20 @@ def test_an_agent_bids_only_on_rounds_that_count_it_in_the_market() -> None:
     assert answer is not None and (answer.lots, answer.robot) == (["t01"], "robot-0")
 
 
+def test_an_agent_drops_a_call_whose_lot_arrays_disagree() -> None:
+    """A call of two lots with the ends of one is no call to price (it raised in the pricing);
+    it is counted as implausible and unanswered."""
+    bus = _NoFloorBus()
+    dropped: list[str] = []
+    bus.drop_implausible = lambda key, sender, why, n=1: dropped.append(why)  # type: ignore[method-assign]
+    agent = Agent(bus, "robot-0", load_fleet_config())  # type: ignore[arg-type]
+    agent.pose_source = OdometryPose((0.0, 0.0, 0.0))
+    call = _call(("t01", (1.0, 0.0), (2.0, 0.0), 5.0), ("t02", (3.0, 0.0), (4.0, 0.0), 5.0))
+    short = dataclasses.replace(call, exits=call.exits[:1])
+    assert agent._answer(short) is None and dropped == ["lot arrays of unequal length"]
+    assert agent._answer(call) is not None
+
+
 def test_the_battery_the_agent_hears_is_what_it_bids_on() -> None:
     """The wiring, not the pricing: a reading heard on the robot's battery key reaches the
     agent's bids (a robot below its threshold bids nothing, one charged bids), whatever the
