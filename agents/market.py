@@ -113,7 +113,7 @@ class MarketClient:
 
     def use_floor(self, floor: GridMap) -> None:
         """Price travel on the floor plan from now on (outside it counts as blocked)."""
-        self._travel = floor_travel(floor, self.radius, self.speed)
+        self._travel = auction.floor_travel(floor, self.radius, self.speed)
         self.has_floor = True
 
     def use_map(self, occupancy: SlamMap | None) -> None:
@@ -272,13 +272,6 @@ class MarketClient:
 
     def _straight(self, start: np.ndarray, targets: np.ndarray) -> np.ndarray:
         return np.hypot(*(np.asarray(targets) - start).T) / self.speed
-
-
-def floor_travel(floor: GridMap, radius: float, speed: float) -> auction.TravelGrid:
-    """Travel times on a floor plan as robots price them: its occupied and unknown cells grown
-    by the robot's ``radius``, at ``speed``."""
-    blocked = dilate(floor.occupied | floor.unknown, radius, floor.resolution)
-    return auction.TravelGrid(~blocked, floor.resolution, floor.origin, speed)
 
 
 def swept_pieces(follow: FollowState | None, sweep_from: int) -> np.ndarray:

@@ -228,9 +228,7 @@ def _quantiles(seconds: list[float]) -> dict[str, float | None]:
 
 def offline(floor: Floor) -> dict[str, Any]:
     """The baseline: the same auctions in one process (:func:`planners.auction.allocate`)."""
-    from agents.market import floor_travel
-
-    travel = floor_travel(floor.grid, floor.radius, floor.speed)
+    travel = auction.floor_travel(floor.grid, floor.radius, floor.speed)
     robots = {robot_name(i): auction.Commitment(p[:2]) for i, p in enumerate(floor.poses)}
     t0 = time.perf_counter()
     allocation = auction.allocate(floor.tasks, robots, travel)
@@ -251,7 +249,6 @@ def run_bench(
 ) -> dict[str, Any]:
     """Sell the tour of ``world``, cut into about ``tasks`` tasks, to ``robots`` bidder
     processes over a router on a free loopback port; the figures (the module docstring)."""
-    from agents.market import floor_travel
     from fleet.bus import Bus
     from fleet.supervisor.launcher import free_port
 
@@ -291,7 +288,7 @@ def run_bench(
             if p.is_alive():
                 p.kill()
     base = offline(floor)
-    travel = floor_travel(floor.grid, floor.radius, floor.speed)
+    travel = auction.floor_travel(floor.grid, floor.radius, floor.speed)
     commitments = {robot_name(i): auction.Commitment(p[:2]) for i, p in enumerate(floor.poses)}
     live_makespan = auction.makespan(live["allocation"], floor.tasks, commitments, travel)
     same = live.pop("allocation") == base.pop("allocation")

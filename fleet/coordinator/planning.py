@@ -29,7 +29,7 @@ import numpy as np
 
 from fleet.params import FleetConfig
 from fleet.world import World
-from planners.auction import Task, TravelGrid, split_tour
+from planners.auction import Task, TravelGrid, floor_travel, split_tour
 from planners.bodies import Rerouted, reroute, with_bodies
 from planners.coverage import CoverageParams, CoveragePlan, plan_coverage
 from planners.coverage.metrics import swath
@@ -184,10 +184,9 @@ class TaskPlanner:
 
     def travel(self) -> TravelGrid:
         """Travel times on the floor plan as the robots' bids price them: obstacles grown by the
-        radius, at ``agent.transit_speed`` (``agents.market.MarketClient.use_floor``)."""
-        g = self.grid
-        blocked = dilate(g.occupied | g.unknown, self.robot.radius, g.resolution)
-        return TravelGrid(~blocked, g.resolution, g.origin, self.transit_speed)
+        radius, at ``agent.transit_speed`` (``planners.auction.floor_travel``, as
+        ``agents.market.MarketClient.use_floor``)."""
+        return floor_travel(self.grid, self.robot.radius, self.transit_speed)
 
     def drive(
         self,

@@ -35,6 +35,7 @@ Public API::
     ahead_of(task, xy, reverse, clearance, new_id, params, robot) -> Task | None
     travel_times(free, resolution, origin, start_xy, targets_xy, speed) -> (K,) seconds
     TravelGrid(free, resolution, origin, speed)(start_xy, targets_xy) -> (K,) seconds
+    floor_travel(floor, radius, speed) -> TravelGrid on the floor plan, obstacles grown
     Commitment(pose, current_s=0.0, current_end=None, queued=())
         .end .total_s .with_task(entry, exit_, time_s, travel_s) .won(bid, entry, exit_, time_s)
     Bid(task, robot, marginal_s, total_s, reverse)
@@ -60,7 +61,7 @@ from planners.auction.bids import (
 )
 from planners.auction.lots import Lot, regions, task_lot
 from planners.auction.tasks import Task, ahead_of, remainder, split_tour
-from planners.auction.travel import UNREACHABLE_FACTOR, TravelGrid, travel_times
+from planners.auction.travel import UNREACHABLE_FACTOR, TravelGrid, floor_travel, travel_times
 
 __all__ = [
     "UNREACHABLE_FACTOR",
@@ -73,6 +74,7 @@ __all__ = [
     "TravelGrid",
     "ahead_of",
     "allocate",
+    "floor_travel",
     "make_bid",
     "make_bids",
     "makespan",

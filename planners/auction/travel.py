@@ -26,6 +26,8 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from planners.grid import GridMap, dilate
+
 # coarsest cell the graph search keeps unchanged (m); finer grids are coarsened to about this
 COARSE_M = 0.1
 # a blocked or cut-off target costs its straight-line distance times this
@@ -151,6 +153,13 @@ def travel_times(
     (True where a robot may drive: the caller's map with unknown cells counted as free and
     obstacles inflated), at ``speed``: :class:`TravelGrid` built for one call."""
     return TravelGrid(free, resolution, origin, speed)(start_xy, targets_xy)
+
+
+def floor_travel(floor: GridMap, radius: float, speed: float) -> TravelGrid:
+    """Travel times on a floor plan as robots price them and the coordinator checks them: its
+    occupied and unknown cells grown by the robot's ``radius``, at ``speed``."""
+    blocked = dilate(floor.occupied | floor.unknown, radius, floor.resolution)
+    return TravelGrid(~blocked, floor.resolution, floor.origin, speed)
 
 
 def _graph(free: np.ndarray) -> csr_matrix:
