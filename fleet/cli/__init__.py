@@ -77,6 +77,9 @@ def _register_all() -> None:
     from fleet.cli import auction
 
     auction.register(app, plan_app, bench_app, slam_app)
+    from fleet.cli import scale
+
+    scale.register(app, plan_app, bench_app, slam_app)
     from fleet.cli.help_text import reflow_commands
 
     reflow_commands(app)
