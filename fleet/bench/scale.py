@@ -86,7 +86,11 @@ def look(run_dir: Path, sim_s: float, wall_s: float) -> Look:
 def _summary(values: Sequence[float]) -> dict[str, float | int | None]:
     if not values:
         return {"n": 0, "median": None, "max": None}
-    return {"n": len(values), "median": round(statistics.median(values), 2), "max": max(values)}
+    return {
+        "n": len(values),
+        "median": round(statistics.median(values), 2),
+        "max": round(max(values), 2),
+    }
 
 
 def window_figures(a: Look, b: Look, scan_hz: float) -> dict[str, Any]:
