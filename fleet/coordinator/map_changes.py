@@ -20,8 +20,8 @@ change found:
   (``fleet.coordinator.market.plan_around``, as round a lost robot's body), and sold again;
 - for furniture taken away: the freed floor is on the planning map (transits may cross it, and
   a tour planned after it sweeps what robot centres reach there) and no task is made for it (a
-  task of its own cost more time than the floor it gained: BENCHMARKS.md, "Options off by
-  default").
+  task of its own cost more time than the floor it gained: ``git show e86d9fa:BENCHMARKS.md``,
+  "Options off by default").
 """
 
 from __future__ import annotations
