@@ -169,8 +169,7 @@ class Slam:
                 [p.search_window_xy**2, p.search_window_xy**2, p.search_window_theta**2]
             )
         self._pose = prior
-        full_circle = len(scan_ranges) * angle_increment >= 2 * math.pi - 1.5 * angle_increment
-        if self._is_new_node(odom, t, full_circle):
+        if self._is_new_node(odom, t):
             self._add_node(points, self._misses(scan_ranges, angle_min, angle_increment), odom, t)
         self._remember_pose()
         return SlamEstimate(self.pose, self._covariance.copy(), t, matched, score)
@@ -233,16 +232,12 @@ class Slam:
         """The map in the map frame: finished submaps (cached) plus the active ones."""
         return self._submaps.occupancy((float(self._pose[0]), float(self._pose[1])))
 
-    def _is_new_node(self, odom: np.ndarray, t: float, full_circle: bool) -> bool:
-        """Whether the scan becomes a pose-graph node: after ``node_min_distance`` of travel,
-        ``node_max_interval`` of time, or ``node_min_rotation`` of turning when the scanner does
-        not see all round (a turn shows it floor it did not see; a full circle's scan turned
-        in place shows the same walls, so a robot turning on the spot adds no node)."""
+    def _is_new_node(self, odom: np.ndarray, t: float) -> bool:
         p = self.params
         moved = relative(self._last_node_odom, odom)
         return (
             math.hypot(moved[0], moved[1]) >= p.node_min_distance
-            or (not full_circle and abs(moved[2]) >= p.node_min_rotation)
+            or abs(moved[2]) >= p.node_min_rotation
             or t - self._last_node_t >= p.node_max_interval
         )
 
