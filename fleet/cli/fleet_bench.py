@@ -29,21 +29,13 @@ from fleet.cli.options import (
     RunRobotsOpt,
     RunTimeoutOpt,
     WorldOpt,
+    WorldsOpt,
 )
 
 if TYPE_CHECKING:
     from fleet.params import FleetConfig
     from fleet.world import World
 
-WorldsOpt = Annotated[
-    str,
-    typer.Option(
-        "--worlds",
-        "-w",
-        help="Comma-separated worlds: built-in names (home, small), world YAML files, or ROS "
-        "map_server YAML files.",
-    ),
-]
 SeedsOpt = Annotated[str, typer.Option("--seeds", help="Seeds of the runs: 0,1,2 or 0-4 or a mix.")]
 
 

@@ -50,6 +50,16 @@ WorldOpt = Annotated[
         envvar="FLEET_WORLD",
     ),
 ]
+# the benches over several worlds (`fleet bench fleet`, `follow`, `scale`)
+WorldsOpt = Annotated[
+    str,
+    typer.Option(
+        "--worlds",
+        "-w",
+        help="Comma-separated worlds: built-in names (home, small), world YAML files, or ROS "
+        "map_server YAML files.",
+    ),
+]
 DeconflictionOpt = Annotated[
     str | None,
     typer.Option(

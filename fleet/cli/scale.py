@@ -10,7 +10,7 @@ import typer
 
 from fleet.cli.common import _fail, print_result, progress_line, stamped_dir, world_file
 from fleet.cli.help_text import reflow
-from fleet.cli.options import JsonOpt, SeedOpt
+from fleet.cli.options import JsonOpt, SeedOpt, WorldsOpt
 
 
 def _robot_counts(text: str) -> list[int]:
@@ -25,15 +25,6 @@ def _robot_counts(text: str) -> list[int]:
     return counts
 
 
-WorldsOpt = Annotated[
-    str,
-    typer.Option(
-        "--worlds",
-        "-w",
-        help="Comma-separated worlds: built-in names (home, small), world YAML files, or ROS "
-        "map_server YAML files.",
-    ),
-]
 RobotCountsOpt = Annotated[
     str, typer.Option("--robots", "-n", help="Comma-separated robot counts, one run each.")
 ]
