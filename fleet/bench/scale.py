@@ -163,25 +163,29 @@ def _watch_window(
     return start, last
 
 
+@dataclass(frozen=True)
+class Settings:
+    """What every point of a bench shares: the simulator's seed, the window (sim s), whether
+    each run goes on to its end, the scan rate (Hz) and more options of ``fleet up``."""
+
+    seed: int
+    window_s: float
+    to_end: bool
+    scan_hz: float
+    options: tuple[str, ...] = ()
+
+
 def run_point(
-    run_dir: Path,
-    world: str,
-    robots: int,
-    seed: int,
-    window_s: float,
-    to_end: bool,
-    scan_hz: float,
-    options: Sequence[str],
-    progress: Callable[[str], None],
+    run_dir: Path, world: str, robots: int, settings: Settings, progress: Callable[[str], None]
 ) -> dict[str, Any]:
     """One fleet of ``robots`` on ``world``: its window's cost, its coordinator's times and,
-    with ``to_end``, what it delivered."""
+    with ``settings.to_end``, what it delivered."""
     t0 = time.monotonic()
     point: dict[str, Any] = {"robots": robots, "run_dir": str(run_dir)}
-    fleet = RunningFleet(run_dir, world, robots, seed, options=options)
+    fleet = RunningFleet(run_dir, world, robots, settings.seed, options=settings.options)
     try:
-        looks = _watch_window(fleet, t0, window_s, progress)
-        if not to_end and fleet.proc.poll() is None:
+        looks = _watch_window(fleet, t0, settings.window_s, progress)
+        if not settings.to_end and fleet.proc.poll() is None:
             fleet.proc.send_signal(signal.SIGTERM)
         report = fleet.finish(END_WAIT_S)
         events = fleet.events()
@@ -190,10 +194,10 @@ def run_point(
     if isinstance(looks, str):
         point["stopped"] = looks
     else:
-        point |= window_figures(*looks, scan_hz)
+        point |= window_figures(*looks, settings.scan_hz)
     point |= coordinator_times(events)
     point["wall_s"] = round(time.monotonic() - t0, 1)
-    if to_end:
+    if settings.to_end:
         point |= _end_figures(report)
     point["left_processes"] = fleet.left
     return point
@@ -203,29 +207,23 @@ def run_bench(
     root: Path,
     worlds: Sequence[tuple[str, str]],
     robots: Sequence[int],
-    seed: int,
-    window_s: float,
-    to_end: bool,
-    scan_hz: float,
-    options: Sequence[str],
+    settings: Settings,
     progress: Callable[[str], None],
 ) -> dict[str, Any]:
     """Every world (name, file) with every robot count; written to ``root/bench.json`` after
     each point."""
     root.mkdir(parents=True, exist_ok=True)
     result: dict[str, Any] = {
-        "seed": seed,
-        "window_s": window_s,
-        "to_end": to_end,
-        "scan_hz": scan_hz,
+        "seed": settings.seed,
+        "window_s": settings.window_s,
+        "to_end": settings.to_end,
+        "scan_hz": settings.scan_hz,
         "points": [],
     }
     for name, path in worlds:
         for n in robots:
             progress(f"{name}, {n} robots")
-            point = {"world": name} | run_point(
-                root / f"{name}-{n}", path, n, seed, window_s, to_end, scan_hz, options, progress
-            )
+            point = {"world": name} | run_point(root / f"{name}-{n}", path, n, settings, progress)
             result["points"].append(point)
             (root / RESULT_FILE).write_text(json.dumps(result, indent=1))
             progress("  " + _row(point))

@@ -85,7 +85,7 @@ def bench_scale(
     `fleet bench scale --worlds ../shared/data/maps/cob_ipa_apartment.yaml --robots 6,20
     --to-the-end`; `fleet bench scale --robots 3 --window 120 --config my-fleet.yaml --json`.
     """
-    from fleet.bench.scale import run_bench, table_lines
+    from fleet.bench.scale import Settings, run_bench, table_lines
     from fleet.config import ConfigError
     from fleet.params import load_fleet_config
 
@@ -105,8 +105,8 @@ def bench_scale(
     if not chosen:
         _fail("--worlds: no world given")
     root = stamped_dir(run_root, "bench-scale-%Y%m%d-%H%M%S")
-    scan_hz = cfg.lidar.rate_hz
-    result = run_bench(root, chosen, counts, seed, window, to_end, scan_hz, options, progress_line)
+    settings = Settings(seed, window, to_end, cfg.lidar.rate_hz, options)
+    result = run_bench(root, chosen, counts, settings, progress_line)
     print_result(result, as_json, table_lines)
 
 
